@@ -1,0 +1,50 @@
+//! Angle helpers.
+
+use crate::Float;
+
+/// Wraps an angle to `[-pi, pi)`: `th - 2 pi floor((th + pi) / (2 pi))` (design section 4).
+///
+/// Returns NaN for a non-finite input.
+pub fn wrap_angle<T: Float>(th: T) -> T {
+    let two_pi = T::two_pi();
+    let pi = T::pi();
+    let mut w = th - two_pi * ((th + pi) / two_pi).floor();
+    // Rounding can land exactly on +pi (or a hair below -pi); fold it back.
+    if w >= pi {
+        w -= two_pi;
+    } else if w < -pi {
+        w += two_pi;
+    }
+    w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrap_angle;
+    use core::f64::consts::PI;
+
+    #[test]
+    fn wraps_into_half_open_range() {
+        let cases = [
+            (0.0, 0.0),
+            (PI, -PI),
+            (-PI, -PI),
+            (3.0 * PI, -PI),
+            (0.5, 0.5),
+            (2.0 * PI + 0.5, 0.5),
+            (-2.0 * PI - 0.5, -0.5),
+            (1e6, 1e6 - 2.0 * PI * ((1e6 + PI) / (2.0 * PI)).floor()),
+        ];
+        for (input, expected) in cases {
+            let w = wrap_angle(input);
+            assert!((w - expected).abs() < 1e-9, "{input} -> {w}, expected {expected}");
+            assert!((-PI..PI).contains(&w));
+        }
+        for i in -10_000..10_000 {
+            let th = i as f32 * 0.013_7;
+            let w = wrap_angle(th);
+            assert!((-core::f32::consts::PI..core::f32::consts::PI).contains(&w), "{th} -> {w}");
+        }
+        assert!(wrap_angle(f64::NAN).is_nan());
+    }
+}

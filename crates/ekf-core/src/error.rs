@@ -1,0 +1,88 @@
+//! Construction errors.
+
+use core::fmt;
+
+/// A scalar parameter named in a [`ConfigError`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Param {
+    /// Stator resistance `rs_ohm`.
+    Rs,
+    /// Stator inductance `ls_h`.
+    Ls,
+    /// Magnet flux linkage `psi_f_wb`.
+    PsiF,
+    /// Sample time `ts_s`.
+    Ts,
+    /// Angle standard deviation limit of the status `angle_sigma_limit_rad`.
+    AngleSigmaLimit,
+}
+
+/// A matrix named in a [`ConfigError`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Matrix {
+    /// Process noise covariance `Q` (4 x 4).
+    Q,
+    /// Measurement noise covariance `R` (2 x 2).
+    R,
+    /// Initial state covariance `P0` (4 x 4).
+    P0,
+}
+
+/// Why a configuration was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConfigError {
+    /// The parameter is NaN or infinite.
+    NonFinite(Param),
+    /// The parameter is zero or negative.
+    NotPositive(Param),
+    /// `pole_pairs` is 0.
+    ZeroPolePairs,
+    /// The matrix holds a NaN or an infinity.
+    NonFiniteMatrix(Matrix),
+    /// The matrix is not symmetric.
+    NotSymmetric(Matrix),
+    /// The matrix has a negative eigenvalue.
+    NotPositiveSemiDefinite(Matrix),
+    /// The initial state `x0` holds a NaN or an infinity.
+    NonFiniteInitialState,
+}
+
+impl fmt::Display for Param {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Param::Rs => "rs_ohm",
+            Param::Ls => "ls_h",
+            Param::PsiF => "psi_f_wb",
+            Param::Ts => "ts_s",
+            Param::AngleSigmaLimit => "angle_sigma_limit_rad",
+        })
+    }
+}
+
+impl fmt::Display for Matrix {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Matrix::Q => "Q",
+            Matrix::R => "R",
+            Matrix::P0 => "P0",
+        })
+    }
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ConfigError::NonFinite(p) => write!(f, "{p} is not finite"),
+            ConfigError::NotPositive(p) => write!(f, "{p} must be positive"),
+            ConfigError::ZeroPolePairs => f.write_str("pole_pairs must be at least 1"),
+            ConfigError::NonFiniteMatrix(m) => write!(f, "{m} holds a NaN or an infinity"),
+            ConfigError::NotSymmetric(m) => write!(f, "{m} is not symmetric"),
+            ConfigError::NotPositiveSemiDefinite(m) => {
+                write!(f, "{m} is not positive semi-definite (negative eigenvalue)")
+            }
+            ConfigError::NonFiniteInitialState => f.write_str("x0 holds a NaN or an infinity"),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}

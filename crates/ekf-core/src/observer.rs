@@ -1,0 +1,453 @@
+//! The seed's PMSM observer: an EKF on the alpha-beta model of a surface-mounted PMSM.
+//!
+//! State `x = [i_a, i_b, w_e, theta]` (A, A, rad/s electrical, rad electrical), input
+//! `u = [u_a, u_b]` (V), measurement `z = [i_a, i_b]` (A), `H = [I2 0]`.
+//! Continuous model (`design.md` section 2, with the sign of `u` of the seed's matrix form):
+//!
+//! ```text
+//! di_a/dt = (-Rs i_a + w psi sin(th) + u_a) / Ls
+//! di_b/dt = (-Rs i_b - w psi cos(th) + u_b) / Ls
+//! dw/dt   = 0        (random walk through Q)
+//! dth/dt  = w
+//! ```
+//!
+//! # Timing (design section 4)
+//!
+//! `step(u_prev, i)` at sample `k` predicts over `[t_{k-1}, t_k)` with `u_prev = u[k-1]`, the
+//! voltage the inverter held over that period, then corrects with `i = i[k]`, the currents
+//! sampled at `t_k`. A new observer's `x0`, `P0` describe the estimate one period before its first
+//! sample, and its first call passes `u_prev = 0`. The angle is wrapped to `[-pi, pi)` after the
+//! prediction and after the correction.
+//!
+//! # Discretizations ([`Discretization`])
+//!
+//! With `a = Rs / Ls`, `c = psi_f / Ls`, `x = [i_a, i_b, w, th]` the posterior at `t_{k-1}`:
+//!
+//! **`ForwardEuler`** (the seed's loop, exactly): `x- = x + Ts (f(x) + B u)`,
+//! `Phi = I + Ts F(x)`:
+//!
+//! ```text
+//! i_a- = i_a + Ts (-a i_a + c w sin th + u_a / Ls)
+//! i_b- = i_b + Ts (-a i_b - c w cos th + u_b / Ls)
+//! w-   = w,   th- = th + Ts w
+//! ```
+//!
+//! The back-EMF is frozen at the start-of-period angle, although the rotor turns by `w Ts`
+//! during the period; the angle estimate is biased by about `w Ts / 2`.
+//!
+//! **`LagFree`** (the default): the exact solution of the current equations over one period
+//! for a voltage held constant and a rotor turning at constant speed `w`. With
+//! `alpha = exp(-a Ts)` and the complex gain
+//!
+//! ```text
+//! G(w) = (exp(j w Ts) - alpha) / (a + j w)            [s],   G -> Ts as a, w -> 0
+//! i-   = alpha i + (1 - alpha) / Rs u + c w Re/Im{ -j e^{j th} G(w) }
+//!      i.e. i_a- = alpha i_a + (1 - alpha) u_a / Rs + c w ( sin th Re G + cos th Im G)
+//!           i_b- = alpha i_b + (1 - alpha) u_b / Rs + c w ( sin th Im G - cos th Re G)
+//! w- = w,   th- = th + Ts w
+//! ```
+//!
+//! For small `a Ts`, `G ~ Ts e^{j w Ts / 2}`: the EMF is in effect taken at the mid-period angle
+//! `th + w Ts / 2`, which removes the lag. `Phi` is the exact Jacobian of this map
+//! (`d/dth` rotates the EMF term by 90 deg; `d/dw` uses `d(w G)/dw = G + w G'`,
+//! `G' = j (Ts e^{j w Ts} - G) / (a + j w)`).
+
+use nalgebra::{Cholesky, Matrix2, Matrix4, SMatrix, Vector2, Vector4};
+
+use crate::ekf::{CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel, all_finite};
+use crate::motor::positive;
+use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t, wrap_angle};
+
+/// How the continuous model is turned into one step of the filter (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Discretization {
+    /// The seed's forward-Euler step; EMF at the start-of-period angle (lags by ~`w Ts / 2`).
+    ForwardEuler,
+    /// Exact for a held voltage and a constant-speed rotation; no half-sample lag.
+    #[default]
+    LagFree,
+}
+
+/// Everything the observer needs; start from [`ObserverConfig::new`] or
+/// [`ObserverConfig::seed`] and change fields as needed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObserverConfig<T: Float> {
+    /// Motor parameters.
+    pub motor: MotorParams<T>,
+    /// Sample (PWM) period, seconds.
+    pub ts_s: T,
+    /// Discretization of the model.
+    pub discretization: Discretization,
+    /// Process and measurement noise covariances.
+    pub noise: NoiseCovariances<T>,
+    /// Initial estimate `[i_a, i_b, w_e, theta]`, one period before the first sample.
+    pub x0: Vector4<T>,
+    /// Initial covariance `P0` (4 x 4).
+    pub p0: Matrix4<T>,
+    /// Covariance update method of the correction.
+    pub covariance_update: CovarianceUpdate,
+    /// The status reads [`Status::Uncertain`] while the angle's standard deviation
+    /// `sqrt(P[3][3])` exceeds this limit, radians.
+    pub angle_sigma_limit_rad: T,
+}
+
+impl<T: Float> ObserverConfig<T> {
+    /// The project default: [`Discretization::LagFree`], [`NoiseCovariances::scaled`], Joseph
+    /// update, `x0 = 0` (rotor angle and speed unknown) and [`default_p0`].
+    pub fn new(motor: MotorParams<T>, ts_s: T) -> Self {
+        Self {
+            motor,
+            ts_s,
+            discretization: Discretization::LagFree,
+            noise: NoiseCovariances::scaled(&motor, ts_s),
+            x0: Vector4::zeros(),
+            p0: default_p0(&motor, ts_s),
+            covariance_update: CovarianceUpdate::Joseph,
+            angle_sigma_limit_rad: to_t(0.2),
+        }
+    }
+
+    /// The seed's filter: [`Discretization::ForwardEuler`], [`NoiseCovariances::seed`] and the
+    /// standard covariance update (seed step 6, made symmetric); `x0`, `P0` as in [`new`](Self::new).
+    pub fn seed(motor: MotorParams<T>, ts_s: T) -> Self {
+        Self {
+            discretization: Discretization::ForwardEuler,
+            noise: NoiseCovariances::seed(),
+            covariance_update: CovarianceUpdate::StandardSymmetrized,
+            ..Self::new(motor, ts_s)
+        }
+    }
+
+    /// Checks every field; the observer's constructor calls it.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.motor.validate()?;
+        positive(self.ts_s, Param::Ts)?;
+        positive(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
+        check_psd(&self.noise.q, Matrix::Q)?;
+        check_psd(&self.noise.r, Matrix::R)?;
+        check_psd(&self.p0, Matrix::P0)?;
+        if !all_finite(&self.x0) {
+            return Err(ConfigError::NonFiniteInitialState);
+        }
+        Ok(())
+    }
+}
+
+/// Default initial covariance: `diag((0.1 I_c)^2, (0.1 I_c)^2, (0.05 / Ts)^2, pi^2)`, i.e. the
+/// currents roughly known, the speed unknown up to `0.05` rad per sample, the angle unknown.
+pub fn default_p0<T: Float>(motor: &MotorParams<T>, ts_s: T) -> Matrix4<T> {
+    let si = motor.characteristic_current_a() * to_t(0.1);
+    let sw = to_t::<T>(0.05) / ts_s;
+    let pi = T::pi();
+    Matrix4::from_diagonal(&Vector4::new(si * si, si * si, sw * sw, pi * pi))
+}
+
+/// Symmetric (to rounding) and positive semi-definite: `m + delta I` has a Cholesky factor for
+/// `delta = 1e3 eps max|m_ij|`, i.e. no eigenvalue below `-delta`.
+fn check_psd<T: Float, const N: usize>(
+    m: &SMatrix<T, N, N>,
+    which: Matrix,
+) -> Result<(), ConfigError> {
+    if !all_finite(m) {
+        return Err(ConfigError::NonFiniteMatrix(which));
+    }
+    let scale = m.iter().fold(T::zero(), |acc, v| acc.max(v.abs()));
+    if scale == T::zero() {
+        return Ok(());
+    }
+    let tol = T::default_epsilon() * to_t(1e3) * scale;
+    if (m - m.transpose()).iter().any(|d| d.abs() > tol) {
+        return Err(ConfigError::NotSymmetric(which));
+    }
+    let shifted = m + SMatrix::<T, N, N>::identity() * tol;
+    if Cholesky::new(shifted).is_none() {
+        return Err(ConfigError::NotPositiveSemiDefinite(which));
+    }
+    Ok(())
+}
+
+/// The PMSM process and measurement model with its per-`Ts` constants; implements
+/// [`ProcessModel`] (input `[u_a, u_b]`) and [`MeasurementModel`] (`z = [i_a, i_b]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PmsmModel<T: Float> {
+    discretization: Discretization,
+    ts: T,
+    /// `a = Rs / Ls`, 1/s.
+    a: T,
+    /// `c = psi_f / Ls`, A/rad.
+    c: T,
+    /// Current decay per sample: `alpha = exp(-a Ts)` (lag-free) or `1 - a Ts` (Euler).
+    decay: T,
+    /// Input gain per sample: `(1 - alpha) / Rs` (lag-free) or `Ts / Ls` (Euler), A/V.
+    input_gain: T,
+    q: Matrix4<T>,
+    r: Matrix2<T>,
+}
+
+impl<T: Float> PmsmModel<T> {
+    /// The model for a validated configuration.
+    pub fn new(cfg: &ObserverConfig<T>) -> Self {
+        let m = &cfg.motor;
+        let ts = cfg.ts_s;
+        let a = m.rs_ohm / m.ls_h;
+        let (decay, input_gain) = match cfg.discretization {
+            Discretization::ForwardEuler => (T::one() - a * ts, ts / m.ls_h),
+            Discretization::LagFree => {
+                // 1 - exp(-a Ts) without cancellation.
+                let one_minus_alpha = -(-a * ts).exp_m1();
+                (T::one() - one_minus_alpha, one_minus_alpha / m.rs_ohm)
+            }
+        };
+        Self {
+            discretization: cfg.discretization,
+            ts,
+            a,
+            c: m.psi_f_wb / m.ls_h,
+            decay,
+            input_gain,
+            q: cfg.noise.q,
+            r: cfg.noise.r,
+        }
+    }
+
+    /// The discretization in use.
+    pub fn discretization(&self) -> Discretization {
+        self.discretization
+    }
+
+    /// `(G, w G, d(w G)/dw)` of the lag-free step as `(re, im)` pairs (module docs).
+    fn emf_gain(&self, w: T) -> ((T, T), (T, T), (T, T)) {
+        let ts = self.ts;
+        match self.discretization {
+            Discretization::ForwardEuler => ((ts, T::zero()), (w * ts, T::zero()), (ts, T::zero())),
+            Discretization::LagFree => {
+                let a = self.a;
+                let one_minus_alpha = T::one() - self.decay;
+                let (sh, ch) = (w * ts * to_t(0.5)).sin_cos();
+                let two = T::one() + T::one();
+                // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
+                let cos_m1 = -two * sh * sh;
+                let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
+                // N = e^{j w Ts} - alpha.
+                let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
+                let d2 = a * a + w * w;
+                // G = N / (a + j w) = N (a - j w) / (a^2 + w^2).
+                let g_re = (n_re * a + n_im * w) / d2;
+                let g_im = (n_im * a - n_re * w) / d2;
+                // G' = j (Ts e^{j w Ts} - G) / (a + j w).
+                let (t_re, t_im) = (ts * ex_re - g_re, ts * ex_im - g_im);
+                // j (t) = -t_im + j t_re; divide by (a + j w).
+                let (jt_re, jt_im) = (-t_im, t_re);
+                let gp_re = (jt_re * a + jt_im * w) / d2;
+                let gp_im = (jt_im * a - jt_re * w) / d2;
+                (
+                    (g_re, g_im),
+                    (w * g_re, w * g_im),
+                    (g_re + w * gp_re, g_im + w * gp_im),
+                )
+            }
+        }
+    }
+}
+
+impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
+    fn transition(&self, x: &Vector4<T>, u: &Vector2<T>) -> (Vector4<T>, Matrix4<T>) {
+        let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
+        let (s, co) = th.sin_cos();
+        let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
+        let c = self.c;
+        // EMF term c w (-j e^{j th}) G, and its derivatives.
+        let ea = c * (s * m_re + co * m_im);
+        let eb = c * (s * m_im - co * m_re);
+        let ea_th = c * (co * m_re - s * m_im);
+        let eb_th = c * (co * m_im + s * m_re);
+        let ea_w = c * (s * mp_re + co * mp_im);
+        let eb_w = c * (s * mp_im - co * mp_re);
+        let xn = Vector4::new(
+            self.decay * ia + self.input_gain * u[0] + ea,
+            self.decay * ib + self.input_gain * u[1] + eb,
+            w,
+            th + self.ts * w,
+        );
+        let z = T::zero();
+        let o = T::one();
+        #[rustfmt::skip]
+        let phi = Matrix4::new(
+            self.decay, z,          ea_w, ea_th,
+            z,          self.decay, eb_w, eb_th,
+            z,          z,          o,    z,
+            z,          z,          self.ts, o,
+        );
+        (xn, phi)
+    }
+
+    fn process_noise(&self) -> &Matrix4<T> {
+        &self.q
+    }
+
+    fn normalize(&self, x: &mut Vector4<T>) {
+        x[3] = wrap_angle(x[3]);
+    }
+}
+
+impl<T: Float> MeasurementModel<T, 4, 2> for PmsmModel<T> {
+    fn observe(&self, x: &Vector4<T>) -> (Vector2<T>, SMatrix<T, 2, 4>) {
+        let z = T::zero();
+        let o = T::one();
+        #[rustfmt::skip]
+        let h = SMatrix::<T, 2, 4>::new(
+            o, z, z, z,
+            z, o, z, z,
+        );
+        (Vector2::new(x[0], x[1]), h)
+    }
+
+    fn measurement_noise(&self) -> &Matrix2<T> {
+        &self.r
+    }
+
+    fn normalize(&self, x: &mut Vector4<T>) {
+        x[3] = wrap_angle(x[3]);
+    }
+}
+
+/// Whether the angle estimate can be trusted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// The angle's standard deviation is below the configured limit.
+    Tracking,
+    /// The angle's standard deviation exceeds the limit: the filter has not converged yet, or
+    /// the back-EMF is too small to observe the angle (near standstill).
+    Uncertain,
+}
+
+/// One output sample of the observer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate<T> {
+    /// Electrical rotor angle, rad, in `[-pi, pi)`.
+    pub theta_rad: T,
+    /// Electrical speed, rad/s.
+    pub omega_e_rad_s: T,
+    /// Mechanical speed `omega_e / pole_pairs`, rad/s.
+    pub omega_mech_rad_s: T,
+    /// Estimated alpha current, A.
+    pub i_alpha_a: T,
+    /// Estimated beta current, A.
+    pub i_beta_a: T,
+    /// Normalized innovation squared of the last correction (0 before the first one).
+    pub nis: T,
+    /// Trust in the angle.
+    pub status: Status,
+}
+
+/// The PMSM alpha-beta EKF observer (seed's model; module docs give equations and timing).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PmsmObserver<T: Float> {
+    model: PmsmModel<T>,
+    ekf: Ekf<T, 4, 2>,
+    inv_pole_pairs: T,
+    angle_var_limit: T,
+}
+
+impl<T: Float> PmsmObserver<T> {
+    /// Validates `cfg` and builds the observer at `x0`, `P0`.
+    pub fn new(cfg: &ObserverConfig<T>) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        let mut x0 = cfg.x0;
+        x0[3] = wrap_angle(x0[3]);
+        Ok(Self {
+            model: PmsmModel::new(cfg),
+            ekf: Ekf::new(x0, cfg.p0, cfg.covariance_update),
+            inv_pole_pairs: T::one() / to_t(f64::from(cfg.motor.pole_pairs)),
+            angle_var_limit: cfg.angle_sigma_limit_rad * cfg.angle_sigma_limit_rad,
+        })
+    }
+
+    /// One sample: predict with `u_prev = [u_a, u_b]` (V, held over the previous period), then
+    /// correct with the sampled currents `i = [i_a, i_b]` (A).
+    ///
+    /// A non-finite input or measurement, a singular innovation covariance or a non-finite
+    /// result returns the error and leaves the state and covariance as they were.
+    pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        let u = Vector2::from(u_prev);
+        let z = Vector2::from(i);
+        if !all_finite(&u) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        if !all_finite(&z) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        let saved = self.ekf.clone();
+        let result = self
+            .ekf
+            .predict(&self.model, &u)
+            .and_then(|()| self.ekf.correct(&self.model, &z));
+        match result {
+            Ok(_) => Ok(self.estimate()),
+            Err(e) => {
+                self.ekf = saved;
+                Err(e)
+            }
+        }
+    }
+
+    /// Prediction only (e.g. to coast over a missing current sample), with the voltage held
+    /// over the period just ended. Refused, state kept, for a non-finite input.
+    pub fn predict(&mut self, u_prev: [T; 2]) -> Result<(), EkfError> {
+        self.ekf.predict(&self.model, &Vector2::from(u_prev))
+    }
+
+    /// Correction only, with the currents sampled now. Refused, state kept, for a non-finite
+    /// measurement.
+    pub fn correct(&mut self, i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        self.ekf.correct(&self.model, &Vector2::from(i))?;
+        Ok(self.estimate())
+    }
+
+    /// The current estimate.
+    pub fn estimate(&self) -> Estimate<T> {
+        let x = self.ekf.state();
+        let p = self.ekf.covariance();
+        let status = if p[(3, 3)] > self.angle_var_limit {
+            Status::Uncertain
+        } else {
+            Status::Tracking
+        };
+        Estimate {
+            theta_rad: x[3],
+            omega_e_rad_s: x[2],
+            omega_mech_rad_s: x[2] * self.inv_pole_pairs,
+            i_alpha_a: x[0],
+            i_beta_a: x[1],
+            nis: self.ekf.last_correction().nis,
+            status,
+        }
+    }
+
+    /// State `[i_a, i_b, w_e, theta]`.
+    pub fn state(&self) -> &Vector4<T> {
+        self.ekf.state()
+    }
+
+    /// State covariance `P` (4 x 4).
+    pub fn covariance(&self) -> &Matrix4<T> {
+        self.ekf.covariance()
+    }
+
+    /// The underlying generic filter.
+    pub fn ekf(&self) -> &Ekf<T, 4, 2> {
+        &self.ekf
+    }
+
+    /// The process/measurement model.
+    pub fn model(&self) -> &PmsmModel<T> {
+        &self.model
+    }
+
+    /// Replaces the estimate and covariance (angle wrapped). Refused, nothing changed, when
+    /// either is not finite.
+    pub fn reset(&mut self, mut x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
+        x[3] = wrap_angle(x[3]);
+        self.ekf.reset(x, p)
+    }
+}
