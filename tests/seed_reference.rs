@@ -6,7 +6,9 @@
 //! angle), and 1e-3 rad on the angle in f32.
 
 use ekf_core::nalgebra::{Matrix4, Vector4};
-use ekf_core::{Discretization, Float, MotorParams, NoiseCovariances, ObserverConfig, PmsmObserver};
+use ekf_core::{
+    Discretization, Float, MotorParams, NoiseCovariances, ObserverConfig, PmsmObserver,
+};
 
 const CSV: &str = include_str!("data/seed_reference.csv");
 
@@ -49,7 +51,10 @@ fn parse() -> Fixture {
                 }
             }
         } else if !header_seen {
-            assert!(line.starts_with("k,u_a,u_b,z_a,z_b,i_a,i_b,w,th,p00"), "header: {line}");
+            assert!(
+                line.starts_with("k,u_a,u_b,z_a,z_b,i_a,i_b,w,th,p00"),
+                "header: {line}"
+            );
             header_seen = true;
         } else if !line.is_empty() {
             let f: Vec<f64> = line.split(',').map(|s| s.parse().expect("float")).collect();
@@ -84,7 +89,10 @@ fn wrap(d: f64) -> f64 {
 
 /// Runs the crate's seed filter over the fixture in precision `T`; returns per-row
 /// `(x, p_diag, nis)` in f64.
-fn run<T: Float + Into<f64>>(fx: &Fixture, conv: impl Fn(f64) -> T) -> Vec<([f64; 4], [f64; 4], f64)> {
+fn run<T: Float + Into<f64>>(
+    fx: &Fixture,
+    conv: impl Fn(f64) -> T,
+) -> Vec<([f64; 4], [f64; 4], f64)> {
     let motor = MotorParams {
         rs_ohm: conv(fx.rs),
         ls_h: conv(fx.ls),
@@ -114,7 +122,12 @@ fn run<T: Float + Into<f64>>(fx: &Fixture, conv: impl Fn(f64) -> T) -> Vec<([f64
             let p = obs.covariance();
             (
                 [x[0].into(), x[1].into(), x[2].into(), x[3].into()],
-                [p[(0, 0)].into(), p[(1, 1)].into(), p[(2, 2)].into(), p[(3, 3)].into()],
+                [
+                    p[(0, 0)].into(),
+                    p[(1, 1)].into(),
+                    p[(2, 2)].into(),
+                    p[(3, 3)].into(),
+                ],
                 est.nis.into(),
             )
         })
@@ -127,7 +140,11 @@ fn column_rel_errors(fx: &Fixture, out: &[([f64; 4], [f64; 4], f64)]) -> [f64; 9
     let mut max_ref = [0.0f64; 9];
     for (row, (x, p, nis)) in fx.rows.iter().zip(out) {
         for c in 0..4 {
-            let d = if c == 3 { wrap(x[c] - row.x[c]) } else { x[c] - row.x[c] };
+            let d = if c == 3 {
+                wrap(x[c] - row.x[c])
+            } else {
+                x[c] - row.x[c]
+            };
             max_diff[c] = max_diff[c].max(d.abs());
             max_ref[c] = max_ref[c].max(row.x[c].abs());
             max_diff[4 + c] = max_diff[4 + c].max((p[c] - row.p_diag[c]).abs());
@@ -170,7 +187,10 @@ fn seed_filter_f32_matches_reference_angle_to_1e_3_rad() {
         .map(|(row, (x, _, _))| wrap(x[3] - row.x[3]).abs())
         .fold(0.0f64, f64::max);
     let rel = column_rel_errors(&fx, &out);
-    println!("f32 angle: max |difference| {max_angle:.3e} rad; speed relative {:.3e}", rel[2]);
+    println!(
+        "f32 angle: max |difference| {max_angle:.3e} rad; speed relative {:.3e}",
+        rel[2]
+    );
     assert!(max_angle < 1e-3, "f32 angle differs by {max_angle} rad");
     assert!(rel[2] < 1e-3, "f32 speed relative difference {}", rel[2]);
 }

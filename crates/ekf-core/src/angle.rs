@@ -37,13 +37,19 @@ mod tests {
         ];
         for (input, expected) in cases {
             let w = wrap_angle(input);
-            assert!((w - expected).abs() < 1e-9, "{input} -> {w}, expected {expected}");
+            assert!(
+                (w - expected).abs() < 1e-9,
+                "{input} -> {w}, expected {expected}"
+            );
             assert!((-PI..PI).contains(&w));
         }
         for i in -10_000..10_000 {
             let th = i as f32 * 0.013_7;
             let w = wrap_angle(th);
-            assert!((-core::f32::consts::PI..core::f32::consts::PI).contains(&w), "{th} -> {w}");
+            assert!(
+                (-core::f32::consts::PI..core::f32::consts::PI).contains(&w),
+                "{th} -> {w}"
+            );
         }
         assert!(wrap_angle(f64::NAN).is_nan());
     }

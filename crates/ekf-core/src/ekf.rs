@@ -83,8 +83,11 @@ impl core::error::Error for EkfError {}
 pub trait ProcessModel<T: Float, const NX: usize, const NU: usize> {
     /// The predicted state `f_d(x, u)` (`NX`) and the transition Jacobian
     /// `Phi = d f_d / d x` (`NX x NX`), both evaluated at the prior state `x`.
-    fn transition(&self, x: &SVector<T, NX>, u: &SVector<T, NU>)
-    -> (SVector<T, NX>, SMatrix<T, NX, NX>);
+    fn transition(
+        &self,
+        x: &SVector<T, NX>,
+        u: &SVector<T, NU>,
+    ) -> (SVector<T, NX>, SMatrix<T, NX, NX>);
 
     /// The process noise covariance `Q` (`NX x NX`) added per step.
     fn process_noise(&self) -> &SMatrix<T, NX, NX>;
@@ -218,7 +221,11 @@ impl<T: Float, const NX: usize, const NZ: usize> Ekf<T, NX, NZ> {
     }
 
     /// Measurement update with `z` (`NZ`); returns the innovation, `S` and the NIS.
-    pub fn correct<M>(&mut self, model: &M, z: &SVector<T, NZ>) -> Result<Correction<T, NZ>, EkfError>
+    pub fn correct<M>(
+        &mut self,
+        model: &M,
+        z: &SVector<T, NZ>,
+    ) -> Result<Correction<T, NZ>, EkfError>
     where
         M: MeasurementModel<T, NX, NZ> + ?Sized,
     {

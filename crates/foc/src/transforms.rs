@@ -113,12 +113,26 @@ mod tests {
     #[test]
     fn clarke_known_answers() {
         // Phase a at its peak: alpha = 1, beta = 0.
-        let ab = Abc { a: 1.0, b: -0.5, c: -0.5 }.to_alpha_beta();
+        let ab = Abc {
+            a: 1.0,
+            b: -0.5,
+            c: -0.5,
+        }
+        .to_alpha_beta();
         assert!(close(ab.alpha, 1.0) && close(ab.beta, 0.0), "{ab:?}");
         // Phase b at its peak (120 deg): alpha = -0.5, beta = sqrt(3)/2.
-        let ab = Abc { a: -0.5, b: 1.0, c: -0.5 }.to_alpha_beta();
+        let ab = Abc {
+            a: -0.5,
+            b: 1.0,
+            c: -0.5,
+        }
+        .to_alpha_beta();
         assert!(close(ab.alpha, -0.5) && close(ab.beta, SQRT_3_2), "{ab:?}");
-        let abc = AlphaBeta { alpha: 0.3, beta: -0.7 }.to_abc();
+        let abc = AlphaBeta {
+            alpha: 0.3,
+            beta: -0.7,
+        }
+        .to_abc();
         assert!(close(abc.a + abc.b + abc.c, 0.0));
         let back = abc.to_alpha_beta();
         assert!(close(back.alpha, 0.3) && close(back.beta, -0.7));
@@ -127,7 +141,11 @@ mod tests {
     #[test]
     fn park_known_answers() {
         // At th = 90 deg the alpha-beta vector (0, 1) is the d axis.
-        let dq = AlphaBeta { alpha: 0.0, beta: 1.0 }.to_dq(1.0, 0.0);
+        let dq = AlphaBeta {
+            alpha: 0.0,
+            beta: 1.0,
+        }
+        .to_dq(1.0, 0.0);
         assert!(close(dq.d, 1.0) && close(dq.q, 0.0), "{dq:?}");
         // At th = 30 deg, (cos 30, sin 30) is the d axis too.
         let (s, c) = (0.5, SQRT_3_2);
