@@ -1,2 +1,71 @@
-//! placeholder
-fn main() {}
+//! Host time per observer step (predict + correct), f32 and f64, default (lag-free, Joseph) and
+//! seed (forward Euler, standard form) configurations.
+//!
+//! Run: `cargo bench -p benches --bench ekf_step`. Target (issue 2): <= 30 ns per step in f64.
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use ekf_core::{Float, MotorParams, ObserverConfig, PmsmObserver};
+
+/// 1024 samples of a servo motor turning at w_e Ts = 0.1 rad with 2 A of q current.
+fn samples<T: Float>(conv: impl Fn(f64) -> T) -> Vec<([T; 2], [T; 2])> {
+    (0..1024)
+        .map(|k| {
+            let th = 0.1 * k as f64;
+            let (s, c) = th.sin_cos();
+            let u = [conv(-180.0 * s), conv(180.0 * c)];
+            let i = [conv(-2.0 * s + 0.01 * (k % 7) as f64), conv(2.0 * c)];
+            (u, i)
+        })
+        .collect()
+}
+
+fn bench_cfg<T: Float>(
+    c: &mut Criterion,
+    name: &str,
+    cfg: ObserverConfig<T>,
+    data: &[([T; 2], [T; 2])],
+) {
+    let mut obs = PmsmObserver::new(&cfg).expect("valid config");
+    let mut k = 0usize;
+    c.bench_function(name, |b| {
+        b.iter(|| {
+            let (u, i) = data[k & 1023];
+            k = k.wrapping_add(1);
+            black_box(obs.step(black_box(u), black_box(i)))
+        })
+    });
+}
+
+fn ekf_step(c: &mut Criterion) {
+    let ts = 1e-4;
+    let d64 = samples(|v| v);
+    let d32 = samples(|v| v as f32);
+    bench_cfg(
+        c,
+        "step f64 default",
+        ObserverConfig::new(MotorParams::<f64>::servo(), ts),
+        &d64,
+    );
+    bench_cfg(
+        c,
+        "step f64 seed",
+        ObserverConfig::seed(MotorParams::<f64>::servo(), ts),
+        &d64,
+    );
+    bench_cfg(
+        c,
+        "step f32 default",
+        ObserverConfig::new(MotorParams::<f32>::servo(), ts as f32),
+        &d32,
+    );
+    bench_cfg(
+        c,
+        "step f32 seed",
+        ObserverConfig::seed(MotorParams::<f32>::servo(), ts as f32),
+        &d32,
+    );
+}
+
+criterion_group!(benches, ekf_step);
+criterion_main!(benches);

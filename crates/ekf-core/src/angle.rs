@@ -8,6 +8,17 @@ use crate::Float;
 pub fn wrap_angle<T: Float>(th: T) -> T {
     let two_pi = T::two_pi();
     let pi = T::pi();
+    // Fast paths: already in range, or one turn out (the usual case after a step). They give
+    // the same value as the general formula with floor = 0 or +-1.
+    if th >= -pi && th < pi {
+        return th;
+    }
+    if th >= pi && th < pi + two_pi {
+        return th - two_pi;
+    }
+    if th < -pi && th >= -pi - two_pi {
+        return th + two_pi;
+    }
     let mut w = th - two_pi * ((th + pi) / two_pi).floor();
     // Rounding can land exactly on +pi (or a hair below -pi); fold it back.
     if w >= pi {

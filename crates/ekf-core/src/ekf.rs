@@ -140,7 +140,14 @@ pub struct Ekf<T: Float, const NX: usize, const NZ: usize> {
 
 /// `true` when every entry is finite.
 pub(crate) fn all_finite<T: Float, const R: usize, const C: usize>(m: &SMatrix<T, R, C>) -> bool {
-    m.iter().all(|v| v.is_finite())
+    finite(m.as_slice())
+}
+
+/// `true` when every value is finite (the branches are always taken the same way on good
+/// data, so they cost next to nothing).
+#[inline]
+pub(crate) fn finite<T: Float>(v: &[T]) -> bool {
+    v.iter().all(|x| x.is_finite())
 }
 
 /// `(m + m^T) / 2`.

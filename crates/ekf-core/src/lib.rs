@@ -9,6 +9,7 @@ mod error;
 pub mod motor;
 pub mod noise;
 pub mod observer;
+mod structured;
 
 pub use angle::wrap_angle;
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};

@@ -54,8 +54,12 @@
 
 use nalgebra::{Cholesky, Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 
-use crate::ekf::{CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel, all_finite};
+use crate::ekf::{
+    Correction, CovarianceUpdate, EkfError, MeasurementModel, ProcessModel, all_finite, finite,
+};
 use crate::motor::positive;
+use crate::structured;
+use crate::structured::Sym4;
 use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t, wrap_angle};
 
 /// How the continuous model is turned into one step of the filter (module docs).
@@ -182,6 +186,21 @@ pub struct PmsmModel<T: Float> {
     input_gain: T,
     q: Matrix4<T>,
     r: Matrix2<T>,
+    update: CovarianceUpdate,
+}
+
+/// Back-EMF term of one step and its derivatives (lag-free or forward Euler).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TransitionTerms<T> {
+    /// EMF contribution to `i_a-`, `i_b-`.
+    pub ea: T,
+    pub eb: T,
+    /// `d i_a- / d w`, `d i_a- / d th`.
+    pub ea_w: T,
+    pub ea_th: T,
+    /// `d i_b- / d w`, `d i_b- / d th`.
+    pub eb_w: T,
+    pub eb_th: T,
 }
 
 impl<T: Float> PmsmModel<T> {
@@ -207,6 +226,53 @@ impl<T: Float> PmsmModel<T> {
             input_gain,
             q: cfg.noise.q,
             r: cfg.noise.r,
+            update: cfg.covariance_update,
+        }
+    }
+
+    /// Sample time `Ts`, s.
+    pub fn ts(&self) -> T {
+        self.ts
+    }
+
+    /// Current decay per sample (`alpha` or `1 - a Ts`).
+    pub fn decay(&self) -> T {
+        self.decay
+    }
+
+    /// Voltage-to-current gain per sample, A/V.
+    pub fn input_gain(&self) -> T {
+        self.input_gain
+    }
+
+    /// Covariance update method the observer uses with this model.
+    pub fn covariance_update(&self) -> CovarianceUpdate {
+        self.update
+    }
+
+    /// `Q` made symmetric, `(Q + Q^T) / 2`.
+    pub(crate) fn q_sym(&self) -> Matrix4<T> {
+        (self.q + self.q.transpose()) * to_t::<T>(0.5)
+    }
+
+    /// `R` made symmetric, `(R + R^T) / 2`.
+    pub(crate) fn r_sym(&self) -> Matrix2<T> {
+        (self.r + self.r.transpose()) * to_t::<T>(0.5)
+    }
+
+    /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
+    pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
+        let (s, co) = th.sin_cos();
+        let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
+        let c = self.c;
+        // EMF term c w (-j e^{j th}) G, and its derivatives.
+        TransitionTerms {
+            ea: c * (s * m_re + co * m_im),
+            eb: c * (s * m_im - co * m_re),
+            ea_th: c * (co * m_re - s * m_im),
+            eb_th: c * (co * m_im + s * m_re),
+            ea_w: c * (s * mp_re + co * mp_im),
+            eb_w: c * (s * mp_im - co * mp_re),
         }
     }
 
@@ -223,23 +289,23 @@ impl<T: Float> PmsmModel<T> {
             Discretization::LagFree => {
                 let a = self.a;
                 let one_minus_alpha = T::one() - self.decay;
-                let (sh, ch) = (w * ts * to_t(0.5)).sin_cos();
+                let (sh, ch) = half_angle_sin_cos(w * ts * to_t(0.5));
                 let two = T::one() + T::one();
                 // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
                 let cos_m1 = -two * sh * sh;
                 let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
                 // N = e^{j w Ts} - alpha.
                 let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
-                let d2 = a * a + w * w;
+                let inv_d2 = T::one() / (a * a + w * w);
                 // G = N / (a + j w) = N (a - j w) / (a^2 + w^2).
-                let g_re = (n_re * a + n_im * w) / d2;
-                let g_im = (n_im * a - n_re * w) / d2;
+                let g_re = (n_re * a + n_im * w) * inv_d2;
+                let g_im = (n_im * a - n_re * w) * inv_d2;
                 // G' = j (Ts e^{j w Ts} - G) / (a + j w).
                 let (t_re, t_im) = (ts * ex_re - g_re, ts * ex_im - g_im);
                 // j (t) = -t_im + j t_re; divide by (a + j w).
                 let (jt_re, jt_im) = (-t_im, t_re);
-                let gp_re = (jt_re * a + jt_im * w) / d2;
-                let gp_im = (jt_im * a - jt_re * w) / d2;
+                let gp_re = (jt_re * a + jt_im * w) * inv_d2;
+                let gp_im = (jt_im * a - jt_re * w) * inv_d2;
                 (
                     (g_re, g_im),
                     (w * g_re, w * g_im),
@@ -253,16 +319,14 @@ impl<T: Float> PmsmModel<T> {
 impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
     fn transition(&self, x: &Vector4<T>, u: &Vector2<T>) -> (Vector4<T>, Matrix4<T>) {
         let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
-        let (s, co) = th.sin_cos();
-        let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
-        let c = self.c;
-        // EMF term c w (-j e^{j th}) G, and its derivatives.
-        let ea = c * (s * m_re + co * m_im);
-        let eb = c * (s * m_im - co * m_re);
-        let ea_th = c * (co * m_re - s * m_im);
-        let eb_th = c * (co * m_im + s * m_re);
-        let ea_w = c * (s * mp_re + co * mp_im);
-        let eb_w = c * (s * mp_im - co * mp_re);
+        let TransitionTerms {
+            ea,
+            eb,
+            ea_w,
+            ea_th,
+            eb_w,
+            eb_th,
+        } = self.transition_terms(th, w);
         let xn = Vector4::new(
             self.decay * ia + self.input_gain * u[0] + ea,
             self.decay * ib + self.input_gain * u[1] + eb,
@@ -311,6 +375,33 @@ impl<T: Float> MeasurementModel<T, 4, 2> for PmsmModel<T> {
     }
 }
 
+/// `(sin x, cos x)` for the half-step angle `x = w Ts / 2`: Taylor series through `x^13` and
+/// `x^14` for `|x| < 0.25` (truncation below 1e-20, i.e. exact in f64 and f32; no range
+/// reduction needed), `sin_cos` otherwise. Cheaper than a library call in the common case.
+fn half_angle_sin_cos<T: Float>(x: T) -> (T, T) {
+    if x.abs() >= to_t(0.25) {
+        return x.sin_cos();
+    }
+    let x2 = x * x;
+    let c = |v: f64| -> T { to_t(v) };
+    // Horner in x^2, coefficients (-1)^n / (2n+1)! and (-1)^n / (2n)!.
+    let s = x
+        * (T::one()
+            + x2 * (c(-1.0 / 6.0)
+                + x2 * (c(1.0 / 120.0)
+                    + x2 * (c(-1.0 / 5040.0)
+                        + x2 * (c(1.0 / 362_880.0)
+                            + x2 * (c(-1.0 / 39_916_800.0) + x2 * c(1.0 / 6_227_020_800.0)))))));
+    let co = T::one()
+        + x2 * (c(-0.5)
+            + x2 * (c(1.0 / 24.0)
+                + x2 * (c(-1.0 / 720.0)
+                    + x2 * (c(1.0 / 40_320.0)
+                        + x2 * (c(-1.0 / 3_628_800.0)
+                            + x2 * (c(1.0 / 479_001_600.0) + x2 * c(-1.0 / 87_178_291_200.0)))))));
+    (s, co)
+}
+
 /// Whether the angle estimate can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Status {
@@ -341,10 +432,17 @@ pub struct Estimate<T> {
 }
 
 /// The PMSM alpha-beta EKF observer (seed's model; module docs give equations and timing).
+///
+/// Its steps run a hand-scheduled update on the 10 unique entries of the symmetric covariance
+/// (the `structured` module), which gives the same results as [`Ekf`](crate::Ekf) driven by
+/// [`PmsmModel`]
+/// (to rounding; tested) at a fraction of the cost.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PmsmObserver<T: Float> {
     model: PmsmModel<T>,
-    ekf: Ekf<T, 4, 2>,
+    x: Vector4<T>,
+    p: Sym4<T>,
+    last: Correction<T, 2>,
     inv_pole_pairs: T,
     angle_var_limit: T,
 }
@@ -357,7 +455,13 @@ impl<T: Float> PmsmObserver<T> {
         x0[3] = wrap_angle(x0[3]);
         Ok(Self {
             model: PmsmModel::new(cfg),
-            ekf: Ekf::new(x0, cfg.p0, cfg.covariance_update),
+            x: x0,
+            p: Sym4::from_matrix(&cfg.p0),
+            last: Correction {
+                innovation: Vector2::zeros(),
+                innovation_covariance: Matrix2::zeros(),
+                nis: T::zero(),
+            },
             inv_pole_pairs: T::one() / to_t(f64::from(cfg.motor.pole_pairs)),
             angle_var_limit: cfg.angle_sigma_limit_rad * cfg.angle_sigma_limit_rad,
         })
@@ -369,46 +473,52 @@ impl<T: Float> PmsmObserver<T> {
     /// A non-finite input or measurement, a singular innovation covariance or a non-finite
     /// result returns the error and leaves the state and covariance as they were.
     pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
-        let u = Vector2::from(u_prev);
-        let z = Vector2::from(i);
-        if !all_finite(&u) {
+        if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        if !all_finite(&z) {
+        if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        let saved = self.ekf.clone();
-        let result = self
-            .ekf
-            .predict(&self.model, &u)
-            .and_then(|()| self.ekf.correct(&self.model, &z));
-        match result {
-            Ok(_) => Ok(self.estimate()),
-            Err(e) => {
-                self.ekf = saved;
-                Err(e)
-            }
-        }
+        let (xm, pm) = structured::predict(&self.model, &self.x, &self.p, u_prev);
+        let (x, p, c) = structured::correct(&self.model, &xm, &pm, i)?;
+        self.x = x;
+        self.p = p;
+        self.last = c;
+        Ok(self.estimate())
     }
 
     /// Prediction only (e.g. to coast over a missing current sample), with the voltage held
-    /// over the period just ended. Refused, state kept, for a non-finite input.
+    /// over the period just ended. Refused, state kept, for a non-finite input or result.
     pub fn predict(&mut self, u_prev: [T; 2]) -> Result<(), EkfError> {
-        self.ekf.predict(&self.model, &Vector2::from(u_prev))
+        if !finite(&u_prev) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        let (x, p) = structured::predict(&self.model, &self.x, &self.p, u_prev);
+        if !(finite(x.as_slice()) && p.all_finite()) {
+            return Err(EkfError::NonFiniteResult);
+        }
+        self.x = x;
+        self.p = p;
+        Ok(())
     }
 
     /// Correction only, with the currents sampled now. Refused, state kept, for a non-finite
-    /// measurement.
+    /// measurement or result.
     pub fn correct(&mut self, i: [T; 2]) -> Result<Estimate<T>, EkfError> {
-        self.ekf.correct(&self.model, &Vector2::from(i))?;
+        if !finite(&i) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        let (x, p, c) = structured::correct(&self.model, &self.x, &self.p, i)?;
+        self.x = x;
+        self.p = p;
+        self.last = c;
         Ok(self.estimate())
     }
 
     /// The current estimate.
     pub fn estimate(&self) -> Estimate<T> {
-        let x = self.ekf.state();
-        let p = self.ekf.covariance();
-        let status = if p[(3, 3)] > self.angle_var_limit {
+        let x = &self.x;
+        let status = if self.p.p33 > self.angle_var_limit {
             Status::Uncertain
         } else {
             Status::Tracking
@@ -419,24 +529,24 @@ impl<T: Float> PmsmObserver<T> {
             omega_mech_rad_s: x[2] * self.inv_pole_pairs,
             i_alpha_a: x[0],
             i_beta_a: x[1],
-            nis: self.ekf.last_correction().nis,
+            nis: self.last.nis,
             status,
         }
     }
 
     /// State `[i_a, i_b, w_e, theta]`.
     pub fn state(&self) -> &Vector4<T> {
-        self.ekf.state()
+        &self.x
     }
 
-    /// State covariance `P` (4 x 4).
-    pub fn covariance(&self) -> &Matrix4<T> {
-        self.ekf.covariance()
+    /// State covariance `P` (4 x 4, symmetric).
+    pub fn covariance(&self) -> Matrix4<T> {
+        self.p.to_matrix()
     }
 
-    /// The underlying generic filter.
-    pub fn ekf(&self) -> &Ekf<T, 4, 2> {
-        &self.ekf
+    /// Innovation, its covariance and the NIS of the last correction (zeros before the first).
+    pub fn last_correction(&self) -> &Correction<T, 2> {
+        &self.last
     }
 
     /// The process/measurement model.
@@ -444,10 +554,15 @@ impl<T: Float> PmsmObserver<T> {
         &self.model
     }
 
-    /// Replaces the estimate and covariance (angle wrapped). Refused, nothing changed, when
-    /// either is not finite.
+    /// Replaces the estimate and covariance (angle wrapped, covariance made symmetric).
+    /// Refused, nothing changed, when either is not finite.
     pub fn reset(&mut self, mut x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
+        if !(finite(x.as_slice()) && finite(p.as_slice())) {
+            return Err(EkfError::NonFiniteResult);
+        }
         x[3] = wrap_angle(x[3]);
-        self.ekf.reset(x, p)
+        self.x = x;
+        self.p = Sym4::from_matrix(&p);
+        Ok(())
     }
 }

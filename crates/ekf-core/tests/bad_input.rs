@@ -10,6 +10,9 @@ fn base() -> ObserverConfig<f64> {
     ObserverConfig::new(MotorParams::servo(), 1e-4)
 }
 
+/// Sets one scalar field of a configuration.
+type Setter = fn(&mut ObserverConfig<f64>, f64);
+
 fn refused(cfg: ObserverConfig<f64>, expected: ConfigError) {
     assert_eq!(PmsmObserver::new(&cfg).err(), Some(expected));
     // The message names the problem.
@@ -30,7 +33,7 @@ fn default_and_seed_configurations_are_valid() {
 
 #[test]
 fn motor_parameters_and_ts() {
-    let cases: [(fn(&mut ObserverConfig<f64>, f64), Param); 4] = [
+    let cases: [(Setter, Param); 4] = [
         (|c, v| c.motor.rs_ohm = v, Param::Rs),
         (|c, v| c.motor.ls_h = v, Param::Ls),
         (|c, v| c.motor.psi_f_wb = v, Param::PsiF),
