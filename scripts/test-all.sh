@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# The one test command (README): installs what it needs, then runs every check.
+#   bash scripts/test-all.sh
+# Needs rustup and python3 (>= 3.10) on PATH; everything else it installs itself.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+step() { printf '\n=== %s\n' "$*"; }
+
+step "toolchain (rust-toolchain.toml) and the Cortex-M4F target"
+rustup toolchain install >/dev/null  # the pinned toolchain, with rustfmt and clippy
+rustup target add thumbv7em-none-eabihf
+rustup component add rustfmt clippy >/dev/null
+
+step "formatting"
+cargo fmt --all --check
+
+step "clippy, host, all targets"
+cargo clippy --all-targets --locked -- -D warnings
+
+step "no_std build and clippy for thumbv7em-none-eabihf"
+cargo clippy -p ekf-core -p foc --no-default-features --target thumbv7em-none-eabihf --locked -- -D warnings
+cargo build -p ekf-core -p foc --no-default-features --target thumbv7em-none-eabihf --release --locked
+
+step "tests (unit, integration, doc)"
+cargo test --locked
+
+step "reference fixture is what its checked-in script makes"
+venv=.venv
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+fi
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/data/requirements.txt
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+"$venv/bin/python" tests/data/gen_seed_reference.py --out "$tmp/seed_reference.csv" >"$tmp/gen.log"
+"$venv/bin/python" tests/data/compare_csv.py tests/data/seed_reference.csv "$tmp/seed_reference.csv"
+
+step "all checks passed"
