@@ -566,3 +566,24 @@ impl<T: Float> PmsmObserver<T> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::half_angle_sin_cos;
+
+    #[test]
+    fn half_angle_series_matches_sin_cos() {
+        let mut worst64 = 0.0f64;
+        let mut worst32 = 0.0f32;
+        for i in -1000..=1000 {
+            let x = i as f64 * 3e-4; // up to +-0.3: both branches
+            let (s, c) = half_angle_sin_cos(x);
+            worst64 = worst64.max((s - x.sin()).abs()).max((c - x.cos()).abs());
+            let xf = x as f32;
+            let (s, c) = half_angle_sin_cos(xf);
+            worst32 = worst32.max((s - xf.sin()).abs()).max((c - xf.cos()).abs());
+        }
+        assert!(worst64 < 4e-16, "f64 series error {worst64:e}");
+        assert!(worst32 < 2e-7, "f32 series error {worst32:e}");
+    }
+}
