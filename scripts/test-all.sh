@@ -24,15 +24,22 @@ cargo build -p ekf-core -p foc --no-default-features --target thumbv7em-none-eab
 step "tests (unit, integration, doc)"
 cargo test --locked
 
-step "reference fixture is what its checked-in script makes"
+step "Python venv (.venv): numpy, maturin, pytest, filterpy"
 venv=.venv
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/data/requirements.txt
+
+step "reference fixture is what its checked-in script makes"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 "$venv/bin/python" tests/data/gen_seed_reference.py --out "$tmp/seed_reference.csv" >"$tmp/gen.log"
 "$venv/bin/python" tests/data/compare_csv.py tests/data/seed_reference.csv "$tmp/seed_reference.csv"
+
+step "pyfoc: clippy, build into the venv (maturin), pytest"
+cargo clippy -p pyfoc --all-targets --locked -- -D warnings
+(cd crates/pyfoc && VIRTUAL_ENV="$PWD/../../$venv" PATH="$PWD/../../$venv/bin:$PATH" maturin develop --release --locked --quiet)
+"$venv/bin/python" -m pytest crates/pyfoc/tests -q
 
 step "all checks passed"

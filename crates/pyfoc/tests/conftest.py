@@ -1,0 +1,42 @@
+"""Shared fixtures: the seed reference record (servo, 2500 samples) from tests/data."""
+import pathlib
+
+import numpy as np
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+SEED_CSV = ROOT / "tests" / "data" / "seed_reference.csv"
+
+
+@pytest.fixture(scope="session")
+def seed_record():
+    meta = {}
+    with open(SEED_CSV) as f:
+        for line in f:
+            if not line.startswith("#"):
+                break
+            for item in line[1:].split():
+                if "=" in item:
+                    k, v = item.split("=", 1)
+                    meta[k] = v
+    with open(SEED_CSV) as f:
+        lines = [line.strip() for line in f if not line.startswith("#")]
+    names = lines[0].split(",")
+    values = np.array([[float(v) for v in line.split(",")] for line in lines[1:] if line])
+    data = {name: values[:, j] for j, name in enumerate(names)}
+    floats = lambda s: np.array([float(v) for v in s.split(",")])  # noqa: E731
+    return {
+        "rs": float(meta["rs"]),
+        "ls": float(meta["ls"]),
+        "psi_f": float(meta["psi_f"]),
+        "pole_pairs": int(meta["pole_pairs"]),
+        "ts": float(meta["ts"]),
+        "q": floats(meta["q"]),
+        "r": floats(meta["r"]),
+        "x0": floats(meta["x0"]),
+        "p0": floats(meta["p0"]),
+        "u_ab": np.column_stack([data["u_a"], data["u_b"]]),
+        "i_ab": np.column_stack([data["z_a"], data["z_b"]]),
+        "theta_true": data["th_true"],
+        "omega_true": data["w_true"],
+    }

@@ -1,0 +1,180 @@
+"""The Python API: shapes, dtypes, errors, chunking, non-finite samples, threads."""
+import threading
+
+import numpy as np
+import pytest
+
+import pyfoc
+
+SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
+
+
+def record(n=3000, ts=1e-4, w=800.0, seed=0):
+    """A rotor at constant speed with ideal dq feed-forward (exact enough to exercise the API)."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    th = 0.4 + w * ts * k
+    iq = 2.0
+    i_ab = np.column_stack([-iq * np.sin(th), iq * np.cos(th)]) + 0.01 * rng.standard_normal((n, 2))
+    uq = SERVO["rs"] * iq + w * SERVO["psi_f"]
+    ud = -w * SERVO["ls"] * iq
+    thm = th + 0.5 * w * ts
+    u_ab = np.column_stack([ud * np.cos(thm) - uq * np.sin(thm), ud * np.sin(thm) + uq * np.cos(thm)])
+    return u_ab, i_ab, np.angle(np.exp(1j * th))
+
+
+def test_motor_and_ekf_construction_errors():
+    m = pyfoc.Motor(**SERVO)
+    assert m.pole_pairs == 4 and m.ld == m.lq == SERVO["ls"]
+    for kwargs in [dict(SERVO, rs=-1.0), dict(SERVO, ls=0.0), dict(SERVO, psi_f=float("nan")),
+                   dict(SERVO, pole_pairs=0), dict(SERVO, pole_pairs=-3)]:
+        with pytest.raises(pyfoc.ConfigError):
+            pyfoc.Motor(**kwargs)
+    assert issubclass(pyfoc.ConfigError, pyfoc.PyfocError)
+    assert issubclass(pyfoc.PyfocError, ValueError)
+    with pytest.raises(pyfoc.ConfigError, match="ts_s"):
+        pyfoc.Ekf(m, ts=0.0)
+    with pytest.raises(pyfoc.ConfigError, match="discretization"):
+        pyfoc.Ekf(m, ts=1e-4, discretization="rk4")
+    with pytest.raises(pyfoc.ConfigError, match="dtype"):
+        pyfoc.Ekf(m, ts=1e-4, dtype="float16")
+    with pytest.raises(pyfoc.ConfigError, match="Q"):
+        pyfoc.Ekf(m, ts=1e-4, q=[1.0, 1.0, -1.0, 1.0])
+    with pytest.raises(pyfoc.ConfigError, match="R"):
+        pyfoc.Ekf(m, ts=1e-4, r=[[1.0, 2.0], [2.0, 1.0]])
+    with pytest.raises(ValueError, match="q"):
+        pyfoc.Ekf(m, ts=1e-4, q=np.eye(3))
+    with pytest.raises(ValueError, match="x0"):
+        pyfoc.Ekf(m, ts=1e-4, x0=[1.0, 2.0])
+    with pytest.raises(pyfoc.ConfigError, match="surface"):
+        pyfoc.Ekf(pyfoc.Motor(**SERVO, ld=8e-3, lq=9e-3), ts=1e-4)
+
+
+def test_run_shapes_and_dtypes_are_checked():
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    good = np.zeros((10, 2))
+    with pytest.raises(ValueError, match="u_ab"):
+        ekf.run(np.zeros((10, 3)), good)
+    with pytest.raises(ValueError, match="i_ab"):
+        ekf.run(good, np.zeros(20))
+    with pytest.raises(ValueError, match="same length"):
+        ekf.run(good, np.zeros((9, 2)))
+    with pytest.raises(TypeError, match="u_ab"):
+        ekf.run(np.full((10, 2), "x"), good)
+    with pytest.raises(TypeError, match="i_ab"):
+        ekf.run(good, np.zeros((10, 2), dtype=complex))
+    with pytest.raises(ValueError, match="u_prev"):
+        ekf.step([1.0, 2.0, 3.0], [0.0, 0.0])
+    # Nothing above touched the filter.
+    assert np.all(ekf.state == 0.0)
+    # float32, int, non-contiguous and read-only inputs are accepted.
+    u, i, _ = record(200)
+    ro = i.copy()
+    ro.setflags(write=False)
+    a = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u.astype(np.float32), ro)
+    b = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(
+        np.asfortranarray(u.astype(np.float32)), np.asfortranarray(i))
+    np.testing.assert_array_equal(a["theta"], b["theta"])
+    assert pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(np.zeros((0, 2)), np.zeros((0, 2)))["theta"].shape == (0,)
+
+
+def test_run_tracks_and_output_layout():
+    u, i, th = record()
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    out = ekf.run(u, i)
+    assert set(out) == {"theta", "omega", "omega_mech", "i_alpha", "i_beta", "nis", "status"}
+    assert all(v.shape == (len(u),) for v in out.values())
+    assert out["status"].dtype == np.int8
+    err = np.degrees(np.angle(np.exp(1j * (out["theta"] - th))))
+    assert np.sqrt(np.mean(err[1000:] ** 2)) < 1.0
+    np.testing.assert_allclose(out["omega"][-1], 800.0, rtol=1e-2)
+    np.testing.assert_allclose(out["omega_mech"], out["omega"] / 4)
+    assert out["status"][-1] == pyfoc.STATUS_TRACKING
+    assert ekf.state.shape == (4,) and ekf.covariance.shape == (4, 4)
+    np.testing.assert_allclose(ekf.covariance, ekf.covariance.T)
+    assert ekf.state[3] == out["theta"][-1]
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_chunked_run_equals_one_run(dtype):
+    u, i, _ = record(2000)
+    one = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype).run(u, i)
+    chunked = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype)
+    parts = [chunked.run(u[a:b], i[a:b]) for a, b in [(0, 1), (1, 700), (700, 701), (701, 2000)]]
+    for key in one:
+        np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), one[key])
+
+
+def test_step_equals_run():
+    u, i, _ = record(300)
+    out = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u, i)
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    u_prev = np.zeros(2)
+    for k in range(len(u)):
+        est = ekf.step(u_prev, i[k])
+        assert est["theta"] == out["theta"][k] and est["omega"] == out["omega"][k]
+        u_prev = u[k]
+
+
+def test_float32_filter_is_close_to_float64():
+    u, i, _ = record(3000)
+    a = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u, i)
+    b = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype="float32").run(u, i)
+    d = np.angle(np.exp(1j * (a["theta"] - b["theta"])))
+    assert np.max(np.abs(d[500:])) < 1e-3
+
+
+def test_non_finite_samples_are_rejected_and_reported():
+    u, i, _ = record(500)
+    bad_i = i.copy()
+    bad_i[100] = [np.nan, 0.0]
+    bad_u = u.copy()
+    bad_u[200] = [np.inf, 0.0]  # row 201 predicts with it
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    out = ekf.run(bad_u, bad_i)
+    assert np.flatnonzero(out["status"] == pyfoc.STATUS_REJECTED).tolist() == [100, 201]
+    # A rejected row repeats the previous estimate: the state was kept.
+    assert out["theta"][100] == out["theta"][99]
+    assert out["theta"][201] == out["theta"][200]
+    assert np.all(np.isfinite(out["theta"])) and np.all(np.isfinite(ekf.covariance))
+    est = ekf.step([np.nan, 0.0], [0.0, 0.0])
+    assert est["status"] == "rejected"
+    before = ekf.state.copy()
+    with pytest.raises(pyfoc.FilterError):
+        ekf.reset([0.0, 0.0, np.nan, 0.0], np.eye(4))
+    np.testing.assert_array_equal(ekf.state, before)
+
+
+def test_threads_each_get_a_result():
+    u, i, _ = record(20000)
+    results, errors = [], []
+
+    def work():
+        try:
+            results.append(pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u, i)["theta"][-1])
+        except Exception as e:  # noqa: BLE001 - collected and asserted below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors and len(results) == 4 and len(set(results)) == 1
+    # One filter shared by threads: each call gets a result or a Python exception, no crash.
+    shared = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    outcomes = []
+
+    def share():
+        try:
+            shared.run(u, i)
+            outcomes.append("ok")
+        except RuntimeError as e:
+            outcomes.append(type(e).__name__)
+
+    threads = [threading.Thread(target=share) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(outcomes) == 4 and "ok" in outcomes
