@@ -4,7 +4,8 @@ use crate::Float;
 
 /// Wraps an angle to `[-pi, pi)`: `th - 2 pi floor((th + pi) / (2 pi))` (design section 4).
 ///
-/// Returns NaN for a non-finite input.
+/// Computed as that formula for `|th| < 3 pi` (one fold at most, bit-identical to it) and
+/// with the exact float remainder beyond. Returns NaN for a non-finite input.
 pub fn wrap_angle<T: Float>(th: T) -> T {
     let two_pi = T::two_pi();
     let pi = T::pi();
@@ -19,8 +20,9 @@ pub fn wrap_angle<T: Float>(th: T) -> T {
     if th < -pi && th >= -pi - two_pi {
         return th + two_pi;
     }
-    let mut w = th - two_pi * ((th + pi) / two_pi).floor();
-    // Rounding can land exactly on +pi (or a hair below -pi); fold it back.
+    // General case: the float remainder is exact and cannot overflow (unlike
+    // `th - 2 pi floor(..)` near the top of the range); it lies in (-2 pi, 2 pi).
+    let mut w = th % two_pi;
     if w >= pi {
         w -= two_pi;
     } else if w < -pi {
@@ -63,5 +65,15 @@ mod tests {
             );
         }
         assert!(wrap_angle(f64::NAN).is_nan());
+        for th in [f64::MAX, -f64::MAX, 1e300, -3.3e17] {
+            assert!((-PI..PI).contains(&wrap_angle(th)), "{th}");
+        }
+        for th in [f32::MAX, -f32::MAX, 3.0e30, -1.0e9] {
+            let w = wrap_angle(th);
+            assert!(
+                (-core::f32::consts::PI..core::f32::consts::PI).contains(&w),
+                "{th} -> {w}"
+            );
+        }
     }
 }

@@ -10,6 +10,7 @@ pub mod motor;
 pub mod noise;
 pub mod observer;
 mod structured;
+pub mod trig;
 
 pub use angle::wrap_angle;
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
@@ -24,11 +25,29 @@ pub use observer::{
 pub use nalgebra;
 
 /// The scalar of the filter: `f32` (Cortex-M4F) or `f64` (host).
-pub trait Float: nalgebra::RealField + Copy {}
-impl Float for f32 {}
-impl Float for f64 {}
+pub trait Float: nalgebra::RealField + Copy {
+    /// `(sin x, cos x)` computed in this precision only: [`trig::sin_cos_f32`] for `f32` (no
+    /// `f64` on a single-precision FPU), the standard library's (or `libm`'s) for `f64`.
+    fn sin_cos_angle(self) -> (Self, Self);
+}
 
-/// `v` converted to the scalar type (rounded to nearest for `f32`).
+impl Float for f32 {
+    #[inline]
+    fn sin_cos_angle(self) -> (f32, f32) {
+        trig::sin_cos_f32(self)
+    }
+}
+
+impl Float for f64 {
+    #[inline]
+    fn sin_cos_angle(self) -> (f64, f64) {
+        nalgebra::ComplexField::sin_cos(self)
+    }
+}
+
+/// `v` converted to the scalar type (rounded to nearest for `f32`). Always inlined so that
+/// constants fold at compile time and no `f64` conversion is left in `f32` code.
+#[inline(always)]
 pub(crate) fn to_t<T: Float>(v: f64) -> T {
     T::from_subset(&v)
 }

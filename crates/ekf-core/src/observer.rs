@@ -184,7 +184,9 @@ pub struct PmsmModel<T: Float> {
     decay: T,
     /// Input gain per sample: `(1 - alpha) / Rs` (lag-free) or `Ts / Ls` (Euler), A/V.
     input_gain: T,
+    /// `Q` made symmetric, `(Q + Q^T) / 2`.
     q: Matrix4<T>,
+    /// `R` made symmetric, `(R + R^T) / 2`.
     r: Matrix2<T>,
     update: CovarianceUpdate,
 }
@@ -224,8 +226,8 @@ impl<T: Float> PmsmModel<T> {
             c: m.psi_f_wb / m.ls_h,
             decay,
             input_gain,
-            q: cfg.noise.q,
-            r: cfg.noise.r,
+            q: (cfg.noise.q + cfg.noise.q.transpose()) * to_t::<T>(0.5),
+            r: (cfg.noise.r + cfg.noise.r.transpose()) * to_t::<T>(0.5),
             update: cfg.covariance_update,
         }
     }
@@ -250,19 +252,20 @@ impl<T: Float> PmsmModel<T> {
         self.update
     }
 
-    /// `Q` made symmetric, `(Q + Q^T) / 2`.
-    pub(crate) fn q_sym(&self) -> Matrix4<T> {
-        (self.q + self.q.transpose()) * to_t::<T>(0.5)
+    /// `Q` as configured, made symmetric at construction, `(Q + Q^T) / 2`.
+    pub(crate) fn q_sym(&self) -> &Matrix4<T> {
+        &self.q
     }
 
-    /// `R` made symmetric, `(R + R^T) / 2`.
-    pub(crate) fn r_sym(&self) -> Matrix2<T> {
-        (self.r + self.r.transpose()) * to_t::<T>(0.5)
+    /// `R` as configured, made symmetric at construction, `(R + R^T) / 2`.
+    pub(crate) fn r_sym(&self) -> &Matrix2<T> {
+        &self.r
     }
 
     /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
+    #[inline(always)]
     pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
-        let (s, co) = th.sin_cos();
+        let (s, co) = th.sin_cos_angle();
         let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
         let c = self.c;
         // EMF term c w (-j e^{j th}) G, and its derivatives.
@@ -282,6 +285,7 @@ impl<T: Float> PmsmModel<T> {
     }
 
     /// `(G, w G, d(w G)/dw)` of the lag-free step as `(re, im)` pairs (module docs).
+    #[inline(always)]
     fn emf_gain(&self, w: T) -> ((T, T), (T, T), (T, T)) {
         let ts = self.ts;
         match self.discretization {
@@ -375,30 +379,37 @@ impl<T: Float> MeasurementModel<T, 4, 2> for PmsmModel<T> {
     }
 }
 
-/// `(sin x, cos x)` for the half-step angle `x = w Ts / 2`: Taylor series through `x^13` and
-/// `x^14` for `|x| < 0.25` (truncation below 1e-20, i.e. exact in f64 and f32; no range
-/// reduction needed), `sin_cos` otherwise. Cheaper than a library call in the common case.
+/// `(sin x, cos x)` for the half-step angle `x = w Ts / 2`: Taylor series for `|x| < 0.25`
+/// (no range reduction needed), [`Float::sin_cos_angle`] otherwise. In `f64` the series runs
+/// through `x^13` / `x^14` (truncation below 1e-20); in `f32` through `x^7` / `x^8`
+/// (truncation below 1e-10, far below the `f32` rounding of 6e-8). Cheaper than a library call
+/// in the common case.
+#[inline(always)]
 fn half_angle_sin_cos<T: Float>(x: T) -> (T, T) {
     if x.abs() >= to_t(0.25) {
-        return x.sin_cos();
+        return x.sin_cos_angle();
     }
     let x2 = x * x;
     let c = |v: f64| -> T { to_t(v) };
-    // Horner in x^2, coefficients (-1)^n / (2n+1)! and (-1)^n / (2n)!.
+    let single = T::default_epsilon() > to_t(1e-10);
+    // Horner in x^2, coefficients (-1)^n / (2n+1)! and (-1)^n / (2n)!; the f64 tails are
+    // folded away at compile time for f32.
+    let (s_tail, c_tail) = if single {
+        (T::zero(), T::zero())
+    } else {
+        (
+            x2 * (c(1.0 / 362_880.0)
+                + x2 * (c(-1.0 / 39_916_800.0) + x2 * c(1.0 / 6_227_020_800.0))),
+            x2 * (c(-1.0 / 3_628_800.0)
+                + x2 * (c(1.0 / 479_001_600.0) + x2 * c(-1.0 / 87_178_291_200.0))),
+        )
+    };
     let s = x
         * (T::one()
-            + x2 * (c(-1.0 / 6.0)
-                + x2 * (c(1.0 / 120.0)
-                    + x2 * (c(-1.0 / 5040.0)
-                        + x2 * (c(1.0 / 362_880.0)
-                            + x2 * (c(-1.0 / 39_916_800.0) + x2 * c(1.0 / 6_227_020_800.0)))))));
+            + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * (c(-1.0 / 5040.0) + s_tail))));
     let co = T::one()
         + x2 * (c(-0.5)
-            + x2 * (c(1.0 / 24.0)
-                + x2 * (c(-1.0 / 720.0)
-                    + x2 * (c(1.0 / 40_320.0)
-                        + x2 * (c(-1.0 / 3_628_800.0)
-                            + x2 * (c(1.0 / 479_001_600.0) + x2 * c(-1.0 / 87_178_291_200.0)))))));
+            + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * (c(1.0 / 40_320.0) + c_tail))));
     (s, co)
 }
 
@@ -473,11 +484,15 @@ impl<T: Float> PmsmObserver<T> {
     /// A non-finite input or measurement, a singular innovation covariance or a non-finite
     /// result returns the error and leaves the state and covariance as they were.
     pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
-        if !finite(&u_prev) {
-            return Err(EkfError::NonFiniteInput);
-        }
-        if !finite(&i) {
-            return Err(EkfError::NonFiniteMeasurement);
+        // One test on the common path; which argument was bad is sorted out only on failure.
+        if !(u_prev[0] + u_prev[1] + i[0] + i[1]).is_finite() {
+            if !finite(&u_prev) {
+                return Err(EkfError::NonFiniteInput);
+            }
+            if !finite(&i) {
+                return Err(EkfError::NonFiniteMeasurement);
+            }
+            // All four finite but their sum overflows: absurd, yet valid input; go on.
         }
         let (xm, pm) = structured::predict(&self.model, &self.x, &self.p, u_prev);
         let (x, p, c) = structured::correct(&self.model, &xm, &pm, i)?;

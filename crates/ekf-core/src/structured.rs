@@ -84,7 +84,7 @@ impl<T: Float> Sym4<T> {
 
 /// Structured prediction: `(x-, P-)` from the posterior `(x, P)` and the input held over the
 /// period. Values are not checked here.
-#[inline]
+#[inline(always)]
 pub(crate) fn predict<T: Float>(
     model: &PmsmModel<T>,
     x: &Vector4<T>,
@@ -125,7 +125,7 @@ pub(crate) fn predict<T: Float>(
     let u01 = d * p01 + a1 * p12 + a2 * p13;
     let u10 = d * p01 + b1 * p02 + b2 * p03;
     let u11 = d * p11 + b1 * p12 + b2 * p13;
-    let q = model.q_sym();
+    let q = *model.q_sym();
     let half: T = to_t(0.5);
     let n01 = d * u01 + t00 * b1 + t01 * b2;
     let n10 = d * u10 + t10 * a1 + t11 * a2;
@@ -145,12 +145,25 @@ pub(crate) fn predict<T: Float>(
     (xn, pn)
 }
 
+/// `true` when the sum of the values is finite: false for any NaN or infinity (they
+/// propagate through a sum), and also, conservatively, when finite values are so large that
+/// their sum overflows. One test instead of one per value; four partial sums keep the
+/// dependency chain short.
+#[inline(always)]
+fn sum_is_finite<T: Float, const N: usize>(v: &[T; N]) -> bool {
+    let mut acc = [T::zero(); 4];
+    for (i, x) in v.iter().enumerate() {
+        acc[i % 4] += *x;
+    }
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])).is_finite()
+}
+
 /// Result of a correction: state, covariance and diagnostics.
 pub(crate) type Posterior<T> = (Vector4<T>, Sym4<T>, Correction<T, 2>);
 
 /// Structured correction: `(x, P, diagnostics)` from the prior `(x-, P-)` and the sampled
 /// currents; an error when `S` is not positive definite or a result is not finite.
-#[inline]
+#[inline(always)]
 pub(crate) fn correct<T: Float>(
     model: &PmsmModel<T>,
     x: &Vector4<T>,
@@ -169,7 +182,7 @@ pub(crate) fn correct<T: Float>(
         p23,
         p33,
     } = *p;
-    let r = model.r_sym();
+    let r = *model.r_sym();
     let (r00, r01, r11) = (r[(0, 0)], r[(0, 1)], r[(1, 1)]);
     let (s00, s01, s11) = (p00 + r00, p01 + r01, p11 + r11);
     let det = s00 * s11 - s01 * s01;
@@ -216,9 +229,13 @@ pub(crate) fn correct<T: Float>(
             p,
             [[k00, k01], [k10, k11], [k20, k21], [k30, k31]],
             (r00, r01, r11),
+            (s00, s01, s11),
         ),
     };
-    if !(finite(&[xn[0], xn[1], xn[2], xn[3], nis]) && pn.all_finite()) {
+    if !sum_is_finite(&[
+        xn[0], xn[1], xn[2], xn[3], nis, pn.p00, pn.p01, pn.p02, pn.p03, pn.p11, pn.p12, pn.p13,
+        pn.p22, pn.p23, pn.p33,
+    ]) {
         return Err(EkfError::NonFiniteResult);
     }
     let correction = Correction {
@@ -229,34 +246,47 @@ pub(crate) fn correct<T: Float>(
     Ok((xn, pn, correction))
 }
 
-/// Joseph form on 2 x 2 blocks (module docs), symmetric by construction of the upper triangle
-/// with the off-diagonal blocks averaged as the generic filter's forced symmetry does.
-fn joseph<T: Float>(p: &Sym4<T>, k: [[T; 2]; 4], r: (T, T, T)) -> Sym4<T> {
-    let half: T = to_t(0.5);
+/// Joseph form on 2 x 2 blocks (module docs), written out on scalars: `E = I - K1`,
+/// `TL = E A E^T + K1 R K1^T`, `TR = E (B - A K2^T) + K1 R K2^T`,
+/// `BR = C - K2 B - (K2 B)^T + K2 S K2^T` with `S = A + R`. Only the upper triangle is formed.
+#[inline(always)]
+fn joseph<T: Float>(p: &Sym4<T>, k: [[T; 2]; 4], r: (T, T, T), s: (T, T, T)) -> Sym4<T> {
+    let (a00, a01, a11) = (p.p00, p.p01, p.p11);
+    let (b00, b01, b10, b11) = (p.p02, p.p03, p.p12, p.p13);
     let (r00, r01, r11) = r;
-    // A, B, C blocks.
-    let a = Matrix2::new(p.p00, p.p01, p.p01, p.p11);
-    let b = Matrix2::new(p.p02, p.p03, p.p12, p.p13);
-    let c = Matrix2::new(p.p22, p.p23, p.p23, p.p33);
-    let rm = Matrix2::new(r00, r01, r01, r11);
-    let k1 = Matrix2::new(k[0][0], k[0][1], k[1][0], k[1][1]);
-    let k2 = Matrix2::new(k[2][0], k[2][1], k[3][0], k[3][1]);
-    let e = Matrix2::identity() - k1;
-    let k1r = k1 * rm;
-    let tl = e * a * e.transpose() + k1r * k1.transpose();
-    let tr = e * (b - a * k2.transpose()) + k1r * k2.transpose();
-    let k2b = k2 * b;
-    let br = c - k2b - k2b.transpose() + k2 * (a + rm) * k2.transpose();
+    let (s00, s01, s11) = s;
+    let [[k00, k01], [k10, k11], [k20, k21], [k30, k31]] = k;
+    let one = T::one();
+    let (e00, e01, e10, e11) = (one - k00, -k01, -k10, one - k11);
+    // E A
+    let (ea00, ea01) = (e00 * a00 + e01 * a01, e00 * a01 + e01 * a11);
+    let (ea10, ea11) = (e10 * a00 + e11 * a01, e10 * a01 + e11 * a11);
+    // K1 R
+    let (kr00, kr01) = (k00 * r00 + k01 * r01, k00 * r01 + k01 * r11);
+    let (kr10, kr11) = (k10 * r00 + k11 * r01, k10 * r01 + k11 * r11);
+    // B - A K2^T
+    let d00 = b00 - (a00 * k20 + a01 * k21);
+    let d01 = b01 - (a00 * k30 + a01 * k31);
+    let d10 = b10 - (a01 * k20 + a11 * k21);
+    let d11 = b11 - (a01 * k30 + a11 * k31);
+    // K2 B
+    let kb00 = k20 * b00 + k21 * b10;
+    let kb01 = k20 * b01 + k21 * b11;
+    let kb10 = k30 * b00 + k31 * b10;
+    let kb11 = k30 * b01 + k31 * b11;
+    // K2 S
+    let (ks00, ks01) = (k20 * s00 + k21 * s01, k20 * s01 + k21 * s11);
+    let (ks10, ks11) = (k30 * s00 + k31 * s01, k30 * s01 + k31 * s11);
     Sym4 {
-        p00: tl[(0, 0)],
-        p01: (tl[(0, 1)] + tl[(1, 0)]) * half,
-        p02: tr[(0, 0)],
-        p03: tr[(0, 1)],
-        p11: tl[(1, 1)],
-        p12: tr[(1, 0)],
-        p13: tr[(1, 1)],
-        p22: br[(0, 0)],
-        p23: (br[(0, 1)] + br[(1, 0)]) * half,
-        p33: br[(1, 1)],
+        p00: ea00 * e00 + ea01 * e01 + kr00 * k00 + kr01 * k01,
+        p01: ea00 * e10 + ea01 * e11 + kr00 * k10 + kr01 * k11,
+        p11: ea10 * e10 + ea11 * e11 + kr10 * k10 + kr11 * k11,
+        p02: e00 * d00 + e01 * d10 + kr00 * k20 + kr01 * k21,
+        p03: e00 * d01 + e01 * d11 + kr00 * k30 + kr01 * k31,
+        p12: e10 * d00 + e11 * d10 + kr10 * k20 + kr11 * k21,
+        p13: e10 * d01 + e11 * d11 + kr10 * k30 + kr11 * k31,
+        p22: p.p22 - (kb00 + kb00) + ks00 * k20 + ks01 * k21,
+        p23: p.p23 - kb01 - kb10 + ks00 * k30 + ks01 * k31,
+        p33: p.p33 - (kb11 + kb11) + ks10 * k30 + ks11 * k31,
     }
 }
