@@ -1,7 +1,7 @@
 //! Instructions per call on a Cortex-M4F (design.md section 5, "Cortex-M4F cost").
 //!
 //! Run: `cargo bench -p benches --bench cortex_m4`. It checks that `qemu-system-arm` is there
-//! and runs `scripts/qemu-firmware.sh --allow-f64`, which builds `crates/foc-firmware` for
+//! and runs `scripts/qemu-firmware.sh --no-install`, which builds `crates/foc-firmware` for
 //! `thumbv7em-none-eabihf`, runs it under QEMU (`mps2-an386`, `-icount shift=10`) and prints,
 //! per measured function,
 //!
@@ -35,7 +35,7 @@ fn main() -> ExitCode {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/qemu-firmware.sh");
     let output = match Command::new("bash")
         .arg(&script)
-        .arg("--allow-f64")
+        .arg("--no-install")
         .output()
     {
         Ok(o) => o,

@@ -21,6 +21,9 @@ step "no_std build and clippy for thumbv7em-none-eabihf"
 cargo clippy -p ekf-core -p foc --no-default-features --target thumbv7em-none-eabihf --locked -- -D warnings
 cargo build -p ekf-core -p foc --no-default-features --target thumbv7em-none-eabihf --release --locked
 
+step "Cortex-M4F firmware under QEMU: runs, checks, instruction counts, no f64"
+bash scripts/qemu-firmware.sh
+
 step "tests (unit, integration, doc)"
 cargo test --locked
 

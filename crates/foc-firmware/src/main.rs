@@ -25,8 +25,8 @@
 //! Measured functions: `ekf_step` (`PmsmObserver::step`, default config: lag-free, Joseph),
 //! `ekf_step_standard` (standard symmetrized covariance update), `ekf_step_euler` (forward
 //! Euler), `ekf_step_seed` (`ObserverConfig::seed`), `ekf_predict` and `ekf_correct` (the two
-//! halves of the default step) and `libm_sincosf` (the `f32` `sin_cos` that `nalgebra` calls
-//! without `std`). To add one, call [`meter::Clock::measure`] with its name.
+//! halves of the default step) and `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
+//! `ekf_core::trig`). To add one, call [`meter::Clock::measure`] with its name.
 #![no_std]
 #![no_main]
 
@@ -38,7 +38,6 @@ use core::panic::PanicInfo;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use cortex_m_semihosting::{debug, heprintln, hprintln};
-use ekf_core::nalgebra::ComplexField;
 use ekf_core::{
     CovarianceUpdate, Discretization, EkfError, Estimate, MotorParams, ObserverConfig,
     PmsmObserver, wrap_angle,
@@ -169,10 +168,10 @@ fn run() -> Result<(), &'static str> {
         ok = false;
     }
 
-    // The f32 sin_cos of the step (nalgebra RealField -> num-traits -> libm::sincosf).
-    clock.measure("libm_sincosf", SAMPLES, |k| {
+    // The observer's f32 sine/cosine (ekf_core::trig; libm's sincosf would compute in f64).
+    clock.measure("sin_cos_f32", SAMPLES, |k| {
         let th = data.get(k).map_or(0.0, |s| s.theta_rad);
-        black_box(black_box(th).sin_cos());
+        black_box(ekf_core::trig::sin_cos_f32(black_box(th)));
     });
 
     if ok {
