@@ -1,11 +1,32 @@
-//! Field-oriented control for a PMSM around the `ekf-core` observer, `no_std`, for Cortex-M4F.
-//!
-//! **Status:** only the reference-frame transforms exist so far ([`transforms`]); current and
-//! speed loops, SVPWM, start-up and faults are the subject of the foc issue and are not here yet.
+#![doc = include_str!("../README.md")]
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod config;
+pub mod controller;
+pub mod fault;
+pub mod hal;
+pub mod health;
+pub mod pi;
+pub mod startup;
+pub mod svpwm;
 pub mod transforms;
+pub mod trig;
 
+pub use config::{
+    ComputationDelay, ConfigError, Field, FocConfig, HealthConfig, Mode, ObserverLossPolicy,
+    StartupConfig,
+};
+pub use controller::{
+    CommandError, Foc, PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput,
+};
+pub use fault::{Fault, FaultInfo};
+pub use health::{HealthReport, LossReason};
+pub use pi::{Pi, PiGains};
+pub use startup::State;
+pub use svpwm::{Modulation, SAFE_DUTIES, duties_to_alpha_beta, svpwm};
 pub use transforms::{Abc, AlphaBeta, Dq};
+
+/// Re-export of the observer crate (motor parameters, observer configuration, estimate).
+pub use ekf_core;

@@ -3,9 +3,18 @@
 //! ```text
 //! Clarke:  a = i_a,  b = (i_a + 2 i_b) / sqrt(3)          (i_a + i_b + i_c = 0 assumed)
 //! Park:    d =  a cos th + b sin th,   q = -a sin th + b cos th
+//! inverse Clarke:  a = alpha,  b = -alpha/2 + sqrt(3)/2 beta,  c = -alpha/2 - sqrt(3)/2 beta
+//! inverse Park:    alpha = d cos th - q sin th,   beta = d sin th + q cos th
 //! ```
+//!
+//! Amplitude-invariant: a balanced set of peak `I` has `|(alpha, beta)| = I`. Angles are
+//! electrical. The `*_angle` variants compute the sine and cosine with [`crate::trig::sin_cos`]
+//! (error below 2.4e-7); the plain ones take them from the caller so that one evaluation serves
+//! several transforms.
 
 use core::ops::{Add, Mul, Sub};
+
+use crate::trig::sin_cos;
 
 /// `1 / sqrt(3)`.
 const FRAC_1_SQRT_3: f32 = 0.577_350_26;
@@ -42,12 +51,29 @@ pub struct Dq {
 }
 
 impl Abc {
-    /// Amplitude-invariant Clarke transform using phases a and b only (balanced load).
+    /// Amplitude-invariant Clarke transform using phases a and b only (balanced load,
+    /// `c = -a - b`; `c` is ignored).
     pub fn to_alpha_beta(self) -> AlphaBeta {
         AlphaBeta {
             alpha: self.a,
             beta: (self.a + 2.0 * self.b) * FRAC_1_SQRT_3,
         }
+    }
+
+    /// Clarke transform using all three phases, `alpha = (2a - b - c) / 3`,
+    /// `beta = (b - c) / sqrt(3)`: removes a common-mode component (e.g. a shared offset) and
+    /// averages the sensor noise of three shunts. Equals [`to_alpha_beta`](Self::to_alpha_beta)
+    /// when `a + b + c = 0`.
+    pub fn to_alpha_beta_3(self) -> AlphaBeta {
+        AlphaBeta {
+            alpha: (2.0 * self.a - self.b - self.c) * (1.0 / 3.0),
+            beta: (self.b - self.c) * FRAC_1_SQRT_3,
+        }
+    }
+
+    /// Whether all three phases are finite.
+    pub fn is_finite(self) -> bool {
+        self.a.is_finite() && self.b.is_finite() && self.c.is_finite()
     }
 }
 
@@ -70,6 +96,22 @@ impl AlphaBeta {
             q: -self.alpha * sin_th + self.beta * cos_th,
         }
     }
+
+    /// Park transform at the electrical angle `theta_rad`.
+    pub fn to_dq_angle(self, theta_rad: f32) -> Dq {
+        let (s, c) = sin_cos(theta_rad);
+        self.to_dq(s, c)
+    }
+
+    /// Squared length `alpha^2 + beta^2`.
+    pub fn norm_squared(self) -> f32 {
+        self.alpha * self.alpha + self.beta * self.beta
+    }
+
+    /// Whether both components are finite.
+    pub fn is_finite(self) -> bool {
+        self.alpha.is_finite() && self.beta.is_finite()
+    }
 }
 
 impl Dq {
@@ -79,6 +121,32 @@ impl Dq {
             alpha: self.d * cos_th - self.q * sin_th,
             beta: self.d * sin_th + self.q * cos_th,
         }
+    }
+
+    /// Inverse Park transform at the electrical angle `theta_rad`.
+    pub fn to_alpha_beta_angle(self, theta_rad: f32) -> AlphaBeta {
+        let (s, c) = sin_cos(theta_rad);
+        self.to_alpha_beta(s, c)
+    }
+
+    /// The same vector seen from a frame turned by `-delta` (i.e. the components rotated by
+    /// `+delta`, given as `sin delta`, `cos delta`): moving a dq quantity from a frame at angle
+    /// `th_a` to one at `th_b` is `rotate(sin(th_a - th_b), cos(th_a - th_b))`.
+    pub fn rotate(self, sin_delta: f32, cos_delta: f32) -> Dq {
+        Dq {
+            d: self.d * cos_delta - self.q * sin_delta,
+            q: self.d * sin_delta + self.q * cos_delta,
+        }
+    }
+
+    /// Squared length `d^2 + q^2`.
+    pub fn norm_squared(self) -> f32 {
+        self.d * self.d + self.q * self.q
+    }
+
+    /// Whether both components are finite.
+    pub fn is_finite(self) -> bool {
+        self.d.is_finite() && self.q.is_finite()
     }
 }
 
@@ -154,5 +222,80 @@ mod tests {
         let ab = Dq { d: 0.2, q: 1.5 }.to_alpha_beta(s, c);
         let dq = ab.to_dq(s, c);
         assert!(close(dq.d, 0.2) && close(dq.q, 1.5), "{dq:?}");
+    }
+
+    #[test]
+    fn inverse_clarke_known_answers() {
+        // alpha = 1: phase a at +1, b and c at -1/2.
+        let abc = AlphaBeta {
+            alpha: 1.0,
+            beta: 0.0,
+        }
+        .to_abc();
+        assert!(
+            close(abc.a, 1.0) && close(abc.b, -0.5) && close(abc.c, -0.5),
+            "{abc:?}"
+        );
+        // beta = 1: b = sqrt(3)/2, c = -sqrt(3)/2.
+        let abc = AlphaBeta {
+            alpha: 0.0,
+            beta: 1.0,
+        }
+        .to_abc();
+        assert!(close(abc.a, 0.0) && close(abc.b, SQRT_3_2) && close(abc.c, -SQRT_3_2));
+        // Three-phase Clarke removes a common offset and equals the two-phase one otherwise.
+        let bal = Abc {
+            a: 0.4,
+            b: -1.1,
+            c: 0.7,
+        };
+        let off = bal
+            + Abc {
+                a: 0.25,
+                b: 0.25,
+                c: 0.25,
+            };
+        let (x, y) = (bal.to_alpha_beta(), off.to_alpha_beta_3());
+        assert!(
+            close(x.alpha, y.alpha) && close(x.beta, y.beta),
+            "{x:?} {y:?}"
+        );
+    }
+
+    #[test]
+    fn park_at_angles_and_rotation() {
+        use core::f32::consts::PI;
+        // A unit vector at angle phi is d = cos(phi - th), q = sin(phi - th) in frame th.
+        for i in 0..24 {
+            let phi = -PI + i as f32 * (PI / 12.0);
+            let v = AlphaBeta {
+                alpha: libm_cos(phi),
+                beta: libm_sin(phi),
+            };
+            for th in [-3.0_f32, -1.0, 0.0, 0.5, 2.0, 3.1] {
+                let dq = v.to_dq_angle(th);
+                assert!(
+                    close(dq.d, libm_cos(phi - th)) && close(dq.q, libm_sin(phi - th)),
+                    "{phi} {th} {dq:?}"
+                );
+                let back = dq.to_alpha_beta_angle(th);
+                assert!(close(back.alpha, v.alpha) && close(back.beta, v.beta));
+                // Frame change th -> 0 equals a rotation by th.
+                let r = dq.rotate(libm_sin(th), libm_cos(th));
+                let direct = v.to_dq_angle(0.0);
+                assert!(
+                    close(r.d, direct.d) && close(r.q, direct.q),
+                    "{r:?} {direct:?}"
+                );
+            }
+        }
+    }
+
+    fn libm_sin(x: f32) -> f32 {
+        (f64::from(x)).sin() as f32
+    }
+
+    fn libm_cos(x: f32) -> f32 {
+        (f64::from(x)).cos() as f32
     }
 }

@@ -1,53 +1,129 @@
-//! A **sensored** field-oriented controller, the stand-in drive of this first simulator.
+//! Drive controllers: the [`DriveController`] trait the run loop calls once per PWM period,
+//! and the **sensored** field-oriented controller that implements it.
 //!
-//! It is given the **true** rotor angle and the **true** mechanical speed from the plant,
-//! not the observer's estimates: the observer runs alongside, open loop, and is only scored.
-//! Closing the loop on the observer (and running the `foc` crate's controller instead of this
-//! one) comes later; this controller exists to drive the plant through a realistic scenario.
+//! # The trait
 //!
-//! # Structure (one call of [`SensoredController::step`] per PWM period `k`)
+//! A controller sees what a real one sees: the measured phase currents (and their Clarke
+//! transform), the measured DC-bus voltage and the speed reference; in sensored mode
+//! ([`DriveController::sensored`]) also the true rotor angle and speed. It returns three
+//! duties in `[0, 1]` and telemetry for the log. Everything a controller does happens inside
+//! [`DriveController::tick`]; the simulator models the inverter (delay, dead time) behind it.
+//!
+//! # The sensored controller ([`SensoredController`])
+//!
+//! The stand-in drive until the `foc` crate's controller closes the loop on the observer. It
+//! is given the **true** rotor angle and speed; the observer runs alongside and is only
+//! scored. One tick:
 //!
 //! ```text
 //! speed PI:   e_w = w_ref - w_mech;  i_q_ref = Kp_w e_w + I_w,  clamped to +-I_max;  i_d_ref = 0
 //! Park:       i_d =  i_a cos th + i_b sin th,   i_q = -i_a sin th + i_b cos th   (th = th[k])
-//! current PI: u_d = Kp (i_d_ref - i_d) + I_d - w_e Ls i_q                 (decoupling)
-//!             u_q = Kp (i_q_ref - i_q) + I_q + w_e Ls i_d + w_e psi_f     (decoupling, EMF FF)
-//! limit:      |u_dq| <= u_dc / sqrt(3)  (linear range of SVPWM), by scaling the vector
-//! inv. Park:  at th + w_e Ts / 2
+//! current PI: u_d = Kp (i_d_ref - i_d) + I_d - w_e Lq i_q                 (decoupling)
+//!             u_q = Kp (i_q_ref - i_q) + I_q + w_e Ld i_d + w_e psi_f     (decoupling, EMF FF)
+//! limit:      |u_dq| <= u_dc_meas / sqrt(3)  (linear range of SVPWM), by scaling the vector
+//! inv. Park:  at th + w_e Ts / 2 (no delay) or th + 1.5 w_e Ts (one period of delay)
+//! SVPWM:      duties for u_ab on the measured bus
 //! ```
 //!
-//! Choices:
-//!
-//! - **Gains** by pole-zero cancellation: `Kp = w_c Ls`, `Ki = w_c Rs` makes each decoupled
-//!   current loop first order with bandwidth `w_c`. Speed loop: `Kp_w = w_s J / k_t`,
-//!   `Ki_w = Kp_w w_s / 4` (PI zero a quarter of the crossover `w_s` below it), `k_t = 1.5 p psi_f`.
-//! - **Decoupling** uses the measured currents (exact cancellation of the cross-coupling up to
-//!   the sensor noise; `w_e Ls` times 20 mA noise is well below 1 V on the servo).
-//! - **Integrators** are backward Euler, `I[k] = I[k-1] + Ki Ts e[k]`, and both loops run every
-//!   PWM period.
+//! - **Gains** by pole-zero cancellation: `Kp = w_c L`, `Ki = w_c Rs` makes each decoupled
+//!   current loop first order with bandwidth `w_c` (`L = (Ld + Lq) / 2`). Speed loop:
+//!   `Kp_w = w_s J / k_t`, `Ki_w = Kp_w w_s / 4`, `k_t = 1.5 p psi_f`.
+//! - **Integrators** are backward Euler, `I[k] = I[k-1] + Ki Ts e[k]`.
 //! - **Anti-windup** by conditional integration: while the output is limited, an axis does not
-//!   integrate an error that would push its output further into the limit (for the voltage
-//!   vector: an error of the same sign as that axis's voltage).
-//! - **Mid-period angle.** The voltage computed at `t_k` is held over `[t_k, t_k+1)` while the
-//!   rotor turns by `w_e Ts`; the inverse Park transform uses the mid-period angle
-//!   `th + w_e Ts / 2` so that the mean applied vector lies where the dq controller meant it.
-//!   This simulator has no computation delay yet (the voltage computed from the sample at
-//!   `t_k` is applied from `t_k` on), so the `1.5 w_e Ts` advance of a delayed drive is not
-//!   needed.
-//! - No field weakening (`i_d_ref = 0`): scenarios must keep the back-EMF below the voltage
-//!   limit.
+//!   integrate an error that would push its output further into the limit.
+//! - **Angle advance.** The voltage is held over a period while the rotor turns by `w_e Ts`.
+//!   Without delay, the vector computed at `t_k` acts over `[t_k, t_k+1)`, centred at
+//!   `t_k + Ts/2`; with the one-period delay it acts over `[t_k+1, t_k+2)`, centred at
+//!   `t_k + 1.5 Ts`. The inverse Park transform uses the angle at that centre so that the
+//!   mean applied vector lies where the dq controller meant it
+//!   ([`ControllerConfig::delay_compensation`]).
+//! - No field weakening (`i_d_ref = 0`): scenarios keep the back-EMF below the voltage limit.
+
+use core::f64::consts::PI;
 
 use serde::Serialize;
 
 use crate::plant::MotorModel;
+use crate::svpwm::{INV_SQRT3, svpwm};
+
+/// The true rotor position and speed, given only to sensored controllers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RotorFeedback {
+    /// Electrical angle at `t_k`, rad.
+    pub theta_e_rad: f64,
+    /// Mechanical speed at `t_k`, rad/s.
+    pub omega_mech_rad_s: f64,
+}
+
+/// What a controller reads in period `k`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerInput {
+    /// Period index.
+    pub k: u64,
+    /// `t_k`, s.
+    pub t_s: f64,
+    /// Measured phase currents `[a, b, c]` (`c` reconstructed), A.
+    pub i_abc_a: [f64; 3],
+    /// Their Clarke transform `[alpha, beta]`, A.
+    pub i_ab_a: [f64; 2],
+    /// Measured DC-bus voltage, V.
+    pub u_dc_v: f64,
+    /// Mechanical speed reference, rad/s.
+    pub speed_ref_mech_rad_s: f64,
+    /// True rotor angle and speed: `Some` only for a [`sensored`](DriveController::sensored)
+    /// controller.
+    pub rotor: Option<RotorFeedback>,
+}
+
+/// What a controller reports about itself, for the log.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ControllerTelemetry {
+    /// Name of the controller's state (e.g. `"sensored"`, `"align"`, `"closed_loop"`).
+    pub state: &'static str,
+    /// Angle the controller used for its Park transform, rad.
+    pub theta_e_rad: f64,
+    /// Electrical speed the controller used, rad/s.
+    pub omega_e_rad_s: f64,
+    /// Measured dq currents in the controller's frame, A.
+    pub i_dq_a: [f64; 2],
+    /// dq current references, A.
+    pub i_dq_ref_a: [f64; 2],
+    /// dq voltage reference after limiting, V.
+    pub u_dq_ref_v: [f64; 2],
+    /// Stationary voltage reference sent to the modulator, V.
+    pub u_ab_ref_v: [f64; 2],
+    /// Whether the voltage vector was limited this period.
+    pub voltage_limited: bool,
+}
+
+/// What a controller commands in period `k`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerOutput {
+    /// Duty of each leg, `[0, 1]` (the simulator clamps and checks them).
+    pub duties: [f64; 3],
+    /// Whether the bridge switches. `false` opens every switch for the coming period at once
+    /// (a gate disable is not delayed by the computation delay; see
+    /// [`Plant::step_open`](crate::plant::Plant::step_open)).
+    pub pwm_enabled: bool,
+    /// For the log.
+    pub telemetry: ControllerTelemetry,
+}
+
+/// A drive controller, called once per PWM period (module docs).
+pub trait DriveController {
+    /// Whether the controller is given the true rotor angle and speed
+    /// ([`ControllerInput::rotor`]).
+    fn sensored(&self) -> bool;
+
+    /// One control period: measurements in, duties out.
+    fn tick(&mut self, input: &ControllerInput) -> ControllerOutput;
+}
 
 /// Tuning and limits of the sensored controller.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ControllerConfig {
     /// Control (PWM) period, s.
     pub ts_s: f64,
-    /// DC-link voltage, V; the voltage vector is limited to `u_dc / sqrt(3)`.
-    pub u_dc_v: f64,
     /// Current limit: the speed loop's `i_q` reference is clamped to `+-current_limit_a`, A.
     pub current_limit_a: f64,
     /// Current loop proportional gain, V/A.
@@ -58,6 +134,9 @@ pub struct ControllerConfig {
     pub kp_speed_a_s_rad: f64,
     /// Speed loop integral gain, A/rad on the mechanical speed.
     pub ki_speed_a_rad: f64,
+    /// Advance the inverse Park angle by `1.5 w_e Ts` (one period of computation delay)
+    /// instead of `0.5 w_e Ts`.
+    pub delay_compensation: bool,
 }
 
 impl ControllerConfig {
@@ -66,55 +145,22 @@ impl ControllerConfig {
     pub fn tuned(
         motor: &MotorModel,
         ts_s: f64,
-        u_dc_v: f64,
         current_limit_a: f64,
         current_bw_rad_s: f64,
         speed_bw_rad_s: f64,
+        delay_compensation: bool,
     ) -> Self {
         let kp_speed = speed_bw_rad_s * motor.j_kg_m2 / motor.torque_constant_nm_a();
         Self {
             ts_s,
-            u_dc_v,
             current_limit_a,
-            kp_current_v_a: current_bw_rad_s * motor.ls_h,
+            kp_current_v_a: current_bw_rad_s * motor.ls_mean_h(),
             ki_current_v_as: current_bw_rad_s * motor.rs_ohm,
             kp_speed_a_s_rad: kp_speed,
             ki_speed_a_rad: kp_speed * speed_bw_rad_s / 4.0,
+            delay_compensation,
         }
     }
-
-    /// Largest voltage vector magnitude, `u_dc / sqrt(3)`, V.
-    pub fn voltage_limit_v(&self) -> f64 {
-        self.u_dc_v / 3f64.sqrt()
-    }
-}
-
-/// What the controller reads in period `k`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ControlInput {
-    /// Measured alpha-beta currents `i[k]`, A.
-    pub i_ab_a: [f64; 2],
-    /// True electrical rotor angle at `t_k`, rad (sensored controller).
-    pub theta_e_rad: f64,
-    /// True mechanical speed at `t_k`, rad/s (sensored controller).
-    pub omega_mech_rad_s: f64,
-    /// Mechanical speed reference, rad/s.
-    pub speed_ref_mech_rad_s: f64,
-}
-
-/// What the controller commands in period `k`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControlOutput {
-    /// Stator voltage `u[k]` to hold over `[t_k, t_k+1)`, alpha-beta, V.
-    pub u_ab_v: [f64; 2],
-    /// The same voltage in the controller's dq frame, V.
-    pub u_dq_v: [f64; 2],
-    /// Measured dq currents, A.
-    pub i_dq_a: [f64; 2],
-    /// dq current references, A.
-    pub i_dq_ref_a: [f64; 2],
-    /// Whether the voltage vector was limited this period.
-    pub voltage_limited: bool,
 }
 
 /// Sensored speed and current controller (module docs).
@@ -126,6 +172,8 @@ pub struct SensoredController {
     int_speed: f64,
     /// Current integrators `[d, q]`, V.
     int_dq: [f64; 2],
+    /// Angle advance factor: 0.5 or 1.5 periods.
+    advance: f64,
 }
 
 impl SensoredController {
@@ -137,6 +185,7 @@ impl SensoredController {
             motor,
             int_speed: 0.0,
             int_dq: [0.0; 2],
+            advance: if cfg.delay_compensation { 1.5 } else { 0.5 },
         }
     }
 
@@ -144,16 +193,33 @@ impl SensoredController {
     pub fn config(&self) -> &ControllerConfig {
         &self.cfg
     }
+}
 
-    /// One control period.
-    pub fn step(&mut self, input: &ControlInput) -> ControlOutput {
+impl DriveController for SensoredController {
+    fn sensored(&self) -> bool {
+        true
+    }
+
+    fn tick(&mut self, input: &ControllerInput) -> ControllerOutput {
         let cfg = self.cfg;
         let m = self.motor;
         let ts = cfg.ts_s;
+        // A sensored controller without the rotor position cannot commutate: it outputs
+        // zero voltage rather than guessing.
+        let Some(rotor) = input.rotor else {
+            return ControllerOutput {
+                duties: [0.5; 3],
+                pwm_enabled: false,
+                telemetry: ControllerTelemetry {
+                    state: "no_rotor_feedback",
+                    ..ControllerTelemetry::default()
+                },
+            };
+        };
 
         // Speed loop.
         let i_max = cfg.current_limit_a;
-        let e_w = input.speed_ref_mech_rad_s - input.omega_mech_rad_s;
+        let e_w = input.speed_ref_mech_rad_s - rotor.omega_mech_rad_s;
         let cand = self.int_speed + cfg.ki_speed_a_rad * ts * e_w;
         let unsat = cfg.kp_speed_a_s_rad * e_w + cand;
         let pushes_further = (unsat > i_max && e_w > 0.0) || (unsat < -i_max && e_w < 0.0);
@@ -164,25 +230,25 @@ impl SensoredController {
         let i_ref = [0.0, iq_ref];
 
         // Current loops.
-        let (s, c) = input.theta_e_rad.sin_cos();
+        let (s, c) = rotor.theta_e_rad.sin_cos();
         let [ia, ib] = input.i_ab_a;
         let i_dq = [ia * c + ib * s, -ia * s + ib * c];
-        let we = m.p() * input.omega_mech_rad_s;
+        let we = m.p() * rotor.omega_mech_rad_s;
         let e = [i_ref[0] - i_dq[0], i_ref[1] - i_dq[1]];
         let cand = [
             self.int_dq[0] + cfg.ki_current_v_as * ts * e[0],
             self.int_dq[1] + cfg.ki_current_v_as * ts * e[1],
         ];
         let ff = [
-            -we * m.ls_h * i_dq[1],
-            we * m.ls_h * i_dq[0] + we * m.psi_f_wb,
+            -we * m.lq_h * i_dq[1],
+            we * m.ld_h * i_dq[0] + we * m.psi_f_wb,
         ];
         let unsat = [
             cfg.kp_current_v_a * e[0] + cand[0] + ff[0],
             cfg.kp_current_v_a * e[1] + cand[1] + ff[1],
         ];
-        let u_lim = cfg.voltage_limit_v();
-        let mag = unsat[0].hypot(unsat[1]);
+        let u_lim = input.u_dc_v * INV_SQRT3;
+        let mag = (unsat[0] * unsat[0] + unsat[1] * unsat[1]).sqrt();
         let limited = mag > u_lim;
         let u_dq = if limited {
             let k = u_lim / mag;
@@ -197,74 +263,163 @@ impl SensoredController {
             }
         }
 
-        // Inverse Park at the mid-period angle.
-        let (s, c) = (input.theta_e_rad + 0.5 * we * ts).sin_cos();
+        // Inverse Park at the angle at the centre of the period the voltage will act in.
+        let (sd, cd) = small_sin_cos(self.advance * we * ts);
+        let (s, c) = (s * cd + c * sd, c * cd - s * sd);
         let u_ab = [u_dq[0] * c - u_dq[1] * s, u_dq[0] * s + u_dq[1] * c];
-        ControlOutput {
-            u_ab_v: u_ab,
-            u_dq_v: u_dq,
-            i_dq_a: i_dq,
-            i_dq_ref_a: i_ref,
-            voltage_limited: limited,
+        let duties = svpwm(u_ab, input.u_dc_v).d;
+        ControllerOutput {
+            duties,
+            pwm_enabled: true,
+            telemetry: ControllerTelemetry {
+                state: "sensored",
+                theta_e_rad: rotor.theta_e_rad,
+                omega_e_rad_s: we,
+                i_dq_a: i_dq,
+                i_dq_ref_a: i_ref,
+                u_dq_ref_v: u_dq,
+                u_ab_ref_v: u_ab,
+                voltage_limited: limited,
+            },
         }
     }
+}
+
+/// `(sin x, cos x)`, by Taylor series for `|x| < 0.35` (error below 1e-14; the angle advance
+/// of one and a half periods stays there up to `w_e Ts = 0.23`), else by `sin_cos`.
+#[inline]
+fn small_sin_cos(x: f64) -> (f64, f64) {
+    if x.abs() < 0.35 {
+        let x2 = x * x;
+        let s = x
+            * (1.0
+                - x2 / 6.0
+                    * (1.0
+                        - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0 * (1.0 - x2 / 110.0)))));
+        let c = 1.0
+            - x2 / 2.0
+                * (1.0
+                    - x2 / 12.0
+                        * (1.0
+                            - x2 / 30.0
+                                * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0 * (1.0 - x2 / 132.0)))));
+        (s, c)
+    } else {
+        x.sin_cos()
+    }
+}
+
+/// Hz to rad/s.
+pub fn hz_to_rad_s(f_hz: f64) -> f64 {
+    2.0 * PI * f_hz
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::inverter::{Inverter, InverterConfig};
     use crate::plant::{Plant, PlantState};
 
-    fn servo_controller() -> (SensoredController, ControllerConfig) {
+    fn servo_controller(delay: bool) -> SensoredController {
         let m = MotorModel::servo();
-        let cfg = ControllerConfig::tuned(
-            &m,
-            1e-4,
-            300.0,
-            3.0,
-            2.0 * 500.0 * core::f64::consts::PI,
-            125.0,
-        );
-        (SensoredController::new(cfg, m), cfg)
+        let cfg = ControllerConfig::tuned(&m, 1e-4, 3.0, hz_to_rad_s(500.0), 125.0, delay);
+        SensoredController::new(cfg, m)
+    }
+
+    /// Closed loop through the inverter model, with or without the delay, and checks that
+    /// the speed settles and the current tracks its reference.
+    fn closed_loop(delay: bool, compensate: bool) -> (f64, f64) {
+        let mut ctl = servo_controller(compensate);
+        let mut inv = Inverter::new(InverterConfig {
+            ts_s: 1e-4,
+            u_dc_v: 300.0,
+            dead_time_s: 0.0,
+            delay,
+            ripple_fraction: 0.0,
+            ripple_hz: 0.0,
+        });
+        let mut plant = Plant::new(MotorModel::servo(), PlantState::default());
+        let w_ref = 150.0;
+        let mut worst_id = 0.0f64;
+        for k in 0..4000u64 {
+            let s = plant.state();
+            let i_ab = plant.i_ab_a();
+            let out = ctl.tick(&ControllerInput {
+                k,
+                t_s: k as f64 * 1e-4,
+                i_abc_a: crate::svpwm::inverse_clarke(i_ab),
+                i_ab_a: i_ab,
+                u_dc_v: 300.0,
+                speed_ref_mech_rad_s: w_ref,
+                rotor: Some(RotorFeedback {
+                    theta_e_rad: s.theta_e_rad,
+                    omega_mech_rad_s: s.omega_mech_rad_s,
+                }),
+            });
+            assert!(out.duties.iter().all(|d| (0.0..=1.0).contains(d)));
+            if k > 3000 {
+                worst_id = worst_id.max(s.i_d_a.abs());
+            }
+            let a = inv.apply(out.duties, 300.0, 300.0, plant.i_abc_a());
+            plant.step(a.u_ab_v, 0.5, 1e-4);
+        }
+        (plant.state().omega_mech_rad_s - w_ref, worst_id)
     }
 
     #[test]
-    fn speed_loop_reaches_its_reference_and_voltage_stays_limited() {
-        let (mut ctl, cfg) = servo_controller();
-        let mut plant = Plant::new(MotorModel::servo(), PlantState::default());
-        let w_ref = 100.0;
-        for _ in 0..3000 {
-            let s = plant.state();
-            let out = ctl.step(&ControlInput {
-                i_ab_a: [s.i_alpha_a, s.i_beta_a],
-                theta_e_rad: s.theta_e_rad,
-                omega_mech_rad_s: s.omega_mech_rad_s,
-                speed_ref_mech_rad_s: w_ref,
-            });
-            assert!(out.u_ab_v[0].hypot(out.u_ab_v[1]) <= cfg.voltage_limit_v() * (1.0 + 1e-12));
-            assert!(out.i_dq_ref_a[1].abs() <= cfg.current_limit_a);
-            plant.step(out.u_ab_v, 0.2, 1e-4, 10);
+    fn speed_loop_reaches_its_reference_through_the_inverter() {
+        let (dw, id) = closed_loop(false, false);
+        assert!(dw.abs() < 0.5 && id < 0.05, "no delay: dw {dw}, i_d {id}");
+        let (dw, id) = closed_loop(true, true);
+        assert!(
+            dw.abs() < 0.5 && id < 0.05,
+            "delay compensated: dw {dw}, i_d {id}"
+        );
+    }
+
+    #[test]
+    fn delay_compensation_removes_the_d_current_error() {
+        // Uncompensated, the applied vector lags by w_e Ts and the steady i_d is off zero.
+        let (_, id_bad) = closed_loop(true, false);
+        let (_, id_good) = closed_loop(true, true);
+        assert!(id_good < id_bad, "compensated {id_good} A, not {id_bad} A");
+    }
+
+    #[test]
+    fn small_angle_series_matches_sin_cos() {
+        for i in -400..=400 {
+            let x = f64::from(i) * 1e-3;
+            let (s, c) = small_sin_cos(x);
+            assert!(
+                (s - x.sin()).abs() < 1e-14 && (c - x.cos()).abs() < 1e-14,
+                "{x}"
+            );
         }
-        let w = plant.state().omega_mech_rad_s;
-        assert!((w - w_ref).abs() < 0.5, "w_mech {w}");
     }
 
     #[test]
     fn voltage_limit_engages_and_integrators_do_not_wind_up() {
-        let (mut ctl, cfg) = servo_controller();
-        // A huge speed error at a high speed: the q voltage saturates.
-        let input = ControlInput {
+        let mut ctl = servo_controller(true);
+        let input = ControllerInput {
+            k: 0,
+            t_s: 0.0,
+            i_abc_a: [0.0; 3],
             i_ab_a: [0.0, 0.0],
-            theta_e_rad: 0.0,
-            omega_mech_rad_s: 240.0,
+            u_dc_v: 300.0,
             speed_ref_mech_rad_s: 400.0,
+            rotor: Some(RotorFeedback {
+                theta_e_rad: 0.0,
+                omega_mech_rad_s: 240.0,
+            }),
         };
         for _ in 0..1000 {
-            let out = ctl.step(&input);
-            assert!(out.voltage_limited);
-            assert!((out.u_dq_v[0].hypot(out.u_dq_v[1]) - cfg.voltage_limit_v()).abs() < 1e-9);
+            let out = ctl.tick(&input);
+            let t = out.telemetry;
+            assert!(t.voltage_limited);
+            let lim = 300.0 * INV_SQRT3;
+            assert!((t.u_dq_ref_v[0].hypot(t.u_dq_ref_v[1]) - lim).abs() < 1e-9);
         }
-        assert!(ctl.int_dq[1].abs() < cfg.voltage_limit_v());
-        assert!(ctl.int_speed.abs() <= cfg.current_limit_a);
+        assert!(ctl.int_dq[1].abs() < 300.0 * INV_SQRT3);
+        assert!(ctl.int_speed.abs() <= 3.0);
     }
 }

@@ -1,41 +1,75 @@
-//! Errors of a simulation run.
+//! Errors of the simulator.
 
-use core::fmt;
+use ekf_core::ConfigError;
+use thiserror::Error;
 
-use ekf_core::{ConfigError, EkfError};
+/// A scenario field whose value is refused, and why.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+#[error("{field}: {problem}")]
+pub struct FieldError {
+    /// Dotted path of the field, e.g. `inverter.dead_time_s`.
+    pub field: String,
+    /// What is wrong with it.
+    pub problem: String,
+}
 
-/// Why a run could not be done.
-#[derive(Clone, Debug, PartialEq)]
+impl FieldError {
+    /// A field error.
+    pub fn new(field: impl Into<String>, problem: impl Into<String>) -> Self {
+        Self {
+            field: field.into(),
+            problem: problem.into(),
+        }
+    }
+}
+
+/// Why the simulator could not do what it was asked.
+#[derive(Debug, Error)]
 pub enum SimError {
-    /// The scenario is invalid (the message says which field and why).
-    Scenario(String),
-    /// The observer refused its configuration.
-    ObserverConfig(ConfigError),
-    /// The observer failed at sample `k`.
-    Observer {
-        /// Sample index.
-        k: usize,
-        /// The observer's error.
-        error: EkfError,
+    /// A scenario file could not be read.
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: String,
+        /// The I/O error.
+        source: std::io::Error,
     },
-}
-
-impl fmt::Display for SimError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            SimError::Scenario(why) => write!(f, "invalid scenario: {why}"),
-            SimError::ObserverConfig(e) => write!(f, "observer configuration refused: {e}"),
-            SimError::Observer { k, error } => write!(f, "observer failed at sample {k}: {error}"),
-        }
-    }
-}
-
-impl std::error::Error for SimError {
-    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
-        match self {
-            SimError::Scenario(_) => None,
-            SimError::ObserverConfig(e) => Some(e),
-            SimError::Observer { error, .. } => Some(error),
-        }
-    }
+    /// A scenario is malformed, incomplete or physically invalid.
+    #[error("{file}: {field}: {problem}")]
+    Scenario {
+        /// The file (or `preset NAME` for a built-in scenario).
+        file: String,
+        /// Dotted path of the offending field (`-` when the file as a whole is unreadable).
+        field: String,
+        /// What is wrong.
+        problem: String,
+    },
+    /// No built-in scenario has this name.
+    #[error("no built-in scenario named {name:?} (known: {known})")]
+    UnknownPreset {
+        /// The name asked for.
+        name: String,
+        /// The known names, comma separated.
+        known: String,
+    },
+    /// The observer refused its configuration.
+    #[error("observer configuration refused: {0}")]
+    ObserverConfig(#[from] ConfigError),
+    /// The simulation stopped before its end (non-finite state, observer failure, log
+    /// failure); the outputs written so far are complete and readable.
+    #[error("run stopped at t = {t_s} s: {reason}")]
+    Stopped {
+        /// Simulated time of the stop, s.
+        t_s: f64,
+        /// What happened.
+        reason: String,
+    },
+    /// Writing an output file failed.
+    #[error("{path}: {message}")]
+    Output {
+        /// The file.
+        path: String,
+        /// What failed.
+        message: String,
+    },
 }

@@ -1,4 +1,4 @@
-//! Metrics of a run (`design.md` section 5).
+//! Metrics of a run (`design.md` section 5), computed on the fly (no trace needed).
 //!
 //! For an observer:
 //!
@@ -13,14 +13,18 @@
 //! - **window**: samples at or after the convergence time with `|w_e| >= 5 %` of rated speed.
 //!   When the observer never converged, the window is every sample with `|w_e| >= 5 %` (so the
 //!   errors show how far off it is) and `converged` is false.
+//! - **NIS mean** over the window: about 2 (the measurement dimension) for a filter whose
+//!   noise model matches the data.
 //!
-//! For the run: simulated time, wall time and the real-time factor, and a few sanity figures of
-//! the drive.
+//! Streaming: a sample with `|e_th| >= 5 deg` restarts the window, so the window accumulated at
+//! the end is exactly the one after the convergence time.
+//!
+//! For the run: simulated time, wall time and the real-time factor, and figures of the drive.
 
 use serde::Serialize;
 
-use crate::scenario::Scenario;
-use crate::sim::{ObserverSample, RunOutput, Sample};
+use crate::scenario::{RPM_PER_RAD_S, Scenario};
+use crate::sim::{ObserverSample, Sample};
 
 /// `|e_th|` below which the observer counts as converged, electrical degrees.
 pub const CONVERGED_DEG: f64 = 5.0;
@@ -52,102 +56,177 @@ pub struct ObserverMetrics {
     pub speed_error_max_rad_s: f64,
     /// Fraction of the window in which the observer reported `Tracking`, %.
     pub tracking_pct: f64,
+    /// Mean normalized innovation squared over the window.
+    pub nis_mean: f64,
+}
+
+/// Running sums over a set of samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Sums {
+    n: usize,
+    sum_e: f64,
+    sum_e2: f64,
+    max_e: f64,
+    sum_w2: f64,
+    max_w: f64,
+    tracking: usize,
+    sum_nis: f64,
+}
+
+impl Sums {
+    fn add(&mut self, e: f64, ew: f64, tracking: bool, nis: f64) {
+        self.n += 1;
+        self.sum_e += e;
+        self.sum_e2 += e * e;
+        self.max_e = self.max_e.max(e.abs());
+        self.sum_w2 += ew * ew;
+        self.max_w = self.max_w.max(ew.abs());
+        self.tracking += usize::from(tracking);
+        self.sum_nis += nis;
+    }
+}
+
+/// Streaming scorer of one observer (module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObserverScore {
+    rated_omega_e_rad_s: f64,
+    w_min: f64,
+    t_first: Option<f64>,
+    /// Time of the first sample of the present run of `|e| < 5 deg`.
+    run_start: Option<f64>,
+    /// Window since `run_start`.
+    window: Sums,
+    /// Every sample above the low-speed limit (the window when never converged).
+    all: Sums,
+}
+
+impl ObserverScore {
+    /// A scorer for a motor rated at `rated_omega_e_rad_s` (electrical).
+    pub fn new(rated_omega_e_rad_s: f64) -> Self {
+        Self {
+            rated_omega_e_rad_s,
+            w_min: LOW_SPEED_FRACTION * rated_omega_e_rad_s,
+            t_first: None,
+            run_start: None,
+            window: Sums::default(),
+            all: Sums::default(),
+        }
+    }
+
+    /// Adds one sample: time, true electrical speed, and the observer's sample.
+    #[inline]
+    pub fn push(&mut self, t_s: f64, omega_e_true_rad_s: f64, est: &ObserverSample) {
+        if self.t_first.is_none() {
+            self.t_first = Some(t_s);
+        }
+        let e = est.angle_error_deg;
+        if e.abs() >= CONVERGED_DEG || e.is_nan() {
+            self.run_start = None;
+            self.window = Sums::default();
+        } else if self.run_start.is_none() {
+            self.run_start = Some(t_s);
+        }
+        if omega_e_true_rad_s.abs() >= self.w_min {
+            let ew = est.speed_error_rad_s;
+            self.all.add(e, ew, est.tracking, est.nis);
+            if self.run_start.is_some() {
+                self.window.add(e, ew, est.tracking, est.nis);
+            }
+        }
+    }
+
+    /// The metrics so far, with samples of period `ts_s`; `None` before the first sample.
+    pub fn finish(&self, ts_s: f64) -> Option<ObserverMetrics> {
+        let first = self.t_first?;
+        let converged = self.run_start.is_some();
+        let s = if converged { &self.window } else { &self.all };
+        let nf = s.n as f64;
+        let speed_rms = (s.sum_w2 / nf).sqrt();
+        Some(ObserverMetrics {
+            converged,
+            convergence_time_s: self.run_start.map(|t| t - first),
+            window_samples: s.n,
+            window_s: nf * ts_s,
+            angle_error_rms_deg: (s.sum_e2 / nf).sqrt(),
+            angle_error_max_deg: if s.n > 0 { s.max_e } else { f64::NAN },
+            angle_error_mean_deg: s.sum_e / nf,
+            speed_error_rms_rad_s: speed_rms,
+            speed_error_rms_pct: 100.0 * speed_rms / self.rated_omega_e_rad_s,
+            speed_error_max_rad_s: if s.n > 0 { s.max_w } else { f64::NAN },
+            tracking_pct: 100.0 * s.tracking as f64 / nf,
+            nis_mean: s.sum_nis / nf,
+        })
+    }
 }
 
 impl ObserverMetrics {
-    /// Scores the observer that `pick` selects from each sample; `None` when some sample has
-    /// no estimate from it (e.g. a comparison filter that was not run or was dropped) or the
-    /// trace is empty.
+    /// Scores the observer that `pick` selects from each sample of a recorded trace; `None`
+    /// when some sample has no estimate from it or the trace is empty.
     pub fn compute(
         samples: &[Sample],
         ts_s: f64,
         rated_omega_e_rad_s: f64,
         pick: impl Fn(&Sample) -> Option<ObserverSample>,
     ) -> Option<Self> {
-        let est: Vec<ObserverSample> = samples.iter().map(&pick).collect::<Option<_>>()?;
-        let first = samples.first()?;
-        let err_deg: Vec<f64> = samples
-            .iter()
-            .zip(&est)
-            .map(|(s, e)| s.angle_error_deg(e))
-            .collect();
-        // Index of the first sample of the final run of |e| < 5 deg.
-        let start = match err_deg.iter().rposition(|e| e.abs() >= CONVERGED_DEG) {
-            None => Some(0),
-            Some(last_bad) if last_bad + 1 < samples.len() => Some(last_bad + 1),
-            Some(_) => None,
-        };
-        let convergence_time_s = start.map(|i| samples[i].t_s - first.t_s);
-        let from = start.unwrap_or(0);
-        let w_min = LOW_SPEED_FRACTION * rated_omega_e_rad_s;
-
-        let mut n = 0usize;
-        let (mut sum_e, mut sum_e2, mut max_e) = (0.0, 0.0, 0.0f64);
-        let (mut sum_w2, mut max_w) = (0.0, 0.0f64);
-        let mut tracking = 0usize;
-        for i in from..samples.len() {
-            let s = &samples[i];
-            if s.omega_e_rad_s.abs() < w_min {
-                continue;
-            }
-            let e = err_deg[i];
-            let ew = s.speed_error_rad_s(&est[i]);
-            n += 1;
-            sum_e += e;
-            sum_e2 += e * e;
-            max_e = max_e.max(e.abs());
-            sum_w2 += ew * ew;
-            max_w = max_w.max(ew.abs());
-            tracking += usize::from(est[i].tracking);
+        let mut score = ObserverScore::new(rated_omega_e_rad_s);
+        for s in samples {
+            score.push(s.t_s, s.truth.omega_e_rad_s, &pick(s)?);
         }
-        let nf = n as f64;
-        let speed_rms = (sum_w2 / nf).sqrt();
-        Some(Self {
-            converged: start.is_some(),
-            convergence_time_s,
-            window_samples: n,
-            window_s: nf * ts_s,
-            angle_error_rms_deg: (sum_e2 / nf).sqrt(),
-            angle_error_max_deg: if n > 0 { max_e } else { f64::NAN },
-            angle_error_mean_deg: sum_e / nf,
-            speed_error_rms_rad_s: speed_rms,
-            speed_error_rms_pct: 100.0 * speed_rms / rated_omega_e_rad_s,
-            speed_error_max_rad_s: if n > 0 { max_w } else { f64::NAN },
-            tracking_pct: 100.0 * tracking as f64 / nf,
-        })
+        score.finish(ts_s)
     }
 }
 
-/// Sanity figures of the (sensored) drive.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// Figures of the drive.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct DriveMetrics {
     /// Largest current vector magnitude, A.
     pub peak_current_a: f64,
     /// Largest `|speed reference - speed|`, mechanical rpm.
     pub max_speed_tracking_error_rpm: f64,
+    /// RMS of `i_q_ref - i_q` (controller's frame, measured currents), A.
+    pub iq_tracking_error_rms_a: f64,
     /// Mechanical speed at the end of the run, rpm.
     pub final_speed_rpm: f64,
     /// Share of periods in which the voltage vector was limited, %.
     pub voltage_limited_pct: f64,
 }
 
-impl DriveMetrics {
-    /// The figures of a trace.
-    pub fn compute(samples: &[Sample]) -> Self {
-        let mut peak = 0.0f64;
-        let mut max_track = 0.0f64;
-        let mut limited = 0usize;
-        for s in samples {
-            peak = peak.max(s.plant.i_alpha_a.hypot(s.plant.i_beta_a));
-            let ref_rpm = s.speed_ref_mech_rad_s * crate::scenario::RPM_PER_RAD_S;
-            max_track = max_track.max((ref_rpm - s.speed_rpm()).abs());
-            limited += usize::from(s.voltage_limited);
-        }
-        Self {
-            peak_current_a: peak,
-            max_speed_tracking_error_rpm: max_track,
-            final_speed_rpm: samples.last().map_or(0.0, Sample::speed_rpm),
-            voltage_limited_pct: 100.0 * limited as f64 / samples.len().max(1) as f64,
+/// Streaming accumulator of [`DriveMetrics`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DriveScore {
+    n: usize,
+    peak_sq: f64,
+    max_track: f64,
+    sum_iq_e2: f64,
+    last_rpm: f64,
+    limited: usize,
+}
+
+impl DriveScore {
+    /// Adds one sample.
+    #[inline]
+    pub fn push(&mut self, s: &Sample) {
+        self.n += 1;
+        let [a, b] = s.truth.i_ab_a;
+        self.peak_sq = self.peak_sq.max(a * a + b * b);
+        self.max_track = self
+            .max_track
+            .max((s.control.speed_ref_rpm - s.truth.speed_rpm).abs());
+        let e = s.control.telemetry.i_dq_ref_a[1] - s.control.telemetry.i_dq_a[1];
+        self.sum_iq_e2 += e * e;
+        self.last_rpm = s.truth.speed_rpm;
+        self.limited += usize::from(s.control.telemetry.voltage_limited);
+    }
+
+    /// The figures so far.
+    pub fn finish(&self) -> DriveMetrics {
+        let n = self.n.max(1) as f64;
+        DriveMetrics {
+            peak_current_a: self.peak_sq.sqrt(),
+            max_speed_tracking_error_rpm: self.max_track,
+            iq_tracking_error_rms_a: (self.sum_iq_e2 / n).sqrt(),
+            final_speed_rpm: self.last_rpm,
+            voltage_limited_pct: 100.0 * self.limited as f64 / n,
         }
     }
 }
@@ -157,15 +236,17 @@ impl DriveMetrics {
 pub struct RunMetrics {
     /// Scenario name.
     pub scenario: String,
+    /// How the run ended (`completed`, or why it stopped early).
+    pub end: String,
     /// PWM periods simulated.
     pub periods: usize,
     /// PWM period, s.
     pub ts_s: f64,
     /// Simulated time, s.
     pub simulated_s: f64,
-    /// Wall-clock time of the simulation loop, s.
+    /// Wall-clock time of the simulation loop, s (logging included when it was on).
     pub wall_time_s: f64,
-    /// Simulated seconds per wall-clock second (plant, controller and every observer run).
+    /// Simulated seconds per wall-clock second.
     pub real_time_factor: f64,
     /// Rated electrical speed, rad/s (the 5 % low-speed exclusion and the % figures).
     pub rated_omega_e_rad_s: f64,
@@ -179,74 +260,111 @@ pub struct RunMetrics {
     pub drive: DriveMetrics,
 }
 
-impl RunMetrics {
-    /// The metrics of a run of `scenario`.
-    pub fn compute(scenario: &Scenario, run: &RunOutput) -> Self {
-        let samples = &run.trace.samples;
-        let ts = run.trace.ts_s;
+/// Streaming accumulator of every metric of a run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MetricsAccumulator {
+    observer: ObserverScore,
+    seed_filter: Option<ObserverScore>,
+    drive: DriveScore,
+    periods: usize,
+}
+
+impl MetricsAccumulator {
+    /// An empty accumulator for `scenario`.
+    pub fn new(scenario: &Scenario) -> Self {
         let rated = scenario.rated_speed_e_rad_s();
         Self {
-            scenario: scenario.name.clone(),
-            periods: samples.len(),
-            ts_s: ts,
-            simulated_s: run.simulated_s(),
-            wall_time_s: run.wall_time_s,
-            real_time_factor: run.real_time_factor(),
-            rated_omega_e_rad_s: rated,
-            observer: ObserverMetrics::compute(samples, ts, rated, |s| Some(s.observer)),
-            seed_filter: if run.seed_filter_failure.is_some() {
-                None
-            } else {
-                ObserverMetrics::compute(samples, ts, rated, |s| s.seed_filter)
-            },
-            seed_filter_failure: run
-                .seed_filter_failure
-                .map(|f| format!("sample {}: {}", f.k, f.error)),
-            drive: DriveMetrics::compute(samples),
+            observer: ObserverScore::new(rated),
+            seed_filter: scenario
+                .observer
+                .seed_filter
+                .then(|| ObserverScore::new(rated)),
+            drive: DriveScore::default(),
+            periods: 0,
         }
     }
+
+    /// Adds one sample.
+    #[inline]
+    pub fn push(&mut self, s: &Sample) {
+        self.periods += 1;
+        self.observer
+            .push(s.t_s, s.truth.omega_e_rad_s, &s.observer);
+        if let (Some(score), Some(est)) = (self.seed_filter.as_mut(), s.seed_filter.as_ref()) {
+            score.push(s.t_s, s.truth.omega_e_rad_s, est);
+        }
+        self.drive.push(s);
+    }
+
+    /// Drops the seed filter's score (it failed and was dropped from the run).
+    pub fn drop_seed_filter(&mut self) {
+        self.seed_filter = None;
+    }
+
+    /// The metrics of the samples pushed so far.
+    pub fn finish(
+        &self,
+        scenario: &Scenario,
+        end: String,
+        wall_time_s: f64,
+        seed_filter_failure: Option<String>,
+    ) -> RunMetrics {
+        let ts = scenario.ts_s();
+        let simulated = self.periods as f64 * ts;
+        RunMetrics {
+            scenario: scenario.name.clone(),
+            end,
+            periods: self.periods,
+            ts_s: ts,
+            simulated_s: simulated,
+            wall_time_s,
+            real_time_factor: simulated / wall_time_s,
+            rated_omega_e_rad_s: scenario.rated_speed_e_rad_s(),
+            observer: self.observer.finish(ts),
+            seed_filter: self.seed_filter.as_ref().and_then(|s| s.finish(ts)),
+            seed_filter_failure,
+            drive: self.drive.finish(),
+        }
+    }
+}
+
+/// Mechanical speed in rpm from rad/s.
+pub fn rpm(omega_mech_rad_s: f64) -> f64 {
+    omega_mech_rad_s * RPM_PER_RAD_S
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::PlantState;
+    use crate::sim::Sample;
 
-    fn sample(t: f64, th_true: f64, th_hat: f64, w: f64, w_hat: f64) -> Sample {
-        Sample {
+    fn sample(t: f64, th_err_deg: f64, w: f64, w_hat: f64) -> Sample {
+        let mut s = Sample {
             t_s: t,
-            plant: PlantState {
-                theta_e_rad: th_true,
-                ..PlantState::default()
-            },
-            omega_e_rad_s: w,
-            torque_nm: 0.0,
-            i_meas_ab_a: [0.0; 2],
-            u_ab_v: [0.0; 2],
-            i_dq_ref_a: [0.0; 2],
-            voltage_limited: false,
-            speed_ref_mech_rad_s: 0.0,
-            load_torque_nm: 0.0,
-            observer: ObserverSample {
-                theta_e_rad: th_hat,
-                omega_e_rad_s: w_hat,
-                tracking: true,
-                nis: 0.0,
-            },
-            seed_filter: None,
-        }
+            ..Sample::default()
+        };
+        s.truth.omega_e_rad_s = w;
+        s.observer = ObserverSample {
+            theta_e_rad: 0.0,
+            omega_e_rad_s: w_hat,
+            angle_error_deg: th_err_deg,
+            speed_error_rad_s: w_hat - w,
+            p_diag: [0.0; 4],
+            nis: 2.0,
+            tracking: true,
+        };
+        s
     }
 
     #[test]
-    fn convergence_window_and_wrapping() {
-        let d = 1f64.to_radians();
+    fn convergence_window_and_streaming() {
         let samples = vec![
-            sample(0.0, 0.0, 1.0, 100.0, 0.0),        // 57 deg off
-            sample(0.1, 3.1, -3.1, 100.0, 100.0),     // wraps: 4.8 deg off
-            sample(0.2, 0.0, 10.0 * d, 100.0, 100.0), // 10 deg off: last bad one
-            sample(0.3, 0.0, 2.0 * d, 100.0, 110.0),
-            sample(0.4, 0.0, 99.0 * d, 1.0, 100.0), // below 5 % of rated (100): but still bad
-            sample(0.5, 0.0, -2.0 * d, -100.0, -90.0),
+            sample(0.0, 57.0, 100.0, 0.0),
+            sample(0.1, -4.8, 100.0, 100.0),
+            sample(0.2, 10.0, 100.0, 100.0), // last bad one
+            sample(0.3, 2.0, 100.0, 110.0),
+            sample(0.4, 99.0, 1.0, 100.0), // below 5 % of rated (100): but still bad
+            sample(0.5, -2.0, -100.0, -90.0),
         ];
         let m = ObserverMetrics::compute(&samples, 0.1, 100.0, |s| Some(s.observer));
         let m = m.expect("metrics");
@@ -256,9 +374,10 @@ mod tests {
         assert!((m.angle_error_mean_deg + 2.0).abs() < 1e-9);
         assert!((m.speed_error_rms_rad_s - 10.0).abs() < 1e-9);
         assert!((m.speed_error_rms_pct - 10.0).abs() < 1e-9);
+        assert!((m.nis_mean - 2.0).abs() < 1e-12);
 
         let mut s2 = samples.clone();
-        s2[4].observer.theta_e_rad = 0.0;
+        s2[4].observer.angle_error_deg = 0.0;
         let m = ObserverMetrics::compute(&s2, 0.1, 100.0, |s| Some(s.observer)).expect("metrics");
         assert_eq!(m.convergence_time_s, Some(0.3));
         // Samples 3 and 5 (sample 4 is below 5 % of rated speed).
@@ -268,10 +387,12 @@ mod tests {
         assert!((m.angle_error_max_deg - 2.0).abs() < 1e-9);
 
         let mut s3 = samples;
-        s3[5].observer.theta_e_rad = 1.0;
+        s3[5].observer.angle_error_deg = 57.0;
         let m = ObserverMetrics::compute(&s3, 0.1, 100.0, |s| Some(s.observer)).expect("metrics");
         assert!(!m.converged);
         assert_eq!(m.convergence_time_s, None);
+        // Not converged: the window is every sample above 5 % of rated speed.
+        assert_eq!(m.window_samples, 5);
         assert!(ObserverMetrics::compute(&s3, 0.1, 100.0, |s| s.seed_filter).is_none());
     }
 }

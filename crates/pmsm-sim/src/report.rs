@@ -9,6 +9,9 @@ pub fn table(m: &RunMetrics) -> String {
     let mut out = String::new();
     // Writing to a String cannot fail; the results are ignored on purpose.
     let _ = writeln!(out, "scenario: {}", m.scenario);
+    if m.end != "completed" {
+        let _ = writeln!(out, "RUN STOPPED EARLY: {}", m.end);
+    }
     let _ = writeln!(
         out,
         "simulated {:.3} s ({} periods of {:.1} us) in {:.3} s wall: real-time factor {:.1}",
@@ -32,7 +35,7 @@ pub fn table(m: &RunMetrics) -> String {
         ("seed filter", m.seed_filter.as_ref()),
     ];
     type Row = (&'static str, &'static str, fn(&ObserverMetrics) -> String);
-    let rows: [Row; 10] = [
+    let rows: [Row; 11] = [
         ("convergence time", "s", |o| {
             o.convergence_time_s
                 .map_or_else(|| "never".into(), |t| format!("{t:.4}"))
@@ -59,6 +62,9 @@ pub fn table(m: &RunMetrics) -> String {
         ("status Tracking in window", "%", |o| {
             format!("{:.1}", o.tracking_pct)
         }),
+        ("NIS mean (2: consistent)", "", |o| {
+            format!("{:.2}", o.nis_mean)
+        }),
         ("converged at end", "", |o| {
             if o.converged { "yes" } else { "no" }.into()
         }),
@@ -83,11 +89,7 @@ pub fn table(m: &RunMetrics) -> String {
     }
     let _ = writeln!(out);
     let d = &m.drive;
-    let _ = writeln!(
-        out,
-        "{:<37} {:<10} {:>14}",
-        "drive (sensored controller)", "unit", "value"
-    );
+    let _ = writeln!(out, "{:<37} {:<10} {:>14}", "drive", "unit", "value");
     let _ = writeln!(out, "{}", "-".repeat(67));
     let drive_rows = [
         ("peak current |i|", "A", format!("{:.3}", d.peak_current_a)),
@@ -95,6 +97,11 @@ pub fn table(m: &RunMetrics) -> String {
             "max |speed ref - speed|",
             "rpm",
             format!("{:.1}", d.max_speed_tracking_error_rpm),
+        ),
+        (
+            "i_q tracking error RMS",
+            "A",
+            format!("{:.4}", d.iq_tracking_error_rms_a),
         ),
         ("final speed", "rpm", format!("{:.1}", d.final_speed_rpm)),
         (

@@ -1,205 +1,224 @@
-//! Scenarios: everything one simulation run needs, and the built-in default.
+//! Scenarios: everything one simulation run needs, read from TOML, and the built-in presets.
 //!
-//! A [`Scenario`] is plain data (motor, drive, sensor, initial state, reference and load
-//! profiles); later it will be read from TOML files, for now [`Scenario::default_servo`] is
-//! built in.
-//!
-//! # The default scenario ([`Scenario::default_servo`])
-//!
-//! Servo motor of `design.md` section 6 at 10 kHz, 1.5 s:
-//!
-//! | time (s)    | speed reference (mech.)          | load torque |
-//! |-------------|----------------------------------|-------------|
-//! | 0 - 0.05    | 0 (standstill)                   | 0           |
-//! | 0.05 - 0.35 | ramp 0 -> 2000 rpm               | 0           |
-//! | 0.35 - 0.6  | 2000 rpm                         | 0           |
-//! | 0.6         |                                  | step to 1.5 N m |
-//! | 0.9 - 1.2   | ramp 2000 -> -1000 rpm (reversal) | 1.5 N m     |
-//! | 1.2 - 1.5   | -1000 rpm (-50 % of rated)       | 1.5 N m     |
-//!
-//! Choices and checks:
-//!
-//! - **DC link 300 V**, so the voltage limit is `300 / sqrt(3) = 173.2 V`.
-//! - **Rated speed 2000 rpm** (mechanical), not 3000: at 3000 rpm the back-EMF
-//!   `w_e psi_f = 1257 rad/s x 0.175 Wb = 220 V` exceeds 173 V, and there is no field weakening.
-//!   At 2000 rpm `w_e = 838 rad/s`, EMF 146.6 V; with rated current
-//!   `|u| = |(Rs i_q + w_e psi_f, -w_e Ls i_q)| = |(150.7, -10.2)| = 151 V`, 87 % of the limit.
-//! - **Rated torque 1.5 N m**: `k_t = 1.5 p psi_f = 1.05 N m/A`, so 1.43 A of `i_q`.
-//!   The current limit (the speed loop's clamp) is **3 A**, about twice that, leaving 1.57 A
-//!   for acceleration under load.
-//! - The load is an **active** (constant) torque, like a hanging mass: it stays on through the
-//!   reversal, so at -1000 rpm the drive brakes it (generating).
-//! - The rotor starts at rest at `theta_e = 1.0 rad`; the observer starts at its default
-//!   `x0 = 0`, so it has to find the angle once the rotor turns (at standstill the angle of a
-//!   surface PMSM is unobservable).
-//! - Current sensor noise 0.02 A standard deviation, seed 1.
-//! - Current loop bandwidth `2 pi 500 rad/s`, speed loop crossover `2 pi 20 rad/s`.
+//! A [`Scenario`] is plain data: motor, inverter, sensors, controller and observer settings,
+//! speed-reference and load profiles, duration and random seed. The same scenario (and seed)
+//! gives a bit-identical run. Files are parsed strictly (unknown fields are errors) and
+//! checked before a run ([`Scenario::validate`]); every error names the file, the field and
+//! the problem. The README documents the format; `scenarios/*.toml` are examples, and the
+//! built-in presets ([`PRESETS`]) are those very files, embedded.
 
 use core::f64::consts::PI;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-use crate::controller::ControllerConfig;
+use crate::SimError;
+use crate::controller::{ControllerConfig, hz_to_rad_s};
+use crate::error::FieldError;
+use crate::inverter::InverterConfig;
 use crate::plant::MotorModel;
+use crate::profile::{LoadTerm, Profile};
+use crate::sensors::SensorConfig;
 
 /// rpm per rad/s.
 pub const RPM_PER_RAD_S: f64 = 30.0 / PI;
 
-/// How a [`Profile`] is read between its points.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-pub enum Interpolation {
-    /// Linear between points (ramps).
-    Linear,
-    /// The value of the last point at or before the time (steps).
-    Step,
+/// Built-in scenarios `(name, TOML text)`; the first is the default.
+pub const PRESETS: &[(&str, &str)] = &[
+    ("default", include_str!("../scenarios/default.toml")),
+    ("servo-ideal", include_str!("../scenarios/servo-ideal.toml")),
+    ("servo-harsh", include_str!("../scenarios/servo-harsh.toml")),
+    (
+        "industrial-2k2",
+        include_str!("../scenarios/industrial-2k2.toml"),
+    ),
+    ("drone", include_str!("../scenarios/drone.toml")),
+];
+
+/// Which controller drives the plant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ControllerKind {
+    /// The sensored speed/current controller ([`crate::controller::SensoredController`]).
+    Sensored,
 }
 
-/// A time profile given by points `(t_s, value)`, times non-decreasing. Before the first point
-/// it holds the first value, after the last the last value; with no point it is zero.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Profile {
-    /// The points `(time s, value)`.
-    pub points: Vec<(f64, f64)>,
-    /// Reading between points.
-    pub interpolation: Interpolation,
-}
-
-impl Profile {
-    /// A piecewise-linear profile.
-    pub fn linear(points: Vec<(f64, f64)>) -> Self {
-        Self {
-            points,
-            interpolation: Interpolation::Linear,
-        }
-    }
-
-    /// A piecewise-constant profile.
-    pub fn steps(points: Vec<(f64, f64)>) -> Self {
-        Self {
-            points,
-            interpolation: Interpolation::Step,
-        }
-    }
-
-    /// The value at `t_s`.
-    pub fn at(&self, t_s: f64) -> f64 {
-        let pts = &self.points;
-        let Some(&(t0, v0)) = pts.first() else {
-            return 0.0;
-        };
-        if t_s < t0 {
-            return v0;
-        }
-        // Index of the last point at or before t.
-        let idx = pts.partition_point(|&(t, _)| t <= t_s) - 1;
-        let (ta, va) = pts[idx];
-        match (self.interpolation, pts.get(idx + 1)) {
-            (Interpolation::Linear, Some(&(tb, vb))) if tb > ta => {
-                va + (vb - va) * (t_s - ta) / (tb - ta)
-            }
-            _ => va,
-        }
-    }
-
-    /// Checks that every number is finite and times do not decrease.
-    pub fn validate(&self, name: &str) -> Result<(), String> {
-        for (i, &(t, v)) in self.points.iter().enumerate() {
-            if !t.is_finite() || !v.is_finite() {
-                return Err(format!("{name}: point {i} is not finite"));
-            }
-            if i > 0 && t < self.points[i - 1].0 {
-                return Err(format!("{name}: point {i} goes back in time"));
-            }
-        }
-        Ok(())
-    }
-}
-
-/// The drive: inverter, control period and controller tuning.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct DriveConfig {
-    /// PWM and control period, s.
-    pub ts_s: f64,
-    /// RK4 sub-steps of the plant per PWM period.
-    pub substeps: u32,
-    /// DC-link voltage, V.
-    pub u_dc_v: f64,
+/// Controller settings (`[controller]`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerSettings {
+    /// Which controller.
+    pub kind: ControllerKind,
     /// The speed loop's current limit, A.
     pub current_limit_a: f64,
-    /// Current loop bandwidth, rad/s.
-    pub current_bw_rad_s: f64,
-    /// Speed loop crossover, rad/s.
-    pub speed_bw_rad_s: f64,
+    /// Current loop bandwidth, Hz.
+    pub current_bandwidth_hz: f64,
+    /// Speed loop crossover, Hz.
+    pub speed_bandwidth_hz: f64,
+    /// Compensate one period of computation delay (default: whether the inverter has it).
+    #[serde(default)]
+    pub delay_compensation: Option<bool>,
 }
 
-/// The current sensor.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct SensorConfig {
-    /// Noise standard deviation on each alpha-beta current, A.
-    pub current_noise_std_a: f64,
-    /// Seed of the noise generator.
-    pub seed: u64,
+/// Observer settings (`[observer]`); the observer is `ObserverConfig::new` on these
+/// parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ObserverSettings {
+    /// Also run the seed's filter (`ObserverConfig::seed`) alongside, for comparison.
+    pub seed_filter: bool,
+    /// The observer's stator resistance (default: the motor's), ohm.
+    pub rs_ohm: Option<f64>,
+    /// The observer's inductance (default: the motor's `(Ld + Lq) / 2`), H.
+    pub ls_h: Option<f64>,
+    /// The observer's flux linkage (default: the motor's), Wb.
+    pub psi_f_wb: Option<f64>,
+    /// Status `Uncertain` above this angle standard deviation (default 0.2), rad.
+    pub angle_sigma_limit_rad: Option<f64>,
 }
 
-/// One simulation run's description.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+impl Default for ObserverSettings {
+    fn default() -> Self {
+        Self {
+            seed_filter: true,
+            rs_ohm: None,
+            ls_h: None,
+            psi_f_wb: None,
+            angle_sigma_limit_rad: None,
+        }
+    }
+}
+
+/// The rotor at `t = 0` (`[initial]`); the currents start at zero.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct InitialState {
+    /// Electrical angle, rad.
+    pub theta_e_rad: f64,
+    /// Mechanical speed, rpm.
+    pub speed_rpm: f64,
+}
+
+/// One simulation run's description (module docs; the README documents every field).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Scenario {
-    /// Name shown in reports.
+    /// Short name (output directory, reports).
     pub name: String,
-    /// The motor (plant; the controller and the observer are given the same parameters).
-    pub motor: MotorModel,
-    /// Inverter and controller.
-    pub drive: DriveConfig,
-    /// Current sensor.
-    pub sensor: SensorConfig,
+    /// One line on what the scenario shows.
+    #[serde(default)]
+    pub description: String,
     /// Simulated time, s.
     pub duration_s: f64,
+    /// Seed of the random generators (sensor noise).
+    #[serde(default)]
+    pub seed: u64,
     /// Rated mechanical speed, rpm (metrics: the 5 % low-speed exclusion, speed error in %).
     pub rated_speed_rpm: f64,
-    /// Rated torque, N m (documentation of the scenario; the load profile uses it).
+    /// Rated torque, N m (documentation; the load terms use it).
     pub rated_torque_nm: f64,
-    /// Electrical rotor angle at `t = 0`, rad (the rotor starts at rest).
-    pub initial_theta_e_rad: f64,
+    /// The motor (plant; the controller and observer are given the same parameters unless
+    /// `[observer]` overrides them).
+    pub motor: MotorModel,
+    /// The rotor at `t = 0`.
+    #[serde(default)]
+    pub initial: InitialState,
+    /// Inverter.
+    pub inverter: InverterConfig,
+    /// Current sensing (default: ideal).
+    #[serde(default)]
+    pub sensors: SensorConfig,
+    /// Controller.
+    pub controller: ControllerSettings,
+    /// Observer.
+    #[serde(default)]
+    pub observer: ObserverSettings,
     /// Mechanical speed reference, rpm.
     pub speed_ref_rpm: Profile,
-    /// Load torque, N m (positive brakes positive rotation).
-    pub load_torque_nm: Profile,
-    /// Also run the seed's filter (`ObserverConfig::seed`) alongside, for comparison.
-    pub run_seed_filter: bool,
+    /// Load torque terms, summed (default: none).
+    #[serde(default)]
+    pub load: Vec<LoadTerm>,
+}
+
+/// A problem in a TOML text, as `(field path, message)`.
+fn toml_problem(text: &str, path: &str, err: &toml::de::Error) -> (String, String) {
+    let mut problem = err.message().trim().to_string();
+    if let Some(span) = err.span() {
+        let start = span.start.min(text.len());
+        let before = &text[..start];
+        let line = before.matches('\n').count() + 1;
+        let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+        problem = format!("{problem} (line {line}, column {col})");
+    }
+    let field = if path.is_empty() || path == "." {
+        "-".to_string()
+    } else {
+        path.to_string()
+    };
+    (field, problem)
 }
 
 impl Scenario {
-    /// The built-in default scenario (module docs).
+    /// Parses and validates a scenario from TOML; `origin` names the file in errors.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, SimError> {
+        let err = |field: String, problem: String| SimError::Scenario {
+            file: origin.to_string(),
+            field,
+            problem,
+        };
+        let de = toml::Deserializer::parse(text).map_err(|e| {
+            let (f, p) = toml_problem(text, "", &e);
+            err(f, p)
+        })?;
+        let sc: Scenario = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = e.path().to_string();
+            let (f, p) = toml_problem(text, &path, e.inner());
+            err(f, p)
+        })?;
+        sc.validate().map_err(|e| err(e.field, e.problem))?;
+        Ok(sc)
+    }
+
+    /// Reads, parses and validates a scenario file.
+    pub fn from_file(path: &std::path::Path) -> Result<Self, SimError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| SimError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        Self::from_toml_str(&text, &file)
+    }
+
+    /// A built-in scenario by name ([`PRESETS`]).
+    pub fn preset(name: &str) -> Result<Self, SimError> {
+        let Some((_, text)) = PRESETS.iter().find(|(n, _)| *n == name) else {
+            return Err(SimError::UnknownPreset {
+                name: name.to_string(),
+                known: PRESETS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            });
+        };
+        Self::from_toml_str(text, &format!("preset {name}"))
+    }
+
+    /// The TOML text of a built-in scenario.
+    pub fn preset_text(name: &str) -> Option<&'static str> {
+        PRESETS.iter().find(|(n, _)| *n == name).map(|(_, t)| *t)
+    }
+
+    /// The built-in default scenario (`scenarios/default.toml`): the servo motor of
+    /// `design.md` section 6 at 10 kHz, from standstill to rated speed, a rated load step and
+    /// a reversal.
+    ///
+    /// # Panics
+    ///
+    /// Never in a released build: the embedded file is parsed and validated by a unit test.
     pub fn default_servo() -> Self {
-        let rated_rpm = 2000.0;
-        let rated_torque = 1.5;
-        Self {
-            name: "default: servo, 10 kHz, ramp / load step / reversal".into(),
-            motor: MotorModel::servo(),
-            drive: DriveConfig {
-                ts_s: 1e-4,
-                substeps: 10,
-                u_dc_v: 300.0,
-                current_limit_a: 3.0,
-                current_bw_rad_s: 2.0 * PI * 500.0,
-                speed_bw_rad_s: 2.0 * PI * 20.0,
-            },
-            sensor: SensorConfig {
-                current_noise_std_a: 0.02,
-                seed: 1,
-            },
-            duration_s: 1.5,
-            rated_speed_rpm: rated_rpm,
-            rated_torque_nm: rated_torque,
-            initial_theta_e_rad: 1.0,
-            speed_ref_rpm: Profile::linear(vec![
-                (0.05, 0.0),
-                (0.35, rated_rpm),
-                (0.9, rated_rpm),
-                (1.2, -0.5 * rated_rpm),
-            ]),
-            load_torque_nm: Profile::steps(vec![(0.0, 0.0), (0.6, rated_torque)]),
-            run_seed_filter: true,
+        match Self::preset("default") {
+            Ok(s) => s,
+            Err(e) => panic!("embedded default scenario is invalid: {e}"),
         }
     }
 
@@ -207,6 +226,11 @@ impl Scenario {
     pub fn with_duration(mut self, duration_s: f64) -> Self {
         self.duration_s = duration_s;
         self
+    }
+
+    /// PWM and control period, s.
+    pub fn ts_s(&self) -> f64 {
+        self.inverter.ts_s
     }
 
     /// Rated mechanical speed, rad/s.
@@ -221,63 +245,163 @@ impl Scenario {
 
     /// Number of PWM periods simulated, `round(duration / Ts)`.
     pub fn periods(&self) -> usize {
-        // Validated finite and positive before use; `as` saturates otherwise.
-        (self.duration_s / self.drive.ts_s).round() as usize
+        // Validated finite, positive and at most 1e9 before use; `as` saturates otherwise.
+        (self.duration_s / self.inverter.ts_s).round() as usize
     }
 
-    /// The controller's configuration.
+    /// Whether the controller compensates one period of delay.
+    pub fn delay_compensation(&self) -> bool {
+        self.controller
+            .delay_compensation
+            .unwrap_or(self.inverter.delay)
+    }
+
+    /// The sensored controller's configuration.
     pub fn controller_config(&self) -> ControllerConfig {
-        let d = &self.drive;
+        let c = &self.controller;
         ControllerConfig::tuned(
             &self.motor,
-            d.ts_s,
-            d.u_dc_v,
-            d.current_limit_a,
-            d.current_bw_rad_s,
-            d.speed_bw_rad_s,
+            self.inverter.ts_s,
+            c.current_limit_a,
+            hz_to_rad_s(c.current_bandwidth_hz),
+            hz_to_rad_s(c.speed_bandwidth_hz),
+            self.delay_compensation(),
         )
     }
 
-    /// Checks the scenario before a run.
-    pub fn validate(&self) -> Result<(), String> {
-        self.motor.validate()?;
-        let d = &self.drive;
-        let positive = [
-            ("drive.ts_s", d.ts_s),
-            ("drive.u_dc_v", d.u_dc_v),
-            ("drive.current_limit_a", d.current_limit_a),
-            ("drive.current_bw_rad_s", d.current_bw_rad_s),
-            ("drive.speed_bw_rad_s", d.speed_bw_rad_s),
-            ("duration_s", self.duration_s),
-            ("rated_speed_rpm", self.rated_speed_rpm),
-            ("rated_torque_nm", self.rated_torque_nm),
-        ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be finite and positive, is {v}"));
+    /// The observer's configuration (`ObserverConfig::new` on the observer's parameters).
+    pub fn observer_config(&self) -> ekf_core::ObserverConfig<f64> {
+        ekf_core::ObserverConfig::new(self.observer_params(), self.inverter.ts_s)
+            .with_sigma(self.observer.angle_sigma_limit_rad)
+    }
+
+    /// The seed filter's configuration (`ObserverConfig::seed`).
+    pub fn seed_filter_config(&self) -> ekf_core::ObserverConfig<f64> {
+        ekf_core::ObserverConfig::seed(self.observer_params(), self.inverter.ts_s)
+            .with_sigma(self.observer.angle_sigma_limit_rad)
+    }
+
+    /// The motor parameters the observers are given.
+    pub fn observer_params(&self) -> ekf_core::MotorParams<f64> {
+        let o = &self.observer;
+        let m = &self.motor;
+        ekf_core::MotorParams::from_f64(
+            o.rs_ohm.unwrap_or(m.rs_ohm),
+            o.ls_h.unwrap_or(m.ls_mean_h()),
+            o.psi_f_wb.unwrap_or(m.psi_f_wb),
+            m.pole_pairs,
+        )
+    }
+
+    /// Checks the scenario before a run; the error names the field.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        if self.name.trim().is_empty() {
+            return Err(FieldError::new("name", "must not be empty"));
+        }
+        let positive = |field: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(FieldError::new(
+                    field,
+                    format!("must be finite and > 0, is {v}"),
+                ))
             }
-        }
-        if d.substeps == 0 {
-            return Err("drive.substeps must be at least 1".into());
-        }
-        let s = self.sensor.current_noise_std_a;
-        if !(s.is_finite() && s >= 0.0) {
-            return Err(format!(
-                "sensor.current_noise_std_a must be finite and >= 0, is {s}"
+        };
+        positive("duration_s", self.duration_s)?;
+        positive("rated_speed_rpm", self.rated_speed_rpm)?;
+        positive("rated_torque_nm", self.rated_torque_nm)?;
+        self.motor.validate()?;
+        self.inverter.validate()?;
+        self.sensors.validate()?;
+        let c = &self.controller;
+        positive("controller.current_limit_a", c.current_limit_a)?;
+        positive("controller.current_bandwidth_hz", c.current_bandwidth_hz)?;
+        positive("controller.speed_bandwidth_hz", c.speed_bandwidth_hz)?;
+        let f_pwm = 1.0 / self.inverter.ts_s;
+        if c.current_bandwidth_hz > 0.1 * f_pwm {
+            return Err(FieldError::new(
+                "controller.current_bandwidth_hz",
+                format!(
+                    "{} Hz is above a tenth of the PWM frequency ({} Hz): the discrete loop \
+                     would be unstable",
+                    c.current_bandwidth_hz,
+                    0.1 * f_pwm
+                ),
             ));
         }
-        if !self.initial_theta_e_rad.is_finite() {
-            return Err("initial_theta_e_rad must be finite".into());
+        if c.speed_bandwidth_hz > 0.2 * c.current_bandwidth_hz {
+            return Err(FieldError::new(
+                "controller.speed_bandwidth_hz",
+                format!(
+                    "{} Hz is above a fifth of the current bandwidth ({} Hz)",
+                    c.speed_bandwidth_hz, c.current_bandwidth_hz
+                ),
+            ));
         }
-        if self.periods() == 0 {
-            return Err("duration_s is shorter than half a PWM period".into());
+        let o = &self.observer;
+        for (name, v) in [
+            ("observer.rs_ohm", o.rs_ohm),
+            ("observer.ls_h", o.ls_h),
+            ("observer.psi_f_wb", o.psi_f_wb),
+            ("observer.angle_sigma_limit_rad", o.angle_sigma_limit_rad),
+        ] {
+            if let Some(v) = v {
+                positive(name, v)?;
+            }
         }
-        if self.duration_s / d.ts_s > 1e9 {
-            return Err("duration_s / ts_s exceeds 1e9 periods".into());
+        for (name, v) in [
+            ("initial.theta_e_rad", self.initial.theta_e_rad),
+            ("initial.speed_rpm", self.initial.speed_rpm),
+        ] {
+            if !v.is_finite() {
+                return Err(FieldError::new(name, format!("must be finite, is {v}")));
+            }
+        }
+        let n = self.duration_s / self.inverter.ts_s;
+        if n.round() < 1.0 {
+            return Err(FieldError::new(
+                "duration_s",
+                format!(
+                    "{} s is shorter than half a PWM period ({} s)",
+                    self.duration_s, self.inverter.ts_s
+                ),
+            ));
+        }
+        if n > 1e9 {
+            return Err(FieldError::new(
+                "duration_s",
+                format!("{} s is more than 1e9 PWM periods", self.duration_s),
+            ));
         }
         self.speed_ref_rpm.validate("speed_ref_rpm")?;
-        self.load_torque_nm.validate("load_torque_nm")?;
+        for (i, term) in self.load.iter().enumerate() {
+            term.validate(&format!("load[{i}]"))?;
+        }
         Ok(())
+    }
+
+    /// The scenario as TOML (what `pmsm-sim show` prints for a file, and the MCAP log keeps).
+    pub fn to_toml(&self) -> Result<String, SimError> {
+        toml::to_string(self).map_err(|e| SimError::Scenario {
+            file: self.name.clone(),
+            field: "-".into(),
+            problem: format!("cannot write as TOML: {e}"),
+        })
+    }
+}
+
+/// Sets the angle standard-deviation limit when given.
+trait WithSigma {
+    fn with_sigma(self, sigma: Option<f64>) -> Self;
+}
+
+impl WithSigma for ekf_core::ObserverConfig<f64> {
+    fn with_sigma(mut self, sigma: Option<f64>) -> Self {
+        if let Some(s) = sigma {
+            self.angle_sigma_limit_rad = s;
+        }
+        self
     }
 }
 
@@ -286,34 +410,93 @@ mod tests {
     use super::*;
 
     #[test]
-    fn profiles_interpolate_and_hold() {
-        let p = Profile::linear(vec![(1.0, 0.0), (2.0, 10.0), (2.0, 20.0), (3.0, 20.0)]);
-        assert_eq!(p.at(0.0), 0.0);
-        assert_eq!(p.at(1.5), 5.0);
-        assert_eq!(p.at(2.0), 20.0);
-        assert_eq!(p.at(9.0), 20.0);
-        let s = Profile::steps(vec![(0.0, 1.0), (0.5, 2.0)]);
-        assert_eq!(s.at(0.49), 1.0);
-        assert_eq!(s.at(0.5), 2.0);
-        assert_eq!(Profile::steps(vec![]).at(3.0), 0.0);
-        assert!(
-            Profile::linear(vec![(1.0, 0.0), (0.5, 0.0)])
-                .validate("x")
-                .is_err()
-        );
+    fn every_preset_parses_validates_and_round_trips() {
+        for (name, _) in PRESETS {
+            let sc = match Scenario::preset(name) {
+                Ok(s) => s,
+                Err(e) => panic!("{e}"),
+            };
+            assert_eq!(&sc.name, name);
+            let text = sc.to_toml().unwrap_or_else(|e| panic!("{e}"));
+            let back =
+                Scenario::from_toml_str(&text, "round trip").unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(back, sc);
+        }
+        assert!(matches!(
+            Scenario::preset("nope"),
+            Err(SimError::UnknownPreset { .. })
+        ));
     }
 
     #[test]
-    fn default_scenario_is_valid_and_within_the_voltage_limit() {
+    fn default_scenario_is_within_the_voltage_limit() {
         let sc = Scenario::default_servo();
-        assert_eq!(sc.validate(), Ok(()));
         assert_eq!(sc.periods(), 15_000);
         let m = sc.motor;
         let we = sc.rated_speed_e_rad_s();
         let iq = sc.rated_torque_nm / m.torque_constant_nm_a();
-        assert!(iq < sc.drive.current_limit_a);
-        let u = (m.rs_ohm * iq + we * m.psi_f_wb).hypot(we * m.ls_h * iq);
-        let u_lim = sc.controller_config().voltage_limit_v();
+        assert!(iq < sc.controller.current_limit_a);
+        let u = (m.rs_ohm * iq + we * m.psi_f_wb).hypot(we * m.lq_h * iq);
+        let u_lim = sc.inverter.u_dc_v / 3f64.sqrt();
         assert!(u < 0.9 * u_lim, "{u} V of {u_lim} V");
+    }
+
+    fn error_of(text: &str) -> (String, String) {
+        match Scenario::from_toml_str(text, "bad.toml") {
+            Err(SimError::Scenario {
+                file,
+                field,
+                problem,
+            }) => {
+                assert_eq!(file, "bad.toml");
+                (field, problem)
+            }
+            other => panic!("expected a scenario error, got {other:?}"),
+        }
+    }
+
+    fn default_text() -> &'static str {
+        Scenario::preset_text("default").unwrap_or_default()
+    }
+
+    #[test]
+    fn malformed_and_invalid_files_name_the_field() {
+        // Missing field.
+        let t = default_text().replace("lq_h = ", "# lq_h = ");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "motor");
+        assert!(problem.contains("missing field `lq_h`"), "{problem}");
+        // Wrong type.
+        let t = default_text().replace("pole_pairs = 4", "pole_pairs = \"four\"");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "motor.pole_pairs");
+        assert!(problem.contains("line"), "{problem}");
+        // Unknown field (a typo).
+        let t = default_text().replace("dead_time_s", "deadtime_s");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "inverter.deadtime_s");
+        assert!(problem.contains("unknown field"), "{problem}");
+        // Not TOML at all.
+        let (field, _) = error_of("name = \n");
+        assert_eq!(field, "-");
+        // Physically invalid values, refused before the run.
+        let t = default_text().replace("ld_h = 8.5e-3", "ld_h = -8.5e-3");
+        assert_eq!(error_of(&t).0, "motor.ld_h");
+        let t = default_text().replace("ts_s = 1e-4", "ts_s = 0.0");
+        assert_eq!(error_of(&t).0, "inverter.ts_s");
+        let t = default_text().replace("dead_time_s = 0.0", "dead_time_s = 2e-4");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "inverter.dead_time_s");
+        assert!(problem.contains("period"), "{problem}");
+        // A bad load term names its index.
+        let t = format!(
+            "{}\n[[load]]\nkind = \"ramp\"\nstart_s = 1.0\nend_s = 0.5\nfrom_nm = 0.0\nto_nm = 1.0\n",
+            default_text()
+        );
+        assert_eq!(error_of(&t).0, "load[1].end_s");
+        let t = format!("{}\n[[load]]\nkind = \"wind\"\n", default_text());
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "load[1].kind");
+        assert!(problem.contains("unknown variant"), "{problem}");
     }
 }

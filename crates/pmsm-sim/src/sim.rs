@@ -1,106 +1,167 @@
-//! The closed-loop run: plant, current sensor, sensored controller, and the observer(s)
-//! alongside.
+//! The closed-loop run: plant, inverter, sensors, controller, and the observer(s) alongside.
 //!
 //! # One PWM period `k` (timing of `design.md` section 4)
 //!
-//! 1. The plant is at `x(t_k)`; the sensor samples `i[k] = i(t_k) + noise`.
+//! 1. The plant is at `x(t_k)`; the sensor samples the phase currents `i[k]` (PWM centre) and
+//!    the DC bus.
 //! 2. The observer steps with `(u[k-1], i[k])`: it predicts over `[t_k-1, t_k)` with the
-//!    voltage that was held there, then corrects with `i[k]`. Its first step (`k = 0`) gets
-//!    `u[-1] = 0`. Its estimate is compared with the true `th(t_k)`, `w_e(t_k)`.
-//! 3. The sensored controller computes `u[k]` from `i[k]`, the true angle and speed at `t_k`
-//!    and the speed reference at `t_k`.
-//! 4. The ideal inverter holds `u[k]` over `[t_k, t_k+1)`; the plant integrates the period with
-//!    the load torque of `t_k` held too.
+//!    voltage held there, then corrects with `i[k]` (first step: `u[-1] = 0`). `u[k-1]` is
+//!    the voltage the duties applied over that period realize with ideal switches on the bus
+//!    the controller measured when it computed them: what a real controller knows it
+//!    commanded. The dead-time distortion is **not** in it (a real controller does not know
+//!    it), so dead time shows up as observer error, as on a bench. The estimate is compared
+//!    with the true `th(t_k)`, `w_e(t_k)`.
+//! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
+//!    controller also gets the true angle and speed) and returns duties `d[k]`.
+//! 4. The inverter applies `d[k-1]` (one period of computation delay) or `d[k]` (no delay)
+//!    over `[t_k, t_k+1)`, with its dead time; the plant integrates the period with the load
+//!    torque of `(t_k, w(t_k))` held. When the controller disables the PWM, all switches
+//!    open for that period at once and the plant coasts ([`Plant::step_open`]); the observer
+//!    then gets `u = 0` for the period.
 //!
-//! There is no computation delay yet: `u[k]` acts from `t_k` on.
+//! # Stops
+//!
+//! A run ends early, with everything recorded so far intact, when the plant state or the
+//! controller's duties go non-finite (naming the quantity and the time), when the observer
+//! fails, when the sink (the MCAP log) fails, or when the interrupt flag (Ctrl-C) is set.
+//! [`run_with`] reports how it ended in [`RunOutput::end`]; [`run`] turns an abnormal end
+//! into an error.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use ekf_core::{EkfError, Estimate, ObserverConfig, PmsmObserver, Status, wrap_angle};
+use ekf_core::{EkfError, Estimate, PmsmObserver, Status, wrap_angle};
 use serde::Serialize;
 
 use crate::SimError;
-use crate::controller::{ControlInput, SensoredController};
+use crate::controller::{
+    ControllerInput, ControllerTelemetry, DriveController, RotorFeedback, SensoredController,
+};
+use crate::inverter::Inverter;
+use crate::metrics::{MetricsAccumulator, RunMetrics};
 use crate::plant::{Plant, PlantState};
-use crate::scenario::{RPM_PER_RAD_S, Scenario};
+use crate::profile::load_torque_nm;
+use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use crate::sensors::CurrentSensor;
 
-/// One observer's output for one sample.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// The true state at `t_k` (for scoring and the log; a sensorless controller never sees it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Truth {
+    /// Electrical angle, rad, in `[-pi, pi)`.
+    pub theta_e_rad: f64,
+    /// Electrical speed, rad/s.
+    pub omega_e_rad_s: f64,
+    /// Mechanical speed, rpm.
+    pub speed_rpm: f64,
+    /// Stator currents `[alpha, beta]`, A.
+    pub i_ab_a: [f64; 2],
+    /// Stator currents `[d, q]` in the true rotor frame, A.
+    pub i_dq_a: [f64; 2],
+    /// Electromagnetic torque, N m.
+    pub torque_nm: f64,
+    /// Load torque held over `[t_k, t_k+1)`, N m.
+    pub load_torque_nm: f64,
+}
+
+/// What the sensors delivered at `t_k`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct Measured {
+    /// Measured phase currents `[a, b, c]` (`c = -a - b`), A.
+    pub i_abc_a: [f64; 3],
+    /// Their Clarke transform, A.
+    pub i_ab_a: [f64; 2],
+    /// Measured DC-bus voltage, V.
+    pub u_dc_v: f64,
+}
+
+/// One observer's output for one sample, with its errors against the truth.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct ObserverSample {
     /// Estimated electrical angle, rad.
     pub theta_e_rad: f64,
     /// Estimated electrical speed, rad/s.
     pub omega_e_rad_s: f64,
-    /// Whether the observer reports [`Status::Tracking`].
-    pub tracking: bool,
+    /// `wrap(th_hat - th)`, electrical degrees.
+    pub angle_error_deg: f64,
+    /// `w_hat - w_e`, electrical rad/s.
+    pub speed_error_rad_s: f64,
+    /// Diagonal of the state covariance `P` (`i_a, i_b, w_e, th`): A^2, A^2, (rad/s)^2, rad^2.
+    pub p_diag: [f64; 4],
     /// Normalized innovation squared of the correction.
     pub nis: f64,
+    /// Whether the observer reports [`Status::Tracking`].
+    pub tracking: bool,
 }
 
-impl From<Estimate<f64>> for ObserverSample {
-    fn from(e: Estimate<f64>) -> Self {
+impl ObserverSample {
+    fn new(e: &Estimate<f64>, p_diag: [f64; 4], truth: &Truth) -> Self {
         Self {
             theta_e_rad: e.theta_rad,
             omega_e_rad_s: e.omega_e_rad_s,
-            tracking: e.status == Status::Tracking,
+            angle_error_deg: wrap_angle(e.theta_rad - truth.theta_e_rad).to_degrees(),
+            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
+            p_diag,
             nis: e.nis,
+            tracking: e.status == Status::Tracking,
         }
     }
 }
 
-/// Everything recorded for sample `k` (at `t_k`).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+/// The controller's side of a sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ControlRecord {
+    /// Mechanical speed reference, rpm.
+    pub speed_ref_rpm: f64,
+    /// Duties the controller computed in this period.
+    pub duties: [f64; 3],
+    /// The controller's own report.
+    pub telemetry: ControllerTelemetry,
+}
+
+/// The inverter's side of a sample.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct InverterRecord {
+    /// Whether the bridge switches over `[t_k, t_k+1)` (`false`: all switches open; the
+    /// voltages below are then 0).
+    pub pwm_enabled: bool,
+    /// Duties applied over `[t_k, t_k+1)` (the previous period's, with the delay on).
+    pub duties: [f64; 3],
+    /// Stator voltage actually applied over `[t_k, t_k+1)`, dead time included, V.
+    pub u_ab_v: [f64; 2],
+    /// The ideal voltage of those duties on the bus the controller measured: the observer's
+    /// input at sample `k + 1`, V.
+    pub u_ab_commanded_v: [f64; 2],
+    /// Bus voltage over the period, V.
+    pub u_dc_v: f64,
+}
+
+/// Everything recorded for period `k` (at `t_k`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct Sample {
+    /// Period index.
+    pub k: u64,
     /// `t_k = k Ts`, s.
     pub t_s: f64,
-    /// True plant state at `t_k`.
-    pub plant: PlantState,
-    /// True electrical speed at `t_k`, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Electromagnetic torque at `t_k`, N m.
-    pub torque_nm: f64,
-    /// Measured currents `i[k]`, A.
-    pub i_meas_ab_a: [f64; 2],
-    /// Voltage `u[k]` held over `[t_k, t_k+1)`, V.
-    pub u_ab_v: [f64; 2],
-    /// dq current reference of the controller, A.
-    pub i_dq_ref_a: [f64; 2],
-    /// Whether the controller limited the voltage.
-    pub voltage_limited: bool,
-    /// Mechanical speed reference, rad/s.
-    pub speed_ref_mech_rad_s: f64,
-    /// Load torque over `[t_k, t_k+1)`, N m.
-    pub load_torque_nm: f64,
+    /// True state.
+    pub truth: Truth,
+    /// Sensor outputs.
+    pub measured: Measured,
     /// The project's default observer (`ObserverConfig::new`, lag-free).
     pub observer: ObserverSample,
     /// The seed's filter (`ObserverConfig::seed`), when the scenario runs it.
     pub seed_filter: Option<ObserverSample>,
-}
-
-impl Sample {
-    /// Wrapped angle error `th_hat - th` of an observer sample, electrical degrees.
-    pub fn angle_error_deg(&self, est: &ObserverSample) -> f64 {
-        wrap_angle(est.theta_e_rad - self.plant.theta_e_rad).to_degrees()
-    }
-
-    /// Speed error `w_hat - w_e` of an observer sample, electrical rad/s.
-    pub fn speed_error_rad_s(&self, est: &ObserverSample) -> f64 {
-        est.omega_e_rad_s - self.omega_e_rad_s
-    }
-
-    /// True mechanical speed, rpm.
-    pub fn speed_rpm(&self) -> f64 {
-        self.plant.omega_mech_rad_s * RPM_PER_RAD_S
-    }
+    /// Controller.
+    pub control: ControlRecord,
+    /// Inverter.
+    pub inverter: InverterRecord,
 }
 
 /// The recorded run.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Trace {
     /// PWM period, s.
     pub ts_s: f64,
-    /// One sample per period.
+    /// One sample per period (empty when the run did not record a trace).
     pub samples: Vec<Sample>,
 }
 
@@ -108,114 +169,370 @@ pub struct Trace {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FilterFailure {
     /// Sample index.
-    pub k: usize,
+    pub k: u64,
     /// The filter's error.
     pub error: EkfError,
 }
 
-/// A finished run: its trace and how long it took.
+/// How a run ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RunEnd {
+    /// Every period of the scenario was simulated.
+    Completed,
+    /// The interrupt flag was set (Ctrl-C) before period `k`.
+    Interrupted {
+        /// First period not simulated.
+        k: u64,
+        /// Its time, s.
+        t_s: f64,
+    },
+    /// A quantity went non-finite at `t_s`.
+    NonFinite {
+        /// Period index.
+        k: u64,
+        /// Time, s.
+        t_s: f64,
+        /// Which quantity.
+        quantity: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The observer failed at `t_s`.
+    ObserverFailed {
+        /// Period index.
+        k: u64,
+        /// Time, s.
+        t_s: f64,
+        /// The observer's error.
+        error: EkfError,
+    },
+    /// The sample sink (log) failed.
+    SinkFailed {
+        /// Period index.
+        k: u64,
+        /// Time, s.
+        t_s: f64,
+        /// What failed.
+        message: String,
+    },
+}
+
+impl RunEnd {
+    /// Whether every period was simulated.
+    pub fn is_completed(&self) -> bool {
+        matches!(self, RunEnd::Completed)
+    }
+
+    /// Time of an early end, s.
+    pub fn stop_time_s(&self) -> Option<f64> {
+        match self {
+            RunEnd::Completed => None,
+            RunEnd::Interrupted { t_s, .. }
+            | RunEnd::NonFinite { t_s, .. }
+            | RunEnd::ObserverFailed { t_s, .. }
+            | RunEnd::SinkFailed { t_s, .. } => Some(*t_s),
+        }
+    }
+
+    /// One line on how the run ended.
+    pub fn describe(&self) -> String {
+        match self {
+            RunEnd::Completed => "completed".into(),
+            RunEnd::Interrupted { t_s, .. } => format!("interrupted at t = {t_s:.6} s"),
+            RunEnd::NonFinite {
+                t_s,
+                quantity,
+                value,
+                ..
+            } => format!("non-finite {quantity} = {value} at t = {t_s:.6} s"),
+            RunEnd::ObserverFailed { t_s, error, .. } => {
+                format!("observer failed at t = {t_s:.6} s: {error}")
+            }
+            RunEnd::SinkFailed { t_s, message, .. } => {
+                format!("log failed at t = {t_s:.6} s: {message}")
+            }
+        }
+    }
+}
+
+/// A finished run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunOutput {
-    /// The recorded run (deterministic for a given scenario).
+    /// The recorded run (deterministic for a given scenario; empty unless asked for).
     pub trace: Trace,
+    /// The metrics (wall-clock figures aside, deterministic).
+    pub metrics: RunMetrics,
+    /// How the run ended.
+    pub end: RunEnd,
     /// Where the seed filter failed and was dropped, if it did.
     pub seed_filter_failure: Option<FilterFailure>,
     /// Wall-clock time of the simulation loop, s (not deterministic).
     pub wall_time_s: f64,
 }
 
-impl RunOutput {
-    /// Simulated time, s.
-    pub fn simulated_s(&self) -> f64 {
-        self.trace.samples.len() as f64 * self.trace.ts_s
-    }
+/// Receives every sample as it is made (the MCAP log, the plot).
+pub trait SampleSink {
+    /// Takes one sample; an error stops the run ([`RunEnd::SinkFailed`]).
+    fn record(&mut self, sample: &Sample) -> Result<(), String>;
+}
 
-    /// Real-time factor: simulated seconds per wall-clock second.
-    pub fn real_time_factor(&self) -> f64 {
-        self.simulated_s() / self.wall_time_s
+/// Options of [`run_with`].
+#[derive(Default)]
+pub struct RunOptions<'a> {
+    /// Keep every sample in [`RunOutput::trace`].
+    pub record_trace: bool,
+    /// Sinks that get every sample, in order.
+    pub sinks: Vec<&'a mut dyn SampleSink>,
+    /// Stop when this flag is set (checked every period).
+    pub interrupt: Option<&'a AtomicBool>,
+    /// Called with `(periods done, periods in all)` every 4096 periods and at the end.
+    pub progress: Option<&'a mut dyn FnMut(usize, usize)>,
+}
+
+/// Runs a scenario with a full trace; an early end (non-finite, observer failure) is an
+/// error.
+pub fn run(scenario: &Scenario) -> Result<RunOutput, SimError> {
+    let out = run_with(
+        scenario,
+        RunOptions {
+            record_trace: true,
+            ..RunOptions::default()
+        },
+    )?;
+    match out.end.stop_time_s() {
+        None => Ok(out),
+        Some(t_s) => Err(SimError::Stopped {
+            t_s,
+            reason: out.end.describe(),
+        }),
     }
 }
 
-/// Runs a scenario (module docs give one period's order).
-pub fn run(scenario: &Scenario) -> Result<RunOutput, SimError> {
-    scenario.validate().map_err(SimError::Scenario)?;
-    let ts = scenario.drive.ts_s;
+/// The controller a scenario asks for.
+pub fn build_controller(scenario: &Scenario) -> Box<dyn DriveController> {
+    match scenario.controller.kind {
+        ControllerKind::Sensored => Box::new(SensoredController::new(
+            scenario.controller_config(),
+            scenario.motor,
+        )),
+    }
+}
+
+/// Runs a scenario with its own controller ([`build_controller`]).
+pub fn run_with(scenario: &Scenario, opts: RunOptions<'_>) -> Result<RunOutput, SimError> {
+    let mut controller = build_controller(scenario);
+    run_with_controller(scenario, controller.as_mut(), opts)
+}
+
+/// Runs a scenario with the given controller (module docs give one period's order).
+///
+/// Errors only for an invalid scenario or observer configuration; how the run ended is in
+/// [`RunOutput::end`].
+pub fn run_with_controller(
+    scenario: &Scenario,
+    controller: &mut dyn DriveController,
+    mut opts: RunOptions<'_>,
+) -> Result<RunOutput, SimError> {
+    scenario.validate().map_err(|e| SimError::Scenario {
+        file: scenario.name.clone(),
+        field: e.field,
+        problem: e.problem,
+    })?;
+    let ts = scenario.ts_s();
     let motor = scenario.motor;
     let mut plant = Plant::new(
         motor,
         PlantState {
-            theta_e_rad: scenario.initial_theta_e_rad,
+            theta_e_rad: scenario.initial.theta_e_rad,
+            omega_mech_rad_s: scenario.initial.speed_rpm / RPM_PER_RAD_S,
             ..PlantState::default()
         },
     );
-    let mut sensor = CurrentSensor::new(scenario.sensor.current_noise_std_a, scenario.sensor.seed);
-    let mut controller = SensoredController::new(scenario.controller_config(), motor);
-    let mut observer = PmsmObserver::new(&ObserverConfig::new(motor.params(), ts))
-        .map_err(SimError::ObserverConfig)?;
-    let mut seed_filter = if scenario.run_seed_filter {
-        Some(
-            PmsmObserver::new(&ObserverConfig::seed(motor.params(), ts))
-                .map_err(SimError::ObserverConfig)?,
-        )
+    let mut inverter = Inverter::new(scenario.inverter);
+    let mut sensor = CurrentSensor::new(scenario.sensors, scenario.seed);
+    let mut observer = PmsmObserver::new(&scenario.observer_config())?;
+    let mut seed_filter = if scenario.observer.seed_filter {
+        Some(PmsmObserver::new(&scenario.seed_filter_config())?)
     } else {
         None
     };
+    let sensored = controller.sensored();
 
     let n = scenario.periods();
-    let mut samples = Vec::with_capacity(n);
+    let mut samples = Vec::with_capacity(if opts.record_trace { n } else { 0 });
+    let mut acc = MetricsAccumulator::new(scenario);
     let mut u_prev = [0.0; 2];
     let mut seed_filter_failure = None;
+    let mut end = RunEnd::Completed;
     let start = Instant::now();
     for k in 0..n {
+        let kk = k as u64;
         let t = k as f64 * ts;
+        if opts.interrupt.is_some_and(|f| f.load(Ordering::Relaxed)) {
+            end = RunEnd::Interrupted { k: kk, t_s: t };
+            break;
+        }
+        if let Err((quantity, value)) = plant.check_finite() {
+            end = RunEnd::NonFinite {
+                k: kk,
+                t_s: t,
+                quantity,
+                value,
+            };
+            break;
+        }
         let state = plant.state();
-        let i_meas = sensor.measure([state.i_alpha_a, state.i_beta_a]);
+        let omega_e = plant.omega_e_rad_s();
+        let i_abc_true = plant.i_abc_a();
+        let meas = sensor.measure(i_abc_true);
+        let u_dc = inverter.u_dc_at(t);
 
-        let est = observer
-            .step(u_prev, i_meas)
-            .map_err(|error| SimError::Observer { k, error })?;
+        let est = match observer.step(u_prev, meas.i_ab_a) {
+            Ok(e) => e,
+            Err(error) => {
+                end = RunEnd::ObserverFailed {
+                    k: kk,
+                    t_s: t,
+                    error,
+                };
+                break;
+            }
+        };
+        let p = observer.covariance();
         // The seed filter is only a comparison: if it fails, it is dropped, not the run.
-        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, i_meas)) {
-            Some(Ok(e)) => Some(e),
+        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, meas.i_ab_a)) {
+            Some(Ok(e)) => seed_filter.as_ref().map(|f| (e, f.covariance())),
             Some(Err(error)) => {
                 seed_filter = None;
-                seed_filter_failure = Some(FilterFailure { k, error });
+                seed_filter_failure = Some(FilterFailure { k: kk, error });
+                acc.drop_seed_filter();
                 None
             }
             None => None,
         };
 
-        let speed_ref = scenario.speed_ref_rpm.at(t) / RPM_PER_RAD_S;
-        let out = controller.step(&ControlInput {
-            i_ab_a: i_meas,
-            theta_e_rad: state.theta_e_rad,
-            omega_mech_rad_s: state.omega_mech_rad_s,
-            speed_ref_mech_rad_s: speed_ref,
-        });
-        let load = scenario.load_torque_nm.at(t);
-
-        samples.push(Sample {
+        let speed_ref_rpm = scenario.speed_ref_rpm.at(t);
+        let out = controller.tick(&ControllerInput {
+            k: kk,
             t_s: t,
-            plant: state,
-            omega_e_rad_s: plant.omega_e_rad_s(),
-            torque_nm: plant.torque_nm(),
-            i_meas_ab_a: i_meas,
-            u_ab_v: out.u_ab_v,
-            i_dq_ref_a: out.i_dq_ref_a,
-            voltage_limited: out.voltage_limited,
-            speed_ref_mech_rad_s: speed_ref,
-            load_torque_nm: load,
-            observer: est.into(),
-            seed_filter: seed_est.map(Into::into),
+            i_abc_a: meas.i_abc_a,
+            i_ab_a: meas.i_ab_a,
+            u_dc_v: u_dc,
+            speed_ref_mech_rad_s: speed_ref_rpm / RPM_PER_RAD_S,
+            rotor: sensored.then_some(RotorFeedback {
+                theta_e_rad: state.theta_e_rad,
+                omega_mech_rad_s: state.omega_mech_rad_s,
+            }),
         });
+        if let Some(&d) = out.duties.iter().find(|d| !d.is_finite()) {
+            end = RunEnd::NonFinite {
+                k: kk,
+                t_s: t,
+                quantity: "controller duties",
+                value: d,
+            };
+            break;
+        }
+        let duties = out.duties.map(|d| d.clamp(0.0, 1.0));
+        let load = load_torque_nm(&scenario.load, t, state.omega_mech_rad_s);
+        let mut applied = inverter.apply(duties, u_dc, u_dc, i_abc_true);
+        let pwm = out.pwm_enabled;
+        if !pwm {
+            // All switches open: no voltage is commanded; the plant coasts (step_open).
+            applied.u_ab_v = [0.0; 2];
+            applied.u_ab_commanded_v = [0.0; 2];
+        }
 
-        plant.step(out.u_ab_v, load, ts, scenario.drive.substeps);
-        u_prev = out.u_ab_v;
+        let (s, c) = plant.sin_cos();
+        let truth = Truth {
+            theta_e_rad: state.theta_e_rad,
+            omega_e_rad_s: omega_e,
+            speed_rpm: state.omega_mech_rad_s * RPM_PER_RAD_S,
+            i_ab_a: [
+                state.i_d_a * c - state.i_q_a * s,
+                state.i_d_a * s + state.i_q_a * c,
+            ],
+            i_dq_a: [state.i_d_a, state.i_q_a],
+            torque_nm: plant.torque_nm(),
+            load_torque_nm: load,
+        };
+        let sample = Sample {
+            k: kk,
+            t_s: t,
+            truth,
+            measured: crate::sim::Measured {
+                i_abc_a: meas.i_abc_a,
+                i_ab_a: meas.i_ab_a,
+                u_dc_v: u_dc,
+            },
+            observer: ObserverSample::new(&est, diag(&p), &truth),
+            seed_filter: seed_est.map(|(e, p)| ObserverSample::new(&e, diag(&p), &truth)),
+            control: ControlRecord {
+                speed_ref_rpm,
+                duties,
+                telemetry: out.telemetry,
+            },
+            inverter: InverterRecord {
+                pwm_enabled: pwm,
+                duties: applied.duties,
+                u_ab_v: applied.u_ab_v,
+                u_ab_commanded_v: applied.u_ab_commanded_v,
+                u_dc_v: u_dc,
+            },
+        };
+        acc.push(&sample);
+        let mut sink_error = None;
+        for sink in opts.sinks.iter_mut() {
+            if let Err(message) = sink.record(&sample) {
+                sink_error = Some(message);
+                break;
+            }
+        }
+        if opts.record_trace {
+            samples.push(sample);
+        }
+        if let Some(message) = sink_error {
+            end = RunEnd::SinkFailed {
+                k: kk,
+                t_s: t,
+                message,
+            };
+            break;
+        }
+
+        if pwm {
+            plant.step(applied.u_ab_v, load, ts);
+        } else {
+            plant.step_open(load, ts);
+        }
+        u_prev = applied.u_ab_commanded_v;
+        if k % 4096 == 4095
+            && let Some(p) = opts.progress.as_mut()
+        {
+            p(k + 1, n);
+        }
     }
     let wall_time_s = start.elapsed().as_secs_f64();
+    if let Some(p) = opts.progress.as_mut() {
+        p(n, n);
+    }
+    let metrics = acc.finish(
+        scenario,
+        end.describe(),
+        wall_time_s,
+        seed_filter_failure.map(|f| format!("sample {}: {}", f.k, f.error)),
+    );
     Ok(RunOutput {
         trace: Trace { ts_s: ts, samples },
+        metrics,
+        end,
         seed_filter_failure,
         wall_time_s,
     })
+}
+
+/// Diagonal of a 4 x 4 covariance.
+#[inline]
+fn diag(p: &ekf_core::nalgebra::Matrix4<f64>) -> [f64; 4] {
+    [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]]
 }

@@ -1,0 +1,558 @@
+//! Configuration of the controller ([`FocConfig`]), its defaults and its validation.
+//!
+//! All quantities are SI and `f32`; speeds and accelerations are **electrical** unless the
+//! name says `_mech`. [`FocConfig::new`] derives every default from the motor, the PWM period
+//! and the nominal DC-bus voltage; change fields afterwards as needed and let
+//! [`Foc::new`](crate::Foc::new) (which calls [`FocConfig::validate`]) check them.
+//!
+//! # Defaults and where they come from
+//!
+//! With `I_c = psi_f / Ls` (characteristic current), `k_t = 1.5 p psi_f` (torque constant,
+//! N m/A), `Ts` the PWM period and `U` the nominal bus voltage:
+//!
+//! | field | default | why |
+//! |---|---|---|
+//! | `current_bw_rad_s` | `0.1 pi / Ts` (a twentieth of the PWM frequency) | phase margin about 63 deg with the 1.5 `Ts` delay (computation + PWM hold) |
+//! | current PI | `Kp = Ls bw`, `Ki = Rs bw` | pole-zero cancellation: each decoupled axis becomes first order with bandwidth `bw` |
+//! | `speed_bw_rad_s` | `current_bw / 30` | well inside the current loop and the observer's speed bandwidth |
+//! | `inertia_kg_m2` | `k_t / 1000` (an assumption: 1000 rad/s^2 mech. per ampere) | a guess within a factor of 6 of the three reference motors; set the real value |
+//! | speed PI | `Kp = bw J / k_t` (A per rad/s mech.), `Ki = Kp bw / 4` | crossover `bw` on the rigid body `J s`, PI zero two octaves below |
+//! | `speed_divider` | `round(0.5 ms / Ts)`, at least 1 | speed loop near 2 kHz |
+//! | `current_limit_a` | `0.25 I_c` | servo 5.1 A, industrial 3.8 A, drone 10 A |
+//! | `over_current_a` | `2 current_limit_a` | above transient overshoot |
+//! | `u_dc_min_v`, `u_dc_max_v` | `0.6 U`, `1.25 U` | |
+//! | `max_speed_rad_s` | `0.95 U / (sqrt(3) psi_f)` | back-EMF below the linear voltage limit (no field weakening) |
+//! | `speed_slew_rad_s2` | `0.5 p k_t current_limit / J` | half the acceleration the current limit gives (recomputed by [`FocConfig::with_inertia`]) |
+//! | `max_modulation` | `1.0` | the current loop uses the whole inscribed circle `u_dc / sqrt(3)` |
+//! | `startup.if_current_a`, `align_current_a` | `0.5 current_limit_a` | |
+//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
+//! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` | hand-over speed in half a second |
+//! | `startup.align_time_s` | 0.2 s | |
+//! | `startup.blend_time_s` | 20 ms | |
+//! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | |
+//!
+//! Health thresholds: [`HealthConfig::default`].
+
+use core::f32::consts::PI;
+use core::fmt;
+
+use ekf_core::{MotorParams, ObserverConfig};
+
+use crate::pi::PiGains;
+
+/// `1 / sqrt(3)`.
+const FRAC_1_SQRT_3: f32 = 0.577_350_26;
+
+/// Where the rotor angle comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mode {
+    /// From the `ekf-core` observer, with the start-up sequence (align, I/f, hand-over).
+    #[default]
+    Sensorless,
+    /// From the caller ([`TickInput::sensor`](crate::TickInput::sensor)); the observer runs
+    /// alongside for comparison only. Starts directly in closed loop.
+    Sensored,
+}
+
+/// When the duties computed at tick `k` reach the motor.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ComputationDelay {
+    /// Real hardware: loaded at the next period boundary, applied over `[t_k+1, t_k+2)`.
+    /// The observer is fed the voltage computed two ticks ago; angle advance 1.5 periods.
+    #[default]
+    OnePeriod,
+    /// Applied at once over `[t_k, t_k+1)` (a simulator without delay). The observer is fed
+    /// the voltage computed one tick ago; angle advance 0.5 periods.
+    None,
+}
+
+impl ComputationDelay {
+    /// The inverse-Park angle advance in PWM periods that puts the applied vector where the
+    /// controller meant it on average: the middle of the application interval, 1.5 or 0.5.
+    pub fn default_angle_advance_periods(self) -> f32 {
+        match self {
+            ComputationDelay::OnePeriod => 1.5,
+            ComputationDelay::None => 0.5,
+        }
+    }
+}
+
+/// What to do when the observer is lost in closed loop.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ObserverLossPolicy {
+    /// Fall back to the open-loop I/f ramp at the commanded speed, re-seed the observer and
+    /// hand over again when it locks (at most `HealthConfig::max_reacquire` times in a row).
+    #[default]
+    FallBackAndReacquire,
+    /// Trip [`Fault::ObserverLost`](crate::Fault::ObserverLost).
+    Trip,
+}
+
+/// Start-up sequence (module [`startup`](crate::startup) describes it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartupConfig {
+    /// Current of the alignment (d axis of the alignment angle), A.
+    pub align_current_a: f32,
+    /// Duration of the alignment, s; 0 skips it (the rotor angle is then unknown at the
+    /// start of the ramp). The current rises linearly over the first half.
+    pub align_time_s: f32,
+    /// Electrical angle the rotor is aligned to, rad.
+    pub align_angle_rad: f32,
+    /// Magnitude of the open-loop (I/f) current vector, A.
+    pub if_current_a: f32,
+    /// Acceleration of the I/f ramp, rad/s^2 electrical.
+    pub accel_rad_s2: f32,
+    /// I/f target speed and speed of the hand-over to the observer, rad/s electrical.
+    pub handover_speed_rad_s: f32,
+    /// Time over which the d current of the I/f vector is faded out after the hand-over, s.
+    pub blend_time_s: f32,
+    /// Closed loop returns to I/f when the speed reference falls below
+    /// `exit_speed_ratio * handover_speed_rad_s` (hysteresis; in `(0, 1)`).
+    pub exit_speed_ratio: f32,
+    /// Time allowed at the hand-over speed for the observer to lock, s; then the observer
+    /// is re-seeded (a re-acquisition attempt), or a fault trips.
+    pub acquire_timeout_s: f32,
+}
+
+/// Observer health monitoring (module [`health`](crate::health)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HealthConfig {
+    /// Time constant of the moving averages (NIS, speed, angle increments), s.
+    pub window_s: f32,
+    /// Average NIS above this is unhealthy (its expectation is 2 for a consistent filter).
+    pub nis_limit: f32,
+    /// Relative speed tolerance: the observer speed vs the rate of its angle, and vs the
+    /// I/f speed for the hand-over; relative to `max(|w|, handover speed)`.
+    pub speed_tolerance: f32,
+    /// Angle between the observer's rotor angle and the I/f current vector beyond which the
+    /// observer is taken to be locked on `theta + pi`, rad (in `(pi/2, pi)`).
+    pub lock_angle_rad: f32,
+    /// An unhealthy condition must persist this long to count, s.
+    pub lost_time_s: f32,
+    /// The observer must be healthy and agree with the I/f ramp this long before the
+    /// hand-over, s.
+    pub lock_time_s: f32,
+    /// Stall detection time, s.
+    pub stall_time_s: f32,
+    /// Re-acquisitions in a row (without `acquire_timeout_s` of closed loop in between)
+    /// before [`Fault::ObserverLost`](crate::Fault::ObserverLost).
+    pub max_reacquire: u8,
+    /// Reaction to a loss in closed loop.
+    pub policy: ObserverLossPolicy,
+}
+
+impl Default for HealthConfig {
+    /// `window_s` 5 ms, `nis_limit` 20 (ten times the expectation), `speed_tolerance` 0.3,
+    /// `lock_angle_rad` 135 deg, `lost_time_s` 20 ms, `lock_time_s` 30 ms, `stall_time_s`
+    /// 0.5 s, `max_reacquire` 3, policy fall back and re-acquire.
+    fn default() -> Self {
+        Self {
+            window_s: 5e-3,
+            nis_limit: 20.0,
+            speed_tolerance: 0.3,
+            lock_angle_rad: 0.75 * PI,
+            lost_time_s: 20e-3,
+            lock_time_s: 30e-3,
+            stall_time_s: 0.5,
+            max_reacquire: 3,
+            policy: ObserverLossPolicy::FallBackAndReacquire,
+        }
+    }
+}
+
+/// Everything the controller needs (module docs give the defaults).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FocConfig {
+    /// Motor parameters (also used by the observer, which must have the same).
+    pub motor: MotorParams<f32>,
+    /// PWM (control) period, s; one [`Foc::tick`](crate::Foc::tick) per period.
+    pub ts_s: f32,
+    /// Angle source.
+    pub mode: Mode,
+    /// Computation delay of the inverter.
+    pub delay: ComputationDelay,
+    /// Inverse-Park angle advance in periods: the voltage computed at tick `k` is rotated
+    /// with `theta_k + angle_advance_periods * w_e * Ts` (1.5 with a one-period delay: the
+    /// middle of `[t_k+1, t_k+2)`; 0.5 without).
+    pub angle_advance_periods: f32,
+    /// Current-loop bandwidth, rad/s; gives the gains unless `current_gains` is set.
+    pub current_bw_rad_s: f32,
+    /// Explicit current-loop gains (V/A, V/(A s)) instead of those from the bandwidth.
+    pub current_gains: Option<PiGains>,
+    /// Speed-loop crossover, rad/s; gives the gains with `inertia_kg_m2` unless
+    /// `speed_gains` is set.
+    pub speed_bw_rad_s: f32,
+    /// Rotor plus load inertia, kg m^2.
+    pub inertia_kg_m2: f32,
+    /// Explicit speed-loop gains (A per rad/s mech., A per rad mech.).
+    pub speed_gains: Option<PiGains>,
+    /// The speed loop runs every `speed_divider` ticks (at least 1).
+    pub speed_divider: u16,
+    /// Limit of the current reference magnitude, A.
+    pub current_limit_a: f32,
+    /// Over-current trip level (current vector magnitude), A.
+    pub over_current_a: f32,
+    /// DC-bus under-voltage trip level, V.
+    pub u_dc_min_v: f32,
+    /// DC-bus over-voltage trip level, V.
+    pub u_dc_max_v: f32,
+    /// Limit of the speed reference, rad/s electrical.
+    pub max_speed_rad_s: f32,
+    /// Slew rate of the closed-loop speed reference, rad/s^2 electrical.
+    pub speed_slew_rad_s2: f32,
+    /// Radius of the current loop's voltage limit as a fraction of `u_dc / sqrt(3)` (1.0 =
+    /// the linear range; up to `2 / sqrt(3)`, where SVPWM clamps the corners).
+    pub max_modulation: f32,
+    /// Start-up sequence.
+    pub startup: StartupConfig,
+    /// Observer health monitoring.
+    pub health: HealthConfig,
+    /// The observer (motor and `ts_s` must equal the fields above).
+    pub observer: ObserverConfig<f32>,
+}
+
+/// `x` rounded to the nearest integer, as `u16` (saturating; NaN gives 0).
+fn round_u16(x: f32) -> u16 {
+    (x + 0.5) as u16
+}
+
+impl FocConfig {
+    /// Defaults for `motor` at the PWM period `ts_s` and the nominal DC-bus voltage
+    /// `u_dc_nominal_v` (module docs list them). Invalid arguments are reported by
+    /// [`validate`](Self::validate), not here.
+    pub fn new(motor: MotorParams<f32>, ts_s: f32, u_dc_nominal_v: f32) -> Self {
+        let ic = motor.characteristic_current_a();
+        let current_limit_a = 0.25 * ic;
+        let if_current_a = 0.5 * current_limit_a;
+        let max_speed_rad_s = 0.95 * u_dc_nominal_v * FRAC_1_SQRT_3 / motor.psi_f_wb;
+        let handover =
+            (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s);
+        let current_bw_rad_s = 0.1 * PI / ts_s;
+        let kt = torque_constant(&motor);
+        let speed_divider = round_u16(0.5e-3 / ts_s).max(1);
+        Self {
+            motor,
+            ts_s,
+            mode: Mode::Sensorless,
+            delay: ComputationDelay::OnePeriod,
+            angle_advance_periods: ComputationDelay::OnePeriod.default_angle_advance_periods(),
+            current_bw_rad_s,
+            current_gains: None,
+            speed_bw_rad_s: current_bw_rad_s / 30.0,
+            inertia_kg_m2: kt / 1000.0,
+            speed_gains: None,
+            speed_divider,
+            current_limit_a,
+            over_current_a: 2.0 * current_limit_a,
+            u_dc_min_v: 0.6 * u_dc_nominal_v,
+            u_dc_max_v: 1.25 * u_dc_nominal_v,
+            max_speed_rad_s,
+            speed_slew_rad_s2: 0.0,
+            max_modulation: 1.0,
+            startup: StartupConfig {
+                align_current_a: if_current_a,
+                align_time_s: 0.2,
+                align_angle_rad: 0.0,
+                if_current_a,
+                accel_rad_s2: handover / 0.5,
+                handover_speed_rad_s: handover,
+                blend_time_s: 20e-3,
+                exit_speed_ratio: 0.7,
+                acquire_timeout_s: 1.0,
+            },
+            health: HealthConfig::default(),
+            observer: ObserverConfig::new(motor, ts_s),
+        }
+        .with_inertia(kt / 1000.0)
+    }
+
+    /// Sets the computation delay and the matching default angle advance (1.5 or 0.5).
+    pub fn with_delay(mut self, delay: ComputationDelay) -> Self {
+        self.delay = delay;
+        self.angle_advance_periods = delay.default_angle_advance_periods();
+        self
+    }
+
+    /// Sets the mode.
+    pub fn with_mode(mut self, mode: Mode) -> Self {
+        self.mode = mode;
+        self
+    }
+
+    /// Sets the inertia; the speed gains (unless given explicitly) follow, and the speed
+    /// slew rate is set to `0.5 p k_t current_limit_a / J`.
+    pub fn with_inertia(mut self, inertia_kg_m2: f32) -> Self {
+        self.inertia_kg_m2 = inertia_kg_m2;
+        self.speed_slew_rad_s2 =
+            0.5 * self.motor.pole_pairs as f32 * self.torque_constant_nm_a() * self.current_limit_a
+                / inertia_kg_m2;
+        self
+    }
+
+    /// Torque constant `k_t = 1.5 p psi_f`, N m/A (peak-amplitude-invariant currents).
+    pub fn torque_constant_nm_a(&self) -> f32 {
+        torque_constant(&self.motor)
+    }
+
+    /// Current-loop gains: `current_gains`, or `Kp = Ls bw` (V/A), `Ki = Rs bw` (V/(A s)).
+    pub fn current_pi_gains(&self) -> PiGains {
+        self.current_gains.unwrap_or(PiGains {
+            kp: self.motor.ls_h * self.current_bw_rad_s,
+            ki: self.motor.rs_ohm * self.current_bw_rad_s,
+        })
+    }
+
+    /// Speed-loop gains on the mechanical speed: `speed_gains`, or `Kp = bw J / k_t`
+    /// (A per rad/s), `Ki = Kp bw / 4` (A per rad).
+    pub fn speed_pi_gains(&self) -> PiGains {
+        self.speed_gains.unwrap_or_else(|| {
+            let kp = self.speed_bw_rad_s * self.inertia_kg_m2 / self.torque_constant_nm_a();
+            PiGains {
+                kp,
+                ki: kp * self.speed_bw_rad_s * 0.25,
+            }
+        })
+    }
+
+    /// Checks every field (no panics; the first problem found is returned).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        use Field as F;
+        self.motor.validate().map_err(ConfigError::Observer)?;
+        self.observer.validate().map_err(ConfigError::Observer)?;
+        if self.observer.motor != self.motor || self.observer.ts_s != self.ts_s {
+            return Err(ConfigError::ObserverMismatch);
+        }
+        positive(self.ts_s, F::Ts)?;
+        in_range(self.angle_advance_periods, 0.0, 4.0, F::AngleAdvance)?;
+        positive(self.current_bw_rad_s, F::CurrentBandwidth)?;
+        if !self.current_pi_gains().is_valid() {
+            return Err(ConfigError::OutOfRange(F::CurrentGains));
+        }
+        positive(self.speed_bw_rad_s, F::SpeedBandwidth)?;
+        positive(self.inertia_kg_m2, F::Inertia)?;
+        if !self.speed_pi_gains().is_valid() {
+            return Err(ConfigError::OutOfRange(F::SpeedGains));
+        }
+        if self.speed_divider == 0 {
+            return Err(ConfigError::NotPositive(F::SpeedDivider));
+        }
+        positive(self.current_limit_a, F::CurrentLimit)?;
+        positive(self.over_current_a, F::OverCurrent)?;
+        if self.over_current_a <= self.current_limit_a {
+            return Err(ConfigError::OutOfRange(F::OverCurrent));
+        }
+        positive(self.u_dc_min_v, F::UdcMin)?;
+        positive(self.u_dc_max_v, F::UdcMax)?;
+        if self.u_dc_max_v <= self.u_dc_min_v {
+            return Err(ConfigError::OutOfRange(F::UdcMax));
+        }
+        positive(self.max_speed_rad_s, F::MaxSpeed)?;
+        positive(self.speed_slew_rad_s2, F::SpeedSlew)?;
+        in_range(
+            self.max_modulation,
+            1e-3,
+            2.0 * FRAC_1_SQRT_3,
+            F::MaxModulation,
+        )?;
+        let s = &self.startup;
+        positive(s.align_current_a, F::AlignCurrent)?;
+        if s.align_current_a > self.current_limit_a {
+            return Err(ConfigError::OutOfRange(F::AlignCurrent));
+        }
+        in_range(s.align_time_s, 0.0, 60.0, F::AlignTime)?;
+        in_range(s.align_angle_rad, -2.0 * PI, 2.0 * PI, F::AlignAngle)?;
+        positive(s.if_current_a, F::IfCurrent)?;
+        if s.if_current_a > self.current_limit_a {
+            return Err(ConfigError::OutOfRange(F::IfCurrent));
+        }
+        positive(s.accel_rad_s2, F::Accel)?;
+        positive(s.handover_speed_rad_s, F::HandoverSpeed)?;
+        if s.handover_speed_rad_s >= self.max_speed_rad_s {
+            return Err(ConfigError::OutOfRange(F::HandoverSpeed));
+        }
+        in_range(s.blend_time_s, 0.0, 60.0, F::BlendTime)?;
+        in_range(s.exit_speed_ratio, 0.05, 0.99, F::ExitSpeedRatio)?;
+        positive(s.acquire_timeout_s, F::AcquireTimeout)?;
+        let h = &self.health;
+        positive(h.window_s, F::HealthWindow)?;
+        if h.window_s < self.ts_s {
+            return Err(ConfigError::OutOfRange(F::HealthWindow));
+        }
+        positive(h.nis_limit, F::NisLimit)?;
+        positive(h.speed_tolerance, F::SpeedTolerance)?;
+        in_range(h.lock_angle_rad, 0.5 * PI, PI, F::LockAngle)?;
+        positive(h.lost_time_s, F::LostTime)?;
+        positive(h.lock_time_s, F::LockTime)?;
+        positive(h.stall_time_s, F::StallTime)?;
+        // Every duration must fit the u32 tick counters.
+        let longest = s
+            .align_time_s
+            .max(s.blend_time_s)
+            .max(s.acquire_timeout_s)
+            .max(h.lost_time_s)
+            .max(h.lock_time_s)
+            .max(h.stall_time_s);
+        if longest / self.ts_s > 1.0e9 {
+            return Err(ConfigError::OutOfRange(F::Ts));
+        }
+        Ok(())
+    }
+}
+
+fn torque_constant(motor: &MotorParams<f32>) -> f32 {
+    1.5 * motor.pole_pairs as f32 * motor.psi_f_wb
+}
+
+fn positive(v: f32, field: Field) -> Result<(), ConfigError> {
+    if !v.is_finite() {
+        Err(ConfigError::NonFinite(field))
+    } else if v <= 0.0 {
+        Err(ConfigError::NotPositive(field))
+    } else {
+        Ok(())
+    }
+}
+
+fn in_range(v: f32, lo: f32, hi: f32, field: Field) -> Result<(), ConfigError> {
+    if !v.is_finite() {
+        Err(ConfigError::NonFinite(field))
+    } else if v < lo || v > hi {
+        Err(ConfigError::OutOfRange(field))
+    } else {
+        Ok(())
+    }
+}
+
+/// A field of [`FocConfig`] named in a [`ConfigError`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[allow(missing_docs)] // each variant is the field of the same name
+pub enum Field {
+    Ts,
+    AngleAdvance,
+    CurrentBandwidth,
+    CurrentGains,
+    SpeedBandwidth,
+    Inertia,
+    SpeedGains,
+    SpeedDivider,
+    CurrentLimit,
+    OverCurrent,
+    UdcMin,
+    UdcMax,
+    MaxSpeed,
+    SpeedSlew,
+    MaxModulation,
+    AlignCurrent,
+    AlignTime,
+    AlignAngle,
+    IfCurrent,
+    Accel,
+    HandoverSpeed,
+    BlendTime,
+    ExitSpeedRatio,
+    AcquireTimeout,
+    HealthWindow,
+    NisLimit,
+    SpeedTolerance,
+    LockAngle,
+    LostTime,
+    LockTime,
+    StallTime,
+}
+
+/// Why a [`FocConfig`] was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConfigError {
+    /// The motor or observer configuration is invalid.
+    Observer(ekf_core::ConfigError),
+    /// `observer.motor` or `observer.ts_s` differ from `motor` / `ts_s`.
+    ObserverMismatch,
+    /// The field is NaN or infinite.
+    NonFinite(Field),
+    /// The field is zero or negative.
+    NotPositive(Field),
+    /// The field is outside its range, or inconsistent with another (`over_current_a` not
+    /// above `current_limit_a`, `u_dc_max_v` not above `u_dc_min_v`, a start-up current above
+    /// the limit, the hand-over speed not below the maximum speed, ...).
+    OutOfRange(Field),
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ConfigError::Observer(e) => write!(f, "observer configuration: {e}"),
+            ConfigError::ObserverMismatch => {
+                f.write_str("observer.motor / observer.ts_s differ from motor / ts_s")
+            }
+            ConfigError::NonFinite(x) => write!(f, "{x:?} is not finite"),
+            ConfigError::NotPositive(x) => write!(f, "{x:?} must be positive"),
+            ConfigError::OutOfRange(x) => write!(f, "{x:?} is out of range"),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate_on_reference_motors() {
+        for (m, ts, u) in [
+            (MotorParams::servo(), 100e-6, 300.0),
+            (MotorParams::servo(), 50e-6, 300.0),
+            (MotorParams::industrial_2k2(), 125e-6, 540.0),
+            (MotorParams::small_fast(), 50e-6, 48.0),
+        ] {
+            let c = FocConfig::new(m, ts, u);
+            assert_eq!(c.validate(), Ok(()), "{m:?}");
+            assert!(c.speed_divider >= 1);
+        }
+        let c = FocConfig::new(MotorParams::servo(), 100e-6, 300.0);
+        let g = c.current_pi_gains();
+        assert!((g.kp - 8.5e-3 * 0.1 * PI / 100e-6).abs() < 1e-3);
+        assert_eq!(c.speed_divider, 5);
+    }
+
+    #[test]
+    fn bad_fields_are_named() {
+        let base = FocConfig::new(MotorParams::servo(), 100e-6, 300.0);
+        let mut c = base;
+        c.ts_s = f32::NAN;
+        assert!(c.validate().is_err());
+        let mut c = base;
+        c.over_current_a = c.current_limit_a;
+        assert_eq!(
+            c.validate(),
+            Err(ConfigError::OutOfRange(Field::OverCurrent))
+        );
+        let mut c = base;
+        c.u_dc_max_v = c.u_dc_min_v;
+        assert_eq!(c.validate(), Err(ConfigError::OutOfRange(Field::UdcMax)));
+        let mut c = base;
+        c.startup.accel_rad_s2 = f32::INFINITY;
+        assert_eq!(c.validate(), Err(ConfigError::NonFinite(Field::Accel)));
+        let mut c = base;
+        c.speed_divider = 0;
+        assert_eq!(
+            c.validate(),
+            Err(ConfigError::NotPositive(Field::SpeedDivider))
+        );
+        let mut c = base;
+        c.observer.ts_s = 50e-6;
+        assert_eq!(c.validate(), Err(ConfigError::ObserverMismatch));
+        let mut c = base;
+        c.motor.rs_ohm = -1.0;
+        assert!(matches!(c.validate(), Err(ConfigError::Observer(_))));
+        let mut c = base;
+        c.current_gains = Some(PiGains {
+            kp: f32::NAN,
+            ki: 1.0,
+        });
+        assert_eq!(
+            c.validate(),
+            Err(ConfigError::OutOfRange(Field::CurrentGains))
+        );
+    }
+}

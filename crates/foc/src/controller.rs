@@ -1,0 +1,637 @@
+//! The controller: one pure [`Foc::tick`] per PWM period.
+//!
+//! # Signal path of tick `k`
+//!
+//! ```text
+//! inputs i[k] (abc or alpha-beta), u_dc[k], [sensor angle/speed]
+//!   -> checks: non-finite / absurd, over-current, bus over/under-voltage  -> latched fault
+//!   -> observer.step(u_applied over [t_k-1, t_k), i_ab[k])                 (EKF, ekf-core)
+//!   -> health monitor, state machine: control frame (angle th_k, speed w), current refs
+//!   -> Park(i_ab, th_k) -> dq current PIs with decoupling and back-EMF feed-forward
+//!   -> inverse Park at th_k + advance * w * Ts -> SVPWM(u_dc[k]) -> duties[k]
+//!   -> realized u_ab[k] = duties_to_alpha_beta(duties[k], u_dc[k]) into a 2-deep history
+//! ```
+//!
+//! # Timing (design section 4) and the computation delay
+//!
+//! The ADC samples `i[k]` at `t_k`; the duties computed by tick `k` are loaded by the PWM
+//! timer at the next period boundary and applied over `[t_k+1, t_k+2)`
+//! ([`ComputationDelay::OnePeriod`], the default). Therefore:
+//!
+//! - the voltage applied over `[t_k-1, t_k)` is the one computed by tick `k-2`: tick `k`
+//!   calls `observer.step(u_hist[1], i[k])`. The history holds the **realized** voltage
+//!   (rebuilt from the clamped duties and the `u_dc` measured when they were computed), zero
+//!   while the PWM is off;
+//! - the voltage computed at tick `k` is rotated back to alpha-beta with the angle at the
+//!   middle of its application interval, `th_k + 1.5 w Ts` (`angle_advance_periods`).
+//!
+//! With [`ComputationDelay::None`] (a simulator that applies the duties at once, over
+//! `[t_k, t_k+1)`) the observer takes `u_hist[0]` (computed by tick `k-1`) and the advance
+//! is 0.5.
+//!
+//! # Current loops
+//!
+//! ```text
+//! e   = i_dq_ref - i_dq
+//! u_d = PI_d(e_d) - w Ls i_q                      (cross-coupling decoupling, measured i)
+//! u_q = PI_q(e_q) + w Ls i_d + w psi_f            (decoupling, back-EMF feed-forward)
+//! |u_dq| <= max_modulation * u_dc / sqrt(3), d axis first, q gets the rest
+//! ```
+//!
+//! `w` is the speed of the control frame: the observer's (or sensor's) speed in closed
+//! loop, the ramp speed under I/f, where the back-EMF feed-forward is off (the rotor angle
+//! is not the frame angle). PI gains: [`FocConfig::current_pi_gains`]; anti-windup:
+//! [`crate::pi`]. When the control frame changes (hand-over, fall-back) the integrators are
+//! re-expressed in the new frame so that the voltage vector is continuous.
+//!
+//! # Cost
+//!
+//! Besides the observer step, a tick evaluates three sine/cosine pairs in the common case
+//! (Park, inverse Park, plus none for the health checks), no square root unless the voltage
+//! limit is active, and no `f64`.
+
+use ekf_core::nalgebra::{Matrix4, Vector4};
+use ekf_core::{Estimate, PmsmObserver};
+
+use crate::config::{ComputationDelay, ConfigError, FocConfig, Mode};
+use crate::fault::{Fault, FaultInfo};
+use crate::health::{HealthMonitor, HealthReport, ticks};
+use crate::pi::{Pi, limit};
+use crate::startup::{Frame, Sequencer, State};
+use crate::svpwm::{SAFE_DUTIES, linear_limit_v, modulate};
+use crate::transforms::{Abc, AlphaBeta, Dq};
+use crate::trig::{add_angles, at_most, max2, sin_cos, sin_cos_small, sqrt, wrap};
+
+/// Phase currents as sampled: three (or two plus a computed third) phases, or already in
+/// alpha-beta.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PhaseCurrents {
+    /// Phase currents, A. The controller uses `a` and `b` (Clarke with `c = -a - b`); `c` is
+    /// checked for finiteness and over-current only.
+    Abc(Abc),
+    /// Alpha-beta currents, A.
+    AlphaBeta(AlphaBeta),
+}
+
+/// Rotor position from a sensor (sensored mode, or for comparison).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RotorSensor {
+    /// Electrical rotor angle at `t_k`, rad (any value within `+-1e4`; wrapped internally).
+    pub theta_e_rad: f32,
+    /// Electrical speed, rad/s.
+    pub omega_e_rad_s: f32,
+}
+
+/// Everything one tick needs, sampled at `t_k`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickInput {
+    /// Phase currents sampled at `t_k`, A.
+    pub currents: PhaseCurrents,
+    /// DC-bus voltage, V.
+    pub u_dc_v: f32,
+    /// Rotor angle and speed from a sensor: required in [`Mode::Sensored`], ignored (but
+    /// checked) in [`Mode::Sensorless`].
+    pub sensor: Option<RotorSensor>,
+}
+
+impl TickInput {
+    /// Input from phase currents `a`, `b`, `c` (A) and the bus voltage (V).
+    pub fn abc(a: f32, b: f32, c: f32, u_dc_v: f32) -> Self {
+        Self {
+            currents: PhaseCurrents::Abc(Abc { a, b, c }),
+            u_dc_v,
+            sensor: None,
+        }
+    }
+
+    /// Input from alpha-beta currents (A) and the bus voltage (V).
+    pub fn alpha_beta(alpha: f32, beta: f32, u_dc_v: f32) -> Self {
+        Self {
+            currents: PhaseCurrents::AlphaBeta(AlphaBeta { alpha, beta }),
+            u_dc_v,
+            sensor: None,
+        }
+    }
+
+    /// The same input with a rotor sensor reading (electrical angle, rad; speed, rad/s).
+    pub fn with_sensor(mut self, theta_e_rad: f32, omega_e_rad_s: f32) -> Self {
+        self.sensor = Some(RotorSensor {
+            theta_e_rad,
+            omega_e_rad_s,
+        });
+        self
+    }
+}
+
+/// Signals worth logging, for this tick (the health monitor's findings:
+/// [`Foc::health_report`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Telemetry {
+    /// Measured currents in the control frame, A.
+    pub i_dq: Dq,
+    /// Current references in the control frame, A.
+    pub i_dq_ref: Dq,
+    /// Voltage the current loops asked for in the control frame (after their limit), V.
+    pub u_dq: Dq,
+    /// Voltage the duties of this tick apply (after SVPWM clamping), V.
+    pub u_ab: AlphaBeta,
+    /// Control-frame angle at `t_k` (Park), rad el. The inverse Park used
+    /// `theta_rad + angle_advance_periods * omega_rad_s * ts_s`.
+    pub theta_rad: f32,
+    /// Speed of the control frame, rad/s el.
+    pub omega_rad_s: f32,
+    /// The (slewed) speed reference of the speed loop, rad/s mech. (the ramp speed under I/f).
+    pub speed_ref_mech_rad_s: f32,
+    /// The observer's estimate after this tick's step (the previous one if refused).
+    pub estimate: Estimate<f32>,
+    /// Whether the observer accepted this tick's step.
+    pub observer_ok: bool,
+}
+
+/// What one tick returns: the duties for the PWM timer and the status.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TickOutput {
+    /// Duties of phases a, b, c: always finite and in `[0, 1]`; `0.5` each when the PWM is
+    /// off or faulted.
+    pub duties: [f32; 3],
+    /// Whether the bridge must switch. `false`: outputs off (all switches open), which is the
+    /// safe state of every fault and of `Idle`.
+    pub pwm_enabled: bool,
+    /// State after this tick.
+    pub state: State,
+    /// The latched fault, if any.
+    pub fault: Option<Fault>,
+    /// Signals for logging.
+    pub telemetry: Telemetry,
+}
+
+/// Why a command was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CommandError {
+    /// A fault is latched; [`Foc::clear_fault`] first.
+    Faulted(Fault),
+    /// The argument is NaN or infinite.
+    NonFinite,
+    /// Only allowed while idle.
+    NotIdle,
+}
+
+impl core::fmt::Display for CommandError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            CommandError::Faulted(x) => write!(f, "fault latched: {x}"),
+            CommandError::NonFinite => f.write_str("argument is not finite"),
+            CommandError::NotIdle => f.write_str("only allowed while idle"),
+        }
+    }
+}
+
+impl core::error::Error for CommandError {}
+
+/// The controller (module docs). Build with [`Foc::new`], call [`Foc::tick`] once per PWM
+/// period, command with [`start`](Foc::start), [`stop`](Foc::stop),
+/// [`set_speed_ref_mech_rad_s`](Foc::set_speed_ref_mech_rad_s).
+#[derive(Clone, Debug)]
+pub struct Foc {
+    pub(crate) cfg: FocConfig,
+    // Constants derived from the configuration.
+    pub(crate) pole_pairs: f32,
+    pub(crate) inv_pole_pairs: f32,
+    pub(crate) handover: f32,
+    pub(crate) exit_speed: f32,
+    pub(crate) align_ticks: u32,
+    pub(crate) blend_ticks: u32,
+    pub(crate) acquire_ticks: u32,
+    pub(crate) stall_ticks: u32,
+    over_current_sq: f32,
+    advance_s: f32,
+    // Parts.
+    pub(crate) observer: PmsmObserver<f32>,
+    pub(crate) health: HealthMonitor,
+    pi_d: Pi,
+    pi_q: Pi,
+    pub(crate) speed_pi: Pi,
+    pub(crate) seq: Sequencer,
+    // State.
+    pub(crate) state: State,
+    fault: Option<FaultInfo>,
+    tick_count: u32,
+    /// Realized voltages computed by ticks k-1 and k-2.
+    u_hist: [AlphaBeta; 2],
+    pub(crate) report: HealthReport,
+}
+
+/// The first non-finite of three values (the last one if none is).
+fn first_bad(a: f32, b: f32, c: f32) -> f32 {
+    if !a.is_finite() {
+        a
+    } else if !b.is_finite() {
+        b
+    } else {
+        c
+    }
+}
+
+/// How the current references and the frame are set for this tick (from the state machine).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Plan {
+    /// Control frame of this tick.
+    pub frame: Frame,
+    /// Current references in that frame, A.
+    pub i_ref: Dq,
+    /// The frame the current loops were in until this tick, when it changed.
+    pub reframe_from: Option<Frame>,
+}
+
+impl Foc {
+    /// Validates `cfg` and builds an idle controller.
+    pub fn new(cfg: &FocConfig) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        let observer = PmsmObserver::new(&cfg.observer).map_err(ConfigError::Observer)?;
+        let ts = cfg.ts_s;
+        let pole_pairs = cfg.motor.pole_pairs as f32;
+        let handover = cfg.startup.handover_speed_rad_s;
+        let exit_speed = cfg.startup.exit_speed_ratio * handover;
+        let speed_ts = ts * f32::from(cfg.speed_divider);
+        Ok(Self {
+            cfg: *cfg,
+            pole_pairs,
+            inv_pole_pairs: 1.0 / pole_pairs,
+            handover,
+            exit_speed,
+            align_ticks: ticks(cfg.startup.align_time_s, ts),
+            blend_ticks: ticks(cfg.startup.blend_time_s, ts),
+            acquire_ticks: ticks(cfg.startup.acquire_timeout_s, ts),
+            stall_ticks: ticks(cfg.health.stall_time_s, ts),
+            over_current_sq: cfg.over_current_a * cfg.over_current_a,
+            advance_s: cfg.angle_advance_periods * ts,
+            observer,
+            health: HealthMonitor::new(&cfg.health, ts, handover, exit_speed),
+            pi_d: Pi::new(cfg.current_pi_gains(), ts),
+            pi_q: Pi::new(cfg.current_pi_gains(), ts),
+            speed_pi: Pi::new(cfg.speed_pi_gains(), speed_ts),
+            seq: Sequencer::default(),
+            state: State::Idle,
+            fault: None,
+            tick_count: 0,
+            u_hist: [AlphaBeta::default(); 2],
+            report: HealthReport::default(),
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &FocConfig {
+        &self.cfg
+    }
+
+    /// Current state.
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    /// The latched fault, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault.map(|f| f.fault)
+    }
+
+    /// The latched fault with its context, if any.
+    pub fn fault_info(&self) -> Option<FaultInfo> {
+        self.fault
+    }
+
+    /// The observer (runs in every driven state, in both modes).
+    pub fn observer(&self) -> &PmsmObserver<f32> {
+        &self.observer
+    }
+
+    /// The speed command, rad/s mech. (sign = direction), as set.
+    pub fn speed_target_mech_rad_s(&self) -> f32 {
+        self.seq.target_mech
+    }
+
+    /// The health monitor's findings of the last tick (sensorless mode; default otherwise).
+    pub fn health_report(&self) -> HealthReport {
+        self.report
+    }
+
+    /// Calls of [`tick`](Self::tick) so far (wrapping).
+    pub fn tick_count(&self) -> u32 {
+        self.tick_count
+    }
+
+    /// Starts the drive from `Idle` (sensorless: align or I/f first; sensored: closed loop);
+    /// while running it cancels a pending [`stop`](Self::stop). Refused while a fault is
+    /// latched.
+    pub fn start(&mut self) -> Result<(), CommandError> {
+        if let Some(f) = self.fault {
+            return Err(CommandError::Faulted(f.fault));
+        }
+        self.seq.stop_requested = false;
+        if self.state == State::Idle {
+            self.reset_loops();
+            let _ = self
+                .observer
+                .reset(self.cfg.observer.x0, self.cfg.observer.p0);
+            self.health.reset(0.0);
+            self.seq.begin();
+            self.state = match self.cfg.mode {
+                Mode::Sensored => State::ClosedLoop,
+                Mode::Sensorless if self.cfg.startup.align_time_s > 0.0 => State::Align,
+                Mode::Sensorless => {
+                    self.enter_open_loop_from_rest(core::f32::consts::PI);
+                    State::OpenLoop
+                }
+            };
+        }
+        Ok(())
+    }
+
+    /// Controlled stop: the speed reference ramps to zero (closed loop down to the exit
+    /// speed, then the I/f ramp down to standstill), then the PWM goes off (`Idle`). During
+    /// alignment, and in sensored mode once the speed is near zero, it stops at once.
+    pub fn stop(&mut self) {
+        if self.state == State::Align {
+            self.go_idle();
+        } else {
+            self.seq.stop_requested = true;
+        }
+    }
+
+    /// Immediate stop: PWM off, `Idle` (the motor coasts). Does not clear a fault.
+    pub fn disable(&mut self) {
+        if self.state != State::Fault {
+            self.go_idle();
+        }
+    }
+
+    /// Sets the speed command, rad/s mechanical; the sign is the direction. Clamped to
+    /// `max_speed_rad_s / pole_pairs`. A reversal goes through zero speed (closed loop down
+    /// to the exit speed, I/f through zero, hand-over in the new direction). Refused if not
+    /// finite.
+    pub fn set_speed_ref_mech_rad_s(&mut self, speed_mech_rad_s: f32) -> Result<(), CommandError> {
+        if !speed_mech_rad_s.is_finite() {
+            return Err(CommandError::NonFinite);
+        }
+        let max = self.cfg.max_speed_rad_s * self.inv_pole_pairs;
+        self.seq.target_mech = limit(speed_mech_rad_s, -max, max);
+        Ok(())
+    }
+
+    /// Clears a latched fault and returns to `Idle` (then [`start`](Self::start) again).
+    /// Returns the fault that was cleared. If its cause persists it trips again at the next
+    /// tick.
+    pub fn clear_fault(&mut self) -> Option<FaultInfo> {
+        let f = self.fault.take();
+        if self.state == State::Fault {
+            self.go_idle();
+        }
+        f
+    }
+
+    /// Changes the mode; only while idle.
+    pub fn set_mode(&mut self, mode: Mode) -> Result<(), CommandError> {
+        if self.state != State::Idle {
+            return Err(CommandError::NotIdle);
+        }
+        self.cfg.mode = mode;
+        Ok(())
+    }
+
+    /// One PWM period (module docs): samples of `t_k` in, duties for the next period out.
+    /// Never panics; the duties are finite and in `[0, 1]` whatever the input.
+    pub fn tick(&mut self, input: &TickInput) -> TickOutput {
+        self.tick_count = self.tick_count.wrapping_add(1);
+        let (i_ab, c_abs) = match input.currents {
+            PhaseCurrents::Abc(x) => (x.to_alpha_beta(), x.c.abs()),
+            PhaseCurrents::AlphaBeta(x) => (x, 0.0),
+        };
+        self.protect(input, i_ab, c_abs);
+        if matches!(self.state, State::Idle | State::Fault) {
+            return self.safe_output();
+        }
+
+        // Observer: the voltage applied over [t_k-1, t_k), the currents at t_k.
+        let u_prev = match self.cfg.delay {
+            ComputationDelay::OnePeriod => self.u_hist[1],
+            ComputationDelay::None => self.u_hist[0],
+        };
+        let (est, observer_ok) = match self
+            .observer
+            .step([u_prev.alpha, u_prev.beta], [i_ab.alpha, i_ab.beta])
+        {
+            Ok(e) => (e, true),
+            Err(_) => (self.observer.estimate(), false),
+        };
+
+        let Some(plan) = self.sequence(&est, observer_ok, input.sensor) else {
+            return self.safe_output();
+        };
+
+        // Current loops in the control frame.
+        let frame = plan.frame;
+        let (s, c) = sin_cos(frame.theta);
+        let i_dq = i_ab.to_dq(s, c);
+        let ff = self.feed_forward(i_dq, frame);
+        if let Some(old) = plan.reframe_from {
+            self.reframe(old, frame, i_ab, ff);
+        }
+        let u_dc = input.u_dc_v;
+        let u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        let e = plan.i_ref - i_dq;
+        let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
+        let uq_free = self.pi_q.unlimited(e.q, ff.q);
+        let q_max = if u_d * u_d + uq_free * uq_free > u_max * u_max {
+            sqrt(u_max * u_max - u_d * u_d)
+        } else {
+            u_max
+        };
+        let u_q = self.pi_q.step(e.q, ff.q, -q_max, q_max);
+        let u_dq = Dq { d: u_d, q: u_q };
+
+        // Inverse Park at the middle of the application interval (the advance rotates the
+        // frame's sine and cosine by a small angle), SVPWM, history.
+        let (sd, cd) = sin_cos_small(frame.omega * self.advance_s);
+        let (s2, c2) = add_angles(s, c, sd, cd);
+        let m = modulate(u_dq.to_alpha_beta(s2, c2), u_dc);
+        self.u_hist = [m.applied, self.u_hist[0]];
+
+        TickOutput {
+            duties: m.duties,
+            pwm_enabled: true,
+            state: self.state,
+            fault: None,
+            telemetry: Telemetry {
+                i_dq,
+                i_dq_ref: plan.i_ref,
+                u_dq,
+                u_ab: m.applied,
+                theta_rad: frame.theta,
+                omega_rad_s: frame.omega,
+                speed_ref_mech_rad_s: self.seq.speed_ref_mech,
+                estimate: est,
+                observer_ok,
+            },
+        }
+    }
+
+    /// Decoupling and back-EMF feed-forward in `frame` for the measured currents `i`.
+    fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
+        let wl = frame.omega * self.cfg.motor.ls_h;
+        let emf = if frame.emf {
+            frame.omega * self.cfg.motor.psi_f_wb
+        } else {
+            0.0
+        };
+        Dq {
+            d: -wl * i.q,
+            q: wl * i.d + emf,
+        }
+    }
+
+    /// Re-expresses the current integrators of frame `old` in frame `new` so that the
+    /// voltage `integrator + feed-forward` is the same vector in alpha-beta.
+    fn reframe(&mut self, old: Frame, new: Frame, i_ab: AlphaBeta, ff_new: Dq) {
+        let ff_old = self.feed_forward(i_ab.to_dq_angle(old.theta), old);
+        let v_old = Dq {
+            d: self.pi_d.integrator() + ff_old.d,
+            q: self.pi_q.integrator() + ff_old.q,
+        };
+        let (s, c) = sin_cos(wrap(old.theta - new.theta));
+        let v_new = v_old.rotate(s, c);
+        self.pi_d.set_integrator(v_new.d - ff_new.d);
+        self.pi_q.set_integrator(v_new.q - ff_new.q);
+    }
+
+    /// Input checks and protections; trips the first fault found.
+    fn protect(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) {
+        // Fast path: comparisons that are false for NaN cover finiteness too (a NaN or an
+        // infinity in the currents makes `i_sq` or `c_abs` NaN or infinite).
+        let running = !matches!(self.state, State::Idle | State::Fault);
+        let u_dc = input.u_dc_v;
+        let u_min = if running {
+            self.cfg.u_dc_min_v
+        } else {
+            -f32::MAX
+        };
+        let sensor_ok = match input.sensor {
+            Some(s) => at_most(s.theta_e_rad.abs(), 1.0e4) && at_most(s.omega_e_rad_s.abs(), 1.0e6),
+            None => !(running && self.cfg.mode == Mode::Sensored),
+        };
+        if at_most(i_ab.norm_squared(), self.over_current_sq)
+            && at_most(c_abs, self.cfg.over_current_a)
+            && at_most(u_dc, self.cfg.u_dc_max_v)
+            && u_dc >= u_min
+            && sensor_ok
+        {
+            return;
+        }
+        self.classify_fault(input, i_ab, c_abs, running);
+    }
+
+    /// The slow path of [`protect`](Self::protect): which fault, with which value.
+    #[cold]
+    #[inline(never)]
+    fn classify_fault(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32, running: bool) {
+        let u_dc = input.u_dc_v;
+        // Non-finite or absurd inputs.
+        let bad_current = match input.currents {
+            PhaseCurrents::Abc(x) if !x.is_finite() => Some(first_bad(x.a, x.b, x.c)),
+            PhaseCurrents::AlphaBeta(x) if !x.is_finite() => Some(first_bad(x.alpha, x.beta, 0.0)),
+            _ => None,
+        };
+        let bad = if bad_current.is_some() {
+            bad_current
+        } else if !u_dc.is_finite() {
+            Some(u_dc)
+        } else {
+            match input.sensor {
+                Some(s) if !at_most(s.theta_e_rad.abs(), 1.0e4) => Some(s.theta_e_rad),
+                Some(s) if !at_most(s.omega_e_rad_s.abs(), 1.0e6) => Some(s.omega_e_rad_s),
+                None if running && self.cfg.mode == Mode::Sensored => Some(f32::NAN),
+                _ => None,
+            }
+        };
+        if let Some(v) = bad {
+            self.trip(Fault::NonFiniteInput, v);
+            return;
+        }
+        let i_sq = i_ab.norm_squared();
+        let oc = self.cfg.over_current_a;
+        if !at_most(i_sq, self.over_current_sq) || c_abs > oc {
+            self.trip(Fault::OverCurrent, max2(sqrt(i_sq), c_abs));
+        } else if u_dc > self.cfg.u_dc_max_v {
+            self.trip(Fault::BusOverVoltage, u_dc);
+        } else if running && u_dc < self.cfg.u_dc_min_v {
+            self.trip(Fault::BusUnderVoltage, u_dc);
+        }
+    }
+
+    /// Latches `fault` (if none is latched yet) and turns the PWM off.
+    pub(crate) fn trip(&mut self, fault: Fault, value: f32) {
+        if self.fault.is_none() {
+            self.fault = Some(FaultInfo {
+                fault,
+                state: self.state,
+                value,
+                tick: self.tick_count,
+            });
+        }
+        self.state = State::Fault;
+        self.reset_loops();
+    }
+
+    /// PWM off, `Idle`.
+    pub(crate) fn go_idle(&mut self) {
+        self.state = State::Idle;
+        self.seq.stop_requested = false;
+        self.reset_loops();
+    }
+
+    /// Integrators and voltage history to zero.
+    fn reset_loops(&mut self) {
+        self.pi_d.reset();
+        self.pi_q.reset();
+        self.speed_pi.reset();
+        self.u_hist = [AlphaBeta::default(); 2];
+    }
+
+    /// Replaces the observer's estimate by `theta` (rad el.), `omega` (rad/s el.) with angle
+    /// standard deviation `sigma_theta` (rad); the currents keep their estimate. Resets the
+    /// health history.
+    pub(crate) fn reseed_observer(&mut self, theta: f32, omega: f32, sigma_theta: f32) {
+        let x = self.observer.state();
+        let si = 0.1 * self.cfg.motor.characteristic_current_a();
+        let sw = 0.5 * self.handover + 0.3 * omega.abs();
+        let x = Vector4::new(x[0], x[1], omega, wrap(theta));
+        let p = Matrix4::from_diagonal(&Vector4::new(
+            si * si,
+            si * si,
+            sw * sw,
+            sigma_theta * sigma_theta,
+        ));
+        // Refused only for non-finite values, which these are not; nothing changes then.
+        let _ = self.observer.reset(x, p);
+        self.health.reset(omega);
+    }
+
+    /// Output of `Idle` and `Fault`: PWM off, duties 0.5.
+    fn safe_output(&self) -> TickOutput {
+        TickOutput {
+            duties: SAFE_DUTIES,
+            pwm_enabled: false,
+            state: self.state,
+            fault: self.fault(),
+            telemetry: Telemetry {
+                i_dq: Dq::default(),
+                i_dq_ref: Dq::default(),
+                u_dq: Dq::default(),
+                u_ab: AlphaBeta::default(),
+                theta_rad: 0.0,
+                omega_rad_s: 0.0,
+                speed_ref_mech_rad_s: 0.0,
+                estimate: self.observer.estimate(),
+                observer_ok: false,
+            },
+        }
+    }
+}

@@ -1,0 +1,289 @@
+//! Every state-machine transition, on the self-written plant of tests/common.
+mod common;
+
+use common::{Plant, Rig};
+use foc::ekf_core::MotorParams;
+use foc::{CommandError, Fault, Foc, FocConfig, Mode, ObserverLossPolicy, State, TickInput};
+
+/// States visited (deduplicated) while running `seconds`.
+fn visit(rig: &mut Rig, seconds: f64) -> Vec<State> {
+    let mut v: Vec<State> = vec![];
+    rig.run(seconds, |_, o| {
+        if v.last() != Some(&o.state) {
+            v.push(o.state);
+        }
+    });
+    v
+}
+
+fn rig() -> Rig {
+    let (_cfg, mut rig) = Rig::servo_default();
+    rig.noise_a = 0.04;
+    rig.plant.x[3] = -2.0;
+    rig
+}
+
+#[test]
+fn idle_align_openloop_handover_closedloop_stop_idle() {
+    let mut rig = rig();
+    // Idle: PWM off until started.
+    let out = rig.step();
+    assert_eq!(
+        (out.state, out.pwm_enabled, out.duties),
+        (State::Idle, false, [0.5; 3])
+    );
+    rig.foc.set_speed_ref_mech_rad_s(80.0).unwrap();
+    rig.foc.start().unwrap();
+    let seen = visit(&mut rig, 1.2);
+    assert_eq!(
+        seen,
+        [
+            State::Align,
+            State::OpenLoop,
+            State::Handover,
+            State::ClosedLoop
+        ]
+    );
+    let out = rig.last.unwrap();
+    assert!(
+        (rig.plant.omega_mech() - 80.0).abs() < 3.0,
+        "{}",
+        rig.plant.omega_mech()
+    );
+    assert!(out.pwm_enabled && out.fault.is_none());
+    // Controlled stop: closed loop down to the exit speed, I/f to zero, PWM off.
+    rig.foc.stop();
+    let seen = visit(&mut rig, 2.0);
+    assert_eq!(seen, [State::ClosedLoop, State::OpenLoop, State::Idle]);
+    assert!(
+        rig.plant.omega_mech().abs() < 3.0,
+        "{}",
+        rig.plant.omega_mech()
+    );
+    assert!(!rig.last.unwrap().pwm_enabled);
+}
+
+#[test]
+fn start_without_alignment_goes_straight_to_open_loop() {
+    let (mut cfg, _) = Rig::servo_default();
+    cfg.startup.align_time_s = 0.0;
+    let mut rig = Rig::new(&cfg, Plant::servo(), 300.0);
+    rig.foc.set_speed_ref_mech_rad_s(60.0).unwrap();
+    rig.foc.start().unwrap();
+    assert_eq!(rig.foc.state(), State::OpenLoop);
+    let seen = visit(&mut rig, 1.2);
+    assert_eq!(seen, [State::OpenLoop, State::Handover, State::ClosedLoop]);
+}
+
+#[test]
+fn reversal_through_zero_speed() {
+    let mut rig = rig();
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    rig.run(0.2, |_, _| {});
+    rig.foc.set_speed_ref_mech_rad_s(-100.0).unwrap();
+    let seen = visit(&mut rig, 2.5);
+    assert_eq!(
+        seen,
+        [
+            State::ClosedLoop,
+            State::OpenLoop,
+            State::Handover,
+            State::ClosedLoop
+        ]
+    );
+    assert!(
+        (rig.plant.omega_mech() + 100.0).abs() < 3.0,
+        "{}",
+        rig.plant.omega_mech()
+    );
+}
+
+#[test]
+fn low_speed_command_stays_in_open_loop_and_returns_up() {
+    let mut rig = rig();
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    // Below the exit speed (0.7 * 84.6 / 4 = 14.8 rad/s mech): back to I/f, held there.
+    rig.foc.set_speed_ref_mech_rad_s(8.0).unwrap();
+    let seen = visit(&mut rig, 1.0);
+    assert_eq!(seen, [State::ClosedLoop, State::OpenLoop]);
+    let mut mean = 0.0;
+    rig.run(0.5, |r, _| mean += r.plant.omega_mech() / 10_000.0);
+    assert!((mean - 8.0).abs() < 1.0, "I/f mean speed {mean}");
+    // And up again.
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    let seen = visit(&mut rig, 1.0);
+    assert_eq!(seen, [State::OpenLoop, State::Handover, State::ClosedLoop]);
+}
+
+#[test]
+fn fault_clear_restart() {
+    let mut rig = rig();
+    rig.foc.set_speed_ref_mech_rad_s(80.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    // Bus over-voltage for one sample.
+    rig.u_dc = 400.0;
+    let out = rig.step();
+    assert_eq!(
+        (out.state, out.fault),
+        (State::Fault, Some(Fault::BusOverVoltage))
+    );
+    assert_eq!(
+        rig.foc.start(),
+        Err(CommandError::Faulted(Fault::BusOverVoltage))
+    );
+    rig.u_dc = 300.0;
+    // Latched although the cause is gone.
+    let out = rig.step();
+    assert_eq!((out.state, out.pwm_enabled), (State::Fault, false));
+    let info = rig.foc.clear_fault().unwrap();
+    assert_eq!(
+        (info.fault, info.state, info.value),
+        (Fault::BusOverVoltage, State::ClosedLoop, 400.0)
+    );
+    assert_eq!(rig.foc.state(), State::Idle);
+    // Let the rotor coast down, then restart from standstill.
+    rig.run(3.0, |_, _| {});
+    rig.plant.x[2] = 0.0;
+    rig.foc.start().unwrap();
+    let seen = visit(&mut rig, 1.2);
+    assert_eq!(
+        seen,
+        [
+            State::Align,
+            State::OpenLoop,
+            State::Handover,
+            State::ClosedLoop
+        ]
+    );
+}
+
+#[test]
+fn observer_loss_falls_back_and_reacquires() {
+    let mut rig = rig();
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    rig.run(0.2, |_, _| {});
+    // A burst of current-sensor noise 12x the observer's R: the NIS flags the loss.
+    rig.noise_a = 0.5;
+    let seen = visit(&mut rig, 0.05);
+    assert_eq!(seen, [State::ClosedLoop, State::OpenLoop]);
+    assert_eq!(rig.foc.health_report().lost, None, "loss is acted on once");
+    rig.noise_a = 0.04;
+    let seen = visit(&mut rig, 1.0);
+    assert_eq!(seen, [State::OpenLoop, State::Handover, State::ClosedLoop]);
+    assert!(rig.foc.fault().is_none());
+    assert!((rig.plant.omega_mech() - 100.0).abs() < 3.0);
+}
+
+#[test]
+fn observer_loss_trips_with_trip_policy() {
+    let (mut cfg, _) = Rig::servo_default();
+    cfg.health.policy = ObserverLossPolicy::Trip;
+    let mut rig = Rig::new(&cfg, Plant::servo(), 300.0);
+    rig.noise_a = 0.04;
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    rig.noise_a = 0.5;
+    assert!(rig.run_until(State::Fault, 0.1).is_some());
+    let info = rig.foc.fault_info().unwrap();
+    assert_eq!(
+        (info.fault, info.state),
+        (Fault::ObserverLost, State::ClosedLoop)
+    );
+}
+
+#[test]
+fn persistent_loss_exhausts_reacquisitions() {
+    let mut rig = rig();
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    rig.noise_a = 0.5;
+    assert!(rig.run_until(State::Fault, 8.0).is_some());
+    assert_eq!(rig.foc.fault(), Some(Fault::ObserverLost));
+}
+
+#[test]
+fn commands_outside_their_states() {
+    let cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+    let mut foc = Foc::new(&cfg).unwrap();
+    assert_eq!(
+        foc.set_speed_ref_mech_rad_s(f32::NAN),
+        Err(CommandError::NonFinite)
+    );
+    // Clamped to the maximum speed.
+    foc.set_speed_ref_mech_rad_s(1e9).unwrap();
+    assert_eq!(foc.speed_target_mech_rad_s(), cfg.max_speed_rad_s / 4.0);
+    foc.set_mode(Mode::Sensored).unwrap();
+    foc.set_mode(Mode::Sensorless).unwrap();
+    assert_eq!(foc.clear_fault(), None);
+    foc.start().unwrap();
+    assert_eq!(foc.state(), State::Align);
+    assert_eq!(foc.set_mode(Mode::Sensored), Err(CommandError::NotIdle));
+    // start() while running is a no-op; stop() during alignment stops at once.
+    foc.start().unwrap();
+    foc.stop();
+    assert_eq!(foc.state(), State::Idle);
+    foc.start().unwrap();
+    let out = foc.tick(&TickInput::abc(0.0, 0.0, 0.0, 300.0));
+    assert!(out.pwm_enabled);
+    foc.disable();
+    let out = foc.tick(&TickInput::abc(0.0, 0.0, 0.0, 300.0));
+    assert_eq!((out.state, out.pwm_enabled), (State::Idle, false));
+}
+
+#[test]
+fn sensored_mode_idle_closedloop_stop() {
+    let (cfg, _) = Rig::servo_default();
+    let cfg = cfg.with_mode(Mode::Sensored);
+    let mut rig = Rig::new(&cfg, Plant::servo(), 300.0);
+    rig.noise_a = 0.04;
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert_eq!(rig.foc.state(), State::ClosedLoop);
+    let seen = visit(&mut rig, 0.3);
+    assert_eq!(seen, [State::ClosedLoop]);
+    assert!(
+        (rig.plant.omega_mech() - 100.0).abs() < 2.0,
+        "{}",
+        rig.plant.omega_mech()
+    );
+    // Reversal with the true angle: straight through zero in closed loop.
+    rig.foc.set_speed_ref_mech_rad_s(-100.0).unwrap();
+    let seen = visit(&mut rig, 0.3);
+    assert_eq!(seen, [State::ClosedLoop]);
+    assert!(
+        (rig.plant.omega_mech() + 100.0).abs() < 2.0,
+        "{}",
+        rig.plant.omega_mech()
+    );
+    // The observer ran alongside and agrees.
+    let out = rig.last.unwrap();
+    assert!(rig.angle_error_deg(&out).abs() < 2.0);
+    rig.foc.stop();
+    let seen = visit(&mut rig, 0.5);
+    assert_eq!(seen, [State::ClosedLoop, State::Idle]);
+}
+
+#[test]
+fn no_delay_configuration_runs_a_delay_free_plant() {
+    let (cfg, _) = Rig::servo_default();
+    let cfg = cfg.with_delay(foc::ComputationDelay::None);
+    assert_eq!(cfg.angle_advance_periods, 0.5);
+    let mut rig = Rig::new(&cfg, Plant::servo(), 300.0);
+    assert!(!rig.delay);
+    rig.noise_a = 0.04;
+    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    let mut worst: f64 = 0.0;
+    rig.run(0.3, |r, o| worst = worst.max(r.angle_error_deg(o).abs()));
+    assert!(worst < 2.0, "angle error {worst} deg");
+}

@@ -1,0 +1,296 @@
+//! The MCAP log of a run: one JSON message per control period, readable by Foxglove and the
+//! `mcap` Python package.
+//!
+//! # Topics (message encoding `json`, schema encoding `jsonschema`)
+//!
+//! | topic | schema | messages |
+//! |---|---|---|
+//! | `/pmsm_sim/period` | `pmsm_sim.Period` ([`PERIOD_SCHEMA`]) | one per PWM period: the [`Sample`] |
+//! | `/pmsm_sim/scenario` | `pmsm_sim.Scenario` | one, at `t = 0`: name, TOML text, scenario |
+//! | `/pmsm_sim/metrics` | `pmsm_sim.Metrics` | one, at the end: the [`RunMetrics`] |
+//! | `/pmsm_sim/event` | `pmsm_sim.Event` | why a run stopped early (non-finite, Ctrl-C, ...) |
+//!
+//! Log and publish times are the simulated time `k Ts` in nanoseconds. A metadata record
+//! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks are compressed
+//! (zstd level 1 by default, single-threaded: the fastest zstd level, and here no larger).
+//!
+//! # Always finished
+//!
+//! [`McapLog::finish`] writes the summary and footer. A run that stops early (non-finite
+//! state, Ctrl-C) still ends in `finish`, after an `/pmsm_sim/event` message; and should the
+//! log be dropped without it (a panic), the `mcap` writer's `Drop` finishes the file.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use mcap::records::{MessageHeader, Metadata};
+use mcap::{Compression, WriteOptions, Writer};
+use serde::Serialize;
+
+use crate::SimError;
+use crate::metrics::RunMetrics;
+use crate::scenario::Scenario;
+use crate::sim::{Sample, SampleSink};
+
+/// JSON schema of the `/pmsm_sim/period` messages.
+pub const PERIOD_SCHEMA: &str = include_str!("schemas/period.schema.json");
+
+/// Topic of the per-period messages.
+pub const TOPIC_PERIOD: &str = "/pmsm_sim/period";
+/// Topic of the scenario message.
+pub const TOPIC_SCENARIO: &str = "/pmsm_sim/scenario";
+/// Topic of the metrics message.
+pub const TOPIC_METRICS: &str = "/pmsm_sim/metrics";
+/// Topic of the event messages.
+pub const TOPIC_EVENT: &str = "/pmsm_sim/event";
+
+const SCENARIO_SCHEMA: &str = r#"{"title":"pmsm_sim.Scenario","type":"object","properties":{"name":{"type":"string"},"toml":{"type":"string","description":"the scenario as TOML"},"scenario":{"type":"object","description":"the scenario (same fields as the TOML)"}}}"#;
+const METRICS_SCHEMA: &str = r#"{"title":"pmsm_sim.Metrics","type":"object","description":"metrics of the run (design.md section 5; see the crate README)"}"#;
+const EVENT_SCHEMA: &str = r#"{"title":"pmsm_sim.Event","type":"object","properties":{"t_s":{"type":"number","description":"simulated time, s"},"level":{"type":"string"},"message":{"type":"string"}}}"#;
+
+/// Chunk compression of the log.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LogCompression {
+    /// zstd level 1, single-threaded (small files).
+    #[default]
+    Zstd,
+    /// lz4 (faster, larger).
+    Lz4,
+    /// None (fastest, largest).
+    None,
+}
+
+impl LogCompression {
+    fn to_mcap(self) -> Option<Compression> {
+        match self {
+            LogCompression::Zstd => Some(Compression::Zstd),
+            LogCompression::Lz4 => Some(Compression::Lz4),
+            LogCompression::None => None,
+        }
+    }
+}
+
+/// An open MCAP log (module docs).
+pub struct McapLog {
+    writer: Writer<BufWriter<File>>,
+    path: PathBuf,
+    period: u16,
+    scenario: u16,
+    metrics: u16,
+    event: u16,
+    seq: u32,
+    ts_ns: u64,
+    last_ns: u64,
+    buf: Vec<u8>,
+}
+
+fn out_err(path: &Path, what: impl core::fmt::Display) -> SimError {
+    SimError::Output {
+        path: path.display().to_string(),
+        message: what.to_string(),
+    }
+}
+
+#[derive(Serialize)]
+struct ScenarioMessage<'a> {
+    name: &'a str,
+    toml: &'a str,
+    scenario: &'a Scenario,
+}
+
+#[derive(Serialize)]
+struct EventMessage<'a> {
+    t_s: f64,
+    level: &'a str,
+    message: &'a str,
+}
+
+impl McapLog {
+    /// Creates the log at `path` and writes the scenario.
+    pub fn create(
+        path: &Path,
+        scenario: &Scenario,
+        compression: LogCompression,
+    ) -> Result<Self, SimError> {
+        let file = File::create(path).map_err(|e| out_err(path, e))?;
+        let opts = WriteOptions::new()
+            .compression(compression.to_mcap())
+            .compression_threads(0)
+            .compression_level(1)
+            .profile("")
+            .library(format!("pmsm-sim {}", env!("CARGO_PKG_VERSION")));
+        let mut writer = opts
+            .create(BufWriter::with_capacity(1 << 20, file))
+            .map_err(|e| out_err(path, e))?;
+        let no_meta = BTreeMap::new();
+        let mut add = |name: &str, schema: &str, topic: &str| -> Result<u16, SimError> {
+            let id = writer
+                .add_schema(name, "jsonschema", schema.as_bytes())
+                .map_err(|e| out_err(path, e))?;
+            writer
+                .add_channel(id, topic, "json", &no_meta)
+                .map_err(|e| out_err(path, e))
+        };
+        let period = add("pmsm_sim.Period", PERIOD_SCHEMA, TOPIC_PERIOD)?;
+        let scenario_ch = add("pmsm_sim.Scenario", SCENARIO_SCHEMA, TOPIC_SCENARIO)?;
+        let metrics = add("pmsm_sim.Metrics", METRICS_SCHEMA, TOPIC_METRICS)?;
+        let event = add("pmsm_sim.Event", EVENT_SCHEMA, TOPIC_EVENT)?;
+        let toml = scenario.to_toml()?;
+        writer
+            .write_metadata(&Metadata {
+                name: "pmsm_sim".into(),
+                metadata: BTreeMap::from([
+                    ("version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+                    ("scenario_toml".to_string(), toml.clone()),
+                ]),
+            })
+            .map_err(|e| out_err(path, e))?;
+        let mut log = Self {
+            writer,
+            path: path.to_path_buf(),
+            period,
+            scenario: scenario_ch,
+            metrics,
+            event,
+            seq: 0,
+            ts_ns: (scenario.ts_s() * 1e9).round() as u64,
+            last_ns: 0,
+            buf: Vec::with_capacity(4096),
+        };
+        let msg = ScenarioMessage {
+            name: &scenario.name,
+            toml: &toml,
+            scenario,
+        };
+        log.write_json(log.scenario, 0, &msg)
+            .map_err(|e| out_err(path, e))?;
+        Ok(log)
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn write_json<T: Serialize>(
+        &mut self,
+        channel: u16,
+        t_ns: u64,
+        value: &T,
+    ) -> Result<(), String> {
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, value).map_err(|e| e.to_string())?;
+        self.seq = self.seq.wrapping_add(1);
+        self.last_ns = self.last_ns.max(t_ns);
+        self.writer
+            .write_to_known_channel(
+                &MessageHeader {
+                    channel_id: channel,
+                    sequence: self.seq,
+                    log_time: t_ns,
+                    publish_time: t_ns,
+                },
+                &self.buf,
+            )
+            .map_err(|e| e.to_string())
+    }
+
+    /// Writes an event (e.g. why the run stopped) at simulated time `t_s`.
+    pub fn event(&mut self, t_s: f64, level: &str, message: &str) -> Result<(), SimError> {
+        let t_ns = if t_s.is_finite() && t_s > 0.0 {
+            (t_s * 1e9).round() as u64
+        } else {
+            self.last_ns
+        };
+        let ch = self.event;
+        self.write_json(
+            ch,
+            t_ns,
+            &EventMessage {
+                t_s,
+                level,
+                message,
+            },
+        )
+        .map_err(|e| out_err(&self.path, e))
+    }
+
+    /// Writes the metrics (if any), then the summary and footer, and flushes the file.
+    pub fn finish(mut self, metrics: Option<&RunMetrics>) -> Result<PathBuf, SimError> {
+        if let Some(m) = metrics {
+            let (ch, t) = (self.metrics, self.last_ns);
+            self.write_json(ch, t, m)
+                .map_err(|e| out_err(&self.path, e))?;
+        }
+        self.writer.finish().map_err(|e| out_err(&self.path, e))?;
+        let path = self.path.clone();
+        let mut inner = self.writer.into_inner();
+        inner.flush().map_err(|e| out_err(&path, e))?;
+        Ok(path)
+    }
+}
+
+impl SampleSink for McapLog {
+    fn record(&mut self, sample: &Sample) -> Result<(), String> {
+        let t_ns = sample.k.saturating_mul(self.ts_ns);
+        let ch = self.period;
+        self.write_json(ch, t_ns, sample)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every key of a serialized sample is in the schema, and every key of the schema is in
+    /// a serialized sample (with the seed filter present).
+    #[test]
+    fn schema_matches_the_sample() {
+        let schema: serde_json::Value = match serde_json::from_str(PERIOD_SCHEMA) {
+            Ok(v) => v,
+            Err(e) => panic!("schema is not JSON: {e}"),
+        };
+        let mut s = Sample::default();
+        s.seed_filter = Some(s.observer);
+        let sample = match serde_json::to_value(s) {
+            Ok(v) => v,
+            Err(e) => panic!("{e}"),
+        };
+        fn walk(schema: &serde_json::Value, value: &serde_json::Value, path: &str) {
+            let schema = if let Some(any) = schema.get("anyOf") {
+                &any[0]
+            } else {
+                schema
+            };
+            if let Some(obj) = value.as_object() {
+                let props = schema["properties"]
+                    .as_object()
+                    .unwrap_or_else(|| panic!("{path}: no properties in the schema"));
+                let mut a: Vec<_> = obj.keys().collect();
+                let mut b: Vec<_> = props.keys().collect();
+                a.sort();
+                b.sort();
+                assert_eq!(a, b, "{path}");
+                for (k, v) in obj {
+                    walk(&props[k], v, &format!("{path}.{k}"));
+                }
+            } else if value.is_array() {
+                assert_eq!(schema["type"], "array", "{path}");
+            } else if value.is_boolean() {
+                assert_eq!(schema["type"], "boolean", "{path}");
+            } else if value.is_string() {
+                assert_eq!(schema["type"], "string", "{path}");
+            } else if value.is_u64() {
+                assert!(
+                    schema["type"] == "integer" || schema["type"] == "number",
+                    "{path}"
+                );
+            } else {
+                assert_eq!(schema["type"], "number", "{path}");
+            }
+        }
+        walk(&schema, &sample, "");
+    }
+}

@@ -1,0 +1,260 @@
+//! The run's plot: an SVG with speed and its estimate, the angle error, and the dq currents
+//! over time.
+//!
+//! [`PlotSink`] keeps every `stride`-th sample (at most about [`MAX_POINTS`] per curve) while
+//! the run goes, and [`PlotSink::write_svg`] draws three panels:
+//!
+//! 1. mechanical speed: true, estimated (default observer), reference, rpm;
+//! 2. angle error `wrap(th_hat - th)` of the observer(s), electrical degrees; the axis is
+//!    zoomed on the converged part (`|e| < 5 deg`), so the start-up excursion is clipped;
+//! 3. dq currents in the true rotor frame and the controller's references, A.
+//!
+//! SVG only: plotters' SVG backend writes text as `<text>` elements and needs no font files,
+//! so the plot works on a headless machine without system fonts.
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use crate::SimError;
+use crate::sim::{Sample, SampleSink};
+
+/// Largest number of points kept per curve.
+pub const MAX_POINTS: usize = 4000;
+
+/// One kept sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Point {
+    t: f64,
+    speed_rpm: f64,
+    est_rpm: f64,
+    ref_rpm: f64,
+    err_deg: f64,
+    seed_err_deg: Option<f64>,
+    i_dq: [f64; 2],
+    i_dq_ref: [f64; 2],
+}
+
+/// Collects a decimated trace for the plot (module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlotSink {
+    stride: usize,
+    seen: usize,
+    pole_pairs: f64,
+    points: Vec<Point>,
+}
+
+impl PlotSink {
+    /// A sink for a run of `periods` periods of a motor with `pole_pairs`.
+    pub fn new(periods: usize, pole_pairs: u32) -> Self {
+        let stride = periods.div_ceil(MAX_POINTS).max(1);
+        Self {
+            stride,
+            seen: 0,
+            pole_pairs: f64::from(pole_pairs),
+            points: Vec::with_capacity(periods / stride + 1),
+        }
+    }
+
+    /// Number of points kept.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether no point was kept.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Draws the SVG at `path` with `title` on top.
+    pub fn write_svg(&self, path: &Path, title: &str) -> Result<(), SimError> {
+        let err = |e: &dyn core::fmt::Display| SimError::Output {
+            path: path.display().to_string(),
+            message: format!("cannot draw the plot: {e}"),
+        };
+        self.draw(path, title).map_err(|e| err(&e))
+    }
+
+    fn draw(&self, path: &Path, title: &str) -> Result<(), Box<dyn std::error::Error>> {
+        let pts = &self.points;
+        let root = SVGBackend::new(path, (1200, 1000)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (top, rest) = root.split_vertically(40);
+        top.titled(title, ("sans-serif", 22))?;
+        let panels = rest.split_evenly((3, 1));
+        let (t0, t1) = match (pts.first(), pts.last()) {
+            (Some(a), Some(b)) if b.t > a.t => (a.t, b.t),
+            (Some(a), _) => (a.t, a.t + 1e-3),
+            _ => (0.0, 1e-3),
+        };
+
+        // Panel 1: speed.
+        let (lo, hi) = range(pts.iter().flat_map(|p| [p.speed_rpm, p.est_rpm, p.ref_rpm]));
+        let mut c = chart(&panels[0], "speed", t0..t1, lo..hi, "rpm (mech.)")?;
+        line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.ref_rpm)),
+            &BLACK.mix(0.5),
+            "reference",
+        )?;
+        line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.speed_rpm)),
+            &BLUE,
+            "true",
+        )?;
+        line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.est_rpm)),
+            &RED,
+            "EKF estimate",
+        )?;
+        legend(&mut c)?;
+
+        // Panel 2: angle error, zoomed on the converged part.
+        let conv = |e: f64| e.abs() < 5.0;
+        let zoom = pts
+            .iter()
+            .flat_map(|p| [Some(p.err_deg), p.seed_err_deg])
+            .flatten()
+            .filter(|e| conv(*e))
+            .fold(0.0f64, |m, e| m.max(e.abs()));
+        let lim = (zoom * 1.15).clamp(0.2, 5.0);
+        let mut c = chart(
+            &panels[1],
+            "angle error wrap(th_hat - th) (start-up excursion clipped)",
+            t0..t1,
+            -lim..lim,
+            "deg el.",
+        )?;
+        if pts.iter().any(|p| p.seed_err_deg.is_some()) {
+            line(
+                &mut c,
+                pts.iter()
+                    .filter_map(|p| p.seed_err_deg.map(|e| (p.t, e.clamp(-lim, lim)))),
+                &GREEN.mix(0.8),
+                "seed filter",
+            )?;
+        }
+        line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.err_deg.clamp(-lim, lim))),
+            &RED,
+            "EKF (default)",
+        )?;
+        legend(&mut c)?;
+
+        // Panel 3: dq currents.
+        let (lo, hi) = range(
+            pts.iter()
+                .flat_map(|p| [p.i_dq[0], p.i_dq[1], p.i_dq_ref[0], p.i_dq_ref[1]]),
+        );
+        let mut c = chart(
+            &panels[2],
+            "dq currents (true rotor frame)",
+            t0..t1,
+            lo..hi,
+            "A",
+        )?;
+        line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.i_dq_ref[1])),
+            &BLACK.mix(0.5),
+            "i_q ref",
+        )?;
+        line(&mut c, pts.iter().map(|p| (p.t, p.i_dq[1])), &BLUE, "i_q")?;
+        line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.i_dq[0])),
+            &MAGENTA,
+            "i_d",
+        )?;
+        legend(&mut c)?;
+        root.present()?;
+        Ok(())
+    }
+}
+
+type Chart<'a, 'b> = ChartContext<
+    'a,
+    SVGBackend<'b>,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// A finite `(lo, hi)` around the values with a 5 % margin.
+fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(v), h.max(v))
+        });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-3);
+    (lo - pad, hi + pad)
+}
+
+fn chart<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    caption: &str,
+    x: core::ops::Range<f64>,
+    y: core::ops::Range<f64>,
+    y_desc: &str,
+) -> Result<Chart<'a, 'b>, Box<dyn std::error::Error>> {
+    let mut c = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 16))
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(60)
+        .build_cartesian_2d(x, y)?;
+    c.configure_mesh()
+        .x_desc("t (s)")
+        .y_desc(y_desc)
+        .light_line_style(WHITE.mix(0.0))
+        .draw()?;
+    Ok(c)
+}
+
+fn line<S: Into<ShapeStyle> + Copy + 'static>(
+    c: &mut Chart<'_, '_>,
+    points: impl Iterator<Item = (f64, f64)>,
+    style: &S,
+    label: &str,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let st: ShapeStyle = (*style).into();
+    c.draw_series(LineSeries::new(points.filter(|p| p.1.is_finite()), st))?
+        .label(label)
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], st));
+    Ok(())
+}
+
+fn legend<'a, 'b: 'a>(c: &mut Chart<'a, 'b>) -> Result<(), Box<dyn std::error::Error>> {
+    c.configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
+impl SampleSink for PlotSink {
+    fn record(&mut self, s: &Sample) -> Result<(), String> {
+        if self.seen.is_multiple_of(self.stride) {
+            let tel = &s.control.telemetry;
+            self.points.push(Point {
+                t: s.t_s,
+                speed_rpm: s.truth.speed_rpm,
+                est_rpm: s.observer.omega_e_rad_s / self.pole_pairs
+                    * crate::scenario::RPM_PER_RAD_S,
+                ref_rpm: s.control.speed_ref_rpm,
+                err_deg: s.observer.angle_error_deg,
+                seed_err_deg: s.seed_filter.map(|f| f.angle_error_deg),
+                i_dq: s.truth.i_dq_a,
+                i_dq_ref: tel.i_dq_ref_a,
+            });
+        }
+        self.seen += 1;
+        Ok(())
+    }
+}

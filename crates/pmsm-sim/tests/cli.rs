@@ -1,0 +1,241 @@
+//! The command line: outputs, bad input, non-finite stops and Ctrl-C, with the MCAP files
+//! read back (finished: summary and footer present).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_pmsm-sim");
+
+/// A fresh directory under the system temp dir.
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("pmsm-sim-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap_or_else(|e| panic!("{}: {e}", d.display()));
+    d
+}
+
+fn run(args: &[&str], cwd: &Path) -> Output {
+    Command::new(BIN)
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {BIN}: {e}"))
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Topic -> messages (JSON) of a finished MCAP file; panics if it is not finished.
+fn read_mcap(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let summary = mcap::read::Summary::read(&bytes)
+        .unwrap_or_else(|e| panic!("{}: bad summary: {e}", path.display()))
+        .unwrap_or_else(|| panic!("{}: no summary (file not finished)", path.display()));
+    let mut out: BTreeMap<String, Vec<serde_json::Value>> = BTreeMap::new();
+    let stream = mcap::MessageStream::new(&bytes).unwrap_or_else(|e| panic!("{e}"));
+    for m in stream {
+        let m = m.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let v: serde_json::Value =
+            serde_json::from_slice(&m.data).unwrap_or_else(|e| panic!("not JSON: {e}"));
+        out.entry(m.channel.topic.clone()).or_default().push(v);
+    }
+    let stats = summary.stats.unwrap_or_else(|| panic!("no statistics"));
+    let total: usize = out.values().map(Vec::len).sum();
+    assert_eq!(stats.message_count as usize, total);
+    out
+}
+
+#[test]
+fn default_run_writes_its_outputs_and_prints_the_paths() {
+    let dir = temp_dir("default");
+    let o = run(&["--duration", "0.05"], &dir);
+    let stdout = text(&o.stdout);
+    assert!(o.status.success(), "{stdout}\n{}", text(&o.stderr));
+    assert!(stdout.contains("angle error RMS"), "{stdout}");
+    for f in ["run.mcap", "plot.svg", "metrics.json"] {
+        let p = Path::new("out").join("default").join(f);
+        assert!(stdout.contains(&p.display().to_string()), "{stdout}");
+        assert!(dir.join(&p).is_file(), "{} missing", p.display());
+    }
+    let msgs = read_mcap(&dir.join("out/default/run.mcap"));
+    let periods = &msgs["/pmsm_sim/period"];
+    assert_eq!(periods.len(), 500);
+    assert_eq!(periods[0]["k"], 0);
+    assert_eq!(periods[499]["k"], 499);
+    assert!(periods[1]["observer"]["p_diag"].as_array().map(Vec::len) == Some(4));
+    assert_eq!(periods[10]["control"]["telemetry"]["state"], "sensored");
+    assert_eq!(msgs["/pmsm_sim/scenario"].len(), 1);
+    assert_eq!(msgs["/pmsm_sim/scenario"][0]["name"], "default");
+    assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], 500);
+    assert!(!msgs.contains_key("/pmsm_sim/event"));
+    let svg = std::fs::read_to_string(dir.join("out/default/plot.svg")).unwrap_or_default();
+    assert!(svg.starts_with("<svg") && svg.contains("angle error"));
+    let metrics: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("out/default/metrics.json")).unwrap_or_default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(metrics["periods"], 500);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn json_output_list_show_and_check() {
+    let dir = temp_dir("json");
+    let o = run(
+        &[
+            "run",
+            "servo-ideal",
+            "--duration",
+            "0.02",
+            "--no-log",
+            "--no-plot",
+            "--json",
+            "--out",
+            "o",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("stdout is not JSON: {e}"));
+    assert_eq!(v["scenario"], "servo-ideal");
+    assert!(!dir.join("o/run.mcap").exists());
+    assert!(dir.join("o/metrics.json").is_file());
+
+    let o = run(&["list"], &dir);
+    let s = text(&o.stdout);
+    assert!(
+        o.status.success() && s.contains("default") && s.contains("drone"),
+        "{s}"
+    );
+    let o = run(&["show", "industrial-2k2"], &dir);
+    let toml = text(&o.stdout);
+    assert!(toml.contains("u_dc_v = 540.0"), "{toml}");
+    std::fs::write(dir.join("mine.toml"), &toml).unwrap_or_else(|e| panic!("{e}"));
+    let o = run(&["check", "mine.toml"], &dir);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
+    let dir = temp_dir("bad");
+    let good = text(&run(&["show"], &dir).stdout);
+    let cases = [
+        (
+            good.replace("psi_f_wb = 0.175", "psi_f_wb = -0.175"),
+            "motor.psi_f_wb",
+            "> 0",
+        ),
+        (
+            good.replace("ts_s = 1e-4", "ts_s = 0.0"),
+            "inverter.ts_s",
+            "> 0",
+        ),
+        (
+            good.replace("dead_time_s = 0.0", "dead_time_s = 1e-3"),
+            "inverter.dead_time_s",
+            "period",
+        ),
+        (
+            good.replace("j_kg_m2 = 8e-4", ""),
+            "motor",
+            "missing field `j_kg_m2`",
+        ),
+        (
+            good.replace("adc_bits = 12", "adc_bits = 12.5"),
+            "sensors.adc_bits",
+            "invalid type",
+        ),
+        (
+            good.replace("[controller]", "[controler]"),
+            "controler",
+            "unknown field",
+        ),
+    ];
+    for (i, (body, field, problem)) in cases.iter().enumerate() {
+        let name = format!("bad{i}.toml");
+        std::fs::write(dir.join(&name), body).unwrap_or_else(|e| panic!("{e}"));
+        let o = run(&["run", &name], &dir);
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{name} accepted");
+        assert!(
+            err.contains(&name) && err.contains(field) && err.contains(problem),
+            "{name}: {err}"
+        );
+        // Refused before the run: nothing written.
+        assert!(!dir.join("out").exists(), "{name}: outputs written");
+    }
+    let o = run(&["run", "missing.toml"], &dir);
+    assert!(!o.status.success() && text(&o.stderr).contains("missing.toml"));
+    let o = run(&["run", "no-such-preset"], &dir);
+    assert!(!o.status.success() && text(&o.stderr).contains("no built-in scenario"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_non_finite_run_stops_with_a_diagnostic_and_a_readable_log() {
+    let dir = temp_dir("nonfinite");
+    let body = text(&run(&["show"], &dir).stdout)
+        .replace("after_nm = 1.5", "after_nm = 1e300")
+        .replace("time_s = 0.6", "time_s = 0.02");
+    std::fs::write(dir.join("blow.toml"), body).unwrap_or_else(|e| panic!("{e}"));
+    let o = run(
+        &["run", "blow.toml", "--duration", "0.1", "--out", "o"],
+        &dir,
+    );
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("non-finite") && err.contains("t = 0.02"),
+        "{err}"
+    );
+    let msgs = read_mcap(&dir.join("o/run.mcap"));
+    let n = msgs["/pmsm_sim/period"].len();
+    assert!((200..1000).contains(&n), "{n} periods");
+    let ev = &msgs["/pmsm_sim/event"][0];
+    assert_eq!(ev["level"], "error");
+    assert!(ev["message"].as_str().unwrap_or("").contains("non-finite"));
+    assert_eq!(msgs["/pmsm_sim/metrics"].len(), 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn ctrl_c_leaves_a_readable_log() {
+    let dir = temp_dir("sigint");
+    let child = Command::new(BIN)
+        .args(["--duration", "1000", "--out", "o", "--no-plot"])
+        .current_dir(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{e}"));
+    // Wait until the log exists and has grown (the run is under way), then interrupt.
+    let log = dir.join("o/run.mcap");
+    let start = Instant::now();
+    while std::fs::metadata(&log).map_or(0, |m| m.len()) < 4 << 20 {
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "run did not start"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap_or_else(|e| panic!("kill: {e}"));
+    assert!(sent.success());
+    let o = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let msgs = read_mcap(&log);
+    let n = msgs["/pmsm_sim/period"].len();
+    assert!(n > 1000, "{n} periods");
+    assert_eq!(msgs["/pmsm_sim/event"][0]["level"], "warning");
+    assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], n);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,0 +1,122 @@
+"""Reads pmsm-sim's MCAP logs back with the `mcap` Python package (what Foxglove-side tools use).
+
+Run (from the workspace root):
+
+    python -m pip install mcap pytest
+    python -m pytest crates/pmsm-sim/tests/python
+
+The simulator binary is taken from the environment variable PMSM_SIM_BIN when set; otherwise
+it is built with `cargo build -p pmsm-sim` (honouring CARGO_TARGET_DIR) and its path read from
+cargo's JSON messages.
+"""
+
+import json
+import math
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+ROOT = Path(__file__).resolve().parents[4]
+PERIOD_FIELDS = {"k", "t_s", "truth", "measured", "observer", "seed_filter", "control", "inverter"}
+
+
+@pytest.fixture(scope="session")
+def sim_bin() -> str:
+    env = os.environ.get("PMSM_SIM_BIN")
+    if env:
+        return env
+    out = subprocess.run(
+        ["cargo", "build", "-p", "pmsm-sim", "--bin", "pmsm-sim", "--message-format=json"],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    for line in out.splitlines():
+        msg = json.loads(line)
+        if msg.get("reason") == "compiler-artifact" and msg.get("executable"):
+            if msg["target"]["name"] == "pmsm-sim":
+                return msg["executable"]
+    raise RuntimeError("cargo built no pmsm-sim executable")
+
+
+def read(path: Path):
+    """(summary, {topic: [decoded JSON messages]}, {topic: (schema, channel)})."""
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        assert summary is not None, "no summary: the file was not finished"
+        messages, channels = {}, {}
+        for schema, channel, message in reader.iter_messages():
+            messages.setdefault(channel.topic, []).append(json.loads(message.data))
+            channels[channel.topic] = (schema, channel, message.log_time)
+    return summary, messages, channels
+
+
+def test_default_run_reads_back(sim_bin, tmp_path):
+    out = tmp_path / "o"
+    done = subprocess.run(
+        [sim_bin, "run", "default", "--duration", "0.1", "--out", str(out), "--no-plot"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    summary, messages, channels = read(out / "run.mcap")
+
+    assert set(messages) == {"/pmsm_sim/period", "/pmsm_sim/scenario", "/pmsm_sim/metrics"}
+    counts = {summary.channels[i].topic: n for i, n in summary.statistics.channel_message_counts.items()}
+    assert counts["/pmsm_sim/period"] == 1000
+    for topic, (schema, channel, _) in channels.items():
+        assert channel.message_encoding == "json"
+        assert schema.encoding == "jsonschema"
+        assert json.loads(schema.data)["title"].startswith("pmsm_sim.")
+
+    periods = messages["/pmsm_sim/period"]
+    assert len(periods) == 1000
+    assert set(periods[0]) == PERIOD_FIELDS
+    ts = 1e-4
+    for i, p in enumerate(periods):
+        assert p["k"] == i
+        assert math.isclose(p["t_s"], i * ts, rel_tol=1e-12, abs_tol=1e-15)
+        assert -math.pi <= p["truth"]["theta_e_rad"] < math.pi
+        assert len(p["observer"]["p_diag"]) == 4 and min(p["observer"]["p_diag"]) >= 0.0
+        assert all(0.0 <= d <= 1.0 for d in p["inverter"]["duties"])
+    # Log time is the simulated time in ns.
+    assert channels["/pmsm_sim/period"][2] == 999 * 100_000
+    last = periods[-1]
+    assert last["truth"]["speed_rpm"] > 100.0  # the ramp started at 0.05 s
+    assert last["control"]["telemetry"]["state"] == "sensored"
+    assert abs(last["observer"]["angle_error_deg"]) < 5.0
+    assert last["seed_filter"] is not None
+    scen = messages["/pmsm_sim/scenario"][0]
+    assert scen["name"] == "default" and "[motor]" in scen["toml"]
+    assert messages["/pmsm_sim/metrics"][0]["periods"] == 1000
+
+
+def test_interrupted_run_is_readable(sim_bin, tmp_path):
+    out = tmp_path / "o"
+    proc = subprocess.Popen(
+        [sim_bin, "run", "--duration", "1000", "--out", str(out), "--no-plot", "--no-seed-filter"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    log = out / "run.mcap"
+    deadline = time.monotonic() + 60
+    while not (log.exists() and log.stat().st_size > (2 << 20)):
+        assert time.monotonic() < deadline, "the run did not start"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    summary, messages, _ = read(log)
+    n = len(messages["/pmsm_sim/period"])
+    assert n > 1000
+    assert messages["/pmsm_sim/period"][-1]["seed_filter"] is None
+    assert messages["/pmsm_sim/event"][0]["level"] == "warning"
+    assert "interrupted" in messages["/pmsm_sim/event"][0]["message"]
+    assert messages["/pmsm_sim/metrics"][0]["periods"] == n
