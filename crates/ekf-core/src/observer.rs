@@ -60,6 +60,7 @@ use crate::ekf::{
 use crate::motor::positive;
 use crate::structured;
 use crate::structured::Sym4;
+use crate::trig::sin_cos_small;
 use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t, wrap_angle};
 
 /// How the continuous model is turned into one step of the filter (module docs).
@@ -293,7 +294,7 @@ impl<T: Float> PmsmModel<T> {
             Discretization::LagFree => {
                 let a = self.a;
                 let one_minus_alpha = T::one() - self.decay;
-                let (sh, ch) = half_angle_sin_cos(w * ts * to_t(0.5));
+                let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
                 let two = T::one() + T::one();
                 // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
                 let cos_m1 = -two * sh * sh;
@@ -377,40 +378,6 @@ impl<T: Float> MeasurementModel<T, 4, 2> for PmsmModel<T> {
     fn normalize(&self, x: &mut Vector4<T>) {
         x[3] = wrap_angle(x[3]);
     }
-}
-
-/// `(sin x, cos x)` for the half-step angle `x = w Ts / 2`: Taylor series for `|x| < 0.25`
-/// (no range reduction needed), [`Float::sin_cos_angle`] otherwise. In `f64` the series runs
-/// through `x^13` / `x^14` (truncation below 1e-20); in `f32` through `x^7` / `x^8`
-/// (truncation below 1e-10, far below the `f32` rounding of 6e-8). Cheaper than a library call
-/// in the common case.
-#[inline(always)]
-fn half_angle_sin_cos<T: Float>(x: T) -> (T, T) {
-    if x.abs() >= to_t(0.25) {
-        return x.sin_cos_angle();
-    }
-    let x2 = x * x;
-    let c = |v: f64| -> T { to_t(v) };
-    let single = T::default_epsilon() > to_t(1e-10);
-    // Horner in x^2, coefficients (-1)^n / (2n+1)! and (-1)^n / (2n)!; the f64 tails are
-    // folded away at compile time for f32.
-    let (s_tail, c_tail) = if single {
-        (T::zero(), T::zero())
-    } else {
-        (
-            x2 * (c(1.0 / 362_880.0)
-                + x2 * (c(-1.0 / 39_916_800.0) + x2 * c(1.0 / 6_227_020_800.0))),
-            x2 * (c(-1.0 / 3_628_800.0)
-                + x2 * (c(1.0 / 479_001_600.0) + x2 * c(-1.0 / 87_178_291_200.0))),
-        )
-    };
-    let s = x
-        * (T::one()
-            + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * (c(-1.0 / 5040.0) + s_tail))));
-    let co = T::one()
-        + x2 * (c(-0.5)
-            + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * (c(1.0 / 40_320.0) + c_tail))));
-    (s, co)
 }
 
 /// Whether the angle estimate can be trusted.
@@ -579,26 +546,5 @@ impl<T: Float> PmsmObserver<T> {
         self.x = x;
         self.p = Sym4::from_matrix(&p);
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::half_angle_sin_cos;
-
-    #[test]
-    fn half_angle_series_matches_sin_cos() {
-        let mut worst64 = 0.0f64;
-        let mut worst32 = 0.0f32;
-        for i in -1000..=1000 {
-            let x = i as f64 * 3e-4; // up to +-0.3: both branches
-            let (s, c) = half_angle_sin_cos(x);
-            worst64 = worst64.max((s - x.sin()).abs()).max((c - x.cos()).abs());
-            let xf = x as f32;
-            let (s, c) = half_angle_sin_cos(xf);
-            worst32 = worst32.max((s - xf.sin()).abs()).max((c - xf.cos()).abs());
-        }
-        assert!(worst64 < 4e-16, "f64 series error {worst64:e}");
-        assert!(worst32 < 2e-7, "f32 series error {worst32:e}");
     }
 }

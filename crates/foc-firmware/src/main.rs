@@ -26,10 +26,13 @@
 //! `ekf_step_standard` (standard symmetrized covariance update), `ekf_step_euler` (forward
 //! Euler), `ekf_step_seed` (`ObserverConfig::seed`), `ekf_predict` and `ekf_correct` (the two
 //! halves of the default step) and `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
-//! `ekf_core::trig`). To add one, call [`meter::Clock::measure`] with its name.
+//! `ekf_core::trig`), and `foc_tick` (the full controller tick in sensorless closed loop, with
+//! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states; see
+//! [`drive`]). To add one, call [`meter::Clock::measure`] with its name.
 #![no_std]
 #![no_main]
 
+mod drive;
 mod meter;
 mod synth;
 
@@ -173,6 +176,9 @@ fn run() -> Result<(), &'static str> {
         let th = data.get(k).map_or(0.0, |s| s.theta_rad);
         black_box(ekf_core::trig::sin_cos_f32(black_box(th)));
     });
+
+    // The full controller tick (foc), sensorless closed loop on an on-target plant.
+    drive::run(&clock)?;
 
     if ok {
         Ok(())

@@ -1,65 +1,32 @@
 //! Cheap `f32` math for the control path: sine/cosine, `atan2`, square root, angle wrapping.
 //!
-//! `core` has no `sin`, `cos` or `sqrt` for `f32`, and `libm`'s versions are written for full
-//! range and correct rounding. The controller only needs angles of a few turns, so these are
-//! short polynomials with documented error (measured by the unit tests against `f64`):
+//! `core` has no `sin`, `cos` or `sqrt` for `f32`, and `libm`'s `sinf`/`cosf` compute in `f64`
+//! (software floating point on a Cortex-M4F). Sine and cosine come from `ekf_core::trig` (shared
+//! with the observer); the rest are short polynomials here. Errors measured by the unit tests
+//! against `f64`:
 //!
 //! | function | method | max abs. error |
 //! |---|---|---|
-//! | [`sin_cos`] | quadrant reduction (3-part Cody-Waite `pi/2`), Cephes `sinf`/`cosf` kernels on `[-pi/4, pi/4]` | 2.4e-7 for `|x| <= 8 pi`, growing as `|x| * 6e-8` beyond |
+//! | [`sin_cos`] | `ekf_core::trig::sin_cos_f32`: quadrant reduction, Taylor kernels on `[-pi/4, pi/4]`; `(0, 1)` for a non-finite `x` | 1.2e-7 for `|x| <= 8 pi` |
 //! | [`atan2`] | octant reduction, Cephes `atanf` kernel | 3e-7 rad |
-//! | [`sin_cos_small`] | Taylor series for `|d| <= 0.5`, [`sin_cos`] beyond | 2.4e-7 |
+//! | [`sin_cos_small`] | `ekf_core::trig::sin_cos_small` for `|d| < 0.5`, [`sin_cos`] beyond | 1.2e-7 |
 //! | [`sqrt`] | bit-level first guess, three Newton steps | 1 ulp-ish (relative 1.2e-7) |
 //!
 //! Nothing here panics; non-finite inputs give finite, documented outputs where that matters.
 //! No `f64` arithmetic.
 
-use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
+use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-/// `2 / pi`.
-const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;
-/// `pi/2` split in three parts for an exact-enough reduction `x - k pi/2` (Cephes `sinf` DP1..3
-/// doubled).
-const PIO2_1: f32 = 1.570_312_5;
-const PIO2_2: f32 = 4.837_513e-4;
-const PIO2_3: f32 = 7.549_79e-8;
-/// Beyond this `|x|` the quadrant count would lose precision: reduce with `wrap_angle` first.
-const DIRECT_LIMIT: f32 = 1.0e5;
-
-/// `(sin x, cos x)`.
+/// `(sin x, cos x)`: [`ekf_core::trig::sin_cos_f32`] (pure `f32`, error below 1.2e-7 for
+/// `|x| <= 8 pi`, larger arguments wrapped first).
 ///
-/// Error below 2.4e-7 for `|x| <= 8 pi` (the controller's angles stay within `[-2 pi, 2 pi]`).
 /// A non-finite `x` gives `(0, 1)` (angle zero) rather than NaN, so that a bad value cannot
-/// reach the PWM through a rotation; so does an `|x|` too large for its wrapped value to mean
-/// anything in `f32`. The result always has `|sin|, |cos| <= 1 + 1e-7`.
+/// reach the PWM through a rotation.
 pub fn sin_cos(x: f32) -> (f32, f32) {
-    // One comparison on the common path (false for NaN and infinities too).
-    let x = if at_most(x.abs(), DIRECT_LIMIT) {
-        x
-    } else {
-        // Beyond ~1e7 rad an f32 angle has no phase left: wrapping cannot bring it in range.
-        let w = ekf_core::wrap_angle(x);
-        if !at_most(w.abs(), 4.0) {
-            return (0.0, 1.0);
-        }
-        w
-    };
-    let q = x * FRAC_2_PI;
-    // Round to nearest (the cast truncates toward zero).
-    let k = (q + 0.5_f32.copysign(q)) as i32;
-    let kf = k as f32;
-    let r = ((x - kf * PIO2_1) - kf * PIO2_2) - kf * PIO2_3;
-    let r2 = r * r;
-    // Cephes sinf / cosf kernels, |r| <= pi/4.
-    let s = r + r * r2 * (-1.666_665_5e-1 + r2 * (8.332_161e-3 + r2 * -1.951_529_6e-4));
-    let c =
-        1.0 - 0.5 * r2 + r2 * r2 * (4.166_664_6e-2 + r2 * (-1.388_731_6e-3 + r2 * 2.443_315_7e-5));
-    match k & 3 {
-        0 => (s, c),
-        1 => (c, -s),
-        2 => (-s, -c),
-        _ => (-c, s),
+    if !x.is_finite() {
+        return (0.0, 1.0);
     }
+    ekf_core::trig::sin_cos_f32(x)
 }
 
 /// `atan(z)` for `z >= 0` (Cephes `atanf`).
@@ -120,20 +87,9 @@ pub fn sqrt(x: f32) -> f32 {
     0.5 * (y + x / y)
 }
 
-/// Wraps an angle that is at most one turn out of range (`|x| < 3 pi`) to `[-pi, pi)`; larger
-/// values go through [`ekf_core::wrap_angle`]. NaN stays NaN.
+/// Wraps an angle to `[-pi, pi)`: [`ekf_core::wrap_angle`] (a single fold for angles at most
+/// one turn out of range). NaN stays NaN.
 pub fn wrap(x: f32) -> f32 {
-    if x >= PI {
-        if x < 3.0 * PI {
-            return x - TAU;
-        }
-    } else if x < -PI {
-        if x >= -3.0 * PI {
-            return x + TAU;
-        }
-    } else {
-        return x;
-    }
     ekf_core::wrap_angle(x)
 }
 
@@ -144,10 +100,7 @@ pub fn sin_cos_small(d: f32) -> (f32, f32) {
     if !at_most(d.abs(), 0.5) {
         return sin_cos(d);
     }
-    let d2 = d * d;
-    let s = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0))));
-    let c = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0))));
-    (s, c)
+    ekf_core::trig::sin_cos_small(d)
 }
 
 /// `(sin(a + b), cos(a + b))` from the sines and cosines of `a` and `b`.
@@ -175,6 +128,7 @@ pub(crate) fn at_most(a: f32, b: f32) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use core::f32::consts::TAU;
 
     #[test]
     fn sin_cos_matches_f64() {
