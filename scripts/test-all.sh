@@ -45,4 +45,8 @@ cargo clippy -p pyfoc --all-targets --locked -- -D warnings
 (cd crates/pyfoc && VIRTUAL_ENV="$PWD/../../$venv" PATH="$PWD/../../$venv/bin:$PATH" maturin develop --release --locked --quiet)
 "$venv/bin/python" -m pytest crates/pyfoc/tests -q
 
+step "pmsm-sim: MCAP log read back by the Python mcap package"
+cargo build -p pmsm-sim --locked --quiet
+PMSM_SIM_BIN="$(pwd)/target/debug/pmsm-sim" "$venv/bin/python" -m pytest crates/pmsm-sim/tests/python -q
+
 step "all checks passed"
