@@ -42,7 +42,7 @@ trap 'rm -rf "$tmp"' EXIT
 
 step "pyfoc: clippy, build into the venv (maturin), pytest"
 cargo clippy -p pyfoc --all-targets --locked -- -D warnings
-(cd crates/pyfoc && VIRTUAL_ENV="$PWD/../../$venv" PATH="$PWD/../../$venv/bin:$PATH" maturin develop --release --locked --quiet)
+(cd crates/pyfoc && VIRTUAL_ENV="$PWD/../../$venv" PATH="$PWD/../../$venv/bin:$PATH" maturin develop --locked --quiet)
 "$venv/bin/python" -m pytest crates/pyfoc/tests -q
 
 step "pmsm-sim: MCAP log read back by the Python mcap package"
