@@ -1,19 +1,22 @@
 //! Drive controllers: the [`DriveController`] trait the run loop calls once per PWM period,
-//! and the **sensored** field-oriented controller that implements it.
+//! and the simulator's own **sensored** field-oriented controller that implements it. The
+//! `foc` crate's controller implements it too ([`crate::foc_drive::FocDrive`]).
 //!
 //! # The trait
 //!
 //! A controller sees what a real one sees: the measured phase currents (and their Clarke
 //! transform), the measured DC-bus voltage and the speed reference; in sensored mode
 //! ([`DriveController::sensored`]) also the true rotor angle and speed. It returns three
-//! duties in `[0, 1]` and telemetry for the log. Everything a controller does happens inside
-//! [`DriveController::tick`]; the simulator models the inverter (delay, dead time) behind it.
+//! duties in `[0, 1]`, whether the bridge switches, and telemetry for the log (state, fault,
+//! dq currents and references, and the estimate of its own observer, if it has one, which the
+//! simulator scores). Everything a controller does happens inside [`DriveController::tick`];
+//! the simulator models the inverter (delay, dead time) behind it.
 //!
 //! # The sensored controller ([`SensoredController`])
 //!
-//! The stand-in drive until the `foc` crate's controller closes the loop on the observer. It
-//! is given the **true** rotor angle and speed; the observer runs alongside and is only
-//! scored. One tick:
+//! The simulator's reference drive (`kind = "sensored"`, the `servo-sensored` preset; it was
+//! the stand-in until the `foc` controller closed the loop on its observer). It is given the
+//! **true** rotor angle and speed; the observers run alongside and are only scored. One tick:
 //!
 //! ```text
 //! speed PI:   e_w = w_ref - w_mech;  i_q_ref = Kp_w e_w + I_w,  clamped to +-I_max;  i_d_ref = 0
@@ -94,6 +97,33 @@ pub struct ControllerTelemetry {
     pub u_ab_ref_v: [f64; 2],
     /// Whether the voltage vector was limited this period.
     pub voltage_limited: bool,
+    /// Whether the speed and current loops run on a rotor angle (sensor or a trusted
+    /// observer) this period: always for the sensored controller; for `foc` in the states
+    /// `handover` and `closed_loop` (not during alignment or the open-loop I/f ramp).
+    pub closed_loop: bool,
+    /// The controller's own (slewed) mechanical speed reference, rpm, when it has one.
+    pub speed_ref_rpm: Option<f64>,
+    /// The latched fault, if any (e.g. `"over_current"`, `"observer_lost"`).
+    pub fault: Option<&'static str>,
+    /// The estimate of the controller's own observer (for `foc`: its `f32` EKF), if any. The
+    /// simulator scores it against the truth like its own observers.
+    pub estimate: Option<ControllerEstimate>,
+}
+
+/// The rotor estimate of an observer inside the controller (e.g. `foc`'s `f32` EKF), after
+/// this period's correction: the estimate of `th(t_k)`, `w_e(t_k)`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ControllerEstimate {
+    /// Electrical angle, rad.
+    pub theta_e_rad: f64,
+    /// Electrical speed, rad/s.
+    pub omega_e_rad_s: f64,
+    /// Diagonal of its covariance (`i_a, i_b, w_e, th`).
+    pub p_diag: [f64; 4],
+    /// Normalized innovation squared of the last correction.
+    pub nis: f64,
+    /// Whether it reports its angle as trusted (`Status::Tracking`).
+    pub tracking: bool,
 }
 
 /// What a controller commands in period `k`.
@@ -280,6 +310,10 @@ impl DriveController for SensoredController {
                 u_dq_ref_v: u_dq,
                 u_ab_ref_v: u_ab,
                 voltage_limited: limited,
+                closed_loop: true,
+                speed_ref_rpm: Some(input.speed_ref_mech_rad_s * 30.0 / PI),
+                fault: None,
+                estimate: None,
             },
         }
     }

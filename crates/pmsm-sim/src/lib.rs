@@ -4,6 +4,7 @@
 
 pub mod controller;
 mod error;
+pub mod foc_drive;
 pub mod inverter;
 pub mod mcap_log;
 pub mod metrics;

@@ -483,8 +483,13 @@ fn components(sc: &Scenario, runs: usize) {
             u = s.inverter.u_ab_commanded_v;
         }
     });
+    let Ok(sensored) = sim::build_controller(sc).map(|c| c.sensored()) else {
+        return;
+    };
     let ctl_ns = time(&mut || {
-        let mut c = sim::build_controller(sc);
+        let Ok(mut c) = sim::build_controller(sc) else {
+            return;
+        };
         for s in samples {
             let out = c.tick(&ControllerInput {
                 k: s.k,
@@ -493,7 +498,7 @@ fn components(sc: &Scenario, runs: usize) {
                 i_ab_a: s.measured.i_ab_a,
                 u_dc_v: s.measured.u_dc_v,
                 speed_ref_mech_rad_s: s.control.speed_ref_rpm / pmsm_sim::scenario::RPM_PER_RAD_S,
-                rotor: Some(RotorFeedback {
+                rotor: sensored.then_some(RotorFeedback {
                     theta_e_rad: s.truth.theta_e_rad,
                     omega_mech_rad_s: s.truth.speed_rpm / pmsm_sim::scenario::RPM_PER_RAD_S,
                 }),
@@ -519,7 +524,7 @@ fn components(sc: &Scenario, runs: usize) {
     for (name, ns) in [
         ("plant step (exact electrical, mechanics)", plant_ns),
         ("observer step (default EKF)", obs_ns),
-        ("controller tick (sensored + SVPWM)", ctl_ns),
+        ("controller tick (incl. SVPWM)", ctl_ns),
         ("current sensor (noise, ADC)", sensor_ns),
         ("JSON encoding of the period message", json_ns),
     ] {

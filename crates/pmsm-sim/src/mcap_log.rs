@@ -245,7 +245,7 @@ mod tests {
     use super::*;
 
     /// Every key of a serialized sample is in the schema, and every key of the schema is in
-    /// a serialized sample (with the seed filter present).
+    /// a serialized sample (with every optional part present).
     #[test]
     fn schema_matches_the_sample() {
         let schema: serde_json::Value = match serde_json::from_str(PERIOD_SCHEMA) {
@@ -254,6 +254,11 @@ mod tests {
         };
         let mut s = Sample::default();
         s.seed_filter = Some(s.observer);
+        s.controller_observer = Some(s.observer);
+        let t = &mut s.control.telemetry;
+        t.speed_ref_rpm = Some(0.0);
+        t.fault = Some("stall");
+        t.estimate = Some(crate::controller::ControllerEstimate::default());
         let sample = match serde_json::to_value(s) {
             Ok(v) => v,
             Err(e) => panic!("{e}"),

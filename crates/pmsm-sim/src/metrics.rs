@@ -19,7 +19,16 @@
 //! Streaming: a sample with `|e_th| >= 5 deg` restarts the window, so the window accumulated at
 //! the end is exactly the one after the convergence time.
 //!
-//! For the run: simulated time, wall time and the real-time factor, and figures of the drive.
+//! The same scores are computed for the **controller's own observer** when it has one (`foc`'s
+//! `f32` EKF), and for it also over the **closed-loop window**: the periods in which the
+//! controller runs on that observer's angle (`foc` states `handover` and `closed_loop`) with
+//! `|w_e| >= 5 %` of rated, i.e. its accuracy after the hand-over, which is what the drive
+//! depends on (its design-section-5 convergence time also counts the start-up and the
+//! zero-speed crossings, where `foc` does not use it).
+//!
+//! For the run: simulated time, wall time and the real-time factor, and figures of the drive:
+//! time to closed loop, the first fault, the speed error once settled (the reference constant
+//! and no load step for [`SETTLE_S`]), peak current, tracking errors.
 
 use serde::Serialize;
 
@@ -30,6 +39,13 @@ use crate::sim::{ObserverSample, Sample};
 pub const CONVERGED_DEG: f64 = 5.0;
 /// Samples with `|w_e|` below this fraction of the rated speed are left out of the window.
 pub const LOW_SPEED_FRACTION: f64 = 0.05;
+/// The speed counts as settled once the speed reference has been constant, and the load
+/// torque has not jumped (by more than [`LOAD_STEP_FRACTION`] of the rated torque from one
+/// period to the next), for this long, s.
+pub const SETTLE_S: f64 = 0.2;
+/// A load change larger than this fraction of the rated torque within one period is a step
+/// (restarts the settling time); fan loads and ramps change less.
+pub const LOAD_STEP_FRACTION: f64 = 0.01;
 
 /// Scores of one observer over one run (module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -176,12 +192,51 @@ impl ObserverMetrics {
     }
 }
 
-/// Figures of the drive.
+/// The controller's own observer over the closed-loop window (module docs): where the
+/// controller runs on its angle and `|w_e| >= 5 %` of rated.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ClosedLoopObserverMetrics {
+    /// Samples in the window.
+    pub window_samples: usize,
+    /// Window length, s.
+    pub window_s: f64,
+    /// RMS angle error, electrical degrees.
+    pub angle_error_rms_deg: f64,
+    /// Largest `|e_th|`, electrical degrees.
+    pub angle_error_max_deg: f64,
+    /// Mean angle error (bias), electrical degrees.
+    pub angle_error_mean_deg: f64,
+    /// RMS speed error, electrical rad/s.
+    pub speed_error_rms_rad_s: f64,
+    /// Largest speed error, electrical rad/s.
+    pub speed_error_max_rad_s: f64,
+}
+
+/// Figures of the drive.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct DriveMetrics {
+    /// First time the controller ran on a rotor angle (`foc`: the hand-over to its observer;
+    /// the sensored stand-in: 0), s; `None`: never.
+    pub closed_loop_time_s: Option<f64>,
+    /// Share of the periods in closed loop, %.
+    pub closed_loop_pct: f64,
+    /// Times the controller left closed loop (`foc`: the planned returns to I/f near zero
+    /// speed, and fall-backs after an observer loss).
+    pub closed_loop_exits: usize,
+    /// The first fault the controller reported, with its time (`"stall at 0.8123 s"`).
+    pub fault: Option<String>,
+    /// Periods counted as settled ([`SETTLE_S`]), s.
+    pub settled_s: f64,
+    /// RMS of `speed - reference` over the settled periods, mechanical rpm.
+    pub speed_error_settled_rms_rpm: f64,
+    /// Mean of `speed - reference` over the settled periods, mechanical rpm.
+    pub speed_error_settled_mean_rpm: f64,
+    /// Largest `|speed - reference|` over the settled periods, mechanical rpm.
+    pub speed_error_settled_max_rpm: f64,
     /// Largest current vector magnitude, A.
     pub peak_current_a: f64,
-    /// Largest `|speed reference - speed|`, mechanical rpm.
+    /// Largest `|speed reference - speed|`, mechanical rpm (start-up, ramps and load steps
+    /// included).
     pub max_speed_tracking_error_rpm: f64,
     /// RMS of `i_q_ref - i_q` (controller's frame, measured currents), A.
     pub iq_tracking_error_rms_a: f64,
@@ -192,7 +247,7 @@ pub struct DriveMetrics {
 }
 
 /// Streaming accumulator of [`DriveMetrics`].
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct DriveScore {
     n: usize,
     peak_sq: f64,
@@ -200,28 +255,90 @@ pub struct DriveScore {
     sum_iq_e2: f64,
     last_rpm: f64,
     limited: usize,
+    closed_loop_t: Option<f64>,
+    closed: usize,
+    was_closed: bool,
+    exits: usize,
+    fault: Option<String>,
+    load_step_nm: f64,
+    prev: Option<(f64, f64)>,
+    quiet_since: f64,
+    settled: usize,
+    sum_se: f64,
+    sum_se2: f64,
+    max_se: f64,
 }
 
 impl DriveScore {
+    /// An accumulator; load changes above `LOAD_STEP_FRACTION * rated_torque_nm` in one
+    /// period count as steps.
+    pub fn new(rated_torque_nm: f64) -> Self {
+        Self {
+            load_step_nm: LOAD_STEP_FRACTION * rated_torque_nm,
+            ..Self::default()
+        }
+    }
+
     /// Adds one sample.
     #[inline]
     pub fn push(&mut self, s: &Sample) {
         self.n += 1;
+        let tel = &s.control.telemetry;
         let [a, b] = s.truth.i_ab_a;
         self.peak_sq = self.peak_sq.max(a * a + b * b);
-        self.max_track = self
-            .max_track
-            .max((s.control.speed_ref_rpm - s.truth.speed_rpm).abs());
-        let e = s.control.telemetry.i_dq_ref_a[1] - s.control.telemetry.i_dq_a[1];
+        let w_ref = s.control.speed_ref_rpm;
+        let e_w = s.truth.speed_rpm - w_ref;
+        self.max_track = self.max_track.max(e_w.abs());
+        let e = tel.i_dq_ref_a[1] - tel.i_dq_a[1];
         self.sum_iq_e2 += e * e;
         self.last_rpm = s.truth.speed_rpm;
-        self.limited += usize::from(s.control.telemetry.voltage_limited);
+        self.limited += usize::from(tel.voltage_limited);
+        if tel.closed_loop {
+            self.closed += 1;
+            if self.closed_loop_t.is_none() {
+                self.closed_loop_t = Some(s.t_s);
+            }
+        } else if self.was_closed {
+            self.exits += 1;
+        }
+        self.was_closed = tel.closed_loop;
+        if self.fault.is_none()
+            && let Some(f) = tel.fault
+        {
+            self.fault = Some(format!("{f} at {:.4} s", s.t_s));
+        }
+        let load = s.truth.load_torque_nm;
+        match self.prev {
+            Some((r, l)) if r == w_ref && (load - l).abs() <= self.load_step_nm => {}
+            _ => self.quiet_since = s.t_s,
+        }
+        self.prev = Some((w_ref, load));
+        if s.t_s - self.quiet_since >= SETTLE_S - 1e-9 {
+            self.settled += 1;
+            self.sum_se += e_w;
+            self.sum_se2 += e_w * e_w;
+            self.max_se = self.max_se.max(e_w.abs());
+        }
     }
 
-    /// The figures so far.
-    pub fn finish(&self) -> DriveMetrics {
+    /// The figures so far; `ts_s` is the period.
+    pub fn finish(&self, ts_s: f64) -> DriveMetrics {
         let n = self.n.max(1) as f64;
+        let ns = self.settled as f64;
+        let per = |x: f64| if self.settled > 0 { x / ns } else { f64::NAN };
         DriveMetrics {
+            closed_loop_time_s: self.closed_loop_t,
+            closed_loop_pct: 100.0 * self.closed as f64 / n,
+            closed_loop_exits: self.exits,
+            fault: self.fault.clone(),
+            settled_s: ns * ts_s,
+            speed_error_settled_rms_rpm: per(self.sum_se2).sqrt(),
+            speed_error_settled_mean_rpm: per(self.sum_se),
+            speed_error_settled_max_rpm: if self.settled > 0 {
+                self.max_se
+            } else {
+                f64::NAN
+            },
             peak_current_a: self.peak_sq.sqrt(),
             max_speed_tracking_error_rpm: self.max_track,
             iq_tracking_error_rms_a: (self.sum_iq_e2 / n).sqrt(),
@@ -231,11 +348,60 @@ impl DriveScore {
     }
 }
 
+/// Streaming accumulator of [`ClosedLoopObserverMetrics`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ClosedLoopScore {
+    w_min: f64,
+    sums: Sums,
+}
+
+impl ClosedLoopScore {
+    /// A scorer leaving out `|w_e|` below 5 % of `rated_omega_e_rad_s`.
+    pub fn new(rated_omega_e_rad_s: f64) -> Self {
+        Self {
+            w_min: LOW_SPEED_FRACTION * rated_omega_e_rad_s,
+            sums: Sums::default(),
+        }
+    }
+
+    /// Adds one sample (ignored outside the window or without a controller observer).
+    #[inline]
+    pub fn push(&mut self, s: &Sample) {
+        if let Some(o) = &s.controller_observer
+            && s.control.telemetry.closed_loop
+            && s.truth.omega_e_rad_s.abs() >= self.w_min
+        {
+            self.sums
+                .add(o.angle_error_deg, o.speed_error_rad_s, o.tracking, o.nis);
+        }
+    }
+
+    /// The figures so far (`None`: empty window).
+    pub fn finish(&self, ts_s: f64) -> Option<ClosedLoopObserverMetrics> {
+        let s = &self.sums;
+        if s.n == 0 {
+            return None;
+        }
+        let nf = s.n as f64;
+        Some(ClosedLoopObserverMetrics {
+            window_samples: s.n,
+            window_s: nf * ts_s,
+            angle_error_rms_deg: (s.sum_e2 / nf).sqrt(),
+            angle_error_max_deg: s.max_e,
+            angle_error_mean_deg: s.sum_e / nf,
+            speed_error_rms_rad_s: (s.sum_w2 / nf).sqrt(),
+            speed_error_max_rad_s: s.max_w,
+        })
+    }
+}
+
 /// Everything reported about one run.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RunMetrics {
     /// Scenario name.
     pub scenario: String,
+    /// The controller (one line).
+    pub controller: String,
     /// How the run ended (`completed`, or why it stopped early).
     pub end: String,
     /// PWM periods simulated.
@@ -256,6 +422,10 @@ pub struct RunMetrics {
     pub seed_filter: Option<ObserverMetrics>,
     /// Why and where the seed filter was dropped, if it was.
     pub seed_filter_failure: Option<String>,
+    /// The controller's own observer (`foc`'s `f32` EKF), when it has one.
+    pub controller_observer: Option<ObserverMetrics>,
+    /// The controller's own observer over the closed-loop window (after the hand-over).
+    pub controller_observer_closed_loop: Option<ClosedLoopObserverMetrics>,
     /// The drive.
     pub drive: DriveMetrics,
 }
@@ -265,8 +435,11 @@ pub struct RunMetrics {
 pub struct MetricsAccumulator {
     observer: ObserverScore,
     seed_filter: Option<ObserverScore>,
+    controller_observer: Option<ObserverScore>,
+    closed_loop: ClosedLoopScore,
     drive: DriveScore,
     periods: usize,
+    rated_omega_e_rad_s: f64,
 }
 
 impl MetricsAccumulator {
@@ -279,8 +452,11 @@ impl MetricsAccumulator {
                 .observer
                 .seed_filter
                 .then(|| ObserverScore::new(rated)),
-            drive: DriveScore::default(),
+            controller_observer: None,
+            closed_loop: ClosedLoopScore::new(rated),
+            drive: DriveScore::new(scenario.rated_torque_nm),
             periods: 0,
+            rated_omega_e_rad_s: rated,
         }
     }
 
@@ -293,6 +469,13 @@ impl MetricsAccumulator {
         if let (Some(score), Some(est)) = (self.seed_filter.as_mut(), s.seed_filter.as_ref()) {
             score.push(s.t_s, s.truth.omega_e_rad_s, est);
         }
+        if let Some(est) = s.controller_observer.as_ref() {
+            let rated = self.rated_omega_e_rad_s;
+            self.controller_observer
+                .get_or_insert_with(|| ObserverScore::new(rated))
+                .push(s.t_s, s.truth.omega_e_rad_s, est);
+        }
+        self.closed_loop.push(s);
         self.drive.push(s);
     }
 
@@ -313,6 +496,7 @@ impl MetricsAccumulator {
         let simulated = self.periods as f64 * ts;
         RunMetrics {
             scenario: scenario.name.clone(),
+            controller: scenario.controller_description(),
             end,
             periods: self.periods,
             ts_s: ts,
@@ -323,7 +507,9 @@ impl MetricsAccumulator {
             observer: self.observer.finish(ts),
             seed_filter: self.seed_filter.as_ref().and_then(|s| s.finish(ts)),
             seed_filter_failure,
-            drive: self.drive.finish(),
+            controller_observer: self.controller_observer.as_ref().and_then(|s| s.finish(ts)),
+            controller_observer_closed_loop: self.closed_loop.finish(ts),
+            drive: self.drive.finish(ts),
         }
     }
 }

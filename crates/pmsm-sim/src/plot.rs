@@ -4,7 +4,9 @@
 //! [`PlotSink`] keeps every `stride`-th sample (at most about [`MAX_POINTS`] per curve) while
 //! the run goes, and [`PlotSink::write_svg`] draws three panels:
 //!
-//! 1. mechanical speed: true, estimated (default observer), reference, rpm;
+//! 1. mechanical speed: true, estimated (the simulator's EKF and the controller's own, when
+//!    it has one), the scenario's reference and the controller's own (slewed; `foc`: the I/f
+//!    ramp speed in open loop), rpm;
 //! 2. angle error `wrap(th_hat - th)` of the observer(s), electrical degrees; the axis is
 //!    zoomed on the converged part (`|e| < 5 deg`), so the start-up excursion is clipped;
 //! 3. dq currents in the true rotor frame and the controller's references, A.
@@ -31,6 +33,9 @@ struct Point {
     ref_rpm: f64,
     err_deg: f64,
     seed_err_deg: Option<f64>,
+    ctl_est_rpm: Option<f64>,
+    ctl_err_deg: Option<f64>,
+    ctl_ref_rpm: Option<f64>,
     i_dq: [f64; 2],
     i_dq_ref: [f64; 2],
 }
@@ -97,6 +102,14 @@ impl PlotSink {
             &BLACK.mix(0.5),
             "reference",
         )?;
+        if pts.iter().any(|p| p.ctl_ref_rpm.is_some()) {
+            line(
+                &mut c,
+                pts.iter().filter_map(|p| p.ctl_ref_rpm.map(|w| (p.t, w))),
+                &MAGENTA.mix(0.6),
+                "controller's own reference",
+            )?;
+        }
         line(
             &mut c,
             pts.iter().map(|p| (p.t, p.speed_rpm)),
@@ -107,15 +120,23 @@ impl PlotSink {
             &mut c,
             pts.iter().map(|p| (p.t, p.est_rpm)),
             &RED,
-            "EKF estimate",
+            "EKF f64 (sim) estimate",
         )?;
+        if pts.iter().any(|p| p.ctl_est_rpm.is_some()) {
+            line(
+                &mut c,
+                pts.iter().filter_map(|p| p.ctl_est_rpm.map(|w| (p.t, w))),
+                &CYAN.mix(0.9),
+                "controller's EKF (f32) estimate",
+            )?;
+        }
         legend(&mut c)?;
 
         // Panel 2: angle error, zoomed on the converged part.
         let conv = |e: f64| e.abs() < 5.0;
         let zoom = pts
             .iter()
-            .flat_map(|p| [Some(p.err_deg), p.seed_err_deg])
+            .flat_map(|p| [Some(p.err_deg), p.seed_err_deg, p.ctl_err_deg])
             .flatten()
             .filter(|e| conv(*e))
             .fold(0.0f64, |m, e| m.max(e.abs()));
@@ -140,8 +161,17 @@ impl PlotSink {
             &mut c,
             pts.iter().map(|p| (p.t, p.err_deg.clamp(-lim, lim))),
             &RED,
-            "EKF (default)",
+            "EKF f64 (sim)",
         )?;
+        if pts.iter().any(|p| p.ctl_err_deg.is_some()) {
+            line(
+                &mut c,
+                pts.iter()
+                    .filter_map(|p| p.ctl_err_deg.map(|e| (p.t, e.clamp(-lim, lim)))),
+                &CYAN.mix(0.9),
+                "controller's EKF (f32)",
+            )?;
+        }
         legend(&mut c)?;
 
         // Panel 3: dq currents.
@@ -250,6 +280,11 @@ impl SampleSink for PlotSink {
                 ref_rpm: s.control.speed_ref_rpm,
                 err_deg: s.observer.angle_error_deg,
                 seed_err_deg: s.seed_filter.map(|f| f.angle_error_deg),
+                ctl_est_rpm: s
+                    .controller_observer
+                    .map(|o| o.omega_e_rad_s / self.pole_pairs * crate::scenario::RPM_PER_RAD_S),
+                ctl_err_deg: s.controller_observer.map(|o| o.angle_error_deg),
+                ctl_ref_rpm: tel.speed_ref_rpm,
                 i_dq: s.truth.i_dq_a,
                 i_dq_ref: tel.i_dq_ref_a,
             });

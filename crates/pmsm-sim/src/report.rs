@@ -2,13 +2,14 @@
 
 use core::fmt::Write as _;
 
-use crate::metrics::{CONVERGED_DEG, LOW_SPEED_FRACTION, ObserverMetrics, RunMetrics};
+use crate::metrics::{CONVERGED_DEG, LOW_SPEED_FRACTION, ObserverMetrics, RunMetrics, SETTLE_S};
 
 /// The metrics as a plain aligned text table.
 pub fn table(m: &RunMetrics) -> String {
     let mut out = String::new();
     // Writing to a String cannot fail; the results are ignored on purpose.
     let _ = writeln!(out, "scenario: {}", m.scenario);
+    let _ = writeln!(out, "controller: {}", m.controller);
     if m.end != "completed" {
         let _ = writeln!(out, "RUN STOPPED EARLY: {}", m.end);
     }
@@ -30,10 +31,12 @@ pub fn table(m: &RunMetrics) -> String {
     );
     let _ = writeln!(out);
 
-    let cols: [(&str, Option<&ObserverMetrics>); 2] = [
-        ("EKF (default)", m.observer.as_ref()),
-        ("seed filter", m.seed_filter.as_ref()),
-    ];
+    let mut cols: Vec<(&str, Option<&ObserverMetrics>)> = Vec::with_capacity(3);
+    if m.controller_observer.is_some() {
+        cols.push(("foc EKF (f32)", m.controller_observer.as_ref()));
+    }
+    cols.push(("EKF f64 (sim)", m.observer.as_ref()));
+    cols.push(("seed filter", m.seed_filter.as_ref()));
     type Row = (&'static str, &'static str, fn(&ObserverMetrics) -> String);
     let rows: [Row; 11] = [
         ("convergence time", "s", |o| {
@@ -69,35 +72,123 @@ pub fn table(m: &RunMetrics) -> String {
             if o.converged { "yes" } else { "no" }.into()
         }),
     ];
-    let _ = writeln!(
-        out,
-        "{:<26} {:<10} {:>14} {:>14}",
-        "observer metric", "unit", cols[0].0, cols[1].0
-    );
-    let _ = writeln!(out, "{}", "-".repeat(67));
+    let width = 37 + 15 * cols.len();
+    let _ = write!(out, "{:<26} {:<10}", "observer metric", "unit");
+    for (name, _) in &cols {
+        let _ = write!(out, " {name:>14}");
+    }
+    let _ = writeln!(out);
+    let _ = writeln!(out, "{}", "-".repeat(width));
     for (name, unit, f) in rows {
-        let cell = |c: Option<&ObserverMetrics>| c.map_or_else(|| "-".into(), f);
-        let _ = writeln!(
-            out,
-            "{name:<26} {unit:<10} {:>14} {:>14}",
-            cell(cols[0].1),
-            cell(cols[1].1)
-        );
+        let _ = write!(out, "{name:<26} {unit:<10}");
+        for (_, c) in &cols {
+            let _ = write!(out, " {:>14}", c.map_or_else(|| "-".into(), f));
+        }
+        let _ = writeln!(out);
     }
     if let Some(why) = &m.seed_filter_failure {
         let _ = writeln!(out, "seed filter dropped at {why}");
     }
+    if let Some(c) = &m.controller_observer_closed_loop {
+        let _ = writeln!(out);
+        let _ = writeln!(
+            out,
+            "{:<40} {:<10} {:>14}",
+            "foc EKF after the hand-over", "unit", "value"
+        );
+        let _ = writeln!(
+            out,
+            "(the loops run on its angle; |w_e| >= {:.0} % of rated)",
+            LOW_SPEED_FRACTION * 100.0
+        );
+        let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+        for (name, unit, v) in [
+            ("window length", "s", format!("{:.4}", c.window_s)),
+            (
+                "angle error RMS",
+                "deg el.",
+                format!("{:.3}", c.angle_error_rms_deg),
+            ),
+            (
+                "angle error max |e|",
+                "deg el.",
+                format!("{:.3}", c.angle_error_max_deg),
+            ),
+            (
+                "angle error mean (bias)",
+                "deg el.",
+                format!("{:+.3}", c.angle_error_mean_deg),
+            ),
+            (
+                "speed error RMS",
+                "rad/s el.",
+                format!("{:.3}", c.speed_error_rms_rad_s),
+            ),
+            (
+                "speed error max |e|",
+                "rad/s el.",
+                format!("{:.3}", c.speed_error_max_rad_s),
+            ),
+        ] {
+            let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
+        }
+    }
     let _ = writeln!(out);
     let d = &m.drive;
-    let _ = writeln!(out, "{:<37} {:<10} {:>14}", "drive", "unit", "value");
-    let _ = writeln!(out, "{}", "-".repeat(67));
+    let _ = writeln!(out, "{:<40} {:<10} {:>14}", "drive", "unit", "value");
+    let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+    let opt = |x: f64, prec: usize| {
+        if x.is_finite() {
+            format!("{x:.prec$}")
+        } else {
+            "-".into()
+        }
+    };
+    let settled = format!("settled (ref const., no load step {SETTLE_S} s)");
     let drive_rows = [
-        ("peak current |i|", "A", format!("{:.3}", d.peak_current_a)),
         (
-            "max |speed ref - speed|",
+            "time to closed loop (hand-over)",
+            "s",
+            d.closed_loop_time_s
+                .map_or_else(|| "never".into(), |t| format!("{t:.4}")),
+        ),
+        (
+            "in closed loop",
+            "% periods",
+            format!("{:.1}", d.closed_loop_pct),
+        ),
+        (
+            "closed-loop exits (I/f, fall-back)",
+            "",
+            d.closed_loop_exits.to_string(),
+        ),
+        (
+            "fault",
+            "",
+            d.fault.clone().unwrap_or_else(|| "none".into()),
+        ),
+        (settled.as_str(), "s", format!("{:.3}", d.settled_s)),
+        (
+            "speed error settled: RMS",
+            "rpm",
+            opt(d.speed_error_settled_rms_rpm, 2),
+        ),
+        (
+            "speed error settled: mean",
+            "rpm",
+            opt(d.speed_error_settled_mean_rpm, 2),
+        ),
+        (
+            "speed error settled: max |e|",
+            "rpm",
+            opt(d.speed_error_settled_max_rpm, 2),
+        ),
+        (
+            "max |speed ref - speed| (whole run)",
             "rpm",
             format!("{:.1}", d.max_speed_tracking_error_rpm),
         ),
+        ("peak current |i|", "A", format!("{:.3}", d.peak_current_a)),
         (
             "i_q tracking error RMS",
             "A",
@@ -111,7 +202,7 @@ pub fn table(m: &RunMetrics) -> String {
         ),
     ];
     for (name, unit, v) in drive_rows {
-        let _ = writeln!(out, "{name:<37} {unit:<10} {v:>14}");
+        let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
     }
     out
 }

@@ -25,6 +25,10 @@ pub const RPM_PER_RAD_S: f64 = 30.0 / PI;
 /// Built-in scenarios `(name, TOML text)`; the first is the default.
 pub const PRESETS: &[(&str, &str)] = &[
     ("default", include_str!("../scenarios/default.toml")),
+    (
+        "servo-sensored",
+        include_str!("../scenarios/servo-sensored.toml"),
+    ),
     ("servo-ideal", include_str!("../scenarios/servo-ideal.toml")),
     ("servo-harsh", include_str!("../scenarios/servo-harsh.toml")),
     (
@@ -38,8 +42,68 @@ pub const PRESETS: &[(&str, &str)] = &[
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ControllerKind {
-    /// The sensored speed/current controller ([`crate::controller::SensoredController`]).
+    /// The simulator's own sensored speed/current controller
+    /// ([`crate::controller::SensoredController`], `f64`, true angle and speed).
     Sensored,
+    /// The `foc` crate's sensorless controller ([`crate::foc_drive::FocDrive`], `f32`):
+    /// alignment, I/f start-up, hand-over to its own EKF, closed loop.
+    Foc,
+    /// The `foc` crate's controller in sensored mode: the true angle and speed through
+    /// `TickInput::with_sensor`, its observer running alongside.
+    FocSensored,
+}
+
+impl ControllerKind {
+    /// Whether this is one of the `foc` crate's controllers.
+    pub fn is_foc(self) -> bool {
+        matches!(self, ControllerKind::Foc | ControllerKind::FocSensored)
+    }
+}
+
+/// What the `foc` controller does when its observer is lost in closed loop.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObserverLoss {
+    /// Fall back to the I/f ramp and hand over again (foc's default).
+    #[default]
+    FallBack,
+    /// Trip the `observer_lost` fault.
+    Trip,
+}
+
+/// Settings of the `foc` controller (`[controller.foc]`, only with `kind = "foc"` or
+/// `"foc_sensored"`). Every field is optional; the defaults are `foc`'s own
+/// (`FocConfig::new`, derived from the motor, the PWM period and the bus voltage), with the
+/// scenario's current limit and loop bandwidths of `[controller]` and the motor's inertia.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FocSettings {
+    /// Nominal DC-bus voltage the controller is configured for (bus trip levels 0.6 and
+    /// 1.25 times it, maximum speed), V. Default: `inverter.u_dc_v`.
+    pub u_dc_nominal_v: Option<f64>,
+    /// Inertia the speed-loop gains and the speed slew rate are computed for, kg m^2.
+    /// Default: `motor.j_kg_m2`.
+    pub inertia_kg_m2: Option<f64>,
+    /// Time of the `start()` command, s (default 0).
+    pub start_time_s: f64,
+    /// Time of a controlled `stop()` command, s (default: none).
+    pub stop_time_s: Option<f64>,
+    /// Over-current trip level, A. Default: twice `controller.current_limit_a`.
+    pub over_current_a: Option<f64>,
+    /// Duration of the alignment, s (0 skips it). Default 0.2 s.
+    pub align_time_s: Option<f64>,
+    /// Alignment current, A. Default: `if_current_a`.
+    pub align_current_a: Option<f64>,
+    /// Current of the open-loop I/f ramp, A. Default: half of `controller.current_limit_a`.
+    pub if_current_a: Option<f64>,
+    /// Speed of the hand-over to the observer, mechanical rpm. Default (foc's rule):
+    /// `max(2 Rs I_f / psi_f, 0.02 w_max)` electrical, the back-EMF twice the resistive drop.
+    pub handover_speed_rpm: Option<f64>,
+    /// Acceleration of the I/f ramp, mechanical rpm per second. Default: the hand-over speed
+    /// in 0.5 s.
+    pub startup_accel_rpm_per_s: Option<f64>,
+    /// Reaction to an observer loss in closed loop (default `fall_back`).
+    pub observer_loss: ObserverLoss,
 }
 
 /// Controller settings (`[controller]`).
@@ -55,8 +119,12 @@ pub struct ControllerSettings {
     /// Speed loop crossover, Hz.
     pub speed_bandwidth_hz: f64,
     /// Compensate one period of computation delay (default: whether the inverter has it).
+    /// For `foc`: `ComputationDelay::OnePeriod` when true, `ComputationDelay::None` when false.
     #[serde(default)]
     pub delay_compensation: Option<bool>,
+    /// `foc` settings (only with a `foc` kind).
+    #[serde(default)]
+    pub foc: Option<FocSettings>,
 }
 
 /// Observer settings (`[observer]`); the observer is `ObserverConfig::new` on these
@@ -208,9 +276,9 @@ impl Scenario {
         PRESETS.iter().find(|(n, _)| *n == name).map(|(_, t)| *t)
     }
 
-    /// The built-in default scenario (`scenarios/default.toml`): the servo motor of
-    /// `design.md` section 6 at 10 kHz, from standstill to rated speed, a rated load step and
-    /// a reversal.
+    /// The built-in default scenario (`scenarios/default.toml`): the `foc` crate's sensorless
+    /// controller on the servo motor of `design.md` section 6 at 10 kHz, from standstill to
+    /// rated speed, a rated load step and a reversal.
     ///
     /// # Panics
     ///
@@ -267,6 +335,92 @@ impl Scenario {
             hz_to_rad_s(c.speed_bandwidth_hz),
             self.delay_compensation(),
         )
+    }
+
+    /// The `foc` controller's configuration (module `foc_drive`): `FocConfig::new` for the
+    /// observer's motor parameters (what the drive knows of the motor), `ts_s` and the
+    /// nominal bus voltage, then the scenario's current limit, loop bandwidths, inertia,
+    /// computation delay, mode and `[controller.foc]` settings. Validated by `foc` itself.
+    pub fn foc_config(&self) -> Result<foc::FocConfig, FieldError> {
+        use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy};
+        let c = &self.controller;
+        let s = c.foc.unwrap_or_default();
+        let p = self.observer_params();
+        let motor =
+            ekf_core::MotorParams::<f32>::from_f64(p.rs_ohm, p.ls_h, p.psi_f_wb, p.pole_pairs);
+        let pp = f64::from(p.pole_pairs);
+        let rpm_to_e = |rpm: f64| (rpm / RPM_PER_RAD_S * pp) as f32;
+        let ts = self.inverter.ts_s as f32;
+        let u_nom = s.u_dc_nominal_v.unwrap_or(self.inverter.u_dc_v) as f32;
+        let delay = if self.delay_compensation() {
+            ComputationDelay::OnePeriod
+        } else {
+            ComputationDelay::None
+        };
+        let mode = if c.kind == ControllerKind::FocSensored {
+            Mode::Sensored
+        } else {
+            Mode::Sensorless
+        };
+        let mut cfg = FocConfig::new(motor, ts, u_nom)
+            .with_delay(delay)
+            .with_mode(mode);
+        cfg.current_bw_rad_s = hz_to_rad_s(c.current_bandwidth_hz) as f32;
+        cfg.speed_bw_rad_s = hz_to_rad_s(c.speed_bandwidth_hz) as f32;
+        cfg.current_limit_a = c.current_limit_a as f32;
+        cfg.over_current_a = s.over_current_a.unwrap_or(2.0 * c.current_limit_a) as f32;
+        // After the current limit: the slew rate follows both.
+        cfg = cfg.with_inertia(s.inertia_kg_m2.unwrap_or(self.motor.j_kg_m2) as f32);
+        let st = &mut cfg.startup;
+        st.if_current_a = s.if_current_a.unwrap_or(0.5 * c.current_limit_a) as f32;
+        st.align_current_a = s.align_current_a.map_or(st.if_current_a, |x| x as f32);
+        if let Some(t) = s.align_time_s {
+            st.align_time_s = t as f32;
+        }
+        st.handover_speed_rad_s = match s.handover_speed_rpm {
+            Some(rpm) => rpm_to_e(rpm),
+            None => (2.0 * motor.rs_ohm * st.if_current_a / motor.psi_f_wb)
+                .max(0.02 * cfg.max_speed_rad_s),
+        };
+        st.accel_rad_s2 = match s.startup_accel_rpm_per_s {
+            Some(a) => rpm_to_e(a),
+            None => st.handover_speed_rad_s / 0.5,
+        };
+        cfg.health.policy = match s.observer_loss {
+            ObserverLoss::FallBack => ObserverLossPolicy::FallBackAndReacquire,
+            ObserverLoss::Trip => ObserverLossPolicy::Trip,
+        };
+        if let Some(sigma) = self.observer.angle_sigma_limit_rad {
+            cfg.observer.angle_sigma_limit_rad = sigma as f32;
+        }
+        cfg.validate().map_err(|e| {
+            FieldError::new(
+                "controller.foc",
+                format!("foc refuses the configuration: {e}"),
+            )
+        })?;
+        Ok(cfg)
+    }
+
+    /// One line on the controller, for reports.
+    pub fn controller_description(&self) -> String {
+        let delay = match (self.inverter.delay, self.delay_compensation()) {
+            (true, true) => "one period of computation delay, compensated",
+            (false, false) => "no computation delay",
+            (true, false) => "one period of computation delay, NOT compensated",
+            (false, true) => "compensating a computation delay the inverter does not have",
+        };
+        match self.controller.kind {
+            ControllerKind::Sensored => {
+                format!("sensored stand-in (f64, true angle and speed), {delay}")
+            }
+            ControllerKind::Foc => {
+                format!("foc, sensorless (f32; align, I/f, hand-over to its own f32 EKF), {delay}")
+            }
+            ControllerKind::FocSensored => {
+                format!("foc, sensored (f32; true angle and speed), {delay}")
+            }
+        }
     }
 
     /// The observer's configuration (`ObserverConfig::new` on the observer's parameters).
@@ -339,6 +493,44 @@ impl Scenario {
                 ),
             ));
         }
+        if let Some(f) = &c.foc {
+            if !c.kind.is_foc() {
+                return Err(FieldError::new(
+                    "controller.foc",
+                    "only used with kind = \"foc\" or \"foc_sensored\"",
+                ));
+            }
+            for (name, v) in [
+                ("controller.foc.u_dc_nominal_v", f.u_dc_nominal_v),
+                ("controller.foc.inertia_kg_m2", f.inertia_kg_m2),
+                ("controller.foc.over_current_a", f.over_current_a),
+                ("controller.foc.align_current_a", f.align_current_a),
+                ("controller.foc.if_current_a", f.if_current_a),
+                ("controller.foc.handover_speed_rpm", f.handover_speed_rpm),
+                (
+                    "controller.foc.startup_accel_rpm_per_s",
+                    f.startup_accel_rpm_per_s,
+                ),
+            ] {
+                if let Some(v) = v {
+                    positive(name, v)?;
+                }
+            }
+            for (name, v) in [
+                ("controller.foc.start_time_s", Some(f.start_time_s)),
+                ("controller.foc.stop_time_s", f.stop_time_s),
+                ("controller.foc.align_time_s", f.align_time_s),
+            ] {
+                if let Some(v) = v
+                    && !(v.is_finite() && v >= 0.0)
+                {
+                    return Err(FieldError::new(
+                        name,
+                        format!("must be finite and >= 0, is {v}"),
+                    ));
+                }
+            }
+        }
         let o = &self.observer;
         for (name, v) in [
             ("observer.rs_ohm", o.rs_ohm),
@@ -377,6 +569,9 @@ impl Scenario {
         self.speed_ref_rpm.validate("speed_ref_rpm")?;
         for (i, term) in self.load.iter().enumerate() {
             term.validate(&format!("load[{i}]"))?;
+        }
+        if c.kind.is_foc() {
+            self.foc_config()?;
         }
         Ok(())
     }
@@ -431,7 +626,7 @@ mod tests {
     #[test]
     fn default_scenario_is_within_the_voltage_limit() {
         let sc = Scenario::default_servo();
-        assert_eq!(sc.periods(), 15_000);
+        assert_eq!(sc.periods(), 20_000);
         let m = sc.motor;
         let we = sc.rated_speed_e_rad_s();
         let iq = sc.rated_torque_nm / m.torque_constant_nm_a();
@@ -484,7 +679,7 @@ mod tests {
         assert_eq!(error_of(&t).0, "motor.ld_h");
         let t = default_text().replace("ts_s = 1e-4", "ts_s = 0.0");
         assert_eq!(error_of(&t).0, "inverter.ts_s");
-        let t = default_text().replace("dead_time_s = 0.0", "dead_time_s = 2e-4");
+        let t = default_text().replace("dead_time_s = 0.5e-6", "dead_time_s = 2e-4");
         let (field, problem) = error_of(&t);
         assert_eq!(field, "inverter.dead_time_s");
         assert!(problem.contains("period"), "{problem}");
@@ -498,5 +693,60 @@ mod tests {
         let (field, problem) = error_of(&t);
         assert_eq!(field, "load[1].kind");
         assert!(problem.contains("unknown variant"), "{problem}");
+    }
+
+    #[test]
+    fn foc_settings_are_checked() {
+        // A typo in [controller.foc].
+        let t = default_text().replace("if_current_a = 2.5", "if_curent_a = 2.5");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "controller.foc.if_curent_a");
+        assert!(problem.contains("unknown field"), "{problem}");
+        // Out of range here.
+        let t = default_text().replace("if_current_a = 2.5", "if_current_a = -2.5");
+        assert_eq!(error_of(&t).0, "controller.foc.if_current_a");
+        let t = default_text().replace("start_time_s = 0.0", "start_time_s = -1.0");
+        assert_eq!(error_of(&t).0, "controller.foc.start_time_s");
+        // Refused by foc itself (the I/f current above the current limit).
+        let t = default_text().replace("if_current_a = 2.5", "if_current_a = 5.0");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "controller.foc");
+        // (the alignment current follows the I/f current and is checked first)
+        assert!(
+            problem.contains("foc refuses") && problem.contains("out of range"),
+            "{problem}"
+        );
+        // foc settings with the sensored stand-in.
+        let t = default_text().replace("kind = \"foc\"", "kind = \"sensored\"");
+        let (field, problem) = error_of(&t);
+        assert_eq!(field, "controller.foc");
+        assert!(problem.contains("only used with"), "{problem}");
+    }
+
+    #[test]
+    fn foc_config_matches_the_scenario() {
+        use foc::{ComputationDelay, Mode};
+        let sc = Scenario::default_servo();
+        let c = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(c.delay, ComputationDelay::OnePeriod);
+        assert_eq!(c.angle_advance_periods, 1.5);
+        assert_eq!(c.mode, Mode::Sensorless);
+        assert_eq!(c.ts_s, 1e-4);
+        assert_eq!(c.current_limit_a, 4.5);
+        assert_eq!(c.over_current_a, 9.0);
+        assert_eq!(c.inertia_kg_m2, 8e-4);
+        assert_eq!(c.startup.if_current_a, 2.5);
+        assert_eq!(c.startup.align_time_s, 0.1);
+        // 2000 rpm/s mech. = 837.8 rad/s^2 el.; hand-over 2 Rs I_f / psi_f = 82.1 rad/s el.
+        assert!((c.startup.accel_rad_s2 - 837.758).abs() < 1e-2);
+        assert!((c.startup.handover_speed_rad_s - 82.142_86).abs() < 1e-3);
+        assert!((c.current_bw_rad_s - 3141.5927).abs() < 1e-2);
+        let ideal = Scenario::preset("servo-ideal").unwrap_or_else(|e| panic!("{e}"));
+        let c = ideal.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(c.delay, ComputationDelay::None);
+        assert_eq!(c.angle_advance_periods, 0.5);
+        let mut s = sc.clone();
+        s.controller.kind = ControllerKind::FocSensored;
+        assert_eq!(s.foc_config().map(|c| c.mode), Ok(Mode::Sensored));
     }
 }

@@ -12,7 +12,9 @@
 //!    it), so dead time shows up as observer error, as on a bench. The estimate is compared
 //!    with the true `th(t_k)`, `w_e(t_k)`.
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
-//!    controller also gets the true angle and speed) and returns duties `d[k]`.
+//!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
+//!    of its own observer (`foc`'s `f32` EKF, which has stepped with its own record of the
+//!    voltage and `i[k]`) is scored against the same truth as the simulator's observers.
 //! 4. The inverter applies `d[k-1]` (one period of computation delay) or `d[k]` (no delay)
 //!    over `[t_k, t_k+1)`, with its dead time; the plant integrates the period with the load
 //!    torque of `(t_k, w(t_k))` held. When the controller disables the PWM, all switches
@@ -35,8 +37,10 @@ use serde::Serialize;
 
 use crate::SimError;
 use crate::controller::{
-    ControllerInput, ControllerTelemetry, DriveController, RotorFeedback, SensoredController,
+    ControllerEstimate, ControllerInput, ControllerTelemetry, DriveController, RotorFeedback,
+    SensoredController,
 };
+use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
 use crate::metrics::{MetricsAccumulator, RunMetrics};
 use crate::plant::{Plant, PlantState};
@@ -94,6 +98,19 @@ pub struct ObserverSample {
 }
 
 impl ObserverSample {
+    /// The sample of a controller's own observer ([`ControllerEstimate`]) against the truth.
+    pub fn from_controller(e: &ControllerEstimate, truth: &Truth) -> Self {
+        Self {
+            theta_e_rad: e.theta_e_rad,
+            omega_e_rad_s: e.omega_e_rad_s,
+            angle_error_deg: wrap_angle(e.theta_e_rad - truth.theta_e_rad).to_degrees(),
+            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
+            p_diag: e.p_diag,
+            nis: e.nis,
+            tracking: e.tracking,
+        }
+    }
+
     fn new(e: &Estimate<f64>, p_diag: [f64; 4], truth: &Truth) -> Self {
         Self {
             theta_e_rad: e.theta_rad,
@@ -150,6 +167,9 @@ pub struct Sample {
     pub observer: ObserverSample,
     /// The seed's filter (`ObserverConfig::seed`), when the scenario runs it.
     pub seed_filter: Option<ObserverSample>,
+    /// The controller's own observer (for `foc`: its `f32` EKF, the one that closes the
+    /// loop), scored the same way; `None` for a controller without one.
+    pub controller_observer: Option<ObserverSample>,
     /// Controller.
     pub control: ControlRecord,
     /// Inverter.
@@ -308,19 +328,24 @@ pub fn run(scenario: &Scenario) -> Result<RunOutput, SimError> {
     }
 }
 
-/// The controller a scenario asks for.
-pub fn build_controller(scenario: &Scenario) -> Box<dyn DriveController> {
-    match scenario.controller.kind {
+/// The controller a scenario asks for: the sensored stand-in, or the `foc` crate's
+/// controller ([`FocDrive`], sensorless or sensored). Errors when `foc` refuses the
+/// configuration.
+pub fn build_controller(scenario: &Scenario) -> Result<Box<dyn DriveController>, SimError> {
+    Ok(match scenario.controller.kind {
         ControllerKind::Sensored => Box::new(SensoredController::new(
             scenario.controller_config(),
             scenario.motor,
         )),
-    }
+        ControllerKind::Foc | ControllerKind::FocSensored => {
+            Box::new(FocDrive::from_scenario(scenario)?)
+        }
+    })
 }
 
 /// Runs a scenario with its own controller ([`build_controller`]).
 pub fn run_with(scenario: &Scenario, opts: RunOptions<'_>) -> Result<RunOutput, SimError> {
-    let mut controller = build_controller(scenario);
+    let mut controller = build_controller(scenario)?;
     run_with_controller(scenario, controller.as_mut(), opts)
 }
 
@@ -467,6 +492,10 @@ pub fn run_with_controller(
             },
             observer: ObserverSample::new(&est, diag(&p), &truth),
             seed_filter: seed_est.map(|(e, p)| ObserverSample::new(&e, diag(&p), &truth)),
+            controller_observer: out
+                .telemetry
+                .estimate
+                .map(|e| ObserverSample::from_controller(&e, &truth)),
             control: ControlRecord {
                 speed_ref_rpm,
                 duties,

@@ -66,7 +66,13 @@ fn default_run_writes_its_outputs_and_prints_the_paths() {
     assert_eq!(periods[0]["k"], 0);
     assert_eq!(periods[499]["k"], 499);
     assert!(periods[1]["observer"]["p_diag"].as_array().map(Vec::len) == Some(4));
-    assert_eq!(periods[10]["control"]["telemetry"]["state"], "sensored");
+    // The default runs foc sensorless: aligning at first, its own observer logged and scored.
+    let tel = &periods[10]["control"]["telemetry"];
+    assert_eq!(tel["state"], "align");
+    assert_eq!(tel["closed_loop"], false);
+    assert!(tel["fault"].is_null());
+    assert!(tel["estimate"]["theta_e_rad"].is_number());
+    assert!(periods[10]["controller_observer"]["angle_error_deg"].is_number());
     assert_eq!(msgs["/pmsm_sim/scenario"].len(), 1);
     assert_eq!(msgs["/pmsm_sim/scenario"][0]["name"], "default");
     assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], 500);
@@ -136,7 +142,7 @@ fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
             "> 0",
         ),
         (
-            good.replace("dead_time_s = 0.0", "dead_time_s = 1e-3"),
+            good.replace("dead_time_s = 0.5e-6", "dead_time_s = 1e-3"),
             "inverter.dead_time_s",
             "period",
         ),
@@ -181,7 +187,7 @@ fn a_non_finite_run_stops_with_a_diagnostic_and_a_readable_log() {
     let dir = temp_dir("nonfinite");
     let body = text(&run(&["show"], &dir).stdout)
         .replace("after_nm = 1.5", "after_nm = 1e300")
-        .replace("time_s = 0.6", "time_s = 0.02");
+        .replace("time_s = 0.9", "time_s = 0.02");
     std::fs::write(dir.join("blow.toml"), body).unwrap_or_else(|e| panic!("{e}"));
     let o = run(
         &["run", "blow.toml", "--duration", "0.1", "--out", "o"],

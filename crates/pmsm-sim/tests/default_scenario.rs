@@ -1,4 +1,7 @@
-//! Closed-loop runs of the built-in scenarios: determinism and observer accuracy.
+//! Closed-loop runs of the built-in scenarios: determinism, observer accuracy on the sensored
+//! stand-in drive (`servo-sensored`, the previous default), and the `foc` default running
+//! through. The detailed closed-loop tests of `foc` on this simulator are in the workspace's
+//! `tests/foc_closed_loop.rs`.
 
 use pmsm_sim::metrics::ObserverMetrics;
 use pmsm_sim::scenario::{PRESETS, Scenario};
@@ -55,7 +58,8 @@ fn observer(m: &Option<ObserverMetrics>) -> ObserverMetrics {
     m.unwrap_or_else(|| panic!("no observer metrics"))
 }
 
-/// The full 1.5 s default scenario (seed 1). Measured (release; debug gives the same):
+/// The full 1.5 s `servo-sensored` scenario (the previous default: sensored stand-in drive,
+/// seed 1). Measured (release; debug gives the same):
 ///
 /// | metric                  | EKF (default) | seed filter |
 /// |-------------------------|---------------|-------------|
@@ -70,8 +74,8 @@ fn observer(m: &Option<ObserverMetrics>) -> ObserverMetrics {
 /// The thresholds leave about 2x margin. The seed filter's bias is its half-sample lag
 /// (`w_e Ts / 2` = 2.4 deg at 2000 rpm), which the default's lag-free step removes.
 #[test]
-fn default_scenario_observer_metrics() {
-    let sc = Scenario::default_servo();
+fn sensored_scenario_observer_metrics() {
+    let sc = Scenario::preset("servo-sensored").unwrap_or_else(|e| panic!("{e}"));
     let out = run(&sc);
     let m = &out.metrics;
     assert_eq!(m.end, "completed");
@@ -115,12 +119,14 @@ fn default_scenario_observer_metrics() {
     assert_eq!(again, m.observer);
 }
 
-/// Started 57 deg off at standstill, the default observer converges for every noise seed
+/// Started 57 deg off at standstill (sensored drive), the default observer converges for every noise seed
 /// tried (1-6 measured: 0.056-0.060 s, 0.068-0.071 deg RMS over the first 0.4 s).
 #[test]
 fn default_observer_converges_for_several_noise_seeds() {
     for seed in 1..=4 {
-        let mut sc = Scenario::default_servo().with_duration(0.4);
+        let mut sc = Scenario::preset("servo-sensored")
+            .unwrap_or_else(|e| panic!("{e}"))
+            .with_duration(0.4);
         sc.seed = seed;
         sc.observer.seed_filter = false;
         let out = run(&sc);
@@ -145,7 +151,7 @@ fn every_preset_runs() {
 }
 
 /// A controller of one's own plugs into the loop through `DriveController` (as the `foc`
-/// adapter will): here the sensored one, wrapped to open the bridge for 10 ms at full speed.
+/// adapter does): here the sensored one, wrapped to open the bridge for 10 ms at full speed.
 #[test]
 fn a_custom_controller_can_open_the_bridge() {
     use pmsm_sim::controller::{ControllerInput, ControllerOutput, DriveController};
@@ -165,8 +171,10 @@ fn a_custom_controller_can_open_the_bridge() {
         }
     }
 
-    let sc = Scenario::default_servo().with_duration(0.6);
-    let mut ctl = Gated(sim::build_controller(&sc));
+    let sc = Scenario::preset("servo-sensored")
+        .unwrap_or_else(|e| panic!("{e}"))
+        .with_duration(0.6);
+    let mut ctl = Gated(sim::build_controller(&sc).unwrap_or_else(|e| panic!("{e}")));
     let out = run_with_controller(
         &sc,
         &mut ctl,
@@ -190,4 +198,46 @@ fn a_custom_controller_can_open_the_bridge() {
     let lost = s[5000].truth.speed_rpm - s[5099].truth.speed_rpm;
     assert!((lost - 25.0).abs() < 2.0, "{lost} rpm");
     assert!((s[5999].truth.speed_rpm - 2000.0).abs() < 20.0);
+}
+
+/// The built-in default runs the `foc` crate's sensorless controller through the whole job
+/// without a fault, and reports foc's own observer next to the simulator's. Measured (seed 1):
+/// hand-over at 0.335 s, one closed-loop exit (the reversal), final speed -1021.5 rpm (the
+/// uncompensated 0.5 us dead time biases foc's speed estimate), foc observer after the
+/// hand-over 1.78 deg RMS.
+#[test]
+fn default_scenario_runs_foc_sensorless_through_the_job() {
+    let sc = Scenario::default_servo();
+    assert_eq!(sc.controller.kind, pmsm_sim::scenario::ControllerKind::Foc);
+    let out = run(&sc);
+    let m = &out.metrics;
+    assert_eq!(m.end, "completed");
+    assert!(
+        m.controller.starts_with("foc, sensorless"),
+        "{}",
+        m.controller
+    );
+    let d = &m.drive;
+    assert_eq!(d.fault, None);
+    let t_cl = d.closed_loop_time_s.unwrap_or(f64::INFINITY);
+    assert!(t_cl > 0.1 && t_cl < 0.5, "closed loop at {t_cl} s");
+    assert_eq!(d.closed_loop_exits, 1, "{d:?}");
+    assert!((d.final_speed_rpm + 1000.0).abs() < 40.0, "{d:?}");
+    assert!(d.speed_error_settled_rms_rpm < 40.0, "{d:?}");
+    assert!(d.peak_current_a < sc.controller.current_limit_a, "{d:?}");
+    let cl = m
+        .controller_observer_closed_loop
+        .unwrap_or_else(|| panic!("no closed-loop window"));
+    assert!(cl.window_s > 1.0 && cl.angle_error_rms_deg < 4.0, "{cl:?}");
+    assert!(m.controller_observer.is_some());
+    // The first samples: foc aligns with the PWM on; its state is in the telemetry.
+    let s = &out.trace.samples;
+    assert_eq!(s[10].control.telemetry.state, "align");
+    assert!(s[10].inverter.pwm_enabled);
+    assert!(s[10].controller_observer.is_some());
+    // The streaming metrics equal the ones recomputed from the trace.
+    let again = ObserverMetrics::compute(s, sc.ts_s(), sc.rated_speed_e_rad_s(), |x| {
+        x.controller_observer
+    });
+    assert_eq!(again, m.controller_observer);
 }

@@ -22,7 +22,17 @@ import pytest
 from mcap.reader import make_reader
 
 ROOT = Path(__file__).resolve().parents[4]
-PERIOD_FIELDS = {"k", "t_s", "truth", "measured", "observer", "seed_filter", "control", "inverter"}
+PERIOD_FIELDS = {
+    "k",
+    "t_s",
+    "truth",
+    "measured",
+    "observer",
+    "seed_filter",
+    "controller_observer",
+    "control",
+    "inverter",
+}
 
 
 @pytest.fixture(scope="session")
@@ -61,7 +71,7 @@ def read(path: Path):
 def test_default_run_reads_back(sim_bin, tmp_path):
     out = tmp_path / "o"
     done = subprocess.run(
-        [sim_bin, "run", "default", "--duration", "0.1", "--out", str(out), "--no-plot"],
+        [sim_bin, "run", "default", "--duration", "0.4", "--out", str(out), "--no-plot"],
         capture_output=True,
         text=True,
     )
@@ -70,14 +80,14 @@ def test_default_run_reads_back(sim_bin, tmp_path):
 
     assert set(messages) == {"/pmsm_sim/period", "/pmsm_sim/scenario", "/pmsm_sim/metrics"}
     counts = {summary.channels[i].topic: n for i, n in summary.statistics.channel_message_counts.items()}
-    assert counts["/pmsm_sim/period"] == 1000
+    assert counts["/pmsm_sim/period"] == 4000
     for topic, (schema, channel, _) in channels.items():
         assert channel.message_encoding == "json"
         assert schema.encoding == "jsonschema"
         assert json.loads(schema.data)["title"].startswith("pmsm_sim.")
 
     periods = messages["/pmsm_sim/period"]
-    assert len(periods) == 1000
+    assert len(periods) == 4000
     assert set(periods[0]) == PERIOD_FIELDS
     ts = 1e-4
     for i, p in enumerate(periods):
@@ -87,15 +97,22 @@ def test_default_run_reads_back(sim_bin, tmp_path):
         assert len(p["observer"]["p_diag"]) == 4 and min(p["observer"]["p_diag"]) >= 0.0
         assert all(0.0 <= d <= 1.0 for d in p["inverter"]["duties"])
     # Log time is the simulated time in ns.
-    assert channels["/pmsm_sim/period"][2] == 999 * 100_000
+    assert channels["/pmsm_sim/period"][2] == 3999 * 100_000
     last = periods[-1]
-    assert last["truth"]["speed_rpm"] > 100.0  # the ramp started at 0.05 s
-    assert last["control"]["telemetry"]["state"] == "sensored"
+    # The default runs foc sensorless: 0.1 s of alignment, I/f, hand-over at 0.335 s.
+    states = [p["control"]["telemetry"]["state"] for p in periods]
+    assert states[500] == "align" and states[1500] == "open_loop"
+    assert last["control"]["telemetry"]["state"] == "closed_loop"
+    assert last["control"]["telemetry"]["closed_loop"]
+    assert last["control"]["telemetry"]["fault"] is None
+    assert last["inverter"]["pwm_enabled"]
     assert abs(last["observer"]["angle_error_deg"]) < 5.0
+    assert abs(last["controller_observer"]["angle_error_deg"]) < 5.0
+    assert len(last["control"]["telemetry"]["estimate"]["p_diag"]) == 4
     assert last["seed_filter"] is not None
     scen = messages["/pmsm_sim/scenario"][0]
     assert scen["name"] == "default" and "[motor]" in scen["toml"]
-    assert messages["/pmsm_sim/metrics"][0]["periods"] == 1000
+    assert messages["/pmsm_sim/metrics"][0]["periods"] == 4000
 
 
 def test_interrupted_run_is_readable(sim_bin, tmp_path):

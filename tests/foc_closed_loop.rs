@@ -1,0 +1,331 @@
+//! Closed-loop tests of the `foc` controller on the `pmsm-sim` simulator (exact plant,
+//! inverter with one period of computation delay, current sensor), servo motor of design
+//! section 6 at 10 kHz on 300 V.
+//!
+//! The job is pmsm-sim's built-in default scenario: `foc` sensorless (f32, its own EKF), rotor
+//! at 1 rad at standstill; `start()` at t = 0, alignment 0.1 s, I/f at 2.5 A and 2000 rpm/s
+//! to the hand-over speed (196 rpm), hand-over; speed reference 0 -> 2000 rpm (rated) over
+//! 0.1-0.6 s, a rated (1.5 N m, active) load step at 0.9 s, a reversal 2000 -> -1000 rpm
+//! (-50 % rated) over 1.2-1.5 s, end at 2.0 s. Windows used below:
+//!
+//! | window | s | what |
+//! |---|---|---|
+//! | rated, no load | 0.7-0.9 | speed error at 2000 rpm |
+//! | load step | 0.9-1.05 | largest dip below the reference |
+//! | rated, loaded | 1.05-1.2 | speed error at 2000 rpm under 1.5 N m |
+//! | reversed | 1.8-2.0 | speed error at -1000 rpm under 1.5 N m (generating) |
+//! | after hand-over | states `handover`/`closed_loop`, `|w_e| >= 5 %` of rated | foc observer's angle error |
+//!
+//! Each test states what it measured (seed 1, `cargo test -p integration-tests --test
+//! foc_closed_loop -- --nocapture` prints it) and asserts with a margin. The default has 0.5 us
+//! of dead time, which `foc` does not compensate; the first test removes it to show what the
+//! controller does on an ideal-switch bridge, the second runs the default as it is, the third
+//! adds sensor noise, offsets, gain errors, bus ripple and dry friction, the fourth starts
+//! from several rotor angles, the fifth is foc's sensored mode, and an ignored one records
+//! the known failure with 1.5 us of dead time. The whole file runs in about 0.2 s (opt-level
+//! 1): the simulator does about a microsecond per period there.
+
+use pmsm_sim::scenario::{ControllerKind, Scenario};
+use pmsm_sim::sim::{self, Sample};
+
+/// What one run of the job gives.
+#[derive(Debug)]
+struct Job {
+    /// States in the order visited (consecutive duplicates removed).
+    states: Vec<&'static str>,
+    /// First sample in state `handover` / `closed_loop`, s.
+    t_handover: Option<f64>,
+    t_closed_loop: Option<f64>,
+    /// First fault with its time.
+    fault: Option<(&'static str, f64)>,
+    /// Mean and largest |speed - reference| in the windows of the module docs, rpm.
+    rated: (f64, f64),
+    loaded: (f64, f64),
+    reversed: (f64, f64),
+    /// Largest dip below the reference after the load step, rpm.
+    dip_rpm: f64,
+    /// foc observer's angle error after the hand-over: RMS, max |e|, mean, deg el.; window, s.
+    angle: (f64, f64, f64, f64),
+    /// Largest current vector magnitude, A.
+    peak_a: f64,
+}
+
+fn preset(name: &str) -> Scenario {
+    Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn run(sc: &Scenario) -> Job {
+    let out = sim::run(sc).unwrap_or_else(|e| panic!("{}: {e}", sc.name));
+    let s = &out.trace.samples;
+    assert_eq!(s.len(), sc.periods());
+    let rated_e = sc.rated_speed_e_rad_s();
+    let mut states: Vec<&'static str> = vec![];
+    let (mut t_handover, mut t_closed_loop, mut fault) = (None, None, None);
+    let (mut sum2, mut sum, mut max, mut n) = (0.0, 0.0, 0.0_f64, 0usize);
+    let mut peak_a = 0.0_f64;
+    for x in s {
+        let tel = &x.control.telemetry;
+        if states.last() != Some(&tel.state) {
+            states.push(tel.state);
+        }
+        if tel.state == "handover" && t_handover.is_none() {
+            t_handover = Some(x.t_s);
+        }
+        if tel.state == "closed_loop" && t_closed_loop.is_none() {
+            t_closed_loop = Some(x.t_s);
+        }
+        if let (None, Some(f)) = (fault, tel.fault) {
+            fault = Some((f, x.t_s));
+        }
+        if tel.closed_loop && x.truth.omega_e_rad_s.abs() >= 0.05 * rated_e {
+            let e = x
+                .controller_observer
+                .unwrap_or_else(|| panic!("no foc observer"))
+                .angle_error_deg;
+            sum2 += e * e;
+            sum += e;
+            max = max.max(e.abs());
+            n += 1;
+        }
+        peak_a = peak_a.max(x.truth.i_ab_a[0].hypot(x.truth.i_ab_a[1]));
+    }
+    let nf = n.max(1) as f64;
+    let window = |t0: f64, t1: f64| speed_error(s, t0, t1);
+    let dip_rpm = s
+        .iter()
+        .filter(|x| (0.9..1.05).contains(&x.t_s))
+        .map(|x| x.control.speed_ref_rpm - x.truth.speed_rpm)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let job = Job {
+        states,
+        t_handover,
+        t_closed_loop,
+        fault,
+        rated: window(0.7, 0.9),
+        loaded: window(1.05, 1.2),
+        reversed: window(1.8, 2.0),
+        dip_rpm,
+        angle: ((sum2 / nf).sqrt(), max, sum / nf, n as f64 * sc.ts_s()),
+        peak_a,
+    };
+    println!("{}: {job:#?}", sc.name);
+    job
+}
+
+/// Mean of `speed - reference` and largest `|speed - reference|` over `[t0, t1)`, rpm.
+fn speed_error(s: &[Sample], t0: f64, t1: f64) -> (f64, f64) {
+    let e: Vec<f64> = s
+        .iter()
+        .filter(|x| x.t_s >= t0 && x.t_s < t1)
+        .map(|x| x.truth.speed_rpm - x.control.speed_ref_rpm)
+        .collect();
+    assert!(!e.is_empty(), "empty window {t0}-{t1}");
+    let mean = e.iter().sum::<f64>() / e.len() as f64;
+    (mean, e.iter().fold(0.0_f64, |m, x| m.max(x.abs())))
+}
+
+/// The state sequence of the job: start-up, closed loop, back to I/f through zero speed for
+/// the reversal, closed loop again.
+const JOB_STATES: [&str; 7] = [
+    "align",
+    "open_loop",
+    "handover",
+    "closed_loop",
+    "open_loop",
+    "handover",
+    "closed_loop",
+];
+
+/// No fault, the job's state sequence, the loops closed in time, the reference held at the
+/// end, and the current within the limit: what every passing variant below shares.
+fn assert_job_done(j: &Job, t_closed_loop_max_s: f64, peak_max_a: f64) {
+    assert_eq!(j.fault, None, "{j:#?}");
+    assert_eq!(j.states, JOB_STATES, "{j:#?}");
+    let t = j.t_closed_loop.unwrap_or(f64::INFINITY);
+    assert!(t < t_closed_loop_max_s, "closed loop at {t} s");
+    // The d current of the I/f vector fades out over foc's 20 ms blend.
+    let blend = t - j.t_handover.unwrap_or(f64::NAN);
+    assert!((blend - 0.02).abs() < 1e-3, "hand-over took {blend} s");
+    assert!(j.peak_a < peak_max_a, "peak current {} A", j.peak_a);
+}
+
+fn assert_speed(window: &str, (mean, max): (f64, f64), mean_max: f64, abs_max: f64) {
+    assert!(
+        mean.abs() < mean_max && max < abs_max,
+        "{window}: mean {mean} rpm, max {max} rpm"
+    );
+}
+
+/// The job on an ideal-switch bridge: the default with its 0.5 us dead time removed (delay,
+/// 12-bit ADC and 20 mA noise kept). What `foc` does when the voltage it commands is the
+/// voltage the motor gets.
+///
+/// | quantity | measured | asserted |
+/// |---|---|---|
+/// | hand-over / closed loop | 0.3607 / 0.3807 s | closed loop < 0.5 s |
+/// | speed error 2000 rpm, no load: mean / max | +0.15 / 1.26 rpm | < 1 / < 4 |
+/// | rated load step: dip | 109.1 rpm | < 150 |
+/// | speed error 2000 rpm, 1.5 N m: mean / max | -0.03 / 1.19 rpm | < 1 / < 4 |
+/// | speed error -1000 rpm, 1.5 N m: mean / max | -0.09 / 1.12 rpm | < 1 / < 4 |
+/// | foc observer after hand-over: RMS / max / mean | 0.066 / 0.361 / +0.006 deg el. | < 0.2 / < 1 / < 0.1 |
+/// | peak current | 2.72 A | < 4.5 A (the limit) |
+///
+/// Seeds 1-6 give the same state sequence and hand-over at 0.334-0.361 s.
+#[test]
+fn sensorless_job_on_an_ideal_switch_bridge() {
+    let mut sc = preset("default");
+    sc.inverter.dead_time_s = 0.0;
+    let j = run(&sc);
+    assert_job_done(&j, 0.5, 4.5);
+    assert_speed("2000 rpm", j.rated, 1.0, 4.0);
+    assert!(j.dip_rpm < 150.0, "dip {} rpm", j.dip_rpm);
+    assert_speed("2000 rpm loaded", j.loaded, 1.0, 4.0);
+    assert_speed("-1000 rpm loaded", j.reversed, 1.0, 4.0);
+    let (rms, max, mean, window) = j.angle;
+    assert!(window > 1.3, "after-hand-over window {window} s");
+    assert!(rms < 0.2 && max < 1.0 && mean.abs() < 0.1, "{:?}", j.angle);
+}
+
+/// The built-in default as it is: 0.5 us of dead time, which `foc` does not compensate. The
+/// dead-time voltage lies along the current; the observer reads its q part as back-EMF, so
+/// its speed estimate is biased by about `dU / psi_f` and the speed loop holds the motor that
+/// much **below** the reference (a known limitation until `foc` compensates dead time; the
+/// thresholds guard against it getting worse).
+///
+/// | quantity | measured | asserted |
+/// |---|---|---|
+/// | hand-over / closed loop | 0.3346 / 0.3546 s | closed loop < 0.5 s |
+/// | speed error 2000 rpm, no load: mean / max | -17.7 / 18.7 rpm | < 25 / < 30 |
+/// | rated load step: dip | 127.6 rpm | < 180 |
+/// | speed error 2000 rpm, 1.5 N m: mean / max | -17.6 / 18.6 rpm | < 25 / < 30 |
+/// | speed error -1000 rpm, 1.5 N m: mean / max | -21.6 / 22.3 rpm | < 30 / < 35 |
+/// | foc observer after hand-over: RMS / max / mean | 1.78 / 9.83 / +1.18 deg el. | < 3 / < 15 / < 2 |
+/// | peak current | 2.65 A | < 4.5 A |
+///
+/// The 9.8 deg maximum is at the second hand-over (after the reversal, where the I/f ramp
+/// runs at low speed and the dead-time voltage is large next to the back-EMF). With 1 us of
+/// dead time the job still completes (speed offset -34 / -35 / -44 rpm, observer 3.5 deg
+/// RMS, 21 deg max); with 1.5 us it does not (see the ignored test below).
+#[test]
+fn sensorless_default_job_with_dead_time() {
+    let sc = preset("default");
+    assert_eq!(sc.inverter.dead_time_s, 0.5e-6);
+    let j = run(&sc);
+    assert_job_done(&j, 0.5, 4.5);
+    assert_speed("2000 rpm", j.rated, 25.0, 30.0);
+    assert!(j.dip_rpm < 180.0, "dip {} rpm", j.dip_rpm);
+    assert_speed("2000 rpm loaded", j.loaded, 25.0, 30.0);
+    assert_speed("-1000 rpm loaded", j.reversed, 30.0, 35.0);
+    // Below the reference, not just off it: the sign of the dead-time bias.
+    assert!(j.rated.0 < 0.0 && j.reversed.0 < 0.0);
+    let (rms, max, mean, window) = j.angle;
+    assert!(window > 1.3, "after-hand-over window {window} s");
+    assert!(rms < 3.0 && max < 15.0 && mean.abs() < 2.0, "{:?}", j.angle);
+}
+
+/// Realistic sensing and supply on top of the default's 0.5 us dead time and 12-bit ADC:
+/// 30 mA of noise, offsets of +20 / -15 mA and gain errors of +1 % / -0.5 % on phases a / b,
+/// 5 % bus ripple at 100 Hz (measured by the controller), Coulomb friction 0.02 N m.
+///
+/// | quantity | measured | asserted |
+/// |---|---|---|
+/// | hand-over / closed loop | 0.3334 / 0.3534 s | closed loop < 0.6 s |
+/// | speed error 2000 rpm, no load: mean / max | -17.5 / 19.8 rpm | < 25 / < 35 |
+/// | rated load step: dip | 128.2 rpm | < 180 |
+/// | speed error 2000 rpm, 1.5 N m: mean / max | -18.1 / 20.4 rpm | < 25 / < 35 |
+/// | speed error -1000 rpm, 1.5 N m: mean / max | -21.1 / 23.0 rpm | < 30 / < 40 |
+/// | foc observer after hand-over: RMS / max / mean | 1.77 / 9.70 / +1.15 deg el. | < 3 / < 15 / < 2 |
+/// | peak current | 2.80 A | < 4.5 A |
+///
+/// The sensor errors and the ripple add little next to the dead time (compare the default).
+#[test]
+fn sensorless_job_with_realistic_sensing() {
+    let mut sc = preset("default");
+    sc.sensors.current_noise_std_a = 0.03;
+    sc.sensors.offset_a = [0.02, -0.015];
+    sc.sensors.gain_error = [0.01, -0.005];
+    sc.inverter.ripple_fraction = 0.05;
+    sc.inverter.ripple_hz = 100.0;
+    sc.motor.coulomb_nm = 0.02;
+    sc.name = "realistic".into();
+    let j = run(&sc);
+    assert_job_done(&j, 0.6, 4.5);
+    assert_speed("2000 rpm", j.rated, 25.0, 35.0);
+    assert!(j.dip_rpm < 180.0, "dip {} rpm", j.dip_rpm);
+    assert_speed("2000 rpm loaded", j.loaded, 25.0, 35.0);
+    assert_speed("-1000 rpm loaded", j.reversed, 30.0, 40.0);
+    let (rms, max, mean, window) = j.angle;
+    assert!(window > 1.3, "after-hand-over window {window} s");
+    assert!(rms < 3.0 && max < 15.0 && mean.abs() < 2.0, "{:?}", j.angle);
+}
+
+/// From standstill at any rotor angle (the default, 0.5 us dead time). The alignment pulls
+/// the rotor from where it is to 0; the lightly damped rotor (J / B = 0.8 s) then swings
+/// around the I/f ramp, and `foc` hands over only once its observer's speed has agreed with
+/// the ramp within 30 % for 30 ms. The farther from 0 the rotor starts, the larger the swing
+/// and the later the hand-over:
+///
+/// | rotor at (rad el.) | 0 | 1 | 2 | 2.8 | 3.1 | -1.5 | -2.5 | -3.1 |
+/// |---|---|---|---|---|---|---|---|---|
+/// | closed loop at (s) | 0.247 | 0.355 | 0.660 | 0.854 | 0.877 | 0.676 | 0.780 | 0.915 |
+///
+/// Asserted: every start completes the job without a fault, closed loop before 1.2 s, the
+/// reversed speed as in the default (mean -21.5 to -21.7 rpm measured; < 30 asserted), peak
+/// current below 1.1 times the 4.5 A limit (4.31 A measured at -3.1 rad: after a late
+/// hand-over the speed loop catches the reference up at its current limit).
+#[test]
+fn sensorless_start_from_any_rotor_angle() {
+    for th in [0.0, 2.0, 3.1, -1.5, -3.1] {
+        let mut sc = preset("default");
+        sc.initial.theta_e_rad = th;
+        sc.name = format!("rotor at {th} rad");
+        let j = run(&sc);
+        assert_job_done(&j, 1.2, 4.95);
+        assert_speed(&sc.name, j.reversed, 30.0, 35.0);
+    }
+}
+
+/// foc's sensored mode (the true angle and speed through `TickInput::with_sensor`) on the same
+/// job and bridge as the default: closed loop from the first tick.
+///
+/// | quantity | measured | asserted |
+/// |---|---|---|
+/// | speed error 2000 rpm, no load: mean / max | +0.08 / 1.02 rpm | < 0.5 / < 3 |
+/// | rated load step: dip | 106.4 rpm | < 150 |
+/// | speed error 2000 rpm, 1.5 N m: mean / max | -0.06 / 0.59 rpm | < 0.5 / < 3 |
+/// | speed error -1000 rpm, 1.5 N m: mean / max | -0.01 / 0.46 rpm | < 0.5 / < 3 |
+/// | peak current | 1.86 A | < 4.5 A |
+#[test]
+fn sensored_foc_job() {
+    let mut sc = preset("default");
+    sc.controller.kind = ControllerKind::FocSensored;
+    sc.name = "foc sensored".into();
+    let j = run(&sc);
+    assert_eq!(j.fault, None);
+    assert_eq!(j.states, ["closed_loop"]);
+    assert_eq!(j.t_closed_loop, Some(0.0));
+    assert!(j.peak_a < 4.5, "peak {} A", j.peak_a);
+    assert_speed("2000 rpm", j.rated, 0.5, 3.0);
+    assert!(j.dip_rpm < 150.0, "dip {} rpm", j.dip_rpm);
+    assert_speed("2000 rpm loaded", j.loaded, 0.5, 3.0);
+    assert_speed("-1000 rpm loaded", j.reversed, 0.5, 3.0);
+}
+
+/// **Known failure** (run with `--ignored`): with 1.5 us of dead time (common for IGBT
+/// bridges) the reversal under rated load does not complete. Measured: closed loop at
+/// 0.356 s, speed offset -51 / -53 rpm at 2000 rpm; after the zero crossing the I/f ramp
+/// reaches -196 rpm but foc's observer never satisfies the hand-over checks, so the drive
+/// stays in I/f (speed error +802 rpm mean over 1.8-2.0 s, no fault within the run). With
+/// 2 us the observer is up to 121 deg off after the first hand-over and the reversal fails
+/// the same way. Cause: no dead-time compensation in `foc` (its observer is fed the commanded
+/// voltage), which at low speed dwarfs the back-EMF.
+#[test]
+#[ignore = "known failure: foc does not compensate dead time; the reversal fails at 1.5 us"]
+fn known_failure_reversal_with_1p5_us_dead_time() {
+    let mut sc = preset("default");
+    sc.inverter.dead_time_s = 1.5e-6;
+    sc.name = "dead time 1.5 us".into();
+    let j = run(&sc);
+    assert_job_done(&j, 0.5, 4.5);
+    assert_speed("-1000 rpm loaded", j.reversed, 80.0, 100.0);
+}
