@@ -4,7 +4,8 @@ Timing: row k of ``u_ab`` is the voltage held over [t_k, t_k+1), row k of ``i_ab
 sampled at t_k; row k of the output is the estimate at t_k, predicted with ``u_ab[k-1]`` and
 corrected with ``i_ab[k]``. SI units; angles and speeds electrical unless named ``_mech``.
 """
-from typing import Literal, TypedDict
+import os
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -26,6 +27,9 @@ class ConfigError(PyfocError):
 
 class FilterError(PyfocError):
     """A filter operation was refused; the filter is unchanged."""
+
+class SimulationError(PyfocError):
+    """The simulator could not run the scenario."""
 
 class Motor:
     """Motor parameters: Rs (ohm), Ls (H), psi_f (Wb), pole pairs; ld/lq default to ls."""
@@ -93,3 +97,18 @@ class Ekf:
         """One sample: predict with u_prev, correct with i."""
     def reset(self, x: npt.ArrayLike, p: npt.ArrayLike) -> None:
         """Replace state and covariance; FilterError if not finite."""
+
+def simulate(
+    scenario: str | os.PathLike[str] | dict[str, Any] | None = None,
+    *,
+    duration: float | None = None,
+    seed: int | None = None,
+) -> dict[str, Any]:
+    """Run the drive simulator (pmsm-sim) on a preset name, a TOML path or a dict with the TOML
+    layout (None: the "default" preset). Returns arrays aligned on the PWM period: ``t``,
+    true ``theta``/``omega``/``speed_rpm``/``torque``/``load_torque``/``i_ab``/``i_dq``,
+    measured ``i_ab_meas``, applied ``u_ab``, ``duties`` (N, 3), ``speed_ref_rpm``, the
+    desktop EKF's ``theta_est``/``omega_est``/``angle_error_deg``/``nis``/``p_diag`` (N, 4),
+    the controller's own observer (``controller_theta_est``/``controller_omega_est``, foc
+    scenarios) and the seed filter (``seed_theta_est``, when it runs); plus ``metrics`` (dict,
+    as ``pmsm-sim --json``), ``completed`` and ``scenario``. Releases the GIL."""

@@ -1,4 +1,4 @@
-//! Python bindings for the `ekf-core` observer (and, later, the `pmsm-sim` simulator).
+//! Python bindings for the `ekf-core` observer and the `pmsm-sim` simulator.
 //!
 //! Thin by design: wrapper types and conversions only; every algorithm lives in the Rust
 //! crates. Arrays in and out follow the project's timing convention: row `k` of `u_ab` is the
@@ -30,6 +30,12 @@ create_exception!(
     ConfigError,
     PyfocError,
     "Invalid motor or filter parameters; the message gives the reason."
+);
+create_exception!(
+    pyfoc,
+    SimulationError,
+    PyfocError,
+    "The simulator could not run the scenario (e.g. its controller could not be built)."
 );
 create_exception!(
     pyfoc,
@@ -553,12 +559,160 @@ impl Ekf {
     }
 }
 
+/// Reads a scenario: a preset name, a path to a TOML file, or a dict with the TOML layout.
+fn scenario_of(obj: &Bound<'_, PyAny>) -> PyResult<pmsm_sim::scenario::Scenario> {
+    use pmsm_sim::scenario::Scenario;
+    let py = obj.py();
+    let err = |e: pmsm_sim::SimError| ConfigError::new_err(e.to_string());
+    if obj.is_instance_of::<PyDict>() {
+        let text: String = py
+            .import("json")?
+            .call_method1("dumps", (obj,))?
+            .extract()?;
+        let sc: Scenario = serde_json::from_str(&text)
+            .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
+        sc.validate()
+            .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
+        return Ok(sc);
+    }
+    let text: String = py
+        .import("os")?
+        .call_method1("fspath", (obj,))
+        .and_then(|p| p.extract())
+        .map_err(|_| PyTypeError::new_err("scenario: expected a preset name, a path or a dict"))?;
+    if Scenario::preset_text(&text).is_some() {
+        return Scenario::preset(&text).map_err(err);
+    }
+    let path = std::path::Path::new(&text);
+    if path.exists() {
+        return Scenario::from_file(path).map_err(err);
+    }
+    Err(ConfigError::new_err(format!(
+        "scenario {text:?} is neither a preset nor an existing file"
+    )))
+}
+
+/// Columns of a simulation trace.
+fn trace_dict<'py>(
+    py: Python<'py>,
+    out: &pmsm_sim::sim::RunOutput,
+) -> PyResult<Bound<'py, PyDict>> {
+    let s = &out.trace.samples;
+    let d = PyDict::new(py);
+    let col = |f: &dyn Fn(&pmsm_sim::sim::Sample) -> f64| s.iter().map(f).collect::<Vec<f64>>();
+    let put = |name: &str, v: Vec<f64>| d.set_item(name, PyArray1::from_vec(py, v));
+    let put2 =
+        |name: &str, f: &dyn Fn(&pmsm_sim::sim::Sample) -> Vec<f64>, w: usize| -> PyResult<()> {
+            let rows: Vec<Vec<f64>> = s.iter().map(f).collect();
+            let arr = if rows.is_empty() {
+                PyArray2::zeros(py, [0, w], false)
+            } else {
+                PyArray2::from_vec2(py, &rows)?
+            };
+            d.set_item(name, arr)
+        };
+    put("t", col(&|x| x.t_s))?;
+    put("theta", col(&|x| x.truth.theta_e_rad))?;
+    put("omega", col(&|x| x.truth.omega_e_rad_s))?;
+    put("speed_rpm", col(&|x| x.truth.speed_rpm))?;
+    put("torque", col(&|x| x.truth.torque_nm))?;
+    put("load_torque", col(&|x| x.truth.load_torque_nm))?;
+    put("speed_ref_rpm", col(&|x| x.control.speed_ref_rpm))?;
+    put2("i_ab", &|x| x.truth.i_ab_a.to_vec(), 2)?;
+    put2("i_dq", &|x| x.truth.i_dq_a.to_vec(), 2)?;
+    put2("i_ab_meas", &|x| x.measured.i_ab_a.to_vec(), 2)?;
+    put2("u_ab", &|x| x.inverter.u_ab_v.to_vec(), 2)?;
+    put2("duties", &|x| x.inverter.duties.to_vec(), 3)?;
+    put("theta_est", col(&|x| x.observer.theta_e_rad))?;
+    put("omega_est", col(&|x| x.observer.omega_e_rad_s))?;
+    put("angle_error_deg", col(&|x| x.observer.angle_error_deg))?;
+    put("nis", col(&|x| x.observer.nis))?;
+    put2("p_diag", &|x| x.observer.p_diag.to_vec(), 4)?;
+    if s.iter().any(|x| x.controller_observer.is_some()) {
+        let nan = f64::NAN;
+        put(
+            "controller_theta_est",
+            col(&|x| x.controller_observer.map_or(nan, |o| o.theta_e_rad)),
+        )?;
+        put(
+            "controller_omega_est",
+            col(&|x| x.controller_observer.map_or(nan, |o| o.omega_e_rad_s)),
+        )?;
+    }
+    if s.iter().any(|x| x.seed_filter.is_some()) {
+        let nan = f64::NAN;
+        put(
+            "seed_theta_est",
+            col(&|x| x.seed_filter.map_or(nan, |o| o.theta_e_rad)),
+        )?;
+    }
+    Ok(d)
+}
+
+/// Runs the simulator (closed loop, the scenario's controller, the observer alongside) and
+/// returns a dict of arrays aligned on the PWM period (`t`, true `theta`/`omega`, `i_ab`,
+/// measured `i_ab_meas`, applied `u_ab`, `duties`, the observer's `theta_est`/`omega_est`/
+/// `angle_error_deg`/`nis`/`p_diag`, ...) plus `metrics` (dict, as `pmsm-sim --json`) and
+/// `completed` (False when the run stopped early; the arrays then hold what was simulated).
+/// The GIL is released while it runs.
+#[pyfunction]
+#[pyo3(signature = (scenario = None, *, duration = None, seed = None))]
+fn simulate<'py>(
+    py: Python<'py>,
+    scenario: Option<&Bound<'py, PyAny>>,
+    duration: Option<f64>,
+    seed: Option<u64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let mut sc = match scenario {
+        Some(obj) => scenario_of(obj)?,
+        None => pmsm_sim::scenario::Scenario::preset("default")
+            .map_err(|e| ConfigError::new_err(e.to_string()))?,
+    };
+    if let Some(d) = duration {
+        if !(d.is_finite() && d > 0.0) {
+            return Err(ConfigError::new_err(format!(
+                "duration must be positive, got {d}"
+            )));
+        }
+        sc = sc.with_duration(d);
+    }
+    if let Some(s) = seed {
+        sc.seed = s;
+    }
+    let out = py
+        .detach(|| {
+            pmsm_sim::sim::run_with(
+                &sc,
+                pmsm_sim::sim::RunOptions {
+                    record_trace: true,
+                    ..Default::default()
+                },
+            )
+        })
+        .map_err(|e| match e {
+            pmsm_sim::SimError::Scenario { .. } => ConfigError::new_err(e.to_string()),
+            other => SimulationError::new_err(other.to_string()),
+        })?;
+    let d = trace_dict(py, &out)?;
+    let metrics = serde_json::to_string(&out.metrics)
+        .map_err(|e| SimulationError::new_err(format!("metrics: {e}")))?;
+    d.set_item(
+        "metrics",
+        py.import("json")?.call_method1("loads", (metrics,))?,
+    )?;
+    d.set_item("completed", out.end.is_completed())?;
+    d.set_item("scenario", sc.name.clone())?;
+    Ok(d)
+}
+
 /// `pyfoc`: the sensorless PMSM observer of `ekf-core` on numpy arrays.
 #[pymodule]
 fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<Motor>()?;
     m.add_class::<Ekf>()?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
     m.add("FilterError", py.get_type::<FilterError>())?;
