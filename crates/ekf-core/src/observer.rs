@@ -536,8 +536,9 @@ impl<T: Float> PmsmObserver<T> {
         &self.model
     }
 
-    /// Replaces the estimate and covariance (angle wrapped, covariance made symmetric).
-    /// Refused, nothing changed, when either is not finite.
+    /// Replaces the estimate and covariance (angle wrapped, covariance made symmetric) and
+    /// clears the last correction's diagnostics (innovation, `S`, NIS read 0 until the next
+    /// correction). Refused, nothing changed, when either is not finite.
     pub fn reset(&mut self, mut x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
         if !(finite(x.as_slice()) && finite(p.as_slice())) {
             return Err(EkfError::NonFiniteResult);
@@ -545,6 +546,11 @@ impl<T: Float> PmsmObserver<T> {
         x[3] = wrap_angle(x[3]);
         self.x = x;
         self.p = Sym4::from_matrix(&p);
+        self.last = Correction {
+            innovation: Vector2::zeros(),
+            innovation_covariance: Matrix2::zeros(),
+            nis: T::zero(),
+        };
         Ok(())
     }
 }
