@@ -24,6 +24,8 @@
 //! | `max_speed_rad_s` | `0.95 U / (sqrt(3) psi_f)` | back-EMF below the linear voltage limit (no field weakening) |
 //! | `speed_slew_rad_s2` | `0.5 p k_t current_limit / J` | half the acceleration the current limit gives (recomputed by [`FocConfig::with_inertia`]) |
 //! | `max_modulation` | `1.0` | the current loop uses the whole inscribed circle `u_dc / sqrt(3)` |
+//! | `dead_time_s` | `0` (compensation off) | a property of the bridge: set it to the gate driver's dead time |
+//! | `dead_time_band_a` | `None`: `0.02 current_limit_a` at [`Foc::new`](crate::Foc::new) | the smooth sign's linear band (module [`deadtime`](crate::deadtime)): in pmsm-sim 1 and 2 % do alike, 5 % doubles the residual observer error; on hardware about half the current ripple |
 //! | `startup.if_current_a`, `align_current_a` | `0.5 current_limit_a` | |
 //! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
 //! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` | hand-over speed in half a second |
@@ -42,6 +44,9 @@ use crate::pi::PiGains;
 
 /// `1 / sqrt(3)`.
 const FRAC_1_SQRT_3: f32 = 0.577_350_26;
+
+/// Default linear band of the dead-time compensation as a fraction of the current limit.
+const DEAD_TIME_BAND_FRACTION: f32 = 0.02;
 
 /// Where the rotor angle comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -203,6 +208,15 @@ pub struct FocConfig {
     /// Radius of the current loop's voltage limit as a fraction of `u_dc / sqrt(3)` (1.0 =
     /// the linear range; up to `2 / sqrt(3)`, where SVPWM clamps the corners).
     pub max_modulation: f32,
+    /// Dead time of the bridge to compensate, s: each phase's duty gets
+    /// `sgn_s(i_x) dead_time_s / ts_s` (module [`deadtime`](crate::deadtime)) and the
+    /// observer is fed the voltage net of it. 0 (the default) turns the compensation off;
+    /// otherwise finite, in `[0, ts_s / 2)`.
+    pub dead_time_s: f32,
+    /// Half-width of the linear zone of the compensation's smooth sign, A (below it the
+    /// offset is proportional to the phase current). `None`: 2 % of `current_limit_a`, taken
+    /// when the controller is built ([`dead_time_band`](Self::dead_time_band)).
+    pub dead_time_band_a: Option<f32>,
     /// Start-up sequence.
     pub startup: StartupConfig,
     /// Observer health monitoring.
@@ -249,6 +263,8 @@ impl FocConfig {
             max_speed_rad_s,
             speed_slew_rad_s2: 0.0,
             max_modulation: 1.0,
+            dead_time_s: 0.0,
+            dead_time_band_a: None,
             startup: StartupConfig {
                 align_current_a: if_current_a,
                 align_time_s: 0.2,
@@ -300,6 +316,13 @@ impl FocConfig {
             kp: self.motor.ls_h * self.current_bw_rad_s,
             ki: self.motor.rs_ohm * self.current_bw_rad_s,
         })
+    }
+
+    /// The linear band of the dead-time compensation's sign, A: `dead_time_band_a`, or 2 %
+    /// of `current_limit_a`.
+    pub fn dead_time_band(&self) -> f32 {
+        self.dead_time_band_a
+            .unwrap_or(DEAD_TIME_BAND_FRACTION * self.current_limit_a)
     }
 
     /// Speed-loop gains on the mechanical speed: `speed_gains`, or `Kp = bw J / k_t`
@@ -354,6 +377,11 @@ impl FocConfig {
             2.0 * FRAC_1_SQRT_3,
             F::MaxModulation,
         )?;
+        in_range(self.dead_time_s, 0.0, f32::MAX, F::DeadTime)?;
+        if self.dead_time_s >= 0.5 * self.ts_s {
+            return Err(ConfigError::OutOfRange(F::DeadTime));
+        }
+        positive(self.dead_time_band(), F::DeadTimeBand)?;
         let s = &self.startup;
         positive(s.align_current_a, F::AlignCurrent)?;
         if s.align_current_a > self.current_limit_a {
@@ -442,6 +470,8 @@ pub enum Field {
     MaxSpeed,
     SpeedSlew,
     MaxModulation,
+    DeadTime,
+    DeadTimeBand,
     AlignCurrent,
     AlignTime,
     AlignAngle,
@@ -473,7 +503,8 @@ pub enum ConfigError {
     NotPositive(Field),
     /// The field is outside its range, or inconsistent with another (`over_current_a` not
     /// above `current_limit_a`, `u_dc_max_v` not above `u_dc_min_v`, a start-up current above
-    /// the limit, the hand-over speed not below the maximum speed, ...).
+    /// the limit, the hand-over speed not below the maximum speed, a dead time not below half
+    /// the PWM period, ...).
     OutOfRange(Field),
 }
 

@@ -8,8 +8,11 @@
 //!   -> observer.step(u_applied over [t_k-1, t_k), i_ab[k])                 (EKF, ekf-core)
 //!   -> health monitor, state machine: control frame (angle th_k, speed w), current refs
 //!   -> Park(i_ab, th_k) -> dq current PIs with decoupling and back-EMF feed-forward
-//!   -> inverse Park at th_k + advance * w * Ts -> SVPWM(u_dc[k]) -> duties[k]
-//!   -> realized u_ab[k] = duties_to_alpha_beta(duties[k], u_dc[k]) into a 2-deep history
+//!   -> inverse Park at th_k + advance * w * Ts -> SVPWM(u_dc[k]) -> d[k]
+//!   -> dead-time compensation (if dead_time_s > 0): duties[k] = clamp01(d[k] + delta[k]),
+//!      delta_x = sgn_s(i_x) t_dead / Ts for the currents predicted at th_k + advance * w * Ts
+//!   -> realized u_ab[k] = duties_to_alpha_beta(clamp01(duties[k] - delta[k]), u_dc[k])
+//!      (= the voltage of d[k] unless clamped) into a 2-deep history
 //! ```
 //!
 //! # Timing (design section 4) and the computation delay
@@ -28,6 +31,17 @@
 //! With [`ComputationDelay::None`] (a simulator that applies the duties at once, over
 //! `[t_k, t_k+1)`) the observer takes `u_hist[0]` (computed by tick `k-1`) and the advance
 //! is 0.5.
+//!
+//! # Dead time
+//!
+//! With [`FocConfig::dead_time_s`] set, every phase's duty gets the offset that cancels the
+//! bridge's average dead-time error, `sgn_s(i_x) t_dead / Ts`, with the phase currents
+//! predicted for the middle of the application interval (the current reference, or the
+//! measured `i_dq` at the voltage limit, turned back with the voltage's angle). The history
+//! (the observer's input) holds the voltage the bridge then realizes, the duties **minus**
+//! the offsets, clamped like the bridge clamps them: the intended voltage unless the offsets
+//! had to be cut at 0 or 1. Module [`crate::deadtime`] derives it against the simulator's
+//! inverter model.
 //!
 //! # Current loops
 //!
@@ -54,11 +68,12 @@ use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{Estimate, PmsmObserver};
 
 use crate::config::{ComputationDelay, ConfigError, FocConfig, Mode};
+use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::health::{HealthMonitor, HealthReport, ticks};
 use crate::pi::{Pi, limit};
 use crate::startup::{Frame, Sequencer, State};
-use crate::svpwm::{SAFE_DUTIES, linear_limit_v, modulate};
+use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
 use crate::transforms::{Abc, AlphaBeta, Dq};
 use crate::trig::{add_angles, at_most, max2, sin_cos, sin_cos_small, sqrt, wrap};
 
@@ -133,7 +148,9 @@ pub struct Telemetry {
     pub i_dq_ref: Dq,
     /// Voltage the current loops asked for in the control frame (after their limit), V.
     pub u_dq: Dq,
-    /// Voltage the duties of this tick apply (after SVPWM clamping), V.
+    /// Voltage the duties of this tick apply (after SVPWM clamping; with dead-time
+    /// compensation the voltage expected at the motor, the duties net of the compensation),
+    /// V. The observer is fed this one when it is applied.
     pub u_ab: AlphaBeta,
     /// Control-frame angle at `t_k` (Park), rad el. The inverse Park used
     /// `theta_rad + angle_advance_periods * omega_rad_s * ts_s`.
@@ -205,6 +222,7 @@ pub struct Foc {
     pub(crate) stall_ticks: u32,
     over_current_sq: f32,
     advance_s: f32,
+    dead_time: DeadTimeCompensation,
     // Parts.
     pub(crate) observer: PmsmObserver<f32>,
     pub(crate) health: HealthMonitor,
@@ -265,6 +283,7 @@ impl Foc {
             stall_ticks: ticks(cfg.health.stall_time_s, ts),
             over_current_sq: cfg.over_current_a * cfg.over_current_a,
             advance_s: cfg.angle_advance_periods * ts,
+            dead_time: DeadTimeCompensation::new(cfg.dead_time_s, ts, cfg.dead_time_band()),
             observer,
             health: HealthMonitor::new(&cfg.health, ts, handover, exit_speed),
             pi_d: Pi::new(cfg.current_pi_gains(), ts),
@@ -440,7 +459,8 @@ impl Foc {
         let e = plan.i_ref - i_dq;
         let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
         let uq_free = self.pi_q.unlimited(e.q, ff.q);
-        let q_max = if u_d * u_d + uq_free * uq_free > u_max * u_max {
+        let limited = u_d * u_d + uq_free * uq_free > u_max * u_max;
+        let q_max = if limited {
             sqrt(u_max * u_max - u_d * u_d)
         } else {
             u_max
@@ -449,14 +469,28 @@ impl Foc {
         let u_dq = Dq { d: u_d, q: u_q };
 
         // Inverse Park at the middle of the application interval (the advance rotates the
-        // frame's sine and cosine by a small angle), SVPWM, history.
+        // frame's sine and cosine by a small angle), SVPWM, dead-time compensation, history.
         let (sd, cd) = sin_cos_small(frame.omega * self.advance_s);
         let (s2, c2) = add_angles(s, c, sd, cd);
-        let m = modulate(u_dq.to_alpha_beta(s2, c2), u_dc);
-        self.u_hist = [m.applied, self.u_hist[0]];
+        let u_ab = u_dq.to_alpha_beta(s2, c2);
+        let (duties, applied) = if self.dead_time.is_active() {
+            // Phase currents predicted for the middle of the application interval, turned
+            // with the frame like the voltage: the reference, which the loops will have
+            // reached (and which carries no sensor noise), or the measured vector while the
+            // voltage limit keeps them off it.
+            let i = if limited { i_dq } else { plan.i_ref };
+            let i_pred = i.to_alpha_beta(s2, c2).to_abc();
+            let (d, _) = modulate_duties(u_ab, u_dc);
+            let comp = self.dead_time.apply(d, i_pred);
+            (comp.duties, duties_to_alpha_beta(comp.effective, u_dc))
+        } else {
+            let m = modulate(u_ab, u_dc);
+            (m.duties, m.applied)
+        };
+        self.u_hist = [applied, self.u_hist[0]];
 
         TickOutput {
-            duties: m.duties,
+            duties,
             pwm_enabled: true,
             state: self.state,
             fault: None,
@@ -464,7 +498,7 @@ impl Foc {
                 i_dq,
                 i_dq_ref: plan.i_ref,
                 u_dq,
-                u_ab: m.applied,
+                u_ab: applied,
                 theta_rad: frame.theta,
                 omega_rad_s: frame.omega,
                 speed_ref_mech_rad_s: self.seq.speed_ref_mech,

@@ -5,6 +5,7 @@
 
 pub mod config;
 pub mod controller;
+pub mod deadtime;
 pub mod fault;
 pub mod hal;
 pub mod health;
@@ -21,6 +22,7 @@ pub use config::{
 pub use controller::{
     CommandError, Foc, PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput,
 };
+pub use deadtime::DeadTimeCompensation;
 pub use fault::{Fault, FaultInfo};
 pub use health::{HealthReport, LossReason};
 pub use pi::{Pi, PiGains};

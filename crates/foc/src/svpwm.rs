@@ -19,7 +19,8 @@
 //!
 //! [`duties_to_alpha_beta`] is the inverse: the average voltage the inverter applies for given
 //! duties. The controller feeds that realized voltage to the observer, so clamping never
-//! misleads the estimate.
+//! misleads the estimate (with dead-time compensation, the voltage of the duties net of the
+//! compensation: [`crate::deadtime`]).
 
 use crate::transforms::AlphaBeta;
 
@@ -88,6 +89,18 @@ pub fn svpwm(u: AlphaBeta, u_dc_v: f32) -> Modulation {
 /// [`svpwm`] without the input check, for a finite `u` and a finite positive `u_dc_v` (the
 /// controller's own call). Duties stay in `[0, 1]` and finite whatever the input.
 pub(crate) fn modulate(u: AlphaBeta, u_dc_v: f32) -> Modulation {
+    let (duties, clamped) = modulate_duties(u, u_dc_v);
+    Modulation {
+        duties,
+        applied: duties_to_alpha_beta(duties, u_dc_v),
+        clamped,
+    }
+}
+
+/// The duties of [`modulate`] and whether the command was reduced, without the realized
+/// voltage (the controller rebuilds that itself, after the dead-time compensation).
+#[inline]
+pub(crate) fn modulate_duties(u: AlphaBeta, u_dc_v: f32) -> ([f32; 3], bool) {
     let v = u.to_abc();
     // Plain comparisons: `f32::max` is a library call on the Cortex-M4.
     let (mut vmax, mut vmin) = if v.a > v.b { (v.a, v.b) } else { (v.b, v.a) };
@@ -110,11 +123,7 @@ pub(crate) fn modulate(u: AlphaBeta, u_dc_v: f32) -> Modulation {
         clamp01((v.b - mid) * k + 0.5),
         clamp01((v.c - mid) * k + 0.5),
     ];
-    Modulation {
-        duties,
-        applied: duties_to_alpha_beta(duties, u_dc_v),
-        clamped,
-    }
+    (duties, clamped)
 }
 
 /// The average alpha-beta voltage the inverter applies with `duties` at `u_dc_v`:
@@ -130,7 +139,8 @@ pub fn duties_to_alpha_beta(duties: [f32; 3], u_dc_v: f32) -> AlphaBeta {
 
 /// `x` limited to `[0, 1]` by two comparisons; NaN gives 1 (finite and in range; the public
 /// [`svpwm`] refuses non-finite inputs before, so only an overflow could make one).
-fn clamp01(x: f32) -> f32 {
+#[inline]
+pub(crate) fn clamp01(x: f32) -> f32 {
     let y = if x < 1.0 { x } else { 1.0 };
     if y > 0.0 { y } else { 0.0 }
 }

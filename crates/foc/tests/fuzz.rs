@@ -1,5 +1,6 @@
 //! Property tests: whatever the inputs and commands, the duties are finite and in [0, 1], a
-//! disabled or faulted output is the safe state, and nothing panics.
+//! disabled or faulted output is the safe state, and nothing panics (with and without
+//! dead-time compensation).
 
 use foc::ekf_core::MotorParams;
 use foc::{Foc, FocConfig, Mode, PhaseCurrents, TickInput, TickOutput};
@@ -100,10 +101,11 @@ fn cmd() -> impl Strategy<Value = Cmd> {
     ]
 }
 
-fn run(mode: Mode, delay: foc::ComputationDelay, cmds: &[Cmd]) {
-    let cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0)
+fn run(mode: Mode, delay: foc::ComputationDelay, dead_time_s: f32, cmds: &[Cmd]) {
+    let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0)
         .with_mode(mode)
         .with_delay(delay);
+    cfg.dead_time_s = dead_time_s;
     let mut foc = Foc::new(&cfg).unwrap();
     for c in cmds {
         match c {
@@ -139,8 +141,10 @@ proptest! {
 
     #[test]
     fn tick_sequences_stay_safe(cmds in proptest::collection::vec(cmd(), 1..300)) {
-        run(Mode::Sensorless, foc::ComputationDelay::OnePeriod, &cmds);
-        run(Mode::Sensored, foc::ComputationDelay::None, &cmds);
+        run(Mode::Sensorless, foc::ComputationDelay::OnePeriod, 0.0, &cmds);
+        run(Mode::Sensored, foc::ComputationDelay::None, 0.0, &cmds);
+        // Dead-time compensation on (1.5 us: 3 % of the period).
+        run(Mode::Sensorless, foc::ComputationDelay::OnePeriod, 1.5e-6, &cmds);
         let (r, t) = (RUNNING.load(Ordering::Relaxed), TICKS.load(Ordering::Relaxed));
         // Not a property of one case: a guard that the strategy reaches the running states.
         prop_assert!(t < 20_000 || r * 10 > t, "only {r} of {t} ticks ran the bridge");
@@ -151,7 +155,9 @@ proptest! {
         bits in proptest::collection::vec((any::<u32>(), any::<u32>(), any::<u32>(), any::<u32>()), 1..64)
     ) {
         // Started, then fed raw bit patterns in every field; restarted after each fault.
-        let cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+        // Dead-time compensation on.
+        let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+        cfg.dead_time_s = 1e-6;
         let mut foc = Foc::new(&cfg).unwrap();
         foc.set_speed_ref_mech_rad_s(100.0).unwrap();
         foc.start().unwrap();

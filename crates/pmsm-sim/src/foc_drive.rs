@@ -14,9 +14,10 @@
 //!                         the f32 observer's estimate and covariance diagonal) }
 //! ```
 //!
-//! Nothing else: no clamping, no dead-time compensation, no help. The numbers cross the
-//! boundary as `f32`, as on the MCU; the simulator's plant, sensors and its own `f64` EKF stay
-//! `f64`.
+//! Nothing else: no clamping, no dead-time compensation of its own, no help (foc compensates
+//! the dead time itself; [`Scenario::foc_config`] tells it the inverter's). The numbers cross
+//! the boundary as `f32`, as on the MCU; the simulator's plant, sensors and its own `f64` EKF
+//! stay `f64`.
 //!
 //! # Timing
 //!

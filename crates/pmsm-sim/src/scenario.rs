@@ -104,6 +104,12 @@ pub struct FocSettings {
     pub startup_accel_rpm_per_s: Option<f64>,
     /// Reaction to an observer loss in closed loop (default `fall_back`).
     pub observer_loss: ObserverLoss,
+    /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
+    /// `inverter.dead_time_s` (the drive knows its bridge); 0 turns the compensation off.
+    pub dead_time_s: Option<f64>,
+    /// Linear band of the compensation's smooth sign (`FocConfig::dead_time_band_a`), A.
+    /// Default foc's: 2 % of `controller.current_limit_a`.
+    pub dead_time_band_a: Option<f64>,
 }
 
 /// Controller settings (`[controller]`).
@@ -340,7 +346,9 @@ impl Scenario {
     /// The `foc` controller's configuration (module `foc_drive`): `FocConfig::new` for the
     /// observer's motor parameters (what the drive knows of the motor), `ts_s` and the
     /// nominal bus voltage, then the scenario's current limit, loop bandwidths, inertia,
-    /// computation delay, mode and `[controller.foc]` settings. Validated by `foc` itself.
+    /// computation delay, mode, dead-time compensation (of `inverter.dead_time_s` unless
+    /// `[controller.foc] dead_time_s` says otherwise; 0 turns it off) and the other
+    /// `[controller.foc]` settings. Validated by `foc` itself.
     pub fn foc_config(&self) -> Result<foc::FocConfig, FieldError> {
         use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy};
         let c = &self.controller;
@@ -393,6 +401,9 @@ impl Scenario {
         if let Some(sigma) = self.observer.angle_sigma_limit_rad {
             cfg.observer.angle_sigma_limit_rad = sigma as f32;
         }
+        // The drive compensates the dead time of its bridge unless told otherwise.
+        cfg.dead_time_s = s.dead_time_s.unwrap_or(self.inverter.dead_time_s) as f32;
+        cfg.dead_time_band_a = s.dead_time_band_a.map(|x| x as f32);
         cfg.validate().map_err(|e| {
             FieldError::new(
                 "controller.foc",

@@ -157,6 +157,10 @@ pub struct Rig {
     /// Plant angle and electrical speed at the last sample instant.
     pub sample_theta: f64,
     pub sample_omega_e: f64,
+    /// Dead time of the bridge, s (0: ideal switches). Average model of pmsm-sim's inverter:
+    /// leg x realizes `clamp01(d_x - sign(i_x) t_dead / Ts)`, the sign of the true phase
+    /// current at the start of the period.
+    pub dead_time_s: f64,
 }
 
 impl Rig {
@@ -178,6 +182,7 @@ impl Rig {
             last: None,
             sample_theta: 0.0,
             sample_omega_e: 0.0,
+            dead_time_s: 0.0,
         }
     }
 
@@ -224,7 +229,28 @@ impl Rig {
         };
         // Output enable acts at once (the hardware's MOE); duties with the delay.
         let on = applied.1 && out.pwm_enabled;
-        let u = if on {
+        let u = if on && self.dead_time_s > 0.0 {
+            let d = applied.0.map(f64::from);
+            let f = self.dead_time_s / self.ts;
+            let (ia, ib) = (self.plant.x[0], self.plant.x[1]);
+            let h = 0.5 * 3f64.sqrt() * ib;
+            let i = [ia, -0.5 * ia + h, -0.5 * ia - h];
+            let e = [0, 1, 2].map(|x| {
+                let sign = if i[x] > 0.0 {
+                    1.0
+                } else if i[x] < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                };
+                (d[x] - sign * f).clamp(0.0, 1.0)
+            });
+            // Clarke of the pole voltages (common mode removed).
+            [
+                (2.0 * e[0] - e[1] - e[2]) / 3.0 * self.u_dc,
+                (e[1] - e[2]) / 3f64.sqrt() * self.u_dc,
+            ]
+        } else if on {
             let u = duties_to_alpha_beta(applied.0, self.u_dc as f32);
             [f64::from(u.alpha), f64::from(u.beta)]
         } else {
