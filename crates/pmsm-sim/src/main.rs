@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::controller::{ControllerInput, RotorFeedback};
-use pmsm_sim::mcap_log::{LogCompression, McapLog};
+use pmsm_sim::mcap_log::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::plot::PlotSink;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
@@ -52,7 +52,8 @@ enum Command {
         /// Scenario file or preset name.
         scenario: String,
     },
-    /// Measure the real-time factor (medians over several runs), with and without logging.
+    /// Measure the real-time factor (medians over several runs), with and without logging,
+    /// and the cost of each part of a period.
     Bench {
         /// Scenario file or preset name (default: "default").
         scenario: Option<String>,
@@ -88,16 +89,34 @@ struct RunArgs {
     /// Do not run the seed filter alongside.
     #[arg(long)]
     no_seed_filter: bool,
-    /// Chunk compression of the MCAP log.
-    #[arg(long, value_enum, default_value_t = Compress::Zstd)]
+    /// Chunk compression of the MCAP log (none: fastest; zstd: smallest).
+    #[arg(long, value_enum, default_value_t = Compress::None)]
     log_compression: Compress,
+    /// Encoding of the per-period messages of the MCAP log (protobuf: fast; json: text).
+    #[arg(long, value_enum, default_value_t = Encoding::Protobuf)]
+    log_encoding: Encoding,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum Compress {
-    Zstd,
-    Lz4,
     None,
+    Lz4,
+    Zstd,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Encoding {
+    Protobuf,
+    Json,
+}
+
+impl From<Encoding> for LogEncoding {
+    fn from(e: Encoding) -> Self {
+        match e {
+            Encoding::Protobuf => LogEncoding::Protobuf,
+            Encoding::Json => LogEncoding::Json,
+        }
+    }
 }
 
 impl From<Compress> for LogCompression {
@@ -235,7 +254,10 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         Some(McapLog::create(
             &mcap_path,
             &scenario,
-            args.log_compression.into(),
+            LogOptions {
+                compression: args.log_compression.into(),
+                encoding: args.log_encoding.into(),
+            },
         )?)
     };
     let mut plot =
@@ -324,7 +346,14 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     };
     say(format!("outputs in {}:", dir.display()));
     for (what, path) in &written {
-        say(format!("  {what:<9} {}", path.display()));
+        match std::fs::metadata(path) {
+            Ok(m) if *what == "MCAP log" => say(format!(
+                "  {what:<9} {} ({:.1} MB)",
+                path.display(),
+                m.len() as f64 / 1e6
+            )),
+            _ => say(format!("  {what:<9} {}", path.display())),
+        }
     }
     Ok(match &out.end {
         RunEnd::Completed => ExitCode::SUCCESS,
@@ -371,40 +400,55 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
         base.ts_s() * 1e6
     );
     println!(
-        "{:<44} {:>12} {:>12} {:>12}",
-        "configuration", "wall (ms)", "ns/period", "real-time x"
+        "{:<46} {:>10} {:>10} {:>11} {:>12}",
+        "configuration", "wall (ms)", "ns/period", "real-time x", "MB / sim. s"
     );
-    let configs: [(&str, bool, Option<LogCompression>); 6] = [
-        ("observer, no seed filter, no log", false, None),
-        ("observer + seed filter, no log", true, None),
+    let log = |compression, encoding| {
+        Some(LogOptions {
+            compression,
+            encoding,
+        })
+    };
+    let (pb, json) = (LogEncoding::Protobuf, LogEncoding::Json);
+    // One untimed run first: page faults, caches and the CPU's clock settle.
+    sim::run_with(&base, RunOptions::default())?;
+    let configs: [(&str, bool, Option<LogOptions>); 7] = [
+        ("no seed filter, no log", false, None),
+        ("seed filter, no log (--no-log)", true, None),
         (
-            "observer, no seed filter, MCAP zstd",
+            "no seed filter, MCAP protobuf",
             false,
-            Some(LogCompression::Zstd),
+            log(LogCompression::None, pb),
         ),
         (
-            "observer + seed filter, MCAP zstd",
+            "seed filter, MCAP protobuf (the default run)",
             true,
-            Some(LogCompression::Zstd),
+            log(LogCompression::None, pb),
         ),
         (
-            "observer, no seed filter, MCAP lz4",
-            false,
-            Some(LogCompression::Lz4),
+            "seed filter, MCAP protobuf lz4",
+            true,
+            log(LogCompression::Lz4, pb),
         ),
         (
-            "observer, no seed filter, MCAP uncompressed",
-            false,
-            Some(LogCompression::None),
+            "seed filter, MCAP protobuf zstd",
+            true,
+            log(LogCompression::Zstd, pb),
+        ),
+        (
+            "seed filter, MCAP JSON zstd",
+            true,
+            log(LogCompression::Zstd, json),
         ),
     ];
     for (name, seed_filter, log) in configs {
         let mut sc = base.clone();
         sc.observer.seed_filter = seed_filter;
         let mut walls = Vec::with_capacity(runs);
+        let mut size = 0;
         for _ in 0..runs {
             let mut logger = match log {
-                Some(c) => Some(McapLog::create(&mcap_path, &sc, c)?),
+                Some(o) => Some(McapLog::create(&mcap_path, &sc, o)?),
                 None => None,
             };
             let mut sinks: Vec<&mut dyn SampleSink> = Vec::new();
@@ -424,6 +468,9 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
                 l.finish(Some(&r.metrics))?;
             }
             walls.push(t.elapsed().as_secs_f64());
+            if log.is_some() {
+                size = std::fs::metadata(&mcap_path).map_or(0, |m| m.len());
+            }
             if !r.end.is_completed() {
                 return Err(SimError::Stopped {
                     t_s: r.end.stop_time_s().unwrap_or(0.0),
@@ -432,13 +479,19 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             }
         }
         let w = median(walls);
+        let mb = if log.is_some() {
+            format!("{:.2}", size as f64 / 1e6 / sc.duration_s)
+        } else {
+            "-".into()
+        };
         println!(
-            "{name:<44} {:>12.2} {:>12.0} {:>12.0}",
+            "{name:<46} {:>10.2} {:>10.0} {:>11.0} {mb:>12}",
             w * 1e3,
             w * 1e9 / sc.periods() as f64,
             sc.duration_s / w
         );
     }
+    let _ = std::fs::remove_file(&mcap_path);
     components(&base, runs);
     Ok(ExitCode::SUCCESS)
 }
@@ -512,6 +565,12 @@ fn components(sc: &Scenario, runs: usize) {
             std::hint::black_box(se.measure(pmsm_sim::svpwm::inverse_clarke(s.truth.i_ab_a)));
         }
     });
+    let proto_ns = time(&mut || {
+        let mut enc = pmsm_sim::mcap_log::proto::PeriodEncoder::new();
+        for s in samples {
+            std::hint::black_box(enc.encode(s));
+        }
+    });
     let json_ns = time(&mut || {
         let mut buf = Vec::with_capacity(4096);
         for s in samples {
@@ -526,6 +585,7 @@ fn components(sc: &Scenario, runs: usize) {
         ("observer step (default EKF)", obs_ns),
         ("controller tick (incl. SVPWM)", ctl_ns),
         ("current sensor (noise, ADC)", sensor_ns),
+        ("protobuf encoding of the period message", proto_ns),
         ("JSON encoding of the period message", json_ns),
     ] {
         println!("  {name:<44} {ns:>8.1}");

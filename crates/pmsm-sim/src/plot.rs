@@ -44,7 +44,8 @@ struct Point {
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlotSink {
     stride: usize,
-    seen: usize,
+    /// Samples to skip before the next kept one (a countdown: no division per period).
+    skip: usize,
     pole_pairs: f64,
     points: Vec<Point>,
 }
@@ -55,7 +56,7 @@ impl PlotSink {
         let stride = periods.div_ceil(MAX_POINTS).max(1);
         Self {
             stride,
-            seen: 0,
+            skip: 0,
             pole_pairs: f64::from(pole_pairs),
             points: Vec::with_capacity(periods / stride + 1),
         }
@@ -269,8 +270,12 @@ fn legend<'a, 'b: 'a>(c: &mut Chart<'a, 'b>) -> Result<(), Box<dyn std::error::E
 }
 
 impl SampleSink for PlotSink {
+    #[inline]
     fn record(&mut self, s: &Sample) -> Result<(), String> {
-        if self.seen.is_multiple_of(self.stride) {
+        if self.skip > 0 {
+            self.skip -= 1;
+        } else {
+            self.skip = self.stride - 1;
             let tel = &s.control.telemetry;
             self.points.push(Point {
                 t: s.t_s,
@@ -289,7 +294,6 @@ impl SampleSink for PlotSink {
                 i_dq_ref: tel.i_dq_ref_a,
             });
         }
-        self.seen += 1;
         Ok(())
     }
 }

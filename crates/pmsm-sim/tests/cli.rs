@@ -28,7 +28,8 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// Topic -> messages (JSON) of a finished MCAP file; panics if it is not finished.
+/// Topic -> messages (as JSON: the protobuf per-period messages decoded with the schema's
+/// table) of a finished MCAP file; panics if it is not finished.
 fn read_mcap(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let summary = mcap::read::Summary::read(&bytes)
@@ -38,8 +39,15 @@ fn read_mcap(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
     let stream = mcap::MessageStream::new(&bytes).unwrap_or_else(|e| panic!("{e}"));
     for m in stream {
         let m = m.unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        let v: serde_json::Value =
-            serde_json::from_slice(&m.data).unwrap_or_else(|e| panic!("not JSON: {e}"));
+        let v: serde_json::Value = match m.channel.message_encoding.as_str() {
+            "protobuf" => {
+                let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
+                assert_eq!(schema, Some("pmsm_sim.Period"));
+                pmsm_sim::mcap_log::proto::decode_to_json("Period", &m.data)
+                    .unwrap_or_else(|e| panic!("bad protobuf: {e}"))
+            }
+            _ => serde_json::from_slice(&m.data).unwrap_or_else(|e| panic!("not JSON: {e}")),
+        };
         out.entry(m.channel.topic.clone()).or_default().push(v);
     }
     let stats = summary.stats.unwrap_or_else(|| panic!("no statistics"));

@@ -1,8 +1,11 @@
 """Reads pmsm-sim's MCAP logs back with the `mcap` Python package (what Foxglove-side tools use).
 
+The per-period channel is protobuf (its schema a FileDescriptorSet), decoded with
+`mcap-protobuf-support` (Google's `protobuf` runtime); the other channels are JSON.
+
 Run (from the workspace root):
 
-    python -m pip install mcap pytest
+    python -m pip install -r tests/data/requirements.txt   # mcap, mcap-protobuf-support, pytest
     python -m pytest crates/pmsm-sim/tests/python
 
 The simulator binary is taken from the environment variable PMSM_SIM_BIN when set; otherwise
@@ -19,7 +22,9 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.decoder import DecoderFactory as McapDecoderFactory
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
 ROOT = Path(__file__).resolve().parents[4]
 PERIOD_FIELDS = {
@@ -55,15 +60,41 @@ def sim_bin() -> str:
     raise RuntimeError("cargo built no pmsm-sim executable")
 
 
+class JsonDecoderFactory(McapDecoderFactory):
+    """Decodes the JSON channels (message encoding `json`)."""
+
+    def decoder_for(self, message_encoding, schema):
+        return json.loads if message_encoding == "json" else None
+
+
+def to_dict(msg):
+    """A decoded protobuf message as the dict of the JSON encoding: the same field names,
+    `None` for an absent message or `optional` field, lists for repeated fields."""
+    out = {}
+    for field in msg.DESCRIPTOR.fields:
+        value = getattr(msg, field.name)
+        if field.is_repeated:
+            out[field.name] = list(value)
+        elif field.has_presence and not msg.HasField(field.name):
+            out[field.name] = None
+        elif field.type == field.TYPE_MESSAGE:
+            out[field.name] = to_dict(value)
+        else:
+            out[field.name] = value
+    return out
+
+
 def read(path: Path):
-    """(summary, {topic: [decoded JSON messages]}, {topic: (schema, channel)})."""
+    """(summary, {topic: [decoded messages as dicts]}, {topic: (schema, channel, last log time)})."""
     with open(path, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, decoder_factories=[ProtobufDecoderFactory(), JsonDecoderFactory()])
         summary = reader.get_summary()
         assert summary is not None, "no summary: the file was not finished"
         messages, channels = {}, {}
-        for schema, channel, message in reader.iter_messages():
-            messages.setdefault(channel.topic, []).append(json.loads(message.data))
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            if channel.message_encoding == "protobuf":
+                decoded = to_dict(decoded)
+            messages.setdefault(channel.topic, []).append(decoded)
             channels[channel.topic] = (schema, channel, message.log_time)
     return summary, messages, channels
 
@@ -82,9 +113,15 @@ def test_default_run_reads_back(sim_bin, tmp_path):
     counts = {summary.channels[i].topic: n for i, n in summary.statistics.channel_message_counts.items()}
     assert counts["/pmsm_sim/period"] == 4000
     for topic, (schema, channel, _) in channels.items():
-        assert channel.message_encoding == "json"
-        assert schema.encoding == "jsonschema"
-        assert json.loads(schema.data)["title"].startswith("pmsm_sim.")
+        if topic == "/pmsm_sim/period":
+            # Protobuf, the schema a FileDescriptorSet of pmsm_sim.Period (what Foxglove reads).
+            assert channel.message_encoding == "protobuf"
+            assert schema.encoding == "protobuf"
+            assert schema.name == "pmsm_sim.Period"
+        else:
+            assert channel.message_encoding == "json"
+            assert schema.encoding == "jsonschema"
+            assert json.loads(schema.data)["title"].startswith("pmsm_sim.")
 
     periods = messages["/pmsm_sim/period"]
     assert len(periods) == 4000
@@ -113,6 +150,32 @@ def test_default_run_reads_back(sim_bin, tmp_path):
     scen = messages["/pmsm_sim/scenario"][0]
     assert scen["name"] == "default" and "[motor]" in scen["toml"]
     assert messages["/pmsm_sim/metrics"][0]["periods"] == 4000
+
+
+def test_protobuf_and_json_encodings_agree(sim_bin, tmp_path):
+    """The same run logged with --log-encoding json (JSON schema) and compressed: every period
+    message has the same fields and the same numbers as the protobuf one."""
+    logs = {}
+    for enc, comp in [("protobuf", "none"), ("json", "zstd"), ("protobuf", "lz4")]:
+        out = tmp_path / f"{enc}-{comp}"
+        done = subprocess.run(
+            [sim_bin, "run", "default", "--duration", "0.05", "--out", str(out), "--no-plot",
+             "--log-encoding", enc, "--log-compression", comp],
+            capture_output=True,
+            text=True,
+        )
+        assert done.returncode == 0, done.stderr
+        _, messages, channels = read(out / "run.mcap")
+        assert channels["/pmsm_sim/period"][1].message_encoding == enc
+        logs[(enc, comp)] = messages["/pmsm_sim/period"]
+    pb = logs[("protobuf", "none")]
+    assert len(pb) == 500
+    assert pb == logs[("json", "zstd")]
+    assert pb == logs[("protobuf", "lz4")]
+    # A message with every optional part present (foc: its estimate and speed reference).
+    tel = pb[-1]["control"]["telemetry"]
+    assert tel["estimate"] is not None and tel["speed_ref_rpm"] is not None
+    assert tel["fault"] is None
 
 
 def test_interrupted_run_is_readable(sim_bin, tmp_path):
