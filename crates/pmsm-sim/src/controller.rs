@@ -135,6 +135,11 @@ pub struct ControllerOutput {
     /// (a gate disable is not delayed by the computation delay; see
     /// [`Plant::step_open`](crate::plant::Plant::step_open)).
     pub pwm_enabled: bool,
+    /// The alpha-beta voltage (V) the controller expects these duties to realize, when it
+    /// knows better than "the duties on the measured bus" (e.g. after its own dead-time
+    /// compensation, which the bridge's dead time cancels). The simulator's observers are fed
+    /// this voltage (delayed like the duties); `None`: the ideal-switch voltage of the duties.
+    pub expected_u_ab_v: Option<[f64; 2]>,
     /// For the log.
     pub telemetry: ControllerTelemetry,
 }
@@ -238,6 +243,7 @@ impl DriveController for SensoredController {
         // zero voltage rather than guessing.
         let Some(rotor) = input.rotor else {
             return ControllerOutput {
+                expected_u_ab_v: None,
                 duties: [0.5; 3],
                 pwm_enabled: false,
                 telemetry: ControllerTelemetry {
@@ -299,6 +305,7 @@ impl DriveController for SensoredController {
         let u_ab = [u_dq[0] * c - u_dq[1] * s, u_dq[0] * s + u_dq[1] * c];
         let duties = svpwm(u_ab, input.u_dc_v).d;
         ControllerOutput {
+            expected_u_ab_v: None,
             duties,
             pwm_enabled: true,
             telemetry: ControllerTelemetry {

@@ -172,6 +172,9 @@ impl DriveController for FocDrive {
         ControllerOutput {
             duties: out.duties.map(f64::from),
             pwm_enabled: out.pwm_enabled,
+            // foc's own record of what its duties realize (duties minus its dead-time
+            // compensation, on the bus it measured): what its observer is fed too.
+            expected_u_ab_v: Some([f64::from(t.u_ab.alpha), f64::from(t.u_ab.beta)]),
             telemetry: ControllerTelemetry {
                 state: state_name(out.state),
                 theta_e_rad: f64::from(t.theta_rad),

@@ -8,8 +8,10 @@
 //!    voltage held there, then corrects with `i[k]` (first step: `u[-1] = 0`). `u[k-1]` is
 //!    the voltage the duties applied over that period realize with ideal switches on the bus
 //!    the controller measured when it computed them: what a real controller knows it
-//!    commanded. The dead-time distortion is **not** in it (a real controller does not know
-//!    it), so dead time shows up as observer error, as on a bench. The estimate is compared
+//!    commanded; or, when the controller reports it (`ControllerOutput::expected_u_ab_v`,
+//!    e.g. `foc` after its dead-time compensation), the voltage the controller expects those
+//!    duties to realize. The actual dead-time distortion is **not** in it (a real controller
+//!    does not know it), so uncompensated dead time shows up as observer error, as on a bench. The estimate is compared
 //!    with the true `th(t_k)`, `w_e(t_k)`.
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
 //!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
@@ -387,6 +389,10 @@ pub fn run_with_controller(
     let mut samples = Vec::with_capacity(if opts.record_trace { n } else { 0 });
     let mut acc = MetricsAccumulator::new(scenario);
     let mut u_prev = [0.0; 2];
+    // The voltage the controller expects of its last duties (`ControllerOutput::expected_u_ab_v`),
+    // held back like the duties when the inverter has its computation delay.
+    let mut expected_pending: Option<[f64; 2]> = None;
+    let delay = scenario.inverter.delay;
     let mut seed_filter_failure = None;
     let mut end = RunEnd::Completed;
     let start = Instant::now();
@@ -534,7 +540,20 @@ pub fn run_with_controller(
         } else {
             plant.step_open(load, ts);
         }
-        u_prev = applied.u_ab_commanded_v;
+        // Voltage over [t_k, t_k+1) as the controller knows it: its expectation for the duties
+        // now applied (those of the previous tick with the delay, these without), else the
+        // ideal-switch voltage of the applied duties; nothing with the PWM off.
+        let expected_now = out.expected_u_ab_v;
+        let expected_applied = if delay {
+            core::mem::replace(&mut expected_pending, expected_now)
+        } else {
+            expected_now
+        };
+        u_prev = if pwm {
+            expected_applied.unwrap_or(applied.u_ab_commanded_v)
+        } else {
+            [0.0; 2]
+        };
         if k % 4096 == 4095
             && let Some(p) = opts.progress.as_mut()
         {

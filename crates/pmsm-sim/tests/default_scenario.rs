@@ -241,3 +241,21 @@ fn default_scenario_runs_foc_sensorless_through_the_job() {
     });
     assert_eq!(again, m.controller_observer);
 }
+
+/// The main job (foc sensorless, 0.5 us dead time compensated by foc): the simulator's own f64
+/// EKF is fed the voltage foc expects its duties to realize (`expected_u_ab_v`), so the
+/// compensated dead time does not bias it. Measured: rms 0.085 deg, mean +0.004 deg, max
+/// 0.46 deg, converged at 10 ms; seed filter 1.77 deg rms (its half-sample lag). Fed the raw
+/// duties instead, it read the compensation as back-EMF: 1.6 deg rms, +1.5 deg bias.
+#[test]
+fn default_main_job_simulator_observer_is_not_biased_by_compensated_dead_time() {
+    let sc = Scenario::preset("default").unwrap_or_else(|e| panic!("{e}"));
+    assert!(sc.inverter.dead_time_s > 0.0, "the default has dead time");
+    let out = run(&sc);
+    let o = observer(&out.metrics.observer);
+    assert!(o.angle_error_rms_deg < 0.25, "{o:?}");
+    assert!(o.angle_error_mean_deg.abs() < 0.1, "{o:?}");
+    assert!(o.angle_error_max_deg < 1.5, "{o:?}");
+    let foc = observer(&out.metrics.controller_observer);
+    assert!(foc.angle_error_rms_deg < 0.25, "{foc:?}");
+}
