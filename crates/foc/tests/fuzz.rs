@@ -1,11 +1,16 @@
 //! Property tests: whatever the inputs and commands, the duties are finite and in [0, 1], a
 //! disabled or faulted output is the safe state, and nothing panics (with and without
-//! dead-time compensation).
+//! dead-time compensation); arbitrary parameters are refused or run safely.
+//! `FUZZ_SECONDS=N` runs each target for `N` seconds instead of a fixed number of cases
+//! (`ekf-core/tests/support/fuzz_harness.rs`).
 
 use foc::ekf_core::MotorParams;
 use foc::{Foc, FocConfig, Mode, PhaseCurrents, TickInput, TickOutput};
 use proptest::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
+
+#[path = "../../ekf-core/tests/support/fuzz_harness.rs"]
+mod harness;
 
 /// Ticks with the PWM on, over all cases (printed by `coverage`).
 static RUNNING: AtomicUsize = AtomicUsize::new(0);
@@ -136,40 +141,171 @@ fn run(mode: Mode, delay: foc::ComputationDelay, dead_time_s: f32, cmds: &[Cmd])
     }
 }
 
-proptest! {
-    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+/// The tick counters, for the harness's report.
+fn stats() -> String {
+    format!(
+        "totals so far: {} ticks, {} with the bridge on; configs {} accepted / {} refused",
+        TICKS.load(Ordering::Relaxed),
+        RUNNING.load(Ordering::Relaxed),
+        CONFIGS_OK.load(Ordering::Relaxed),
+        CONFIGS_REFUSED.load(Ordering::Relaxed),
+    )
+}
 
-    #[test]
-    fn tick_sequences_stay_safe(cmds in proptest::collection::vec(cmd(), 1..300)) {
-        run(Mode::Sensorless, foc::ComputationDelay::OnePeriod, 0.0, &cmds);
-        run(Mode::Sensored, foc::ComputationDelay::None, 0.0, &cmds);
-        // Dead-time compensation on (1.5 us: 3 % of the period).
-        run(Mode::Sensorless, foc::ComputationDelay::OnePeriod, 1.5e-6, &cmds);
-        let (r, t) = (RUNNING.load(Ordering::Relaxed), TICKS.load(Ordering::Relaxed));
-        // Not a property of one case: a guard that the strategy reaches the running states.
-        prop_assert!(t < 20_000 || r * 10 > t, "only {r} of {t} ticks ran the bridge");
-    }
+#[test]
+fn tick_sequences_stay_safe() {
+    harness::fuzz(
+        "tick sequences",
+        512,
+        proptest::collection::vec(cmd(), 1..300),
+        |cmds| {
+            run(
+                Mode::Sensorless,
+                foc::ComputationDelay::OnePeriod,
+                0.0,
+                &cmds,
+            );
+            run(Mode::Sensored, foc::ComputationDelay::None, 0.0, &cmds);
+            // Dead-time compensation on (1.5 us: 3 % of the period).
+            run(
+                Mode::Sensorless,
+                foc::ComputationDelay::OnePeriod,
+                1.5e-6,
+                &cmds,
+            );
+            let (r, t) = (
+                RUNNING.load(Ordering::Relaxed),
+                TICKS.load(Ordering::Relaxed),
+            );
+            // Not a property of one case: a guard that the strategy reaches the running states.
+            prop_assert!(
+                t < 20_000 || r * 10 > t,
+                "only {r} of {t} ticks ran the bridge"
+            );
+            Ok(())
+        },
+        stats,
+    );
+}
 
-    #[test]
-    fn running_controller_with_arbitrary_bits(
-        bits in proptest::collection::vec((any::<u32>(), any::<u32>(), any::<u32>(), any::<u32>()), 1..64)
-    ) {
-        // Started, then fed raw bit patterns in every field; restarted after each fault.
-        // Dead-time compensation on.
-        let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
-        cfg.dead_time_s = 1e-6;
-        let mut foc = Foc::new(&cfg).unwrap();
-        foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-        foc.start().unwrap();
-        for (a, b, c, u) in bits {
-            let out = foc.tick(&TickInput::abc(
-                f32::from_bits(a), f32::from_bits(b), f32::from_bits(c), f32::from_bits(u),
-            ));
-            check(&out);
-            if out.fault.is_some() {
-                foc.clear_fault();
-                foc.start().unwrap();
+#[test]
+fn running_controller_with_arbitrary_bits() {
+    harness::fuzz(
+        "raw bits into a running controller",
+        512,
+        proptest::collection::vec(
+            (any::<u32>(), any::<u32>(), any::<u32>(), any::<u32>()),
+            1..64,
+        ),
+        |bits| {
+            // Started, then fed raw bit patterns in every field; restarted after each fault.
+            // Dead-time compensation on.
+            let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+            cfg.dead_time_s = 1e-6;
+            let mut foc = Foc::new(&cfg).unwrap();
+            foc.set_speed_ref_mech_rad_s(100.0).unwrap();
+            foc.start().unwrap();
+            for (a, b, c, u) in bits {
+                let out = foc.tick(&TickInput::abc(
+                    f32::from_bits(a),
+                    f32::from_bits(b),
+                    f32::from_bits(c),
+                    f32::from_bits(u),
+                ));
+                check(&out);
+                if out.fault.is_some() {
+                    foc.clear_fault();
+                    foc.start().unwrap();
+                }
             }
-        }
-    }
+            Ok(())
+        },
+        stats,
+    );
+}
+
+/// A parameter: any bit pattern, or (mostly) the default scaled by 1e-3 .. 1e3 or negated.
+fn param() -> impl Strategy<Value = Option<f32>> {
+    prop_oneof![
+        2 => any::<u32>().prop_map(|b| Some(f32::from_bits(b))),
+        1 => prop_oneof![Just(f32::NAN), Just(f32::INFINITY), Just(0.0), Just(-1.0)].prop_map(Some),
+        6 => (-3.0f32..3.0).prop_map(|e| Some(10f32.powf(e))),
+        1 => Just(None),
+    ]
+}
+
+/// Sets field `k` (of the list below) of `cfg` to `v` times its default (or to `v` itself
+/// for bit patterns and special values, which come as `absolute`).
+fn set_field(cfg: &mut FocConfig, k: usize, v: f32, absolute: bool) {
+    let f: &mut f32 = match k % 24 {
+        0 => &mut cfg.motor.rs_ohm,
+        1 => &mut cfg.motor.ls_h,
+        2 => &mut cfg.motor.psi_f_wb,
+        3 => &mut cfg.ts_s,
+        4 => &mut cfg.angle_advance_periods,
+        5 => &mut cfg.current_bw_rad_s,
+        6 => &mut cfg.speed_bw_rad_s,
+        7 => &mut cfg.current_limit_a,
+        8 => &mut cfg.over_current_a,
+        9 => &mut cfg.u_dc_min_v,
+        10 => &mut cfg.u_dc_max_v,
+        11 => &mut cfg.max_speed_rad_s,
+        12 => &mut cfg.max_modulation,
+        13 => &mut cfg.dead_time_s,
+        14 => &mut cfg.startup.align_current_a,
+        15 => &mut cfg.startup.align_time_s,
+        16 => &mut cfg.startup.if_current_a,
+        17 => &mut cfg.startup.accel_rad_s2,
+        18 => &mut cfg.startup.handover_speed_rad_s,
+        19 => &mut cfg.health.window_s,
+        20 => &mut cfg.health.nis_limit,
+        21 => &mut cfg.observer.ts_s,
+        22 => &mut cfg.observer.motor.ls_h,
+        _ => &mut cfg.observer.angle_sigma_limit_rad,
+    };
+    *f = if absolute { v } else { *f * v };
+}
+
+static CONFIGS_OK: AtomicUsize = AtomicUsize::new(0);
+static CONFIGS_REFUSED: AtomicUsize = AtomicUsize::new(0);
+
+#[test]
+fn arbitrary_parameters_are_refused_or_run_safely() {
+    harness::fuzz(
+        "parameters",
+        1024,
+        (
+            proptest::collection::vec((0usize..24, param(), any::<bool>()), 1..4),
+            any::<u32>().prop_map(|p| p % 64),
+            proptest::collection::vec(input(), 1..200),
+        ),
+        |(fields, pole_pairs, inputs)| {
+            let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+            cfg.dead_time_s = 0.5e-6;
+            for (k, v, absolute) in fields {
+                match v {
+                    Some(v) => set_field(&mut cfg, k, v, absolute || !v.is_finite()),
+                    None => cfg.motor.pole_pairs = pole_pairs,
+                }
+            }
+            let Ok(mut foc) = Foc::new(&cfg) else {
+                CONFIGS_REFUSED.fetch_add(1, Ordering::Relaxed);
+                prop_assert!(cfg.validate().is_err());
+                return Ok(());
+            };
+            CONFIGS_OK.fetch_add(1, Ordering::Relaxed);
+            let _ = foc.set_speed_ref_mech_rad_s(100.0);
+            let _ = foc.start();
+            for t in &inputs {
+                let out = foc.tick(t);
+                check(&out);
+                TICKS.fetch_add(1, Ordering::Relaxed);
+                if out.pwm_enabled {
+                    RUNNING.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            Ok(())
+        },
+        stats,
+    );
 }

@@ -1,0 +1,290 @@
+//! Fuzzing of the public step functions, on stable, driven by proptest.
+//!
+//! Arbitrary `f32`/`f64` bit patterns (NaN, infinities, subnormals, huge values) for the
+//! measurements, the inputs and the parameters. Properties, after every call:
+//! - nothing panics;
+//! - a constructor either refuses the configuration with an error or gives an observer;
+//! - a refused step leaves the state and the covariance bit for bit as they were;
+//! - an accepted step leaves a finite state, a finite covariance, an angle in `[-pi, pi]`
+//!   and a finite estimate.
+//!
+//! By default each target runs a fixed number of cases (part of `cargo test`). With
+//! `FUZZ_SECONDS=N` each target runs fresh random cases for `N` seconds instead and prints how
+//! many it ran: `FUZZ_SECONDS=600 cargo test --release -p ekf-core --test fuzz -- --nocapture`.
+
+use ekf_core::nalgebra::{Matrix4, Vector4};
+use ekf_core::{
+    CovarianceUpdate, Discretization, Float, MotorParams, NoiseCovariances, ObserverConfig,
+    PmsmObserver,
+};
+use proptest::prelude::*;
+use proptest::test_runner::TestCaseError;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+
+#[path = "support/fuzz_harness.rs"]
+mod harness;
+
+/// Counters printed after each target, so a run shows it reached the accepting paths.
+static CONFIGS_OK: AtomicU64 = AtomicU64::new(0);
+static CONFIGS_REFUSED: AtomicU64 = AtomicU64::new(0);
+static CALLS_OK: AtomicU64 = AtomicU64::new(0);
+static CALLS_REFUSED: AtomicU64 = AtomicU64::new(0);
+
+/// Any bit pattern of an `f64`, or (most of the time) a plausible value of scale `scale`.
+fn any_f64(scale: f64) -> impl Strategy<Value = f64> {
+    prop_oneof![
+        1 => any::<u64>().prop_map(f64::from_bits),
+        1 => prop_oneof![
+            Just(0.0), Just(-0.0), Just(f64::NAN), Just(f64::INFINITY), Just(f64::NEG_INFINITY),
+            Just(f64::MAX), Just(f64::MIN_POSITIVE), Just(-f64::MAX), Just(1e-300),
+        ],
+        4 => (-1.0f64..1.0).prop_map(move |x| x * scale),
+    ]
+}
+
+/// A parameter: any bit pattern, a boundary value, or (mostly) a plausible positive value
+/// around `nominal` (from 1e-3x to 1e3x).
+fn param(nominal: f64) -> impl Strategy<Value = f64> {
+    prop_oneof![
+        1 => any_f64(nominal),
+        12 => (-3.0f64..3.0).prop_map(move |e| nominal * 10f64.powf(e)),
+    ]
+}
+
+/// One call on the observer.
+#[derive(Clone, Debug)]
+enum Call {
+    Step([f64; 2], [f64; 2]),
+    Predict([f64; 2]),
+    Correct([f64; 2]),
+    Reset([f64; 4], f64),
+}
+
+fn call(u: f64, i: f64) -> impl Strategy<Value = Call> {
+    let pair = move |s| [any_f64(s), any_f64(s)];
+    let plausible = move |s: f64| [(-s..s), (-s..s)];
+    prop_oneof![
+        30 => (plausible(u), plausible(i)).prop_map(|(u, i)| Call::Step(u, i)),
+        10 => (pair(u), pair(i)).prop_map(|(u, i)| Call::Step(u, i)),
+        2 => pair(u).prop_map(Call::Predict),
+        2 => pair(i).prop_map(Call::Correct),
+        1 => ([any_f64(i), any_f64(i), any_f64(1e3), any_f64(4.0)], param(1.0))
+            .prop_map(|(x, p)| Call::Reset(x, p)),
+    ]
+}
+
+/// A configuration with every parameter fuzzed: motor, Ts, Q, R, P0, x0, angle limit.
+#[derive(Clone, Debug)]
+struct Params {
+    motor: (f64, f64, f64, u32),
+    ts: f64,
+    q: [f64; 4],
+    r: [f64; 2],
+    p0: [f64; 4],
+    x0: [f64; 4],
+    sigma_limit: f64,
+    lag_free: bool,
+    joseph: bool,
+    seed_noise: bool,
+}
+
+fn params() -> impl Strategy<Value = Params> {
+    (
+        (param(1.0), param(2e-3), param(0.05), 0u32..64),
+        param(1e-4),
+        (
+            [param(1e-6), param(1e-6), param(1.0), param(1e-8)],
+            [param(1e-4), param(1e-4)],
+        ),
+        (
+            [param(1e-2), param(1e-2), param(1e4), param(10.0)],
+            [any_f64(1.0), any_f64(1.0), any_f64(1e3), any_f64(4.0)],
+        ),
+        param(0.2),
+        (any::<bool>(), any::<bool>(), prop::bool::weighted(0.2)),
+    )
+        .prop_map(
+            |(motor, ts, (q, r), (p0, x0), sigma_limit, (lag_free, joseph, seed_noise))| Params {
+                motor,
+                ts,
+                q,
+                r,
+                p0,
+                x0,
+                sigma_limit,
+                lag_free,
+                joseph,
+                seed_noise,
+            },
+        )
+}
+
+fn config<T: Float>(p: &Params) -> ObserverConfig<T> {
+    let t = |v: f64| T::from_subset(&v);
+    let motor = MotorParams {
+        rs_ohm: t(p.motor.0),
+        ls_h: t(p.motor.1),
+        psi_f_wb: t(p.motor.2),
+        pole_pairs: p.motor.3,
+    };
+    let mut cfg = ObserverConfig::new(motor, t(p.ts));
+    cfg.discretization = if p.lag_free {
+        Discretization::LagFree
+    } else {
+        Discretization::ForwardEuler
+    };
+    cfg.covariance_update = if p.joseph {
+        CovarianceUpdate::Joseph
+    } else {
+        CovarianceUpdate::StandardSymmetrized
+    };
+    cfg.noise = if p.seed_noise {
+        NoiseCovariances::seed()
+    } else {
+        NoiseCovariances::from_diagonals(p.q.map(t), p.r.map(t))
+    };
+    cfg.p0 = Matrix4::from_diagonal(&Vector4::from(p.p0.map(t)));
+    cfg.x0 = Vector4::from(p.x0.map(t));
+    cfg.angle_sigma_limit_rad = t(p.sigma_limit);
+    cfg
+}
+
+fn is_nan<T: Float>(x: T) -> bool {
+    x.partial_cmp(&x).is_none()
+}
+
+fn finite<T: Float>(v: &[T]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// Applies `calls` and checks the properties of the module docs after each.
+fn drive<T: Float>(obs: &mut PmsmObserver<T>, calls: &[Call]) -> Result<(), TestCaseError> {
+    let t = |v: f64| T::from_subset(&v);
+    let pi = T::pi();
+    for c in calls {
+        let (x0, p0) = (*obs.state(), obs.covariance());
+        let (ok, est) = match *c {
+            Call::Step(u, i) => match obs.step(u.map(t), i.map(t)) {
+                Ok(e) => (true, Some(e)),
+                Err(_) => (false, None),
+            },
+            Call::Predict(u) => (obs.predict(u.map(t)).is_ok(), None),
+            Call::Correct(i) => match obs.correct(i.map(t)) {
+                Ok(e) => (true, Some(e)),
+                Err(_) => (false, None),
+            },
+            Call::Reset(x, p) => {
+                let p = Matrix4::identity() * t(p);
+                (obs.reset(Vector4::from(x.map(t)), p).is_ok(), None)
+            }
+        };
+        let (x, p) = (*obs.state(), obs.covariance());
+        if ok { &CALLS_OK } else { &CALLS_REFUSED }.fetch_add(1, Relaxed);
+        if !ok {
+            // Refused: nothing changed, bit for bit (NaN-safe comparison).
+            let same = |a: &[T], b: &[T]| {
+                a.iter()
+                    .zip(b)
+                    .all(|(a, b)| a == b || (is_nan(*a) && is_nan(*b)))
+            };
+            prop_assert!(same(x.as_slice(), x0.as_slice()), "{c:?} changed x");
+            prop_assert!(same(p.as_slice(), p0.as_slice()), "{c:?} changed P");
+            continue;
+        }
+        prop_assert!(finite(x.as_slice()), "{c:?}: state {x:?}");
+        prop_assert!(finite(p.as_slice()), "{c:?}: P {p:?}");
+        prop_assert!(x[3] >= -pi && x[3] <= pi, "{c:?}: angle {}", x[3]);
+        if let Some(e) = est {
+            prop_assert!(
+                finite(&[e.theta_rad, e.omega_e_rad_s, e.omega_mech_rad_s])
+                    && finite(&[e.i_alpha_a, e.i_beta_a]),
+                "{c:?}: estimate {e:?}"
+            );
+            prop_assert!(!is_nan(e.nis), "{c:?}: NIS {:?}", e.nis);
+        }
+    }
+    Ok(())
+}
+
+/// The counters, for the harness's report.
+fn stats() -> String {
+    format!(
+        "totals so far: configs {} accepted / {} refused, calls {} accepted / {} refused",
+        CONFIGS_OK.load(Relaxed),
+        CONFIGS_REFUSED.load(Relaxed),
+        CALLS_OK.load(Relaxed),
+        CALLS_REFUSED.load(Relaxed),
+    )
+}
+
+fn fuzz_params<T: Float>(name: &str, cases: u32) {
+    harness::fuzz(
+        name,
+        cases,
+        (params(), prop::collection::vec(call(50.0, 5.0), 0..64)),
+        |(p, calls)| {
+            let cfg = config::<T>(&p);
+            match PmsmObserver::new(&cfg) {
+                // A refused configuration must have been refused by `validate` too.
+                Err(_) => {
+                    CONFIGS_REFUSED.fetch_add(1, Relaxed);
+                    prop_assert!(cfg.validate().is_err());
+                }
+                Ok(mut obs) => {
+                    CONFIGS_OK.fetch_add(1, Relaxed);
+                    drive(&mut obs, &calls)?;
+                }
+            }
+            Ok(())
+        },
+        stats,
+    );
+}
+
+fn fuzz_inputs<T: Float>(name: &str, cases: u32) {
+    let motors = [
+        MotorParams::<T>::servo(),
+        MotorParams::industrial_2k2(),
+        MotorParams::small_fast(),
+    ];
+    harness::fuzz(
+        name,
+        cases,
+        (
+            0usize..3,
+            any::<bool>(),
+            prop::collection::vec(call(100.0, 10.0), 1..256),
+        ),
+        |(m, seed, calls)| {
+            let ts = T::from_subset(&1e-4);
+            let cfg = if seed {
+                ObserverConfig::seed(motors[m], ts)
+            } else {
+                ObserverConfig::new(motors[m], ts)
+            };
+            let mut obs = PmsmObserver::new(&cfg).expect("preset is valid");
+            drive(&mut obs, &calls)
+        },
+        stats,
+    );
+}
+
+#[test]
+fn fuzz_inputs_f32() {
+    fuzz_inputs::<f32>("inputs f32", 256);
+}
+
+#[test]
+fn fuzz_inputs_f64() {
+    fuzz_inputs::<f64>("inputs f64", 256);
+}
+
+#[test]
+fn fuzz_parameters_f32() {
+    fuzz_params::<f32>("parameters f32", 512);
+}
+
+#[test]
+fn fuzz_parameters_f64() {
+    fuzz_params::<f64>("parameters f64", 512);
+}
