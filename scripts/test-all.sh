@@ -27,6 +27,10 @@ bash scripts/qemu-firmware.sh
 step "tests (unit, integration, doc)"
 cargo test --locked
 
+step "fuzzing, bounded: every fuzz target of ekf-core and foc for 20 s (release)"
+FUZZ_SECONDS=20 cargo test --release --locked -p ekf-core -p foc --test fuzz -- --nocapture 2>&1 | grep -E '^fuzz |test result|panicked|FAILED|error' 
+test "${PIPESTATUS[0]}" -eq 0
+
 step "Python venv (.venv): numpy, maturin, pytest, filterpy"
 venv=.venv
 if [ ! -x "$venv/bin/python" ]; then

@@ -12,10 +12,11 @@
 //! `FUZZ_SECONDS=N` each target runs fresh random cases for `N` seconds instead and prints how
 //! many it ran: `FUZZ_SECONDS=600 cargo test --release -p ekf-core --test fuzz -- --nocapture`.
 
+use ekf_core::nalgebra::Vector2;
 use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{
-    CovarianceUpdate, Discretization, Float, MotorParams, NoiseCovariances, ObserverConfig,
-    PmsmObserver,
+    CovarianceUpdate, Discretization, Ekf, Float, MotorParams, NoiseCovariances, ObserverConfig,
+    PmsmModel, PmsmObserver,
 };
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -287,4 +288,63 @@ fn fuzz_parameters_f32() {
 #[test]
 fn fuzz_parameters_f64() {
     fuzz_params::<f64>("parameters f64", 512);
+}
+
+/// The generic filter driven by the PMSM model, with fuzzed parameters and calls: a refused
+/// call changes nothing, an accepted one leaves everything finite.
+fn fuzz_generic<T: Float>(name: &str, cases: u32) {
+    harness::fuzz(
+        name,
+        cases,
+        (params(), prop::collection::vec(call(50.0, 5.0), 0..64)),
+        |(p, calls)| {
+            let cfg = config::<T>(&p);
+            if cfg.validate().is_err() {
+                CONFIGS_REFUSED.fetch_add(1, Relaxed);
+                return Ok(());
+            }
+            CONFIGS_OK.fetch_add(1, Relaxed);
+            let model = PmsmModel::new(&cfg);
+            let mut ekf = Ekf::<T, 4, 2>::new(cfg.x0, cfg.p0, cfg.covariance_update);
+            let t = |v: f64| T::from_subset(&v);
+            for c in &calls {
+                let (x0, p0) = (*ekf.state(), *ekf.covariance());
+                let ok = match *c {
+                    Call::Step(u, i) => {
+                        ekf.predict(&model, &Vector2::from(u.map(t))).is_ok()
+                            && ekf.correct(&model, &Vector2::from(i.map(t))).is_ok()
+                    }
+                    Call::Predict(u) => ekf.predict(&model, &Vector2::from(u.map(t))).is_ok(),
+                    Call::Correct(i) => ekf.correct(&model, &Vector2::from(i.map(t))).is_ok(),
+                    Call::Reset(x, p) => ekf
+                        .reset(Vector4::from(x.map(t)), Matrix4::identity() * t(p))
+                        .is_ok(),
+                };
+                if ok { &CALLS_OK } else { &CALLS_REFUSED }.fetch_add(1, Relaxed);
+                let (x, p) = (ekf.state(), ekf.covariance());
+                if ok {
+                    prop_assert!(finite(x.as_slice()) && finite(p.as_slice()), "{c:?}");
+                } else if !matches!(c, Call::Step(..)) {
+                    // (A step is predict then correct; a refused correct keeps the prediction.)
+                    prop_assert!(
+                        x.iter().zip(x0.iter()).all(|(a, b)| a == b || is_nan(*b))
+                            && p.iter().zip(p0.iter()).all(|(a, b)| a == b || is_nan(*b)),
+                        "{c:?} changed the filter"
+                    );
+                }
+            }
+            Ok(())
+        },
+        stats,
+    );
+}
+
+#[test]
+fn fuzz_generic_f32() {
+    fuzz_generic::<f32>("generic Ekf f32", 256);
+}
+
+#[test]
+fn fuzz_generic_f64() {
+    fuzz_generic::<f64>("generic Ekf f64", 256);
 }
