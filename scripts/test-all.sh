@@ -28,8 +28,12 @@ step "tests (unit, integration, doc)"
 cargo test --locked
 
 step "fuzzing, bounded: every fuzz target of ekf-core and foc for 20 s (release)"
-FUZZ_SECONDS=20 cargo test --release --locked -p ekf-core -p foc --test fuzz -- --nocapture 2>&1 | grep -E '^fuzz |test result|panicked|FAILED|error' 
-test "${PIPESTATUS[0]}" -eq 0
+fuzz_log=$(mktemp)
+if ! FUZZ_SECONDS=20 cargo test --release --locked -p ekf-core -p foc --test fuzz -- --nocapture >"$fuzz_log" 2>&1; then
+    cat "$fuzz_log"
+    exit 1
+fi
+grep -E '^fuzz |test result' "$fuzz_log"
 
 step "Python venv (.venv): numpy, maturin, pytest, filterpy"
 venv=.venv
