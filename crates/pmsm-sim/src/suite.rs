@@ -604,9 +604,9 @@ impl SideObserver for Scored {
         }
         if t < self.plan.conv_end_s {
             self.last_conv_s = t;
-            let bad = own
-                .as_ref()
-                .is_none_or(|s| !(s.angle_error_deg.abs() < CONVERGED_DEG));
+            let bad = own.as_ref().is_none_or(|s| {
+                s.angle_error_deg.abs() >= CONVERGED_DEG || s.angle_error_deg.is_nan()
+            });
             if bad {
                 self.last_bad_s = Some(t);
             }
