@@ -12,7 +12,8 @@
 //!    e.g. `foc` after its dead-time compensation), the voltage the controller expects those
 //!    duties to realize. The actual dead-time distortion is **not** in it (a real controller
 //!    does not know it), so uncompensated dead time shows up as observer error, as on a bench. The estimate is compared
-//!    with the true `th(t_k)`, `w_e(t_k)`.
+//!    with the true `th(t_k)`, `w_e(t_k)`. Extra observers ([`SideObserver`],
+//!    [`run_with_side_observers`]) step right after, on the same inputs.
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
 //!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
 //!    of its own observer (`foc`'s `f32` EKF, which has stepped with its own record of the
