@@ -15,6 +15,10 @@ pub enum Param {
     Ts,
     /// Angle standard deviation limit of the status `angle_sigma_limit_rad`.
     AngleSigmaLimit,
+    /// Flux observer gain `observer_gain_rad_s` ([`crate::flux`]).
+    ObserverGain,
+    /// PLL bandwidth `pll_bandwidth_rad_s` ([`crate::flux`]).
+    PllBandwidth,
 }
 
 /// A matrix named in a [`ConfigError`].
@@ -45,6 +49,9 @@ pub enum ConfigError {
     NotPositiveSemiDefinite(Matrix),
     /// The initial state `x0` holds a NaN or an infinity.
     NonFiniteInitialState,
+    /// The parameter is too large for the sample time: its discrete update would be unstable
+    /// or badly damped (the limit is in the parameter's documentation).
+    TooLargeForTs(Param),
 }
 
 impl fmt::Display for Param {
@@ -55,6 +62,8 @@ impl fmt::Display for Param {
             Param::PsiF => "psi_f_wb",
             Param::Ts => "ts_s",
             Param::AngleSigmaLimit => "angle_sigma_limit_rad",
+            Param::ObserverGain => "observer_gain_rad_s",
+            Param::PllBandwidth => "pll_bandwidth_rad_s",
         })
     }
 }
@@ -81,6 +90,9 @@ impl fmt::Display for ConfigError {
                 write!(f, "{m} is not positive semi-definite (negative eigenvalue)")
             }
             ConfigError::NonFiniteInitialState => f.write_str("x0 holds a NaN or an infinity"),
+            ConfigError::TooLargeForTs(p) => {
+                write!(f, "{p} is too large for ts_s (unstable discrete update)")
+            }
         }
     }
 }

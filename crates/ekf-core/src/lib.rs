@@ -6,6 +6,7 @@
 pub mod angle;
 pub mod ekf;
 mod error;
+pub mod flux;
 pub mod motor;
 pub mod noise;
 pub mod observer;
@@ -15,6 +16,7 @@ pub mod trig;
 pub use angle::wrap_angle;
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
 pub use error::{ConfigError, Matrix, Param};
+pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, FluxTiming};
 pub use motor::MotorParams;
 pub use noise::NoiseCovariances;
 pub use observer::{

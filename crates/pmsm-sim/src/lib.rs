@@ -15,6 +15,7 @@ pub mod report;
 pub mod scenario;
 pub mod sensors;
 pub mod sim;
+pub mod suite;
 pub mod svpwm;
 
 pub use error::{FieldError, SimError};

@@ -15,6 +15,7 @@ use pmsm_sim::mcap_log::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::plot::PlotSink;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
+use pmsm_sim::suite::{SuiteOptions, run_suite};
 use pmsm_sim::{SimError, report};
 
 /// Desktop simulator of a sensorless PMSM drive: plant, inverter, sensors, controller and the
@@ -62,6 +63,23 @@ enum Command {
         runs: usize,
         /// Directory for the benchmark's MCAP file.
         #[arg(long, default_value = "out/bench")]
+        out: PathBuf,
+    },
+    /// Run the scenario suite: the three reference motors at 10/50/100 % rated speed, a rated
+    /// load step and an unknown start; tables for the seed's filter, the flux + PLL baseline
+    /// and the default EKF (printed, and written as suite.md and suite.json).
+    Suite {
+        /// Shortened windows (about half the simulated time).
+        #[arg(long)]
+        short: bool,
+        /// Seed of the sensor noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Ideal sensing and inverter (no noise, ADC, offsets, gain errors, dead time).
+        #[arg(long)]
+        ideal: bool,
+        /// Output directory.
+        #[arg(long, default_value = "out/suite")]
         out: PathBuf,
     },
 }
@@ -151,6 +169,12 @@ fn main() -> ExitCode {
             runs,
             out,
         }) => bench(scenario.as_deref(), runs, &out),
+        Some(Command::Suite {
+            short,
+            seed,
+            ideal,
+            out,
+        }) => suite(SuiteOptions { short, seed, ideal }, &out),
     };
     match result {
         Ok(code) => code,
@@ -590,4 +614,21 @@ fn components(sc: &Scenario, runs: usize) {
     ] {
         println!("  {name:<44} {ns:>8.1}");
     }
+}
+
+/// `pmsm-sim suite`: runs the suite, prints the markdown tables, writes `suite.md` and
+/// `suite.json` to `out`. A goal or limit that fails is a result (in the tables), not an
+/// error: the exit code is 0 whenever the suite ran.
+fn suite(opts: SuiteOptions, out: &Path) -> Result<ExitCode, SimError> {
+    let report = run_suite(&opts)?;
+    let md = report.to_markdown();
+    print!("{md}");
+    std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
+    let md_path = out.join("suite.md");
+    std::fs::write(&md_path, &md).map_err(|e| out_err(&md_path, e))?;
+    let json_path = out.join("suite.json");
+    let json = serde_json::to_string_pretty(&report).map_err(|e| out_err(&json_path, e))?;
+    std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
+    println!("\noutputs: {} {}", md_path.display(), json_path.display());
+    Ok(ExitCode::SUCCESS)
 }

@@ -12,7 +12,8 @@
 //!    e.g. `foc` after its dead-time compensation), the voltage the controller expects those
 //!    duties to realize. The actual dead-time distortion is **not** in it (a real controller
 //!    does not know it), so uncompensated dead time shows up as observer error, as on a bench. The estimate is compared
-//!    with the true `th(t_k)`, `w_e(t_k)`.
+//!    with the true `th(t_k)`, `w_e(t_k)`. Extra observers ([`SideObserver`],
+//!    [`run_with_side_observers`]) step right after, on the same inputs.
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
 //!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
 //!    of its own observer (`foc`'s `f32` EKF, which has stepped with its own record of the
@@ -358,7 +359,36 @@ pub fn run_with(scenario: &Scenario, opts: RunOptions<'_>) -> Result<RunOutput, 
 pub fn run_with_controller(
     scenario: &Scenario,
     controller: &mut dyn DriveController,
+    opts: RunOptions<'_>,
+) -> Result<RunOutput, SimError> {
+    run_with_side_observers(scenario, controller, opts, &mut [])
+}
+
+/// The estimate a [`SideObserver`] returns: angle, speed, and what it can tell of its
+/// uncertainty (zeros and `tracking = true` when it has no covariance).
+pub type SideEstimate = ControllerEstimate;
+
+/// An extra observer stepped alongside the built-in ones, on exactly their inputs (the
+/// scenario suite compares observers this way). In period `k`, [`step`](Self::step) comes
+/// right after the built-in observers' steps, before the controller ticks and before the
+/// truth is known to anyone; [`record`](Self::record) comes once the period's [`Sample`] is
+/// complete, with this observer's estimate scored against the truth.
+pub trait SideObserver {
+    /// One step with the timing of `PmsmObserver::step`: `u_prev` the voltage held over the
+    /// previous period as the controller knows it, `i_ab_a` the currents measured now.
+    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<SideEstimate, EkfError>;
+
+    /// The completed sample of the period, and this observer's scored estimate (its error
+    /// when the step failed; the run goes on).
+    fn record(&mut self, sample: &Sample, own: Result<ObserverSample, EkfError>);
+}
+
+/// As [`run_with_controller`], with extra observers stepped alongside ([`SideObserver`]).
+pub fn run_with_side_observers(
+    scenario: &Scenario,
+    controller: &mut dyn DriveController,
     mut opts: RunOptions<'_>,
+    side: &mut [&mut dyn SideObserver],
 ) -> Result<RunOutput, SimError> {
     scenario.validate().map_err(|e| SimError::Scenario {
         file: scenario.name.clone(),
@@ -394,6 +424,7 @@ pub fn run_with_controller(
     let mut expected_pending: Option<[f64; 2]> = None;
     let delay = scenario.inverter.delay;
     let mut seed_filter_failure = None;
+    let mut side_est = Vec::with_capacity(side.len());
     let mut end = RunEnd::Completed;
     let start = Instant::now();
     for k in 0..n {
@@ -441,6 +472,8 @@ pub fn run_with_controller(
             }
             None => None,
         };
+        side_est.clear();
+        side_est.extend(side.iter_mut().map(|o| o.step(u_prev, meas.i_ab_a)));
 
         let speed_ref_rpm = scenario.speed_ref_rpm.at(t);
         let out = controller.tick(&ControllerInput {
@@ -516,6 +549,12 @@ pub fn run_with_controller(
             },
         };
         acc.push(&sample);
+        for (o, r) in side.iter_mut().zip(&side_est) {
+            o.record(
+                &sample,
+                r.map(|e| ObserverSample::from_controller(&e, &truth)),
+            );
+        }
         let mut sink_error = None;
         for sink in opts.sinks.iter_mut() {
             if let Err(message) = sink.record(&sample) {
