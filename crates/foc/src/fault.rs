@@ -9,8 +9,8 @@
 //!
 //! | fault | trips when | checked |
 //! |---|---|---|
-//! | [`Fault::NonFiniteInput`] | a current, `u_dc`, or a supplied sensor value is NaN or infinite; the sensor angle beyond `+-1e4` rad or its speed beyond `+-1e6` rad/s; the sensor missing in sensored mode | every tick, every state |
-//! | [`Fault::OverCurrent`] | `|i_alpha_beta|`, or `|i_c|` when given, above `over_current_a` | every tick, every state |
+//! | [`Fault::NonFiniteInput`] | `u_dc` or a supplied sensor value is NaN or infinite; the sensor angle beyond `+-1e4` rad or its speed beyond `+-1e6` rad/s; the sensor missing in sensored mode; `samples.missing_trip_ticks` current samples in a row missing (NaN, infinite) or implausible (below the over-current level) | every tick, every state |
+//! | [`Fault::OverCurrent`] | `|i_alpha_beta|`, or `|i_c|` when given, above `over_current_a` for `samples.over_current_trip_ticks` accepted samples in a row (debounced: the hardware comparator is the real protection), or `missing_trip_ticks` rejected samples in a row above it | every tick, every state |
 //! | [`Fault::BusOverVoltage`] | `u_dc > u_dc_max_v` | every tick, every state |
 //! | [`Fault::BusUnderVoltage`] | `u_dc < u_dc_min_v` | while the bridge is driven (not in `Idle`) |
 //! | [`Fault::ObserverLost`] | health monitor: lost in closed loop with [`ObserverLossPolicy::Trip`](crate::ObserverLossPolicy::Trip); re-acquisitions exhausted; no lock within `acquire_timeout_s` at the hand-over speed | sensorless running states |
