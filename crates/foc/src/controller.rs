@@ -274,6 +274,12 @@ pub struct Foc {
     missed: u16,
     /// Accepted samples above the over-current level in a row.
     over_current_count: u16,
+    /// Last raw readings of phases a and b (stuck-channel check).
+    raw_last: [f32; 2],
+    /// Electrical angle the current vector turned while phase a / b repeated its reading, rad.
+    stuck_angle: [f32; 2],
+    /// Ticks phase a / b repeated its reading.
+    stuck_ticks: [u16; 2],
     pub(crate) report: HealthReport,
 }
 
@@ -339,6 +345,9 @@ impl Foc {
             i_last: AlphaBeta::default(),
             missed: 0,
             over_current_count: 0,
+            raw_last: [f32::NAN; 2],
+            stuck_angle: [0.0; 2],
+            stuck_ticks: [0; 2],
             report: HealthReport::default(),
         })
     }
@@ -505,6 +514,20 @@ impl Foc {
         let Some(plan) = self.sequence(&est, observer_ok, input.sensor) else {
             return self.safe_output();
         };
+        // Stuck channel: a sampled phase current that repeats bit for bit while the current
+        // vector turns (module docs). The common path is two comparisons.
+        if let PhaseCurrents::Abc(x) = input.currents {
+            let same = [x.a == self.raw_last[0], x.b == self.raw_last[1]];
+            self.raw_last = [x.a, x.b];
+            if same[0] || same[1] {
+                if self.stuck_channel(same, x, plan) {
+                    return self.safe_output();
+                }
+            } else {
+                self.stuck_angle = [0.0; 2];
+                self.stuck_ticks = [0; 2];
+            }
+        }
 
         // Current loops in the control frame.
         let frame = plan.frame;
@@ -572,6 +595,37 @@ impl Foc {
                 sample_ok,
             },
         }
+    }
+
+    /// A phase reading repeated: accumulates the angle the current vector turned meanwhile
+    /// (only while the commanded current is at least 5 % of the current limit) and trips
+    /// [`Fault::CurrentSensor`] once it exceeds `samples.stuck_angle_rad` (and at least 4
+    /// ticks). Returns whether it tripped.
+    #[cold]
+    #[inline(never)]
+    fn stuck_channel(&mut self, same: [bool; 2], x: Abc, plan: Plan) -> bool {
+        let limit = self.cfg.samples.stuck_angle_rad;
+        let i_min = 0.05 * self.cfg.current_limit_a;
+        let step = if at_most(i_min * i_min, plan.i_ref.norm_squared()) {
+            let w = plan.frame.omega;
+            max2(w, -w) * self.cfg.ts_s
+        } else {
+            0.0
+        };
+        for (ch, v) in [x.a, x.b].into_iter().enumerate() {
+            if !same[ch] {
+                self.stuck_angle[ch] = 0.0;
+                self.stuck_ticks[ch] = 0;
+                continue;
+            }
+            self.stuck_angle[ch] += step;
+            self.stuck_ticks[ch] = self.stuck_ticks[ch].saturating_add(1);
+            if limit > 0.0 && self.stuck_angle[ch] > limit && self.stuck_ticks[ch] >= 4 {
+                self.trip(Fault::CurrentSensor, v);
+                return true;
+            }
+        }
+        false
     }
 
     /// The last dq voltage for a tick over a bad sample: in this tick's frame (rotated when
@@ -760,6 +814,8 @@ impl Foc {
         self.speed_pi.reset();
         self.u_hist = [AlphaBeta::default(); 2];
         self.u_dq_last = Dq::default();
+        self.stuck_angle = [0.0; 2];
+        self.stuck_ticks = [0; 2];
     }
 
     /// Replaces the observer's estimate by `theta` (rad el.), `omega` (rad/s el.) with angle

@@ -127,6 +127,7 @@ pub fn fault_name(f: Fault) -> &'static str {
         Fault::ObserverLost => "observer_lost",
         Fault::Stall => "stall",
         Fault::NonFiniteInput => "non_finite_input",
+        Fault::CurrentSensor => "current_sensor",
     }
 }
 
