@@ -707,9 +707,13 @@ torque_nm = 4.0
 
     #[test]
     fn bad_faults_name_their_field() {
+        // An unknown key: the fault's index, the key's name and its place in the file.
         let (f, p) = field_of("[[faults]]\nkind = \"glitch\"\nt_s = 1.0\nduration_s = 0.1\n");
-        assert_eq!(f, "faults[0].duration_s");
-        assert!(p.contains("unknown field"), "{p}");
+        assert_eq!(f, "faults[0]");
+        assert!(
+            p.contains("unknown field `duration_s`") && p.contains("line"),
+            "{p}"
+        );
         let (f, p) = field_of("[[faults]]\nkind = \"meltdown\"\nt_s = 1.0\n");
         assert_eq!(f, "faults[0].kind");
         assert!(p.contains("unknown variant"), "{p}");
@@ -723,8 +727,9 @@ torque_nm = 4.0
         assert!(p.contains("end of the run"), "{p}");
         let (f, _) = field_of("[[faults]]\nkind = \"overload\"\nt_s = 1.0\nduration_s = -1.0\ntorque_nm = 1.0\n");
         assert_eq!(f, "faults[0].duration_s");
-        let (f, _) = field_of("[[faults]]\nkind = \"stuck\"\nt_s = 1.0\nchannel = \"c\"\n");
-        assert_eq!(f, "faults[0].channel");
+        let (f, p) = field_of("[[faults]]\nkind = \"stuck\"\nt_s = 1.0\nchannel = \"c\"\n");
+        assert_eq!(f, "faults[0]");
+        assert!(p.contains("unknown variant `c`"), "{p}");
         let (f, _) = field_of(
             "[[faults]]\nkind = \"param_drift\"\nt_s = 1.0\ntemperature_rise_k = 1000.0\n",
         );
