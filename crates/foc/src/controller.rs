@@ -249,8 +249,9 @@ pub struct Foc {
     pub(crate) acquire_ticks: u32,
     pub(crate) stall_ticks: u32,
     over_current_sq: f32,
-    /// Largest plausible change of the current vector per period, A.
+    /// Largest plausible change of the current vector per period, A, and its square.
     max_step_a: f32,
+    max_step_sq: f32,
     advance_s: f32,
     dead_time: DeadTimeCompensation,
     // Parts.
@@ -329,6 +330,8 @@ impl Foc {
             // Capped so that `((n + 1) step)^2` stays finite for any count `n`: an infinite
             // step of the current vector (`d^2 = inf`) is then never accepted.
             max_step_a: min2(cfg.max_current_step(), 1.0e14),
+            max_step_sq: min2(cfg.max_current_step(), 1.0e14)
+                * min2(cfg.max_current_step(), 1.0e14),
             advance_s: cfg.angle_advance_periods * ts,
             dead_time: DeadTimeCompensation::new(cfg.dead_time_s, ts, cfg.dead_time_band()),
             observer,
@@ -523,7 +526,7 @@ impl Foc {
                 if self.stuck_channel(same, x, plan) {
                     return self.safe_output();
                 }
-            } else {
+            } else if self.stuck_ticks != [0; 2] {
                 self.stuck_angle = [0.0; 2];
                 self.stuck_ticks = [0; 2];
             }
@@ -643,7 +646,13 @@ impl Foc {
             (u, false)
         } else {
             let k = u_max / sqrt(n2);
-            (Dq { d: u.d * k, q: u.q * k }, true)
+            (
+                Dq {
+                    d: u.d * k,
+                    q: u.q * k,
+                },
+                true,
+            )
         }
     }
 
@@ -652,10 +661,15 @@ impl Foc {
     /// count reaches its limit.
     #[inline]
     fn check_currents(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) -> bool {
-        let lim = self.max_step_a * (f32::from(self.missed) + 1.0);
+        let lim_sq = if self.missed == 0 {
+            self.max_step_sq
+        } else {
+            let lim = self.max_step_a * (f32::from(self.missed) + 1.0);
+            lim * lim
+        };
         let d = i_ab - self.i_last;
         // False for NaN: a non-finite current is never accepted (`c` too).
-        if !(at_most(d.norm_squared(), lim * lim) && at_most(c_abs, f32::MAX)) {
+        if !(at_most(d.norm_squared(), lim_sq) && at_most(c_abs, f32::MAX)) {
             self.bad_sample(input, i_ab, c_abs);
             return false;
         }
@@ -678,10 +692,7 @@ impl Foc {
     fn over_current_sample(&mut self, i_ab: AlphaBeta, c_abs: f32) {
         self.over_current_count = self.over_current_count.saturating_add(1);
         if self.over_current_count >= self.cfg.samples.over_current_trip_ticks {
-            self.trip(
-                Fault::OverCurrent,
-                max2(sqrt(i_ab.norm_squared()), c_abs),
-            );
+            self.trip(Fault::OverCurrent, max2(sqrt(i_ab.norm_squared()), c_abs));
         }
     }
 

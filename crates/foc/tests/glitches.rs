@@ -296,7 +296,10 @@ fn a_stuck_channel_trips_within_a_quarter_turn() {
         assert_eq!(fault, Some(Fault::CurrentSensor), "phase {phase}");
         // The frame's angle is accumulated: its speed moves a little as the frozen reading
         // misleads the loops, so the trip comes within 3/4 to 3/2 of a quarter period.
-        assert!(4 * k >= 3 * quarter && 2 * k <= 3 * quarter, "{k} ticks, quarter {quarter}");
+        assert!(
+            4 * k >= 3 * quarter && 2 * k <= 3 * quarter,
+            "{k} ticks, quarter {quarter}"
+        );
         println!("phase {phase} stuck: trip after {k} ticks (quarter period {quarter})");
         assert!(rig.plant.x[0].hypot(rig.plant.x[1]) < rig.foc.config().over_current_a.into());
     }
