@@ -62,6 +62,14 @@
 //! [`Fault::NonFiniteInput`]; above `over_current_a`: [`Fault::OverCurrent`]; else
 //! `NonFiniteInput`, an absurd value).
 //!
+//! A **stuck channel** (phase `a` or `b` of [`PhaseCurrents::Abc`] repeating its reading bit
+//! for bit while the commanded current vector, at least 5 % of the current limit, turns by
+//! `samples.stuck_angle_rad`, a quarter period by default) trips [`Fault::CurrentSensor`]:
+//! a live channel's sinusoid moves by 29 % of its amplitude over a quarter period. Found by
+//! two comparisons per tick. Without it a frozen reading goes unnoticed by the other checks
+//! (it is plausible and finite) while the loops, chasing a current they cannot move, drive
+//! the real one far past the over-current level before anything trips.
+//!
 //! The software over-current check runs on accepted samples only and is debounced: it trips
 //! after `over_current_trip_ticks` samples in a row above `over_current_a` (default 2). A
 //! single sample never trips it. This is a back-up: the bridge's hardware comparator, which

@@ -299,7 +299,8 @@ impl FaultSpec {
     /// Checks the values for `scenario` (start within the run, positive durations, the
     /// kind's parameters); errors name `field.<name>`.
     pub fn validate(&self, field: &str, scenario: &Scenario) -> Result<(), FieldError> {
-        let err = |name: &str, problem: String| Err(FieldError::new(format!("{field}.{name}"), problem));
+        let err =
+            |name: &str, problem: String| Err(FieldError::new(format!("{field}.{name}"), problem));
         let t = self.start_s();
         if !(t.is_finite() && t >= 0.0) {
             return err("t_s", format!("must be finite and >= 0, is {t}"));
@@ -369,9 +370,7 @@ impl FaultSpec {
                 if 1.0 + rs_per_k * temperature_rise_k <= 0.0 {
                     return err(
                         "temperature_rise_k",
-                        format!(
-                            "{temperature_rise_k} K with rs_per_k = {rs_per_k} makes Rs <= 0"
-                        ),
+                        format!("{temperature_rise_k} K with rs_per_k = {rs_per_k} makes Rs <= 0"),
                     );
                 }
                 if 1.0 + psi_f_per_k * temperature_rise_k <= 0.0 {
@@ -490,8 +489,7 @@ impl FaultInjector {
                     ..
                 } if k >= a.k0 => {
                     let end = if a.k1 == u64::MAX { k } else { k.min(a.k1) };
-                    f.offset_a[channel.index()] +=
-                        rate_a_per_s * (end - a.k0) as f64 * self.ts_s;
+                    f.offset_a[channel.index()] += rate_a_per_s * (end - a.k0) as f64 * self.ts_s;
                 }
                 FaultSpec::GainStep {
                     channel,
@@ -502,7 +500,9 @@ impl FaultInjector {
                     channel, value_a, ..
                 } if a.active(k) => {
                     let ch = channel.index();
-                    let v = *a.held.get_or_insert(value_a.unwrap_or(self.last_reading[ch]));
+                    let v = *a
+                        .held
+                        .get_or_insert(value_a.unwrap_or(self.last_reading[ch]));
                     f.value_a[ch] = Some(v);
                 }
                 FaultSpec::Dropout { channel, .. } if a.active(k) => match channel {
@@ -725,7 +725,9 @@ torque_nm = 4.0
         let (f, p) = field_of("[[faults]]\nkind = \"locked_rotor\"\nt_s = 5.0\n");
         assert_eq!(f, "faults[0].t_s");
         assert!(p.contains("end of the run"), "{p}");
-        let (f, _) = field_of("[[faults]]\nkind = \"overload\"\nt_s = 1.0\nduration_s = -1.0\ntorque_nm = 1.0\n");
+        let (f, _) = field_of(
+            "[[faults]]\nkind = \"overload\"\nt_s = 1.0\nduration_s = -1.0\ntorque_nm = 1.0\n",
+        );
         assert_eq!(f, "faults[0].duration_s");
         let (f, p) = field_of("[[faults]]\nkind = \"stuck\"\nt_s = 1.0\nchannel = \"c\"\n");
         assert_eq!(f, "faults[0]");

@@ -38,11 +38,11 @@ use ekf_core::{EkfError, Estimate, PmsmObserver, Status, wrap_angle};
 use serde::Serialize;
 
 use crate::SimError;
-use crate::faults::{self, FaultInjector};
 use crate::controller::{
     ControllerEstimate, ControllerInput, ControllerTelemetry, DriveController, RotorFeedback,
     SensoredController,
 };
+use crate::faults::{self, FaultInjector};
 use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
 use crate::metrics::{MetricsAccumulator, RunMetrics};

@@ -306,7 +306,10 @@ fn faults_subcommand_prints_and_writes_its_table() {
     // Header, separator and one row per fault.
     let rows = md.lines().filter(|l| l.starts_with("| ")).count();
     assert_eq!(rows, 1 + pmsm_sim::fault_suite::cases().len(), "{md}");
-    assert!(md.contains("| glitch, one sample at 10x rated (a) |"), "{md}");
+    assert!(
+        md.contains("| glitch, one sample at 10x rated (a) |"),
+        "{md}"
+    );
     assert!(md.contains("## Expected behaviour"), "{md}");
     let _ = std::fs::remove_dir_all(&dir);
 }
