@@ -775,4 +775,57 @@ channel = "a"
             }
         }
     }
+
+    #[test]
+    fn plant_bus_and_load_faults_act_where_they_should() {
+        let sc = with_faults(
+            r#"
+[[faults]]
+kind = "phase_open"
+t_s = 0.5
+duration_s = 0.05
+phase = "b"
+[[faults]]
+kind = "locked_rotor"
+t_s = 0.6
+duration_s = 0.05
+[[faults]]
+kind = "bus_sag"
+t_s = 0.7
+duration_s = 0.01
+fraction = 0.2
+[[faults]]
+kind = "overload"
+t_s = 0.72
+duration_s = 0.01
+torque_nm = 0.5
+"#,
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+        .with_duration(0.75);
+        let out = crate::sim::run_with(
+            &sc,
+            crate::sim::RunOptions {
+                record_trace: true,
+                ..Default::default()
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let s = &out.trace.samples;
+        // Open phase b: its true current is zero (to rounding) after the first step.
+        for x in &s[5001..5500] {
+            let ib = crate::svpwm::inverse_clarke(x.truth.i_ab_a)[1];
+            assert!(ib.abs() < 1e-9, "k {}: i_b {ib}", x.k);
+        }
+        assert!(crate::svpwm::inverse_clarke(s[5600].truth.i_ab_a)[1].abs() > 1e-3);
+        // Locked: no speed while locked (unless foc has tripped, the shaft then coasts).
+        for x in &s[6001..6500] {
+            assert_eq!(x.truth.speed_rpm, 0.0, "k {}", x.k);
+        }
+        // Bus sag: the controller measures 240 V; the load carries the extra torque.
+        assert_eq!(s[7000].measured.u_dc_v, 240.0);
+        assert_eq!(s[7100].measured.u_dc_v, 300.0);
+        let base = s[7150].truth.load_torque_nm;
+        assert!((s[7200].truth.load_torque_nm - base - 0.5).abs() < 0.05);
+    }
 }
