@@ -15,8 +15,8 @@
 //! - **outcome**: `trip` (a fault latched in `foc`), `fall-back` (no trip, but `foc` left
 //!   closed loop: its health monitor detected the observer lost and fell back to I/f) or
 //!   `ride-through` (closed loop all along);
-//! - **detected after**: from the fault's start to the trip, or to the first exit from
-//!   closed loop;
+//! - **detected after**: from the fault's start to the trip or to the first exit from
+//!   closed loop (a fall-back), whichever came first;
 //! - **worst angle error**: `foc`'s own observer against the true angle, over the periods after
 //!   the fault's start in which the loops ran on it (closed loop, PWM on), deg el.;
 //! - **max phase current**: the true phase currents after the fault's start, A, against the
@@ -275,7 +275,8 @@ pub struct CaseResult {
     pub outcome: &'static str,
     /// The latched fault.
     pub reason: Option<&'static str>,
-    /// Time from the fault to the trip or the first exit from closed loop, s.
+    /// Time from the fault to the trip or the first exit from closed loop, whichever came
+    /// first, s.
     pub detected_after_s: Option<f64>,
     /// Worst |angle error| of foc's observer after the fault, while in closed loop, deg el.
     pub worst_angle_error_deg: f64,
@@ -431,7 +432,10 @@ pub fn run_case(case: &FaultCase, opts: &SuiteOptions) -> Result<CaseResult, Sim
         expected: case.expected,
         outcome,
         reason: score.reason,
-        detected_after_s: score.t_trip.or(score.t_exit),
+        detected_after_s: match (score.t_trip, score.t_exit) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        },
         worst_angle_error_deg: score.worst_angle_deg,
         max_phase_current_a: score.max_current_a,
         current_limit_a: limit,
