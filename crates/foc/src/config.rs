@@ -32,6 +32,10 @@
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
 //! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | |
+//! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
+//! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
+//! | `samples.stuck_angle_rad` | `pi / 2` | a phase reading repeated bit for bit while the current vector turns a quarter period: [`Fault::CurrentSensor`](crate::Fault::CurrentSensor) |
+//! | `samples.over_current_trip_ticks` | 2 | the software over-current trip is debounced: one sample never trips it, two in a row do. The hardware comparator of the bridge is the real over-current protection (microseconds); this one is the controller's back-up |
 //!
 //! Health thresholds: [`HealthConfig::default`].
 
@@ -165,6 +169,63 @@ impl Default for HealthConfig {
     }
 }
 
+/// Checks of the sampled phase currents (module [`controller`](crate::controller), "Bad
+/// current samples").
+///
+/// A sample is **missing** when a current is NaN or infinite, **implausible** when the current
+/// vector moved by more than `(n + 1) max_step_a` from the last accepted sample, `n` being the
+/// number of samples missed since (the current of an inductive load cannot jump). Either
+/// way the tick rides through: the observer only predicts, the current loops hold their
+/// integrators and reuse the last voltage (rotated with the frame), and the over-current
+/// check does not see the sample. `missing_trip_ticks` such samples in a row trip: with
+/// [`Fault::NonFiniteInput`](crate::Fault::NonFiniteInput) for a non-finite current,
+/// [`Fault::OverCurrent`](crate::Fault::OverCurrent) when the rejected current is above
+/// `over_current_a`, else `NonFiniteInput` (an absurd value).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleCheckConfig {
+    /// Largest plausible change of the current vector over one period, A (`f32::INFINITY`
+    /// turns the plausibility check off). `None`: derived when the controller is built
+    /// ([`FocConfig::max_current_step`]).
+    pub max_step_a: Option<f32>,
+    /// Missing or implausible current samples in a row that trip (1: the first trips).
+    pub missing_trip_ticks: u16,
+    /// Accepted samples above `over_current_a` in a row that trip (1: the first trips).
+    pub over_current_trip_ticks: u16,
+    /// Stuck channel: a sampled phase current (`a` or `b` of [`PhaseCurrents::Abc`](crate::PhaseCurrents::Abc))
+    /// that repeats its reading bit for bit while the commanded current vector (at least
+    /// 5 % of `current_limit_a`) turns by more than this electrical angle (and at least 4
+    /// ticks) trips [`Fault::CurrentSensor`](crate::Fault::CurrentSensor), rad. A live
+    /// channel cannot repeat: a sinusoid changes by at least 29 % of its amplitude over a
+    /// quarter period, far more than an ADC step and its noise. 0 turns the check off.
+    pub stuck_angle_rad: f32,
+}
+
+impl Default for SampleCheckConfig {
+    /// Derived step limit, five missing samples, two over-current samples, stuck after a
+    /// quarter turn.
+    fn default() -> Self {
+        Self {
+            max_step_a: None,
+            missing_trip_ticks: 5,
+            over_current_trip_ticks: 2,
+            stuck_angle_rad: 0.5 * PI,
+        }
+    }
+}
+
+impl SampleCheckConfig {
+    /// No ride-through: every missing, implausible-and-over-current or over-current sample
+    /// trips at once, and no step limit (the behaviour before the checks existed).
+    pub fn strict() -> Self {
+        Self {
+            max_step_a: Some(f32::INFINITY),
+            missing_trip_ticks: 1,
+            over_current_trip_ticks: 1,
+            stuck_angle_rad: 0.5 * PI,
+        }
+    }
+}
+
 /// Everything the controller needs (module docs give the defaults).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FocConfig {
@@ -221,6 +282,8 @@ pub struct FocConfig {
     pub startup: StartupConfig,
     /// Observer health monitoring.
     pub health: HealthConfig,
+    /// Checks of the current samples: glitch ride-through, over-current debounce.
+    pub samples: SampleCheckConfig,
     /// The observer (motor and `ts_s` must equal the fields above).
     pub observer: ObserverConfig<f32>,
 }
@@ -277,6 +340,7 @@ impl FocConfig {
                 acquire_timeout_s: 1.0,
             },
             health: HealthConfig::default(),
+            samples: SampleCheckConfig::default(),
             observer: ObserverConfig::new(motor, ts_s),
         }
         .with_inertia(kt / 1000.0)
@@ -323,6 +387,17 @@ impl FocConfig {
     pub fn dead_time_band(&self) -> f32 {
         self.dead_time_band_a
             .unwrap_or(DEAD_TIME_BAND_FRACTION * self.current_limit_a)
+    }
+
+    /// The largest plausible change of the current vector per period, A:
+    /// `samples.max_step_a`, or `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1
+    /// over_current_a` ([`SampleCheckConfig`]).
+    pub fn max_current_step(&self) -> f32 {
+        self.samples.max_step_a.unwrap_or(
+            (self.u_dc_max_v + self.motor.rs_ohm * self.over_current_a) * self.ts_s
+                / self.motor.ls_h
+                + 0.1 * self.over_current_a,
+        )
     }
 
     /// Speed-loop gains on the mechanical speed: `speed_gains`, or `Kp = bw J / k_t`
@@ -412,6 +487,19 @@ impl FocConfig {
         positive(h.lost_time_s, F::LostTime)?;
         positive(h.lock_time_s, F::LockTime)?;
         positive(h.stall_time_s, F::StallTime)?;
+        let step = self.max_current_step();
+        if step.is_nan() {
+            return Err(ConfigError::NonFinite(F::MaxCurrentStep));
+        } else if step <= 0.0 {
+            return Err(ConfigError::NotPositive(F::MaxCurrentStep));
+        }
+        if self.samples.missing_trip_ticks == 0 {
+            return Err(ConfigError::NotPositive(F::MissingTripTicks));
+        }
+        if self.samples.over_current_trip_ticks == 0 {
+            return Err(ConfigError::NotPositive(F::OverCurrentTripTicks));
+        }
+        in_range(self.samples.stuck_angle_rad, 0.0, 1.0e6, F::StuckAngle)?;
         // Every duration must fit the u32 tick counters.
         let longest = s
             .align_time_s
@@ -488,6 +576,10 @@ pub enum Field {
     LostTime,
     LockTime,
     StallTime,
+    MaxCurrentStep,
+    MissingTripTicks,
+    OverCurrentTripTicks,
+    StuckAngle,
 }
 
 /// Why a [`FocConfig`] was refused.

@@ -43,6 +43,39 @@
 //! had to be cut at 0 or 1. Module [`crate::deadtime`] derives it against the simulator's
 //! inverter model.
 //!
+//! # Bad current samples (ride-through)
+//!
+//! Every tick first checks the current sample ([`SampleCheckConfig`](crate::SampleCheckConfig)):
+//!
+//! - **missing**: a current is NaN or infinite (an ADC conversion that did not complete, a
+//!   DMA overrun);
+//! - **implausible**: the current vector moved by more than `(n + 1) max_step_a` since the
+//!   last accepted sample (`n` samples missed since): an inductive load's current changes by
+//!   at most about `u_dc Ts / Ls` per period, so a single wild reading (a spike of ten times
+//!   the rated current on one channel) is rejected, not believed.
+//!
+//! Such a tick rides through: the observer only predicts (`PmsmObserver::predict` with the
+//! voltage applied over the last period), the state machine runs on the predicted estimate,
+//! the current PIs hold their integrators and the last dq voltage is applied again in the
+//! (moving) control frame; the telemetry shows the observer's predicted currents and
+//! `sample_ok = false`. `missing_trip_ticks` bad samples in a row trip (non-finite:
+//! [`Fault::NonFiniteInput`]; above `over_current_a`: [`Fault::OverCurrent`]; else
+//! `NonFiniteInput`, an absurd value).
+//!
+//! A **stuck channel** (phase `a` or `b` of [`PhaseCurrents::Abc`] repeating its reading bit
+//! for bit while the commanded current vector, at least 5 % of the current limit, turns by
+//! `samples.stuck_angle_rad`, a quarter period by default) trips [`Fault::CurrentSensor`]:
+//! a live channel's sinusoid moves by 29 % of its amplitude over a quarter period. Found by
+//! two comparisons per tick. Without it a frozen reading goes unnoticed by the other checks
+//! (it is plausible and finite) while the loops, chasing a current they cannot move, drive
+//! the real one far past the over-current level before anything trips.
+//!
+//! The software over-current check runs on accepted samples only and is debounced: it trips
+//! after `over_current_trip_ticks` samples in a row above `over_current_a` (default 2). A
+//! single sample never trips it. This is a back-up: the bridge's hardware comparator, which
+//! acts within microseconds, is the real over-current protection. A real short circuit moves
+//! the current at most at the physical rate, so its samples are accepted and trip it.
+//!
 //! # Current loops
 //!
 //! ```text
@@ -75,7 +108,7 @@ use crate::pi::{Pi, limit};
 use crate::startup::{Frame, Sequencer, State};
 use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
 use crate::transforms::{Abc, AlphaBeta, Dq};
-use crate::trig::{add_angles, at_most, max2, sin_cos, sin_cos_small, sqrt, wrap};
+use crate::trig::{add_angles, at_most, max2, min2, sin_cos, sin_cos_small, sqrt, wrap};
 
 /// Phase currents as sampled: three (or two plus a computed third) phases, or already in
 /// alpha-beta.
@@ -163,6 +196,9 @@ pub struct Telemetry {
     pub estimate: Estimate<f32>,
     /// Whether the observer accepted this tick's step.
     pub observer_ok: bool,
+    /// Whether this tick's current sample was used: `false` when it was missing or
+    /// implausible and the tick rode through (module docs, "Bad current samples").
+    pub sample_ok: bool,
 }
 
 /// What one tick returns: the duties for the PWM timer and the status.
@@ -221,6 +257,9 @@ pub struct Foc {
     pub(crate) acquire_ticks: u32,
     pub(crate) stall_ticks: u32,
     over_current_sq: f32,
+    /// Largest plausible change of the current vector per period, A, and its square.
+    max_step_a: f32,
+    max_step_sq: f32,
     advance_s: f32,
     dead_time: DeadTimeCompensation,
     // Parts.
@@ -236,6 +275,20 @@ pub struct Foc {
     tick_count: u32,
     /// Realized voltages computed by ticks k-1 and k-2.
     u_hist: [AlphaBeta; 2],
+    /// The current loops' last voltage, in the last control frame (held over bad samples).
+    u_dq_last: Dq,
+    /// The last accepted current sample.
+    i_last: AlphaBeta,
+    /// Missing or implausible current samples in a row.
+    missed: u16,
+    /// Accepted samples above the over-current level in a row.
+    over_current_count: u16,
+    /// Last raw readings of phases a and b (stuck-channel check).
+    raw_last: [f32; 2],
+    /// Electrical angle the current vector turned while phase a / b repeated its reading, rad.
+    stuck_angle: [f32; 2],
+    /// Ticks phase a / b repeated its reading.
+    stuck_ticks: [u16; 2],
     pub(crate) report: HealthReport,
 }
 
@@ -282,6 +335,11 @@ impl Foc {
             acquire_ticks: ticks(cfg.startup.acquire_timeout_s, ts),
             stall_ticks: ticks(cfg.health.stall_time_s, ts),
             over_current_sq: cfg.over_current_a * cfg.over_current_a,
+            // Capped so that `((n + 1) step)^2` stays finite for any count `n`: an infinite
+            // step of the current vector (`d^2 = inf`) is then never accepted.
+            max_step_a: min2(cfg.max_current_step(), 1.0e14),
+            max_step_sq: min2(cfg.max_current_step(), 1.0e14)
+                * min2(cfg.max_current_step(), 1.0e14),
             advance_s: cfg.angle_advance_periods * ts,
             dead_time: DeadTimeCompensation::new(cfg.dead_time_s, ts, cfg.dead_time_band()),
             observer,
@@ -294,6 +352,13 @@ impl Foc {
             fault: None,
             tick_count: 0,
             u_hist: [AlphaBeta::default(); 2],
+            u_dq_last: Dq::default(),
+            i_last: AlphaBeta::default(),
+            missed: 0,
+            over_current_count: 0,
+            raw_last: [f32::NAN; 2],
+            stuck_angle: [0.0; 2],
+            stuck_ticks: [0; 2],
             report: HealthReport::default(),
         })
     }
@@ -424,27 +489,56 @@ impl Foc {
             PhaseCurrents::Abc(x) => (x.to_alpha_beta(), x.c.abs()),
             PhaseCurrents::AlphaBeta(x) => (x, 0.0),
         };
-        self.protect(input, i_ab, c_abs);
+        let sample_ok = self.check_currents(input, i_ab, c_abs);
+        self.protect(input);
         if matches!(self.state, State::Idle | State::Fault) {
             return self.safe_output();
         }
 
-        // Observer: the voltage applied over [t_k-1, t_k), the currents at t_k.
+        // Observer: the voltage applied over [t_k-1, t_k), the currents at t_k (only a
+        // prediction over a bad sample).
         let u_prev = match self.cfg.delay {
             ComputationDelay::OnePeriod => self.u_hist[1],
             ComputationDelay::None => self.u_hist[0],
         };
-        let (est, observer_ok) = match self
-            .observer
-            .step([u_prev.alpha, u_prev.beta], [i_ab.alpha, i_ab.beta])
-        {
-            Ok(e) => (e, true),
-            Err(_) => (self.observer.estimate(), false),
+        let u_prev = [u_prev.alpha, u_prev.beta];
+        let (est, observer_ok) = if sample_ok {
+            match self.observer.step(u_prev, [i_ab.alpha, i_ab.beta]) {
+                Ok(e) => (e, true),
+                Err(_) => (self.observer.estimate(), false),
+            }
+        } else {
+            let ok = self.observer.predict(u_prev).is_ok();
+            (self.observer.estimate(), ok)
+        };
+        // Over a bad sample the observer's predicted currents stand in for the measurement
+        // (telemetry, frame changes); the current loops do not use them.
+        let i_ab = if sample_ok {
+            i_ab
+        } else {
+            AlphaBeta {
+                alpha: est.i_alpha_a,
+                beta: est.i_beta_a,
+            }
         };
 
         let Some(plan) = self.sequence(&est, observer_ok, input.sensor) else {
             return self.safe_output();
         };
+        // Stuck channel: a sampled phase current that repeats bit for bit while the current
+        // vector turns (module docs). The common path is two comparisons.
+        if let PhaseCurrents::Abc(x) = input.currents {
+            let same = [x.a == self.raw_last[0], x.b == self.raw_last[1]];
+            self.raw_last = [x.a, x.b];
+            if same[0] || same[1] {
+                if self.stuck_channel(same, x, plan) {
+                    return self.safe_output();
+                }
+            } else if self.stuck_ticks != [0; 2] {
+                self.stuck_angle = [0.0; 2];
+                self.stuck_ticks = [0; 2];
+            }
+        }
 
         // Current loops in the control frame.
         let frame = plan.frame;
@@ -456,17 +550,22 @@ impl Foc {
         }
         let u_dc = input.u_dc_v;
         let u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
-        let e = plan.i_ref - i_dq;
-        let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
-        let uq_free = self.pi_q.unlimited(e.q, ff.q);
-        let limited = u_d * u_d + uq_free * uq_free > u_max * u_max;
-        let q_max = if limited {
-            sqrt(u_max * u_max - u_d * u_d)
+        let (u_dq, limited) = if sample_ok {
+            let e = plan.i_ref - i_dq;
+            let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
+            let uq_free = self.pi_q.unlimited(e.q, ff.q);
+            let limited = u_d * u_d + uq_free * uq_free > u_max * u_max;
+            let q_max = if limited {
+                sqrt(u_max * u_max - u_d * u_d)
+            } else {
+                u_max
+            };
+            let u_q = self.pi_q.step(e.q, ff.q, -q_max, q_max);
+            (Dq { d: u_d, q: u_q }, limited)
         } else {
-            u_max
+            self.held_voltage(plan.reframe_from, frame, u_max)
         };
-        let u_q = self.pi_q.step(e.q, ff.q, -q_max, q_max);
-        let u_dq = Dq { d: u_d, q: u_q };
+        self.u_dq_last = u_dq;
 
         // Inverse Park at the middle of the application interval (the advance rotates the
         // frame's sine and cosine by a small angle), SVPWM, dead-time compensation, history.
@@ -504,7 +603,129 @@ impl Foc {
                 speed_ref_mech_rad_s: self.seq.speed_ref_mech,
                 estimate: est,
                 observer_ok,
+                sample_ok,
             },
+        }
+    }
+
+    /// A phase reading repeated: accumulates the angle the current vector turned meanwhile
+    /// (only while the commanded current is at least 5 % of the current limit) and trips
+    /// [`Fault::CurrentSensor`] once it exceeds `samples.stuck_angle_rad` (and at least 4
+    /// ticks). Returns whether it tripped.
+    #[cold]
+    #[inline(never)]
+    fn stuck_channel(&mut self, same: [bool; 2], x: Abc, plan: Plan) -> bool {
+        let limit = self.cfg.samples.stuck_angle_rad;
+        let i_min = 0.05 * self.cfg.current_limit_a;
+        let step = if at_most(i_min * i_min, plan.i_ref.norm_squared()) {
+            let w = plan.frame.omega;
+            max2(w, -w) * self.cfg.ts_s
+        } else {
+            0.0
+        };
+        for (ch, v) in [x.a, x.b].into_iter().enumerate() {
+            if !same[ch] {
+                self.stuck_angle[ch] = 0.0;
+                self.stuck_ticks[ch] = 0;
+                continue;
+            }
+            self.stuck_angle[ch] += step;
+            self.stuck_ticks[ch] = self.stuck_ticks[ch].saturating_add(1);
+            if limit > 0.0 && self.stuck_angle[ch] > limit && self.stuck_ticks[ch] >= 4 {
+                self.trip(Fault::CurrentSensor, v);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The last dq voltage for a tick over a bad sample: in this tick's frame (rotated when
+    /// the frame changed) and within the voltage limit `u_max`; and whether it was limited.
+    #[cold]
+    #[inline(never)]
+    fn held_voltage(&self, reframed_from: Option<Frame>, frame: Frame, u_max: f32) -> (Dq, bool) {
+        let mut u = self.u_dq_last;
+        if let Some(old) = reframed_from {
+            let (s, c) = sin_cos(wrap(old.theta - frame.theta));
+            u = u.rotate(s, c);
+        }
+        let n2 = u.norm_squared();
+        if at_most(n2, u_max * u_max) {
+            (u, false)
+        } else {
+            let k = u_max / sqrt(n2);
+            (
+                Dq {
+                    d: u.d * k,
+                    q: u.q * k,
+                },
+                true,
+            )
+        }
+    }
+
+    /// Checks this tick's current sample (module docs, "Bad current samples"): whether it is
+    /// used. Counts bad samples and over-current samples in a row and trips when either
+    /// count reaches its limit.
+    #[inline]
+    fn check_currents(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) -> bool {
+        let lim_sq = if self.missed == 0 {
+            self.max_step_sq
+        } else {
+            let lim = self.max_step_a * (f32::from(self.missed) + 1.0);
+            lim * lim
+        };
+        let d = i_ab - self.i_last;
+        // False for NaN: a non-finite current is never accepted (`c` too).
+        if !(at_most(d.norm_squared(), lim_sq) && at_most(c_abs, f32::MAX)) {
+            self.bad_sample(input, i_ab, c_abs);
+            return false;
+        }
+        self.missed = 0;
+        self.i_last = i_ab;
+        if at_most(i_ab.norm_squared(), self.over_current_sq)
+            && at_most(c_abs, self.cfg.over_current_a)
+        {
+            self.over_current_count = 0;
+        } else {
+            self.over_current_sample(i_ab, c_abs);
+        }
+        true
+    }
+
+    /// An accepted sample above the over-current level: trips when there have been
+    /// `over_current_trip_ticks` in a row.
+    #[cold]
+    #[inline(never)]
+    fn over_current_sample(&mut self, i_ab: AlphaBeta, c_abs: f32) {
+        self.over_current_count = self.over_current_count.saturating_add(1);
+        if self.over_current_count >= self.cfg.samples.over_current_trip_ticks {
+            self.trip(Fault::OverCurrent, max2(sqrt(i_ab.norm_squared()), c_abs));
+        }
+    }
+
+    /// A missing or implausible sample: trips when there have been `missing_trip_ticks` in
+    /// a row (non-finite: `NonFiniteInput`; above the over-current level: `OverCurrent`;
+    /// else `NonFiniteInput`, an absurd value).
+    #[cold]
+    #[inline(never)]
+    fn bad_sample(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) {
+        self.missed = self.missed.saturating_add(1);
+        if self.missed < self.cfg.samples.missing_trip_ticks {
+            return;
+        }
+        let non_finite = match input.currents {
+            PhaseCurrents::Abc(x) if !x.is_finite() => Some(first_bad(x.a, x.b, x.c)),
+            PhaseCurrents::AlphaBeta(x) if !x.is_finite() => Some(first_bad(x.alpha, x.beta, 0.0)),
+            _ => None,
+        };
+        let magnitude = max2(sqrt(i_ab.norm_squared()), c_abs);
+        match non_finite {
+            Some(v) => self.trip(Fault::NonFiniteInput, v),
+            None if !at_most(magnitude, self.cfg.over_current_a) => {
+                self.trip(Fault::OverCurrent, magnitude)
+            }
+            None => self.trip(Fault::NonFiniteInput, magnitude),
         }
     }
 
@@ -536,10 +757,10 @@ impl Foc {
         self.pi_q.set_integrator(v_new.q - ff_new.q);
     }
 
-    /// Input checks and protections; trips the first fault found.
-    fn protect(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) {
-        // Fast path: comparisons that are false for NaN cover finiteness too (a NaN or an
-        // infinity in the currents makes `i_sq` or `c_abs` NaN or infinite).
+    /// Checks of the bus voltage and the sensor (the currents: `check_currents`); trips the
+    /// first fault found.
+    fn protect(&mut self, input: &TickInput) {
+        // Fast path: comparisons that are false for NaN cover finiteness too.
         let running = !matches!(self.state, State::Idle | State::Fault);
         let u_dc = input.u_dc_v;
         let u_min = if running {
@@ -551,31 +772,19 @@ impl Foc {
             Some(s) => at_most(s.theta_e_rad.abs(), 1.0e4) && at_most(s.omega_e_rad_s.abs(), 1.0e6),
             None => !(running && self.cfg.mode == Mode::Sensored),
         };
-        if at_most(i_ab.norm_squared(), self.over_current_sq)
-            && at_most(c_abs, self.cfg.over_current_a)
-            && at_most(u_dc, self.cfg.u_dc_max_v)
-            && u_dc >= u_min
-            && sensor_ok
-        {
+        if at_most(u_dc, self.cfg.u_dc_max_v) && u_dc >= u_min && sensor_ok {
             return;
         }
-        self.classify_fault(input, i_ab, c_abs, running);
+        self.classify_fault(input, running);
     }
 
     /// The slow path of [`protect`](Self::protect): which fault, with which value.
     #[cold]
     #[inline(never)]
-    fn classify_fault(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32, running: bool) {
+    fn classify_fault(&mut self, input: &TickInput, running: bool) {
         let u_dc = input.u_dc_v;
         // Non-finite or absurd inputs.
-        let bad_current = match input.currents {
-            PhaseCurrents::Abc(x) if !x.is_finite() => Some(first_bad(x.a, x.b, x.c)),
-            PhaseCurrents::AlphaBeta(x) if !x.is_finite() => Some(first_bad(x.alpha, x.beta, 0.0)),
-            _ => None,
-        };
-        let bad = if bad_current.is_some() {
-            bad_current
-        } else if !u_dc.is_finite() {
+        let bad = if !u_dc.is_finite() {
             Some(u_dc)
         } else {
             match input.sensor {
@@ -589,11 +798,7 @@ impl Foc {
             self.trip(Fault::NonFiniteInput, v);
             return;
         }
-        let i_sq = i_ab.norm_squared();
-        let oc = self.cfg.over_current_a;
-        if !at_most(i_sq, self.over_current_sq) || c_abs > oc {
-            self.trip(Fault::OverCurrent, max2(sqrt(i_sq), c_abs));
-        } else if u_dc > self.cfg.u_dc_max_v {
+        if u_dc > self.cfg.u_dc_max_v {
             self.trip(Fault::BusOverVoltage, u_dc);
         } else if running && u_dc < self.cfg.u_dc_min_v {
             self.trip(Fault::BusUnderVoltage, u_dc);
@@ -627,6 +832,9 @@ impl Foc {
         self.pi_q.reset();
         self.speed_pi.reset();
         self.u_hist = [AlphaBeta::default(); 2];
+        self.u_dq_last = Dq::default();
+        self.stuck_angle = [0.0; 2];
+        self.stuck_ticks = [0; 2];
     }
 
     /// Replaces the observer's estimate by `theta` (rad el.), `omega` (rad/s el.) with angle
@@ -665,6 +873,7 @@ impl Foc {
                 speed_ref_mech_rad_s: 0.0,
                 estimate: self.observer.estimate(),
                 observer_ok: false,
+                sample_ok: self.missed == 0,
             },
         }
     }

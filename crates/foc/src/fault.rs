@@ -7,13 +7,17 @@
 //! caused it, until [`Foc::clear_fault`](crate::Foc::clear_fault). Later faults while latched
 //! are not recorded (the first cause is the interesting one).
 //!
+//! Single bad current samples do not trip: they are ridden through
+//! ([`SampleCheckConfig`](crate::SampleCheckConfig), module [`controller`](crate::controller)).
+//!
 //! | fault | trips when | checked |
 //! |---|---|---|
-//! | [`Fault::NonFiniteInput`] | a current, `u_dc`, or a supplied sensor value is NaN or infinite; the sensor angle beyond `+-1e4` rad or its speed beyond `+-1e6` rad/s; the sensor missing in sensored mode | every tick, every state |
-//! | [`Fault::OverCurrent`] | `|i_alpha_beta|`, or `|i_c|` when given, above `over_current_a` | every tick, every state |
+//! | [`Fault::NonFiniteInput`] | `u_dc` or a supplied sensor value is NaN or infinite; the sensor angle beyond `+-1e4` rad or its speed beyond `+-1e6` rad/s; the sensor missing in sensored mode; `samples.missing_trip_ticks` current samples in a row missing (NaN, infinite) or implausible (below the over-current level) | every tick, every state |
+//! | [`Fault::OverCurrent`] | `|i_alpha_beta|`, or `|i_c|` when given, above `over_current_a` for `samples.over_current_trip_ticks` accepted samples in a row (debounced: the hardware comparator is the real protection), or `missing_trip_ticks` rejected samples in a row above it | every tick, every state |
 //! | [`Fault::BusOverVoltage`] | `u_dc > u_dc_max_v` | every tick, every state |
 //! | [`Fault::BusUnderVoltage`] | `u_dc < u_dc_min_v` | while the bridge is driven (not in `Idle`) |
 //! | [`Fault::ObserverLost`] | health monitor: lost in closed loop with [`ObserverLossPolicy::Trip`](crate::ObserverLossPolicy::Trip); re-acquisitions exhausted; no lock within `acquire_timeout_s` at the hand-over speed | sensorless running states |
+//! | [`Fault::CurrentSensor`] | phase `a` or `b` reading repeated bit for bit while the commanded current vector (at least 5 % of the current limit) turned by `samples.stuck_angle_rad` (a quarter period) | running states, `Abc` input |
 //! | [`Fault::Stall`] | speed loop at its current limit while the rotor speed stays low for `stall_time_s`; or the I/f ramp at speed but the rotor not turning | running states |
 
 use core::fmt;
@@ -36,6 +40,9 @@ pub enum Fault {
     /// A NaN, an infinity or an absurd value in the inputs (or a missing rotor sensor in
     /// sensored mode).
     NonFiniteInput,
+    /// A current-sensor channel stuck: its reading repeats while the current vector turns
+    /// (`samples.stuck_angle_rad`).
+    CurrentSensor,
 }
 
 /// A latched fault with its context.
@@ -62,6 +69,7 @@ impl fmt::Display for Fault {
             Fault::ObserverLost => "observer lost the rotor angle",
             Fault::Stall => "rotor stalled",
             Fault::NonFiniteInput => "non-finite or absurd input",
+            Fault::CurrentSensor => "current-sensor channel stuck",
         })
     }
 }

@@ -17,7 +17,7 @@ pub mod trig;
 
 pub use config::{
     ComputationDelay, ConfigError, Field, FocConfig, HealthConfig, Mode, ObserverLossPolicy,
-    StartupConfig,
+    SampleCheckConfig, StartupConfig,
 };
 pub use controller::{
     CommandError, Foc, PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput,

@@ -1,13 +1,21 @@
 //! Every fault path, and NaN / infinite / absurd values in every input field: the outputs go
 //! safe (PWM off, duties 0.5), the fault is latched with its reason, nothing panics.
+//!
+//! These tests run the strict sample checks (`SampleCheckConfig::strict`: every bad or
+//! over-current sample trips at once); the default ride-through of single bad samples is
+//! tested in `glitches.rs`.
 mod common;
 
 use common::{Plant, Rig};
 use foc::ekf_core::MotorParams;
-use foc::{Fault, Foc, FocConfig, Mode, PhaseCurrents, State, TickInput, TickOutput};
+use foc::{
+    Fault, Foc, FocConfig, Mode, PhaseCurrents, SampleCheckConfig, State, TickInput, TickOutput,
+};
 
 fn cfg() -> FocConfig {
-    FocConfig::new(MotorParams::servo(), 50e-6, 300.0)
+    let mut c = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+    c.samples = SampleCheckConfig::strict();
+    c
 }
 
 fn assert_safe(out: &TickOutput) {

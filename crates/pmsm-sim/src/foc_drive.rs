@@ -127,6 +127,7 @@ pub fn fault_name(f: Fault) -> &'static str {
         Fault::ObserverLost => "observer_lost",
         Fault::Stall => "stall",
         Fault::NonFiniteInput => "non_finite_input",
+        Fault::CurrentSensor => "current_sensor",
     }
 }
 
@@ -235,9 +236,15 @@ mod tests {
         assert!(!o.telemetry.closed_loop);
         assert!(o.telemetry.estimate.is_some());
         assert!((d.foc().speed_target_mech_rad_s() - 100.0).abs() < 1e-4);
-        // A non-finite measurement trips foc's fault; the adapter reports it.
+        // A missing (NaN) sample is ridden through; five in a row trip foc's fault, and the
+        // adapter reports it.
         let mut bad = input(2e-3, None);
         bad.i_abc_a[0] = f64::NAN;
+        let n = cfg.samples.missing_trip_ticks;
+        for _ in 1..n {
+            let o = d.tick(&bad);
+            assert!(o.pwm_enabled && o.telemetry.fault.is_none(), "{o:?}");
+        }
         let o = d.tick(&bad);
         assert!(!o.pwm_enabled);
         assert_eq!(o.telemetry.fault, Some("non_finite_input"));

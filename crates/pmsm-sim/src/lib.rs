@@ -4,6 +4,8 @@
 
 pub mod controller;
 mod error;
+pub mod fault_suite;
+pub mod faults;
 pub mod foc_drive;
 pub mod inverter;
 pub mod mcap_log;

@@ -82,6 +82,19 @@ enum Command {
         #[arg(long, default_value = "out/suite")]
         out: PathBuf,
     },
+    /// Run the fault suite: every injected fault kind in closed loop with the foc sensorless
+    /// controller; prints a markdown table and writes it to <out>/faults.md.
+    Faults {
+        /// Output directory.
+        #[arg(long, default_value = "out/faults")]
+        out: PathBuf,
+        /// Start of every fault, s.
+        #[arg(long, default_value_t = 1.2)]
+        t_fault: f64,
+        /// End of every run, s.
+        #[arg(long, default_value_t = 2.0)]
+        t_end: f64,
+    },
 }
 
 #[derive(Args, Debug, Clone)]
@@ -175,6 +188,11 @@ fn main() -> ExitCode {
             ideal,
             out,
         }) => suite(SuiteOptions { short, seed, ideal }, &out),
+        Some(Command::Faults {
+            out,
+            t_fault,
+            t_end,
+        }) => faults_command(&out, t_fault, t_end),
     };
     match result {
         Ok(code) => code,
@@ -268,7 +286,8 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     let plot_path = dir.join("plot.svg");
     let metrics_path = dir.join("metrics.json");
 
-    // Ctrl-C sets the flag; the run stops at the next period and the files are finished.
+    // Ctrl-C (SIGINT) and SIGTERM (ctrlc's `termination` feature) set the flag; the run
+    // stops at the next period and the files are finished.
     // A second handler cannot be installed (e.g. in tests calling this twice): ignore that.
     let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::Relaxed));
 
@@ -396,6 +415,20 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
             ExitCode::from(2)
         }
     })
+}
+
+/// `pmsm-sim faults` (module `pmsm_sim::fault_suite`).
+fn faults_command(out: &Path, t_fault_s: f64, t_end_s: f64) -> Result<ExitCode, SimError> {
+    use pmsm_sim::fault_suite::{SuiteOptions, markdown, run_suite};
+    let opts = SuiteOptions { t_fault_s, t_end_s };
+    let results = run_suite(&opts)?;
+    let md = markdown(&results, &opts);
+    std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
+    let path = out.join("faults.md");
+    std::fs::write(&path, &md).map_err(|e| out_err(&path, e))?;
+    print!("{md}");
+    println!("\nwritten to {}", path.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 /// Median of some numbers (sorted copy; NaN-free input).

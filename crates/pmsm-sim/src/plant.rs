@@ -217,6 +217,8 @@ pub struct Plant {
     decay: (f64, f64),
     /// Steps taken (to refresh `sc` exactly now and then).
     steps: u32,
+    /// Rotor mechanically locked (fault injection): speed held at zero.
+    locked: bool,
 }
 
 /// `(C, S)` of `e^{N t} = C I + S N` for a traceless 2 x 2 `N` with `N^2 = disc I`.
@@ -260,7 +262,52 @@ impl Plant {
             sc: state.theta_e_rad.sin_cos(),
             decay: (1.0, 0.0),
             steps: 0,
+            locked: false,
         }
+    }
+
+    /// Changes the stator resistance and the flux linkage (parameter drift, e.g. with
+    /// temperature; module [`faults`](crate::faults)). Takes effect at the next step.
+    pub fn set_rs_psi(&mut self, rs_ohm: f64, psi_f_wb: f64) {
+        self.motor.rs_ohm = rs_ohm;
+        self.motor.psi_f_wb = psi_f_wb;
+        // Recompute the cached decay factor at the next step.
+        self.decay = (1.0, 0.0);
+    }
+
+    /// Locks the rotor mechanically (a jam): the speed becomes zero at once and stays zero
+    /// while locked; the electrical part runs as usual. `false` frees it (from rest).
+    pub fn set_locked(&mut self, locked: bool) {
+        self.locked = locked;
+        if locked {
+            self.state.omega_mech_rad_s = 0.0;
+        }
+    }
+
+    /// Whether the rotor is locked.
+    pub fn is_locked(&self) -> bool {
+        self.locked
+    }
+
+    /// Opens phase `phase` (0 a, 1 b, 2 c) for the state: removes the current component along
+    /// that phase's axis, so that its phase current is zero. Called after every step while
+    /// the phase is open, this is the open-phase motor (star, isolated neutral): the current
+    /// vector is confined to the axis perpendicular to the open phase, and along it the
+    /// decoupled alpha-beta equation of a surface motor is unchanged (the line voltage of
+    /// the two remaining phases drives it). The step's torque is that of the unconstrained
+    /// currents (an error of the order of one period's current build-up along the open axis).
+    pub fn open_phase(&mut self, phase: usize) {
+        let (ex, ey) = match phase {
+            0 => (1.0, 0.0),
+            1 => (-0.5, 0.5 * 3f64.sqrt()),
+            _ => (-0.5, -0.5 * 3f64.sqrt()),
+        };
+        let [ia, ib] = self.i_ab_a();
+        let along = ia * ex + ib * ey;
+        let (ia, ib) = (ia - along * ex, ib - along * ey);
+        let (s, c) = self.sc;
+        self.state.i_d_a = ia * c + ib * s;
+        self.state.i_q_a = -ia * s + ib * c;
     }
 
     /// The motor.
@@ -330,7 +377,11 @@ impl Plant {
             - m.b_nm_s_rad * x.omega_mech_rad_s
             - self.friction_nm(x.omega_mech_rad_s, drive0))
             / m.j_kg_m2;
-        let w = p * (x.omega_mech_rad_s + 0.5 * h_s * acc0);
+        let w = if self.locked {
+            0.0
+        } else {
+            p * (x.omega_mech_rad_s + 0.5 * h_s * acc0)
+        };
 
         // 2. Electrical part, exact for the held voltage and the constant speed w.
         let (ad, aq) = (m.rs_ohm / m.ld_h, m.rs_ohm / m.lq_h);
@@ -399,7 +450,11 @@ impl Plant {
         // is taken for linear variation over the period (mean product + slope term / 12).
         let mean_dq = mean_d * mean_q + (id1 - x.i_d_a) * (iq1 - x.i_q_a) / 12.0;
         let te_mean = 1.5 * p * (m.psi_f_wb * mean_q + (m.ld_h - m.lq_h) * mean_dq);
-        let w1 = self.mechanics(te_mean, t_load_nm, h_s);
+        let w1 = if self.locked {
+            0.0
+        } else {
+            self.mechanics(te_mean, t_load_nm, h_s)
+        };
 
         let th1 = wrap_angle(x.theta_e_rad + w * h_s);
         self.state = PlantState {
@@ -445,7 +500,11 @@ impl Plant {
     pub fn step_open(&mut self, t_load_nm: f64, h_s: f64) {
         let te_mean = 0.5 * self.torque_nm();
         let w0 = self.state.omega_mech_rad_s;
-        let w1 = self.mechanics(te_mean, t_load_nm, h_s);
+        let w1 = if self.locked {
+            0.0
+        } else {
+            self.mechanics(te_mean, t_load_nm, h_s)
+        };
         let th1 = wrap_angle(self.state.theta_e_rad + 0.5 * self.motor.p() * (w0 + w1) * h_s);
         self.state = PlantState {
             i_d_a: 0.0,

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::SimError;
 use crate::controller::{ControllerConfig, hz_to_rad_s};
 use crate::error::FieldError;
+use crate::faults::FaultSpec;
 use crate::inverter::InverterConfig;
 use crate::plant::MotorModel;
 use crate::profile::{LoadTerm, Profile};
@@ -211,6 +212,9 @@ pub struct Scenario {
     /// Load torque terms, summed (default: none).
     #[serde(default)]
     pub load: Vec<LoadTerm>,
+    /// Injected faults (`[[faults]]`, module [`crate::faults`]; default: none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<FaultSpec>,
 }
 
 /// A problem in a TOML text, as `(field path, message)`.
@@ -580,6 +584,9 @@ impl Scenario {
         self.speed_ref_rpm.validate("speed_ref_rpm")?;
         for (i, term) in self.load.iter().enumerate() {
             term.validate(&format!("load[{i}]"))?;
+        }
+        for (i, fault) in self.faults.iter().enumerate() {
+            fault.validate(&format!("faults[{i}]"), self)?;
         }
         if c.kind.is_foc() {
             self.foc_config()?;

@@ -105,6 +105,31 @@ impl SensorConfig {
     }
 }
 
+/// Faults acting on the two channels `[a, b]` for one sample (module
+/// [`faults`](crate::faults)): `i_meas_x = Q((1 + g_x) gain_x i_x + o_x + offset_x + n_x)`,
+/// then replaced by `value_a` when that is set (a stuck channel, a missing sample as NaN, a
+/// glitch).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChannelFaults {
+    /// Gain multiplier on top of the configured gain error.
+    pub gain: [f64; 2],
+    /// Offset on top of the configured one (drift, noise burst), A.
+    pub offset_a: [f64; 2],
+    /// The channel's output replaced by this value (after the ADC), A.
+    pub value_a: [Option<f64>; 2],
+}
+
+impl Default for ChannelFaults {
+    /// No fault.
+    fn default() -> Self {
+        Self {
+            gain: [1.0; 2],
+            offset_a: [0.0; 2],
+            value_a: [None; 2],
+        }
+    }
+}
+
 /// One current sample.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct CurrentSample {
@@ -156,6 +181,12 @@ impl CurrentSensor {
     fn channel(&self, i: f64, ch: usize, noise: f64) -> f64 {
         let c = &self.cfg;
         let v = (1.0 + c.gain_error[ch]) * i + c.offset_a[ch] + c.current_noise_std_a * noise;
+        self.adc(v)
+    }
+
+    /// The ADC: quantization and clipping (none with `adc_bits = 0`).
+    #[inline]
+    fn adc(&self, v: f64) -> f64 {
         if self.lsb_a > 0.0 {
             (v / self.lsb_a).round().clamp(self.code_min, self.code_max) * self.lsb_a
         } else {
@@ -171,6 +202,30 @@ impl CurrentSensor {
         let a = self.channel(i_abc_a[0], 0, na);
         let b = self.channel(i_abc_a[1], 1, nb);
         let abc = [a, b, -a - b];
+        CurrentSample {
+            i_abc_a: abc,
+            i_ab_a: clarke(abc),
+        }
+    }
+
+    /// [`measure`](Self::measure) with channel faults (the same noise stream).
+    pub fn measure_with(&mut self, i_abc_a: [f64; 3], f: &ChannelFaults) -> CurrentSample {
+        let na: f64 = StandardNormal.sample(&mut self.rng);
+        let nb: f64 = StandardNormal.sample(&mut self.rng);
+        let c = self.cfg;
+        let mut out = [0.0; 2];
+        for (ch, (i, n)) in [(i_abc_a[0], na), (i_abc_a[1], nb)].into_iter().enumerate() {
+            out[ch] = match f.value_a[ch] {
+                Some(v) => v,
+                None => self.adc(
+                    (1.0 + c.gain_error[ch]) * f.gain[ch] * i
+                        + c.offset_a[ch]
+                        + f.offset_a[ch]
+                        + c.current_noise_std_a * n,
+                ),
+            };
+        }
+        let abc = [out[0], out[1], -out[0] - out[1]];
         CurrentSample {
             i_abc_a: abc,
             i_ab_a: clarke(abc),

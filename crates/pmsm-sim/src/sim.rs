@@ -43,6 +43,7 @@ use crate::controller::{
     ControllerEstimate, ControllerInput, ControllerTelemetry, DriveController, RotorFeedback,
     SensoredController,
 };
+use crate::faults::{self, FaultInjector};
 use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
 use crate::metrics::{MetricsAccumulator, RunMetrics};
@@ -407,6 +408,8 @@ pub fn run_with_side_observers(
     );
     let mut inverter = Inverter::new(scenario.inverter);
     let mut sensor = CurrentSensor::new(scenario.sensors, scenario.seed);
+    // Injected faults (`[[faults]]`; none: not built, the loop unchanged).
+    let mut faults = FaultInjector::new(scenario);
     let mut observer = PmsmObserver::new(&scenario.observer_config())?;
     let mut seed_filter = if scenario.observer.seed_filter {
         Some(PmsmObserver::new(&scenario.seed_filter_config())?)
@@ -446,10 +449,15 @@ pub fn run_with_side_observers(
         let state = plant.state();
         let omega_e = plant.omega_e_rad_s();
         let i_abc_true = plant.i_abc_a();
-        let meas = sensor.measure(i_abc_true);
-        let u_dc = inverter.u_dc_at(t);
+        let (meas, u_dc) = match faults.as_mut() {
+            Some(f) => (
+                f.measure(kk, &mut sensor, i_abc_true),
+                inverter.u_dc_at(t) * f.bus_factor(kk),
+            ),
+            None => (sensor.measure(i_abc_true), inverter.u_dc_at(t)),
+        };
 
-        let est = match observer.step(u_prev, meas.i_ab_a) {
+        let est = match faults::observe(&mut observer, u_prev, meas.i_ab_a) {
             Ok(e) => e,
             Err(error) => {
                 end = RunEnd::ObserverFailed {
@@ -462,7 +470,10 @@ pub fn run_with_side_observers(
         };
         let p = observer.covariance();
         // The seed filter is only a comparison: if it fails, it is dropped, not the run.
-        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, meas.i_ab_a)) {
+        let seed_est = match seed_filter
+            .as_mut()
+            .map(|f| faults::observe(f, u_prev, meas.i_ab_a))
+        {
             Some(Ok(e)) => seed_filter.as_ref().map(|f| (e, f.covariance())),
             Some(Err(error)) => {
                 seed_filter = None;
@@ -498,7 +509,8 @@ pub fn run_with_side_observers(
             break;
         }
         let duties = out.duties.map(|d| d.clamp(0.0, 1.0));
-        let load = load_torque_nm(&scenario.load, t, state.omega_mech_rad_s);
+        let load = load_torque_nm(&scenario.load, t, state.omega_mech_rad_s)
+            + faults.as_ref().map_or(0.0, |f| f.extra_load_nm(kk));
         let mut applied = inverter.apply(duties, u_dc, u_dc, i_abc_true);
         let pwm = out.pwm_enabled;
         if !pwm {
@@ -574,10 +586,16 @@ pub fn run_with_side_observers(
             break;
         }
 
+        if let Some(f) = faults.as_mut() {
+            f.before_step(kk, &mut plant);
+        }
         if pwm {
             plant.step(applied.u_ab_v, load, ts);
         } else {
             plant.step_open(load, ts);
+        }
+        if let Some(f) = faults.as_mut() {
+            f.after_step(kk, &mut plant);
         }
         // Voltage over [t_k, t_k+1) as the controller knows it: its expectation for the duties
         // now applied (those of the previous tick with the delay, these without), else the

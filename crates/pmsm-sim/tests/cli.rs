@@ -217,9 +217,10 @@ fn a_non_finite_run_stops_with_a_diagnostic_and_a_readable_log() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-#[test]
-fn ctrl_c_leaves_a_readable_log() {
-    let dir = temp_dir("sigint");
+/// Starts a long run, waits until its log has grown, sends `signal` (`kill -<signal>`) and
+/// returns the output and the log's path.
+fn interrupted_run(name: &str, signal: &str) -> (Output, PathBuf, PathBuf) {
+    let dir = temp_dir(name);
     let child = Command::new(BIN)
         .args(["--duration", "1000", "--out", "o", "--no-plot"])
         .current_dir(&dir)
@@ -227,7 +228,7 @@ fn ctrl_c_leaves_a_readable_log() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap_or_else(|e| panic!("{e}"));
-    // Wait until the log exists and has grown (the run is under way), then interrupt.
+    // Wait until the log exists and has grown (the run is under way), then signal.
     let log = dir.join("o/run.mcap");
     let start = Instant::now();
     while std::fs::metadata(&log).map_or(0, |m| m.len()) < 4 << 20 {
@@ -238,11 +239,17 @@ fn ctrl_c_leaves_a_readable_log() {
         std::thread::sleep(Duration::from_millis(20));
     }
     let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args([&format!("-{signal}"), &child.id().to_string()])
         .status()
         .unwrap_or_else(|e| panic!("kill: {e}"));
     assert!(sent.success());
     let o = child.wait_with_output().unwrap_or_else(|e| panic!("{e}"));
+    (o, log, dir)
+}
+
+#[test]
+fn ctrl_c_leaves_a_readable_log() {
+    let (o, log, dir) = interrupted_run("sigint", "INT");
     let err = text(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(err.contains("interrupted"), "{err}");
@@ -251,5 +258,58 @@ fn ctrl_c_leaves_a_readable_log() {
     assert!(n > 1000, "{n} periods");
     assert_eq!(msgs["/pmsm_sim/event"][0]["level"], "warning");
     assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], n);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sigterm_leaves_a_readable_log() {
+    // `kill` and service managers stop a process with SIGTERM: the run stops like on
+    // Ctrl-C and the log is finished.
+    let (o, log, dir) = interrupted_run("sigterm", "TERM");
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let msgs = read_mcap(&log);
+    let n = msgs["/pmsm_sim/period"].len();
+    assert!(n > 1000, "{n} periods");
+    let last = &msgs["/pmsm_sim/period"][n - 1];
+    assert_eq!(last["k"], (n - 1) as u64);
+    assert_eq!(msgs["/pmsm_sim/event"][0]["level"], "warning");
+    assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], n);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_output_error_after_the_run_leaves_a_readable_log() {
+    // The plot cannot be written (its path is a directory): an error, but the MCAP log,
+    // finished before the plot is drawn, is complete.
+    let dir = temp_dir("outerr");
+    std::fs::create_dir_all(dir.join("o/plot.svg")).unwrap_or_else(|e| panic!("{e}"));
+    let o = run(&["--duration", "0.05", "--out", "o"], &dir);
+    let err = text(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("plot.svg"), "{err}");
+    let msgs = read_mcap(&dir.join("o/run.mcap"));
+    assert_eq!(msgs["/pmsm_sim/period"].len(), 500);
+    assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], 500);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn faults_subcommand_prints_and_writes_its_table() {
+    let dir = temp_dir("faults");
+    let o = run(&["faults", "--out", "f"], &dir);
+    let stdout = text(&o.stdout);
+    assert!(o.status.success(), "{stdout}\n{}", text(&o.stderr));
+    let md = std::fs::read_to_string(dir.join("f/faults.md")).unwrap_or_default();
+    assert!(stdout.starts_with(&md), "{stdout}");
+    // Header, separator and one row per fault.
+    let rows = md.lines().filter(|l| l.starts_with("| ")).count();
+    assert_eq!(rows, 1 + pmsm_sim::fault_suite::cases().len(), "{md}");
+    assert!(
+        md.contains("| glitch, one sample at 10x rated (a) |"),
+        "{md}"
+    );
+    assert!(md.contains("## Expected behaviour"), "{md}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -200,3 +200,57 @@ def test_interrupted_run_is_readable(sim_bin, tmp_path):
     assert messages["/pmsm_sim/event"][0]["level"] == "warning"
     assert "interrupted" in messages["/pmsm_sim/event"][0]["message"]
     assert messages["/pmsm_sim/metrics"][0]["periods"] == n
+
+
+def test_sigterm_run_is_readable(sim_bin, tmp_path):
+    """SIGTERM (what `kill`, systemd and container runtimes send) stops the run like Ctrl-C:
+    every period simulated so far is in the log, which has its summary, an event and the
+    metrics."""
+    out = tmp_path / "o"
+    proc = subprocess.Popen(
+        [sim_bin, "run", "--duration", "1000", "--out", str(out), "--no-plot"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    log = out / "run.mcap"
+    deadline = time.monotonic() + 60
+    while not (log.exists() and log.stat().st_size > (2 << 20)):
+        assert time.monotonic() < deadline, "the run did not start"
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert b"interrupted" in err
+    summary, messages, _ = read(log)
+    periods = messages["/pmsm_sim/period"]
+    n = len(periods)
+    assert n > 1000
+    assert [p["k"] for p in periods] == list(range(n))
+    counts = {summary.channels[i].topic: c for i, c in summary.statistics.channel_message_counts.items()}
+    assert counts["/pmsm_sim/period"] == n
+    assert messages["/pmsm_sim/event"][0]["level"] == "warning"
+    assert "interrupted" in messages["/pmsm_sim/event"][0]["message"]
+    assert messages["/pmsm_sim/metrics"][0]["periods"] == n
+
+
+def test_fault_run_logs_the_trip(sim_bin, tmp_path):
+    """A scenario with an injected fault (a 5 ms dropout: foc trips non_finite_input after 5
+    missing samples) logs the missing samples as NaN and the trip, and stays readable."""
+    scen = tmp_path / "dropout.toml"
+    text = subprocess.run([sim_bin, "show"], capture_output=True, text=True, check=True).stdout
+    scen.write_text(text + '\n[[faults]]\nkind = "dropout"\nt_s = 0.45\nduration_s = 0.005\n')
+    out = tmp_path / "o"
+    done = subprocess.run(
+        [sim_bin, "run", str(scen), "--duration", "0.5", "--out", str(out), "--no-plot"],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    _, messages, _ = read(out / "run.mcap")
+    periods = messages["/pmsm_sim/period"]
+    assert len(periods) == 5000
+    assert math.isnan(periods[4500]["measured"]["i_abc_a"][0])
+    assert periods[4499]["control"]["telemetry"]["fault"] is None
+    assert periods[4504]["control"]["telemetry"]["fault"] == "non_finite_input"
+    assert not periods[4504]["inverter"]["pwm_enabled"]
+    assert all(0.0 <= d <= 1.0 for p in periods for d in p["inverter"]["duties"])
