@@ -501,6 +501,7 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
             }
             load
         },
+        faults: Vec::new(),
     }
 }
 
