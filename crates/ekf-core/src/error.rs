@@ -15,6 +15,22 @@ pub enum Param {
     Ts,
     /// Angle standard deviation limit of the status `angle_sigma_limit_rad`.
     AngleSigmaLimit,
+    /// Threshold of the branch check, `BranchCheck::threshold_rad`.
+    BranchThreshold,
+    /// Speed below which the branch check sleeps, `BranchCheck::min_speed_rad_s`.
+    BranchMinSpeed,
+    /// Allowance of the branch check, `BranchCheck::allowance`.
+    BranchAllowance,
+    /// NIS threshold of the innovation gate, `InnovationGate::nis_threshold`.
+    GateNisThreshold,
+    /// Settled level of the innovation gate, `InnovationGate::settled_nis`.
+    GateSettledNis,
+    /// NIS limit of the branch check, `BranchCheck::max_nis`.
+    BranchMaxNis,
+    /// Angle uncertainty added by a flip, `BranchCheck::flip_angle_sigma_rad`.
+    BranchFlipSigma,
+    /// Trace factor of the covariance health check, `CovarianceHealth::trace_factor`.
+    HealthTraceFactor,
 }
 
 /// A matrix named in a [`ConfigError`].
@@ -45,6 +61,9 @@ pub enum ConfigError {
     NotPositiveSemiDefinite(Matrix),
     /// The initial state `x0` holds a NaN or an infinity.
     NonFiniteInitialState,
+    /// The covariance health check is on but `trace(P0)` is zero, so its bound
+    /// `trace_factor * trace(P0)` would reject every covariance.
+    ZeroInitialCovarianceTrace,
 }
 
 impl fmt::Display for Param {
@@ -55,6 +74,14 @@ impl fmt::Display for Param {
             Param::PsiF => "psi_f_wb",
             Param::Ts => "ts_s",
             Param::AngleSigmaLimit => "angle_sigma_limit_rad",
+            Param::BranchThreshold => "branch_check.threshold_rad",
+            Param::BranchMinSpeed => "branch_check.min_speed_rad_s",
+            Param::BranchAllowance => "branch_check.allowance",
+            Param::GateNisThreshold => "innovation_gate.nis_threshold",
+            Param::GateSettledNis => "innovation_gate.settled_nis",
+            Param::BranchMaxNis => "branch_check.max_nis",
+            Param::BranchFlipSigma => "branch_check.flip_angle_sigma_rad",
+            Param::HealthTraceFactor => "covariance_health.trace_factor",
         })
     }
 }
@@ -81,6 +108,9 @@ impl fmt::Display for ConfigError {
                 write!(f, "{m} is not positive semi-definite (negative eigenvalue)")
             }
             ConfigError::NonFiniteInitialState => f.write_str("x0 holds a NaN or an infinity"),
+            ConfigError::ZeroInitialCovarianceTrace => f.write_str(
+                "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",
+            ),
         }
     }
 }

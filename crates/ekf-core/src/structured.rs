@@ -74,6 +74,22 @@ impl<T: Float> Sym4<T> {
         )
     }
 
+    /// `p00 + p11 + p22 + p33`.
+    pub(crate) fn trace(&self) -> T {
+        (self.p00 + self.p11) + (self.p22 + self.p33)
+    }
+
+    /// `T P T` with `T = diag(1, 1, -1, 1)`: the covariance after the speed's sign is flipped
+    /// (the entries coupling the speed with another state change sign).
+    pub(crate) fn flip_speed(self) -> Self {
+        Self {
+            p02: -self.p02,
+            p12: -self.p12,
+            p23: -self.p23,
+            ..self
+        }
+    }
+
     pub(crate) fn all_finite(&self) -> bool {
         finite(&[
             self.p00, self.p01, self.p02, self.p03, self.p11, self.p12, self.p13, self.p22,
@@ -158,10 +174,11 @@ fn sum_is_finite<T: Float, const N: usize>(v: &[T; N]) -> bool {
     ((acc[0] + acc[1]) + (acc[2] + acc[3])).is_finite()
 }
 
-/// Result of a correction: state, covariance and diagnostics.
-pub(crate) type Posterior<T> = (Vector4<T>, Sym4<T>, Correction<T, 2>);
+/// Result of a correction: state, covariance, diagnostics and the angle correction
+/// `K_th y` (rad, before wrapping) the update added to the prior angle.
+pub(crate) type Posterior<T> = (Vector4<T>, Sym4<T>, Correction<T, 2>, T);
 
-/// Structured correction: `(x, P, diagnostics)` from the prior `(x-, P-)` and the sampled
+/// Structured correction: `(x, P, diagnostics, angle correction)` from the prior `(x-, P-)` and the sampled
 /// currents; an error when `S` is not positive definite or a result is not finite.
 #[inline(always)]
 pub(crate) fn correct<T: Float>(
@@ -199,11 +216,12 @@ pub(crate) fn correct<T: Float>(
     let (k30, k31) = k(p03, p13);
     let y0 = z[0] - x[0];
     let y1 = z[1] - x[1];
+    let dth = k30 * y0 + k31 * y1;
     let xn = Vector4::new(
         x[0] + k00 * y0 + k01 * y1,
         x[1] + k10 * y0 + k11 * y1,
         x[2] + k20 * y0 + k21 * y1,
-        wrap_angle(x[3] + k30 * y0 + k31 * y1),
+        wrap_angle(x[3] + dth),
     );
     let nis = i00 * y0 * y0 + (i01 + i01) * y0 * y1 + i11 * y1 * y1;
     let pn = match model.covariance_update() {
@@ -243,7 +261,7 @@ pub(crate) fn correct<T: Float>(
         innovation_covariance: Matrix2::new(s00, s01, s01, s11),
         nis,
     };
-    Ok((xn, pn, correction))
+    Ok((xn, pn, correction, dth))
 }
 
 /// Joseph form on 2 x 2 blocks (module docs), written out on scalars: `E = I - K1`,
