@@ -138,13 +138,87 @@ fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (
 fn default_locks_from_any_angle_and_seed_does_not() {
     let (cells, fail_default) = grid("ObserverConfig::new (default)", ObserverConfig::new);
     let (_, fail_seed) = grid("ObserverConfig::seed", ObserverConfig::seed);
-    if std::env::var_os("NOB").is_some() {
-        grid("new, no branch check", |m, ts| ObserverConfig { branch_check: None, ..ObserverConfig::new(m, ts) });
-    }
     assert_eq!(
         fail_default, 0,
         "default: {fail_default} of {cells} cells fail"
     );
     // The seed's filter has no branch check: some cells settle on the theta + pi branch.
     assert!(fail_seed > 0, "the seed was expected to fail some cells");
+}
+
+/// Runs the default observer started on the truth over a speed profile; returns the branch
+/// flips and the largest angle error (deg) where `|w| > 10 %` of rated after the first 20 ms.
+fn run_profile(
+    motor: MotorParams<f64>,
+    rated: f64,
+    noise: f64,
+    speed: &dyn Fn(f64) -> f64,
+    n: usize,
+) -> (u32, f64) {
+    let ic = motor.characteristic_current_a();
+    let iq = move |_t: f64| 0.1 * ic;
+    let tr = simulate(&Scenario {
+        motor,
+        ts: TS,
+        n,
+        speed,
+        iq_ref: &iq,
+        th0: 0.3,
+        noise_a: noise,
+        seed: 9,
+    });
+    let mut cfg = ObserverConfig::new(motor, TS);
+    cfg.x0[2] = tr.w[0];
+    cfg.x0[3] = tr.th[0];
+    let mut obs = PmsmObserver::new(&cfg).expect("valid");
+    let mut u_prev = [0.0, 0.0];
+    let mut max_err = 0.0f64;
+    for (k, ((i, u), (th, w))) in tr.i_meas.iter().zip(&tr.u).zip(tr.th.iter().zip(&tr.w)).enumerate() {
+        let e = obs.step(u_prev, *i).expect("finite");
+        if k >= 200 && w.abs() >= 0.099 * rated {
+            max_err = max_err.max(wrap_angle(e.theta_rad - th).to_degrees().abs());
+        }
+        u_prev = *u;
+    }
+    (obs.counters().branch_flips, max_err)
+}
+
+/// No false flips: steady state at every grid speed, slow and fast reversals through zero,
+/// and a rotor rocking around standstill (where the back-EMF is unobservable).
+#[test]
+fn no_false_flips() {
+    for (mname, motor, rated, noise) in motors() {
+        let mut report = Vec::new();
+        for f in SPEED_FRACTIONS {
+            let w = f * rated;
+            let (flips, err) = run_profile(motor, rated, noise, &move |_| w, 2000);
+            report.push((format!("steady {:+.0}%", f * 100.0), flips, err));
+        }
+        // Sinusoidal reversal, period 0.2 s, through +-rated.
+        let slow = move |t: f64| rated * (2.0 * PI * t / 0.2).cos();
+        let (flips, err) = run_profile(motor, rated, noise, &slow, 4000);
+        report.push(("reversal 0.2 s period".into(), flips, err));
+        // Linear reversal from +rated to -rated in 50 ms, and back.
+        let fast = move |t: f64| {
+            let r = (t - 0.02) / 0.05;
+            if t < 0.1 {
+                rated * (1.0 - 2.0 * r.clamp(0.0, 1.0))
+            } else {
+                -rated * (1.0 - 2.0 * ((t - 0.12) / 0.05).clamp(0.0, 1.0))
+            }
+        };
+        let (flips, err) = run_profile(motor, rated, noise, &fast, 2000);
+        report.push(("reversal +-rated in 50 ms".into(), flips, err));
+        // Rocking around standstill: +-3 % of rated at 5 Hz.
+        let rock = move |t: f64| 0.03 * rated * (2.0 * PI * 5.0 * t).sin();
+        let (flips, _) = run_profile(motor, rated, noise, &rock, 4000);
+        report.push(("rocking +-3% at 5 Hz".into(), flips, 0.0));
+        for (name, flips, err) in &report {
+            println!("{mname:18} {name:28} flips {flips}  max |angle error| {err:6.2} deg");
+        }
+        for (name, flips, err) in &report {
+            assert_eq!(*flips, 0, "{mname} {name}: false branch flip");
+            assert!(*err < 5.0, "{mname} {name}: angle error {err} deg");
+        }
+    }
 }
