@@ -103,12 +103,7 @@ impl<T: Float> NoiseCovariances<T> {
     /// the sensing chain: the sensor's noise standard deviation (A) and the ADC's step in
     /// amperes (module docs, "The rule from the sensing chain"). A non-finite or absurd value
     /// is refused when the observer is built ([`ObserverConfig::validate`](crate::ObserverConfig::validate)).
-    pub fn from_sensing(
-        motor: &MotorParams<T>,
-        ts_s: T,
-        sensor_sigma_a: T,
-        adc_lsb_a: T,
-    ) -> Self {
+    pub fn from_sensing(motor: &MotorParams<T>, ts_s: T, sensor_sigma_a: T, adc_lsb_a: T) -> Self {
         let r = sensor_sigma_a * sensor_sigma_a + adc_lsb_a * adc_lsb_a / to_t(12.0);
         Self {
             q: Self::scaled(motor, ts_s).q,

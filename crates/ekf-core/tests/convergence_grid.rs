@@ -173,7 +173,13 @@ fn run_profile(
     let mut obs = PmsmObserver::new(&cfg).expect("valid");
     let mut u_prev = [0.0, 0.0];
     let mut max_err = 0.0f64;
-    for (k, ((i, u), (th, w))) in tr.i_meas.iter().zip(&tr.u).zip(tr.th.iter().zip(&tr.w)).enumerate() {
+    for (k, ((i, u), (th, w))) in tr
+        .i_meas
+        .iter()
+        .zip(&tr.u)
+        .zip(tr.th.iter().zip(&tr.w))
+        .enumerate()
+    {
         let e = obs.step(u_prev, *i).expect("finite");
         if k >= 200 && w.abs() >= 0.099 * rated {
             max_err = max_err.max(wrap_angle(e.theta_rad - th).to_degrees().abs());

@@ -120,13 +120,8 @@ fn single_glitch_is_rejected() {
             ("beta", 0.0, -glitch),
             ("both", glitch, glitch),
         ] {
-            let bad = |k: usize, i: [f64; 2]| {
-                Some(if k == K0 {
-                    [i[0] + ga, i[1] + gb]
-                } else {
-                    i
-                })
-            };
+            let bad =
+                |k: usize, i: [f64; 2]| Some(if k == K0 { [i[0] + ga, i[1] + gb] } else { i });
             let mut cfg = ObserverConfig::new(motor, TS);
             let clean = run(&mut locked(&mut cfg, &tr), &tr, |_, i| Some(i));
             let mut obs = locked(&mut cfg, &tr);
@@ -194,8 +189,8 @@ fn stuck_channel_is_reported_and_recovered_from() {
         let err = angle_errors_deg(&tr, &est);
         let c = *obs.counters();
         let nis_stuck = est[STUCK].iter().map(|e| e.nis).sum::<f64>() / STUCK.len() as f64;
-        let nis_before = est[100..STUCK.start].iter().map(|e| e.nis).sum::<f64>()
-            / (STUCK.start - 100) as f64;
+        let nis_before =
+            est[100..STUCK.start].iter().map(|e| e.nis).sum::<f64>() / (STUCK.start - 100) as f64;
         let max_err_stuck = err[STUCK].iter().fold(0.0f64, |m, e| m.max(e.abs()));
         let relock = convergence_index(&err, 5.0).map(|k| (k as f64 - STUCK.end as f64) * TS * 1e3);
         println!(
