@@ -51,6 +51,45 @@
 //! `th + w Ts / 2`, which removes the lag. `Phi` is the exact Jacobian of this map
 //! (`d/dth` rotates the EMF term by 90 deg; `d/dw` uses `d(w G)/dw = G + w G'`,
 //! `G' = j (Ts e^{j w Ts} - G) / (a + j w)`).
+//!
+//! # Safeguards (on in [`ObserverConfig::new`], off in [`ObserverConfig::seed`])
+//!
+//! After the correction of every step, in this order; each is an `Option` field of
+//! [`ObserverConfig`], reported per step in [`Estimate`] and counted in [`ObserverCounters`].
+//! Together they add a few tens of instructions to a step (no division, no square root).
+//!
+//! **Innovation gate** ([`InnovationGate`]). The correction's `NIS = y^T S^-1 y` is, for a
+//! consistent filter, chi-square distributed with 2 degrees of freedom: `P(NIS > g) =
+//! exp(-g / 2)`. While the filter is *settled* (angle variance below the status limit and the
+//! running mean of the accepted NIS, each clamped to the threshold, at most `settled_nis`), a
+//! sample with `NIS > nis_threshold` is rejected: the step keeps the prediction
+//! (`x = x-`, `P = P-`, as if the sample were missing) and reports `rejected`. After
+//! `max_consecutive` rejections in a row the next sample is accepted whatever its NIS and the
+//! gate stays open until an accepted NIS is below the threshold again, so that a real change
+//! is not locked out (counted as `gate_reopened`). During the initial convergence (NIS far
+//! above 2) the gate does not act.
+//!
+//! **Wrong branch** ([`BranchCheck`]). `(w, th)` and `(-w, th + pi)` give the same back-EMF
+//! (design section 3); only `dth/dt = w` tells them apart. On the wrong branch the prediction
+//! turns the angle at `w_hat` while the measured EMF turns the other way, so the corrections
+//! `K_th y` keep cancelling the predicted motion. A CUSUM test accumulates that missing motion
+//! (in radians) while the filter is tracking above a minimum speed; past `threshold_rad` the
+//! state moves to the other branch: `theta += pi`, `w = -w`, `P = T P T` with
+//! `T = diag(1, 1, -1, 1)`, and the angle variance is raised by `flip_angle_sigma_rad^2`
+//! (reported as `branch_flipped`). Near standstill, where the EMF and hence the branch is not
+//! observable, the test sleeps and forgets.
+//!
+//! **Covariance health** ([`CovarianceHealth`]). `P` must have a positive diagonal and
+//! `trace(P) <= trace_factor * trace(P0)` (its entries are finite: every step that would make
+//! them non-finite is refused). `trace(P)` mixes units; with [`default_p0`] it is dominated by
+//! the speed variance, `(0.05 / Ts)^2`, so the default bound (factor 100) means a speed
+//! standard deviation of about `0.5 / Ts` (5000 rad/s el. at 10 kHz): the filter has lost the
+//! rotor entirely. On failure the observer resets itself: currents = the measured currents
+//! (after [`PmsmObserver::predict`]: the estimated ones), speed and angle kept when finite
+//! (else 0), `P = P0`, gate and branch test restarted; reported as `covariance_reset`. The
+//! check runs after every `step`, `predict` and `correct`, and also when a step is refused
+//! for a singular `S` or a non-finite result while the stored `P` is unhealthy (then the
+//! reset replaces the error).
 
 use nalgebra::{Cholesky, Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 
