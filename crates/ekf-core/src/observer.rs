@@ -98,7 +98,7 @@ use crate::ekf::{
 };
 use crate::motor::positive;
 use crate::structured;
-use crate::structured::Sym4;
+use crate::structured::{Outcome, Sym4};
 use crate::trig::sin_cos_small;
 use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t, wrap_angle};
 
@@ -664,6 +664,45 @@ struct HealthState<T> {
     p0: Sym4<T>,
 }
 
+/// The gate's decision on one sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Verdict {
+    /// NIS at or below the threshold (or no gate): accept.
+    Low,
+    /// NIS above the threshold but the gate does not act (not settled, or open): accept.
+    High,
+    /// NIS above the threshold after `max_consecutive` rejections: accept and open the gate.
+    Reopen,
+    /// Reject: prediction only.
+    Reject,
+}
+
+/// The gate's decision for a sample with `NIS > threshold` (no state change here).
+#[cold]
+#[inline(never)]
+fn gate_verdict<T: Float>(g: &GateState<T>, tracking: bool) -> Verdict {
+    if !(tracking && g.nis_mean <= g.settled_nis && !g.open) {
+        Verdict::High
+    } else if g.consecutive < g.max_consecutive {
+        Verdict::Reject
+    } else {
+        Verdict::Reopen
+    }
+}
+
+/// Bookkeeping of an accepted sample whose NIS was above the threshold: it counts at the
+/// threshold in the running mean; a reopening is counted and opens the gate.
+#[cold]
+#[inline(never)]
+fn gate_accepted_high<T: Float>(g: &mut GateState<T>, counters: &mut ObserverCounters, v: Verdict) {
+    if v == Verdict::Reopen {
+        g.open = true;
+        counters.gate_reopened = counters.gate_reopened.saturating_add(1);
+    }
+    g.consecutive = 0;
+    g.nis_mean += (g.threshold - g.nis_mean) * to_t::<T>(1.0 / 16.0);
+}
+
 /// The PMSM alpha-beta EKF observer (seed's model; module docs give equations and timing).
 ///
 /// Its steps run a hand-scheduled update on the 10 unique entries of the symmetric covariance
@@ -768,6 +807,7 @@ impl<T: Float> PmsmObserver<T> {
         let (x, p) = structured::predict(&self.model, &self.x, &self.p, u_prev);
         if !(finite(x.as_slice()) && p.all_finite()) {
             if self.unhealthy(&self.p) {
+                self.events = Events::default();
                 self.self_reset(None);
                 return Ok(());
             }
@@ -800,72 +840,106 @@ impl<T: Float> PmsmObserver<T> {
         pm: Sym4<T>,
         i: [T; 2],
     ) -> Result<Estimate<T>, EkfError> {
-        let (x, p, c, dth) = match structured::correct(&self.model, &xm, &pm, i) {
-            Ok(post) => post,
+        // Common path first: every test below is one comparison on good data; the rare
+        // branches (rejection, reopening, flip, reset) are out-of-line functions.
+        let tracking = pm.p33 <= self.angle_var_limit;
+        // The gate decides from the NIS before the update is computed; its bookkeeping is
+        // applied only once the step has succeeded (a refused step changes nothing).
+        let mut verdict = Verdict::Low;
+        let gate = &self.gate;
+        let outcome = structured::correct(&self.model, &xm, &pm, i, |nis| match gate {
+            Some(g) if nis > g.threshold => {
+                verdict = gate_verdict(g, tracking);
+                verdict == Verdict::Reject
+            }
+            _ => false,
+        });
+        let (x, p, c, dth) = match outcome {
+            Ok(Outcome::Updated(post)) => post,
+            Ok(Outcome::Skipped(c)) => {
+                // Rejected by the gate: the step is the prediction only.
+                self.x = xm;
+                self.p = pm;
+                self.last = c;
+                self.gate_rejected();
+                if self.unhealthy(&self.p) {
+                    self.self_reset(Some(i));
+                }
+                return Ok(self.estimate());
+            }
             Err(e) => {
                 if self.unhealthy(&self.p) {
+                    self.events = Events::default();
                     self.self_reset(Some(i));
                     return Ok(self.estimate());
                 }
                 return Err(e);
             }
         };
-        let mut events = Events::default();
-        let tracking = pm.p33 <= self.angle_var_limit;
-        if let Some(g) = &mut self.gate {
-            if tracking && g.nis_mean <= g.settled_nis && !g.open && c.nis > g.threshold {
-                if g.consecutive < g.max_consecutive {
-                    // Rejected: the step is the prediction only.
-                    g.consecutive += 1;
-                    self.counters.rejected = self.counters.rejected.saturating_add(1);
-                    self.x = xm;
-                    self.p = pm;
-                    self.last = c;
-                    self.events = Events {
-                        rejected: true,
-                        ..Events::default()
-                    };
-                    if self.unhealthy(&self.p) {
-                        self.self_reset(Some(i));
-                    }
-                    return Ok(self.estimate());
-                }
-                g.open = true;
-                self.counters.gate_reopened = self.counters.gate_reopened.saturating_add(1);
-            }
-            g.consecutive = 0;
-            if g.open && c.nis <= g.threshold {
-                g.open = false;
-            }
-            g.nis_mean += (c.nis.min(g.threshold) - g.nis_mean) * to_t::<T>(1.0 / 16.0);
-        }
         self.x = x;
         self.p = p;
         self.last = c;
+        self.events = Events::default();
+        if let Some(g) = &mut self.gate {
+            if verdict == Verdict::Low {
+                g.consecutive = 0;
+                g.open = false;
+                g.nis_mean += (c.nis - g.nis_mean) * to_t::<T>(1.0 / 16.0);
+            } else {
+                gate_accepted_high(g, &mut self.counters, verdict);
+            }
+        }
         if let Some(b) = &mut self.branch {
             let w = x[2];
-            if p.p33 <= self.angle_var_limit && w * w > b.min_speed2 && c.nis <= b.max_nis {
+            if tracking && w * w > b.min_speed2 && c.nis <= b.max_nis {
                 let (back, w_abs) = if w > T::zero() { (-dth, w) } else { (dth, -w) };
-                let back = back.min(b.two_ts * w_abs);
-                b.sum = (b.sum + back - b.k * w_abs).max(T::zero());
+                // Plain comparisons: `min`/`max` are libm calls (NaN rules) on the MCU.
+                let cap = b.two_ts * w_abs;
+                let back = if back < cap { back } else { cap };
+                let sum = b.sum + back - b.k * w_abs;
+                b.sum = if sum > T::zero() { sum } else { T::zero() };
                 if b.sum > b.threshold {
-                    b.sum = T::zero();
-                    self.x[2] = -w;
-                    self.x[3] = wrap_angle(x[3] + T::pi());
-                    self.p = self.p.flip_speed();
-                    self.p.p33 += b.flip_var;
-                    self.counters.branch_flips = self.counters.branch_flips.saturating_add(1);
-                    events.flipped = true;
+                    self.flip();
                 }
             } else {
                 b.sum = T::zero();
             }
         }
-        self.events = events;
         if self.unhealthy(&self.p) {
             self.self_reset(Some(i));
         }
         Ok(self.estimate())
+    }
+
+    /// Bookkeeping of a rejected sample: counted and reported.
+    #[cold]
+    #[inline(never)]
+    fn gate_rejected(&mut self) {
+        if let Some(g) = &mut self.gate {
+            g.consecutive += 1;
+        }
+        self.counters.rejected = self.counters.rejected.saturating_add(1);
+        self.events = Events {
+            rejected: true,
+            ..Events::default()
+        };
+    }
+
+    /// Moves the estimate to the other branch: `theta += pi`, `w = -w`, `P = T P T`
+    /// (`T = diag(1, 1, -1, 1)`), `P33 += flip_angle_sigma_rad^2`; restarts the test.
+    #[cold]
+    #[inline(never)]
+    fn flip(&mut self) {
+        let Some(b) = &mut self.branch else {
+            return;
+        };
+        b.sum = T::zero();
+        self.x[2] = -self.x[2];
+        self.x[3] = wrap_angle(self.x[3] + T::pi());
+        self.p = self.p.flip_speed();
+        self.p.p33 += b.flip_var;
+        self.counters.branch_flips = self.counters.branch_flips.saturating_add(1);
+        self.events.flipped = true;
     }
 
     /// `true` when the health check is on and `P` fails it: a non-positive (or NaN) diagonal
@@ -875,11 +949,11 @@ impl<T: Float> PmsmObserver<T> {
         match &self.health {
             Some(h) => {
                 let z = T::zero();
-                !(p.p00 > z
+                !((p.p00 + p.p11) + (p.p22 + p.p33) <= h.trace_bound
+                    && p.p00 > z
                     && p.p11 > z
                     && p.p22 > z
-                    && p.p33 > z
-                    && (p.p00 + p.p11) + (p.p22 + p.p33) <= h.trace_bound)
+                    && p.p33 > z)
             }
             None => false,
         }
@@ -889,6 +963,7 @@ impl<T: Float> PmsmObserver<T> {
     /// estimate if none, or 0 if that is not finite), speed and angle kept if finite else 0,
     /// `P = P0`, gate and branch check restarted; reported in the events and counters.
     #[cold]
+    #[inline(never)]
     fn self_reset(&mut self, i: Option<[T; 2]>) {
         let Some(h) = &self.health else {
             return;
