@@ -25,8 +25,6 @@ pub enum Param {
     GateNisThreshold,
     /// Settled level of the innovation gate, `InnovationGate::settled_nis`.
     GateSettledNis,
-    /// NIS limit of the branch check, `BranchCheck::max_nis`.
-    BranchMaxNis,
     /// Angle uncertainty added by a flip, `BranchCheck::flip_angle_sigma_rad`.
     BranchFlipSigma,
     /// Trace factor of the covariance health check, `CovarianceHealth::trace_factor`.
@@ -79,7 +77,6 @@ impl fmt::Display for Param {
             Param::BranchAllowance => "branch_check.allowance",
             Param::GateNisThreshold => "innovation_gate.nis_threshold",
             Param::GateSettledNis => "innovation_gate.settled_nis",
-            Param::BranchMaxNis => "branch_check.max_nis",
             Param::BranchFlipSigma => "branch_check.flip_angle_sigma_rad",
             Param::HealthTraceFactor => "covariance_health.trace_factor",
         })

@@ -149,19 +149,20 @@ pub struct ObserverConfig<T: Float> {
 /// predicted motion. The check accumulates that "missing motion" (a CUSUM test on the angle):
 ///
 /// ```text
-/// b_k = min(-sign(w_hat) K_th y_k, 2 |w_hat| Ts)          (backward correction, rad)
-/// m_k = b_k - allowance |w_hat| Ts                         (< 0 on average on the right branch)
-/// S_k = max(0, S_k-1 + m_k)      while tracking, |w_hat| > min_speed_rad_s and NIS <= max_nis
-/// S_k = 0                        otherwise
-/// flip when S_k > threshold_rad
+/// b_k = min(-w_hat K_th y_k, 2 Ts w_hat^2)        backward correction times |w_hat|
+/// S_k = max(0, S_k-1 + b_k - allowance Ts w_hat^2)   while tracking and |w_hat| > min_speed_rad_s
+/// S_k = 0                                             otherwise
+/// flip when S_k > threshold_rad |w_hat|
 /// ```
 ///
-/// The clamp of `b_k` and the NIS condition keep the first samples of a convergence, where
-/// the filter makes large jumps, from counting as evidence.
+/// `S` is the missing motion weighted by `|w_hat|` (rad^2/s), which needs neither the sign of
+/// `w_hat` nor a division; at a steady speed `S / |w_hat|` is the missing motion in radians.
+/// The clamp of `b_k` (at most two predicted steps' worth per sample) keeps the first samples
+/// of a convergence, where the filter makes large jumps, from counting as much evidence.
 ///
-/// On the right branch the corrections average zero and `S` stays near 0 (`m` drifts by
-/// `-allowance |w| Ts` per sample); on the wrong branch they cancel about `|w| Ts` per sample
-/// and `S` grows by about `(1 - allowance) |w| Ts` per sample. The flip moves the state to the
+/// On the right branch the corrections average zero and `S` stays near 0 (it drifts by
+/// `-allowance |w| Ts` rad per sample); on the wrong branch they cancel about `|w| Ts` per
+/// sample and `S` grows by about `(1 - allowance) |w| Ts` rad per sample. The flip moves the state to the
 /// other branch: `theta += pi`, `w = -w`, `P = T P T` with `T = diag(1, 1, -1, 1)`, then
 /// `P33 += flip_angle_sigma_rad^2`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -174,8 +175,6 @@ pub struct BranchCheck<T> {
     /// Fraction of the predicted motion `|w_hat| Ts` the corrections may cancel per sample
     /// without counting as evidence (between 0 and 1).
     pub allowance: T,
-    /// A sample whose NIS exceeds this restarts the test (the filter is not tracking).
-    pub max_nis: T,
     /// Added to the angle's standard deviation (in quadrature, `P33 += sigma^2`) by a flip:
     /// the wrong branch's equilibrium is not exactly `pi` away, and the flipped estimate
     /// must be free to move.
@@ -184,14 +183,13 @@ pub struct BranchCheck<T> {
 
 impl<T: Float> BranchCheck<T> {
     /// The default for a sample time: threshold `0.3` rad, minimum speed `0.002 / Ts`
-    /// (0.002 rad per sample, 20 rad/s at 10 kHz), allowance `0.5`, `max_nis = 41.4`,
+    /// (0.002 rad per sample, 20 rad/s at 10 kHz), allowance `0.5`,
     /// `flip_angle_sigma_rad = 0.5`.
     pub fn default_for(ts_s: T) -> Self {
         Self {
             threshold_rad: to_t(0.3),
             min_speed_rad_s: to_t::<T>(0.002) / ts_s,
             allowance: to_t(0.5),
-            max_nis: to_t(41.4),
             flip_angle_sigma_rad: to_t(0.5),
         }
     }
@@ -299,7 +297,6 @@ impl<T: Float> ObserverConfig<T> {
             positive(b.threshold_rad, Param::BranchThreshold)?;
             non_negative(b.min_speed_rad_s, Param::BranchMinSpeed)?;
             non_negative(b.allowance, Param::BranchAllowance)?;
-            positive(b.max_nis, Param::BranchMaxNis)?;
             non_negative(b.flip_angle_sigma_rad, Param::BranchFlipSigma)?;
         }
         if let Some(g) = &self.innovation_gate {
@@ -637,10 +634,9 @@ struct BranchState<T> {
     k: T,
     /// `2 Ts`.
     two_ts: T,
-    max_nis: T,
     /// `flip_angle_sigma_rad^2`.
     flip_var: T,
-    /// CUSUM of the missing motion, rad.
+    /// CUSUM of the missing motion weighted by `|w_hat|`, rad^2/s.
     sum: T,
 }
 
@@ -753,7 +749,6 @@ impl<T: Float> PmsmObserver<T> {
                 min_speed2: b.min_speed_rad_s * b.min_speed_rad_s,
                 k: b.allowance * ts,
                 two_ts: ts + ts,
-                max_nis: b.max_nis,
                 flip_var: b.flip_angle_sigma_rad * b.flip_angle_sigma_rad,
                 sum: T::zero(),
             }),
@@ -891,14 +886,15 @@ impl<T: Float> PmsmObserver<T> {
         }
         if let Some(b) = &mut self.branch {
             let w = x[2];
-            if tracking && w * w > b.min_speed2 && c.nis <= b.max_nis {
-                let (back, w_abs) = if w > T::zero() { (-dth, w) } else { (dth, -w) };
+            let w2 = w * w;
+            if tracking && w2 > b.min_speed2 {
                 // Plain comparisons: `min`/`max` are libm calls (NaN rules) on the MCU.
-                let cap = b.two_ts * w_abs;
+                let back = -(dth * w);
+                let cap = b.two_ts * w2;
                 let back = if back < cap { back } else { cap };
-                let sum = b.sum + back - b.k * w_abs;
+                let sum = b.sum + back - b.k * w2;
                 b.sum = if sum > T::zero() { sum } else { T::zero() };
-                if b.sum > b.threshold {
+                if b.sum > b.threshold * w.abs() {
                     self.flip();
                 }
             } else {
