@@ -305,7 +305,8 @@ impl<T: Float> ObserverConfig<T> {
         }
         if let Some(h) = &self.covariance_health {
             positive(h.trace_factor, Param::HealthTraceFactor)?;
-            if !(self.p0.trace() > T::zero()) {
+            // P0 is finite and positive semi-definite here, so its trace is finite and >= 0.
+            if self.p0.trace() <= T::zero() {
                 return Err(ConfigError::ZeroInitialCovarianceTrace);
             }
         }
