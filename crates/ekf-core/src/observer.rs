@@ -182,12 +182,12 @@ pub struct BranchCheck<T> {
 }
 
 impl<T: Float> BranchCheck<T> {
-    /// The default for a sample time: threshold `0.3` rad, minimum speed `0.002 / Ts`
+    /// The default for a sample time: threshold `0.5` rad, minimum speed `0.002 / Ts`
     /// (0.002 rad per sample, 20 rad/s at 10 kHz), allowance `0.5`,
     /// `flip_angle_sigma_rad = 0.5`.
     pub fn default_for(ts_s: T) -> Self {
         Self {
-            threshold_rad: to_t(0.3),
+            threshold_rad: to_t(0.5),
             min_speed_rad_s: to_t::<T>(0.002) / ts_s,
             allowance: to_t(0.5),
             flip_angle_sigma_rad: to_t(0.5),

@@ -60,6 +60,8 @@ struct Cell {
     /// Time to lock, samples, if locked before the deadline and held to the end.
     lock: Option<usize>,
     flips: u32,
+    /// Flips after which the speed estimate had the wrong sign.
+    wrong_flips: u32,
 }
 
 /// Runs one observer over a trace from the initial angle error `err0_deg`, speed estimate 0.
@@ -69,8 +71,12 @@ fn run_cell(mut cfg: ObserverConfig<f64>, tr: &Trace, err0_deg: f64) -> Cell {
     let mut obs = PmsmObserver::new(&cfg).expect("valid");
     let mut u_prev = [0.0, 0.0];
     let mut err = Vec::with_capacity(tr.th.len());
-    for ((i, u), th) in tr.i_meas.iter().zip(&tr.u).zip(&tr.th) {
+    let mut wrong_flips = 0;
+    for (((i, u), th), w) in tr.i_meas.iter().zip(&tr.u).zip(&tr.th).zip(&tr.w) {
         let e = obs.step(u_prev, *i).expect("finite step");
+        if e.branch_flipped && e.omega_e_rad_s * w <= 0.0 {
+            wrong_flips += 1;
+        }
         err.push(wrap_angle(e.theta_rad - th).to_degrees());
         u_prev = *u;
     }
@@ -78,13 +84,15 @@ fn run_cell(mut cfg: ObserverConfig<f64>, tr: &Trace, err0_deg: f64) -> Cell {
     Cell {
         lock,
         flips: obs.counters().branch_flips,
+        wrong_flips,
     }
 }
 
-/// Runs the grid for one configuration maker; prints it; returns (cells, failures).
-fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (usize, usize) {
+/// Runs the grid for one configuration maker; prints it; returns (cells, failures, flips that
+/// left the speed estimate with the wrong sign).
+fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (usize, usize, u32) {
     let angles = angle_grid_deg();
-    let (mut cells, mut failures) = (0, 0);
+    let (mut cells, mut failures, mut wrong) = (0, 0, 0);
     println!("\n=== {name}: time to lock (ms) or FAIL; '*' = branch flip(s) ===");
     for (mname, motor, rated, noise) in motors() {
         let ic = motor.characteristic_current_a();
@@ -118,6 +126,7 @@ fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (
             for tr in &traces {
                 let c = run_cell(make(motor, TS), tr, a);
                 cells += 1;
+                wrong += c.wrong_flips;
                 let mark = if c.flips > 0 { "*" } else { " " };
                 match c.lock {
                     Some(k) => print!("{:>8.1}{mark}", k as f64 * TS * 1e3),
@@ -130,18 +139,19 @@ fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (
             println!();
         }
     }
-    println!("{name}: {failures} of {cells} cells fail");
-    (cells, failures)
+    println!("{name}: {failures} of {cells} cells fail; {wrong} flips to the wrong branch");
+    (cells, failures, wrong)
 }
 
 #[test]
 fn default_locks_from_any_angle_and_seed_does_not() {
-    let (cells, fail_default) = grid("ObserverConfig::new (default)", ObserverConfig::new);
-    let (_, fail_seed) = grid("ObserverConfig::seed", ObserverConfig::seed);
+    let (cells, fail_default, wrong) = grid("ObserverConfig::new (default)", ObserverConfig::new);
+    let (_, fail_seed, _) = grid("ObserverConfig::seed", ObserverConfig::seed);
     assert_eq!(
         fail_default, 0,
         "default: {fail_default} of {cells} cells fail"
     );
+    assert_eq!(wrong, 0, "default: flips to the wrong branch");
     // The seed's filter has no branch check: some cells settle on the theta + pi branch.
     assert!(fail_seed > 0, "the seed was expected to fail some cells");
 }
