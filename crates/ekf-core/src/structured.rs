@@ -237,12 +237,14 @@ pub(crate) fn correct<T: Float>(
     let (k10, k11) = k(p01, p11);
     let (k20, k21) = k(p02, p12);
     let (k30, k31) = k(p03, p13);
+    // The angle correction for the branch check; the state update below keeps the seed's
+    // order of operations, `(th + k30 y0) + k31 y1` (bit-identical to the seed reference).
     let dth = k30 * y0 + k31 * y1;
     let xn = Vector4::new(
         x[0] + k00 * y0 + k01 * y1,
         x[1] + k10 * y0 + k11 * y1,
         x[2] + k20 * y0 + k21 * y1,
-        wrap_angle(x[3] + dth),
+        wrap_angle(x[3] + k30 * y0 + k31 * y1),
     );
     let pn = match model.covariance_update() {
         CovarianceUpdate::StandardSymmetrized => {
