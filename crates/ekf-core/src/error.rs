@@ -19,6 +19,20 @@ pub enum Param {
     ObserverGain,
     /// PLL bandwidth `pll_bandwidth_rad_s` ([`crate::flux`]).
     PllBandwidth,
+    /// Threshold of the branch check, `BranchCheck::threshold_rad`.
+    BranchThreshold,
+    /// Speed below which the branch check sleeps, `BranchCheck::min_speed_rad_s`.
+    BranchMinSpeed,
+    /// Allowance of the branch check, `BranchCheck::allowance`.
+    BranchAllowance,
+    /// NIS threshold of the innovation gate, `InnovationGate::nis_threshold`.
+    GateNisThreshold,
+    /// Settled level of the innovation gate, `InnovationGate::settled_nis`.
+    GateSettledNis,
+    /// Angle uncertainty added by a flip, `BranchCheck::flip_angle_sigma_rad`.
+    BranchFlipSigma,
+    /// Trace factor of the covariance health check, `CovarianceHealth::trace_factor`.
+    HealthTraceFactor,
 }
 
 /// A matrix named in a [`ConfigError`].
@@ -52,6 +66,9 @@ pub enum ConfigError {
     /// The parameter is too large for the sample time: its discrete update would be unstable
     /// or badly damped (the limit is in the parameter's documentation).
     TooLargeForTs(Param),
+    /// The covariance health check is on but `trace(P0)` is zero, so its bound
+    /// `trace_factor * trace(P0)` would reject every covariance.
+    ZeroInitialCovarianceTrace,
 }
 
 impl fmt::Display for Param {
@@ -64,6 +81,13 @@ impl fmt::Display for Param {
             Param::AngleSigmaLimit => "angle_sigma_limit_rad",
             Param::ObserverGain => "observer_gain_rad_s",
             Param::PllBandwidth => "pll_bandwidth_rad_s",
+            Param::BranchThreshold => "branch_check.threshold_rad",
+            Param::BranchMinSpeed => "branch_check.min_speed_rad_s",
+            Param::BranchAllowance => "branch_check.allowance",
+            Param::GateNisThreshold => "innovation_gate.nis_threshold",
+            Param::GateSettledNis => "innovation_gate.settled_nis",
+            Param::BranchFlipSigma => "branch_check.flip_angle_sigma_rad",
+            Param::HealthTraceFactor => "covariance_health.trace_factor",
         })
     }
 }
@@ -93,6 +117,9 @@ impl fmt::Display for ConfigError {
             ConfigError::TooLargeForTs(p) => {
                 write!(f, "{p} is too large for ts_s (unstable discrete update)")
             }
+            ConfigError::ZeroInitialCovarianceTrace => f.write_str(
+                "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",
+            ),
         }
     }
 }

@@ -20,7 +20,8 @@ pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, 
 pub use motor::MotorParams;
 pub use noise::NoiseCovariances;
 pub use observer::{
-    Discretization, Estimate, ObserverConfig, PmsmModel, PmsmObserver, Status, default_p0,
+    BranchCheck, CovarianceHealth, Discretization, Estimate, InnovationGate, ObserverConfig,
+    ObserverCounters, PmsmModel, PmsmObserver, Status, default_p0,
 };
 
 /// Re-export of the `nalgebra` this crate is built on, for its matrix types.

@@ -34,6 +34,23 @@
 //!
 //! When the current-sensing noise is known, [`NoiseCovariances::scaled_with_sensor_noise`] sets
 //! `R` from it and keeps the ratio `Q_ii / R` of the default.
+//!
+//! # The rule from the sensing chain ([`NoiseCovariances::from_sensing`])
+//!
+//! `R` is the variance of what the filter is given: the analogue noise of the current sensor
+//! and amplifier (standard deviation `sigma_a`, A) plus the ADC's quantization, uniform over
+//! one step of `lsb_a` amperes, whose variance is `lsb_a^2 / 12`:
+//!
+//! ```text
+//! R = (sigma_a^2 + lsb_a^2 / 12) I2          (A^2)
+//! Q = the scaled default's Q (model error, speed and angle random walks; above)
+//! ```
+//!
+//! The two errors are independent, so their variances add. Example: a 12-bit ADC over
+//! +-25 A (`lsb = 50 A / 4096 = 12.2 mA`) with 20 mA RMS sensor noise gives
+//! `R = (0.02^2 + 0.0122^2 / 12) = 4.12e-4 A^2` (sigma 20.3 mA). `Q` keeps its motor-scaled
+//! value because it describes the model, not the sensor. [`NoiseCovariances::scaled`] stays the
+//! default when the sensing noise is unknown.
 
 use nalgebra::{SMatrix, SVector};
 
@@ -82,6 +99,18 @@ impl<T: Float> NoiseCovariances<T> {
         Self::scaled_with_sensor_noise(ts_s, ic * to_t(SIGMA_Z_NORM))
     }
 
+    /// `Q` of [`scaled`](Self::scaled) and `R = (sensor_sigma_a^2 + adc_lsb_a^2 / 12) I2` from
+    /// the sensing chain: the sensor's noise standard deviation (A) and the ADC's step in
+    /// amperes (module docs, "The rule from the sensing chain"). A non-finite or absurd value
+    /// is refused when the observer is built ([`ObserverConfig::validate`](crate::ObserverConfig::validate)).
+    pub fn from_sensing(motor: &MotorParams<T>, ts_s: T, sensor_sigma_a: T, adc_lsb_a: T) -> Self {
+        let r = sensor_sigma_a * sensor_sigma_a + adc_lsb_a * adc_lsb_a / to_t(12.0);
+        Self {
+            q: Self::scaled(motor, ts_s).q,
+            r: SMatrix::from_diagonal(&SVector::from([r, r])),
+        }
+    }
+
     /// As [`scaled`](Self::scaled), with `R = sigma_a^2 I2` from a known current-sensing noise
     /// standard deviation `sigma_a` (ampere); `Q_ii` keeps its default ratio to `R`.
     pub fn scaled_with_sensor_noise(ts_s: T, sigma_a: T) -> Self {
@@ -91,5 +120,26 @@ impl<T: Float> NoiseCovariances<T> {
         let sw = to_t::<T>(SIGMA_W_NORM) / ts_s;
         let sth: T = to_t(SIGMA_TH);
         Self::from_diagonals([qi, qi, sw * sw, sth * sth], [r, r])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::NoiseCovariances;
+    use crate::MotorParams;
+
+    #[test]
+    fn from_sensing_adds_quantization_variance() {
+        let motor = MotorParams::<f64>::servo();
+        let lsb = 50.0 / 4096.0;
+        let n = NoiseCovariances::from_sensing(&motor, 1e-4, 0.02, lsb);
+        let r = 0.02 * 0.02 + lsb * lsb / 12.0;
+        assert!((n.r[(0, 0)] - r).abs() < 1e-15 && (n.r[(1, 1)] - r).abs() < 1e-15);
+        assert_eq!(n.r[(0, 1)], 0.0);
+        assert!((r - 4.124e-4).abs() < 1e-6, "{r}");
+        assert_eq!(n.q, NoiseCovariances::scaled(&motor, 1e-4).q);
+        // No ADC step: R is the sensor's variance alone.
+        let n0 = NoiseCovariances::from_sensing(&motor, 1e-4, 0.03, 0.0);
+        assert!((n0.r[(0, 0)] - 9e-4).abs() < 1e-15);
     }
 }

@@ -74,6 +74,22 @@ impl<T: Float> Sym4<T> {
         )
     }
 
+    /// `p00 + p11 + p22 + p33`.
+    pub(crate) fn trace(&self) -> T {
+        (self.p00 + self.p11) + (self.p22 + self.p33)
+    }
+
+    /// `T P T` with `T = diag(1, 1, -1, 1)`: the covariance after the speed's sign is flipped
+    /// (the entries coupling the speed with another state change sign).
+    pub(crate) fn flip_speed(self) -> Self {
+        Self {
+            p02: -self.p02,
+            p12: -self.p12,
+            p23: -self.p23,
+            ..self
+        }
+    }
+
     pub(crate) fn all_finite(&self) -> bool {
         finite(&[
             self.p00, self.p01, self.p02, self.p03, self.p11, self.p12, self.p13, self.p22,
@@ -158,18 +174,31 @@ fn sum_is_finite<T: Float, const N: usize>(v: &[T; N]) -> bool {
     ((acc[0] + acc[1]) + (acc[2] + acc[3])).is_finite()
 }
 
-/// Result of a correction: state, covariance and diagnostics.
-pub(crate) type Posterior<T> = (Vector4<T>, Sym4<T>, Correction<T, 2>);
+/// Result of a correction: state, covariance, diagnostics and the angle correction
+/// `K_th y` (rad, before wrapping) the update added to the prior angle.
+pub(crate) type Posterior<T> = (Vector4<T>, Sym4<T>, Correction<T, 2>, T);
 
-/// Structured correction: `(x, P, diagnostics)` from the prior `(x-, P-)` and the sampled
-/// currents; an error when `S` is not positive definite or a result is not finite.
+/// What [`correct`] did.
+pub(crate) enum Outcome<T: Float> {
+    /// The update was applied.
+    Updated(Posterior<T>),
+    /// The caller's gate refused the sample after seeing its NIS: no update, only the
+    /// diagnostics (innovation, `S`, NIS).
+    Skipped(Correction<T, 2>),
+}
+
+/// Structured correction: `(x, P, diagnostics, angle correction)` from the prior `(x-, P-)`
+/// and the sampled currents; an error when `S` is not positive definite or a result is not
+/// finite. `skip(nis)` is asked once the NIS is known, before the update is computed; `true`
+/// skips the update ([`Outcome::Skipped`]).
 #[inline(always)]
 pub(crate) fn correct<T: Float>(
     model: &PmsmModel<T>,
     x: &Vector4<T>,
     p: &Sym4<T>,
     z: [T; 2],
-) -> Result<Posterior<T>, EkfError> {
+    skip: impl FnOnce(T) -> bool,
+) -> Result<Outcome<T>, EkfError> {
     let Sym4 {
         p00,
         p01,
@@ -191,21 +220,32 @@ pub(crate) fn correct<T: Float>(
     }
     let inv_det = T::one() / det;
     let (i00, i01, i11) = (s11 * inv_det, -s01 * inv_det, s00 * inv_det);
+    let y0 = z[0] - x[0];
+    let y1 = z[1] - x[1];
+    let nis = i00 * y0 * y0 + (i01 + i01) * y0 * y1 + i11 * y1 * y1;
+    let correction = Correction {
+        innovation: Vector2::new(y0, y1),
+        innovation_covariance: Matrix2::new(s00, s01, s01, s11),
+        nis,
+    };
+    if skip(nis) {
+        return Ok(Outcome::Skipped(correction));
+    }
     // K = L S^-1, L = first two columns of P- (rows 0..3).
     let k = |l0: T, l1: T| (l0 * i00 + l1 * i01, l0 * i01 + l1 * i11);
     let (k00, k01) = k(p00, p01);
     let (k10, k11) = k(p01, p11);
     let (k20, k21) = k(p02, p12);
     let (k30, k31) = k(p03, p13);
-    let y0 = z[0] - x[0];
-    let y1 = z[1] - x[1];
+    // The angle correction for the branch check; the state update below keeps the seed's
+    // order of operations, `(th + k30 y0) + k31 y1` (bit-identical to the seed reference).
+    let dth = k30 * y0 + k31 * y1;
     let xn = Vector4::new(
         x[0] + k00 * y0 + k01 * y1,
         x[1] + k10 * y0 + k11 * y1,
         x[2] + k20 * y0 + k21 * y1,
         wrap_angle(x[3] + k30 * y0 + k31 * y1),
     );
-    let nis = i00 * y0 * y0 + (i01 + i01) * y0 * y1 + i11 * y1 * y1;
     let pn = match model.covariance_update() {
         CovarianceUpdate::StandardSymmetrized => {
             // P - K L^T, L rows (p_r0, p_r1).
@@ -238,12 +278,7 @@ pub(crate) fn correct<T: Float>(
     ]) {
         return Err(EkfError::NonFiniteResult);
     }
-    let correction = Correction {
-        innovation: Vector2::new(y0, y1),
-        innovation_covariance: Matrix2::new(s00, s01, s01, s11),
-        nis,
-    };
-    Ok((xn, pn, correction))
+    Ok(Outcome::Updated((xn, pn, correction, dth)))
 }
 
 /// Joseph form on 2 x 2 blocks (module docs), written out on scalars: `E = I - K1`,
