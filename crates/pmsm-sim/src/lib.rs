@@ -16,5 +16,6 @@ pub mod scenario;
 pub mod sensors;
 pub mod sim;
 pub mod svpwm;
+pub mod tune;
 
 pub use error::{FieldError, SimError};
