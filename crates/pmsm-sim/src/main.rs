@@ -64,6 +64,9 @@ enum Command {
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
     },
+    /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
+    /// NIS and angle error of the default and the tuned filter.
+    Tune(pmsm_sim::tune::TuneArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -151,6 +154,7 @@ fn main() -> ExitCode {
             runs,
             out,
         }) => bench(scenario.as_deref(), runs, &out),
+        Some(Command::Tune(args)) => Ok(args.run()),
     };
     match result {
         Ok(code) => code,

@@ -590,7 +590,10 @@ pub fn tune_qr(
         ));
     }
     if !opts.x0.iter().all(|v| v.is_finite()) {
-        return Err(option_err("x0", format!("must be finite, got {:?}", opts.x0)));
+        return Err(option_err(
+            "x0",
+            format!("must be finite, got {:?}", opts.x0),
+        ));
     }
     let min_speed = opts.min_speed_rad_s.unwrap_or(0.0);
     if !(min_speed.is_finite() && min_speed >= 0.0) {
@@ -778,6 +781,8 @@ pub const REPLAY_TOL_RAD: f64 = 1e-6;
 pub struct McapTuneReport {
     /// Scenario name.
     pub scenario: String,
+    /// Angle-error window: `|omega_true|` at least this, rad/s electrical.
+    pub min_speed_rad_s: f64,
     /// Periods in the log.
     pub periods: usize,
     /// The `R` the scenario's current sensor produces ([`sensor_r_ab`]), A^2.
@@ -792,10 +797,15 @@ pub struct McapTuneReport {
     pub report: TuneReport,
 }
 
-/// Reads a `pmsm-sim` MCAP log and runs [`tune_qr`] on it, with the true angle from the log
-/// and, unless set, the angle-error window above 5 % of the scenario's rated speed.
+/// Reads a `pmsm-sim` MCAP log and runs [`tune_qr`] on it ([`tune_logged_run`]).
 pub fn tune_qr_mcap(path: &Path, opts: &TuneOptions) -> Result<McapTuneReport, TuneError> {
-    let run = LoggedRun::read(path)?;
+    tune_logged_run(&LoggedRun::read(path)?, opts)
+}
+
+/// [`tune_qr`] on a run read from a log, with the true angle from the log and, unless set,
+/// the angle-error window above 5 % of the scenario's rated speed; checks that the default
+/// filter replayed on the log reproduces the logged observer.
+pub fn tune_logged_run(run: &LoggedRun, opts: &TuneOptions) -> Result<McapTuneReport, TuneError> {
     let sc = &run.scenario;
     let motor = sc.observer_params();
     let ts = sc.ts_s();
@@ -818,7 +828,11 @@ pub fn tune_qr_mcap(path: &Path, opts: &TuneOptions) -> Result<McapTuneReport, T
                     Ok(e) => {
                         let d = ekf_core::wrap_angle(e.theta_rad - run.observer_theta[k]).abs();
                         // NaN (a non-finite logged angle) counts as a mismatch.
-                        diff = if d.is_nan() { f64::INFINITY } else { diff.max(d) };
+                        diff = if d.is_nan() {
+                            f64::INFINITY
+                        } else {
+                            diff.max(d)
+                        };
                     }
                     Err(_) => diff = f64::INFINITY,
                 }
@@ -830,12 +844,192 @@ pub fn tune_qr_mcap(path: &Path, opts: &TuneOptions) -> Result<McapTuneReport, T
     };
     Ok(McapTuneReport {
         scenario: sc.name.clone(),
+        min_speed_rad_s: o.min_speed_rad_s.unwrap_or(0.0),
         periods: run.i_ab.len(),
         sensor_r: sensor_r_ab(&sc.sensors),
         replay_max_diff_rad,
         replay_matches_log: replay_max_diff_rad <= REPLAY_TOL_RAD,
         report,
     })
+}
+
+impl McapTuneReport {
+    /// The report as text: before/after table, the scenario's sensor `R`, the TOML snippet.
+    pub fn render(&self, file: &str) -> String {
+        use std::fmt::Write;
+        let r = &self.report;
+        let mut s = String::new();
+        let ts_us = r.ts_s * 1e6;
+        let _ = writeln!(s, "pmsm-sim tune: {file}");
+        let _ = writeln!(
+            s,
+            "  scenario {}: {} periods, Ts = {ts_us} us, I_c = {:.4} A; first {} periods ({} s) \
+             not scored, {} scored, {} rejected",
+            self.scenario,
+            self.periods,
+            r.characteristic_current_a,
+            r.skip,
+            r.skip as f64 * r.ts_s,
+            r.samples_scored,
+            r.samples_rejected
+        );
+        let _ = writeln!(
+            s,
+            "  default filter replayed on the log: {} (largest angle difference {:e} rad)",
+            if self.replay_matches_log {
+                "matches the logged observer"
+            } else {
+                "DIFFERS from the logged observer (the record may not be what the observer saw)"
+            },
+            self.replay_max_diff_rad
+        );
+        let _ = writeln!(
+            s,
+            "  search: R {:?}, {} filter runs, {}{}",
+            r.r_shape,
+            r.evaluations,
+            if r.converged {
+                "converged"
+            } else {
+                "NOT converged (evaluation budget used up)"
+            },
+            if r.at_bound.is_empty() {
+                String::new()
+            } else {
+                format!("; on the search box: {}", r.at_bound.join(", "))
+            }
+        );
+        let _ = writeln!(s, "\n  {:<34} {:>13} {:>13}", "", "default", "tuned");
+        let mut row = |name: &str, a: String, b: String| {
+            let _ = writeln!(s, "  {name:<34} {a:>13} {b:>13}");
+        };
+        let e = |v: f64| format!("{v:.4e}");
+        let (a, b) = (&r.start, &r.tuned);
+        let cov_a = [a.sigma_z[0], a.sigma_z[1]].map(|x| (x * r.characteristic_current_a).powi(2));
+        row("sigma_z alpha (x I_c)", e(a.sigma_z[0]), e(b.sigma_z[0]));
+        row("sigma_z beta (x I_c)", e(a.sigma_z[1]), e(b.sigma_z[1]));
+        row(
+            "rho_z",
+            format!("{:.4}", a.rho_z),
+            format!("{:.4}", b.rho_z),
+        );
+        row("sigma_i (x I_c per sample)", e(a.sigma_i), e(b.sigma_i));
+        row(
+            "sigma_w (rad/sample per sample)",
+            e(a.sigma_w),
+            e(b.sigma_w),
+        );
+        row("sigma_th (rad per sample)", e(a.sigma_th), e(b.sigma_th));
+        row("R alpha (A^2)", e(cov_a[0]), e(r.r[0][0]));
+        row("R beta (A^2)", e(cov_a[1]), e(r.r[1][1]));
+        row(
+            "mean NIS (2 expected)",
+            format!("{:.3}", r.before.mean_nis),
+            format!("{:.3}", r.after.mean_nis),
+        );
+        row(
+            "log-likelihood",
+            format!("{:.1}", r.before.log_likelihood),
+            format!("{:.1}", r.after.log_likelihood),
+        );
+        if let (Some(x), Some(y)) = (r.before.angle_error, r.after.angle_error) {
+            let d = |v: f64| format!("{v:.4}");
+            row("angle error rms (deg el.)", d(x.rms_deg), d(y.rms_deg));
+            row("angle error mean (deg el.)", d(x.mean_deg), d(y.mean_deg));
+            row(
+                "angle error max |.| (deg el.)",
+                d(x.max_abs_deg),
+                d(y.max_abs_deg),
+            );
+            let _ = writeln!(
+                s,
+                "  (angle error over {} samples: after the skipped window, |w_e| >= {:.1} rad/s)",
+                y.samples, self.min_speed_rad_s
+            );
+        }
+        for (name, f) in [("default", &r.before.failure), ("tuned", &r.after.failure)] {
+            if let Some(f) = f {
+                let _ = writeln!(s, "  the {name} filter failed: {f}");
+            }
+        }
+        let sr = &self.sensor_r;
+        let _ = writeln!(
+            s,
+            "  R of the scenario's current sensor: [[{:.4e}, {:.4e}], [{:.4e}, {:.4e}]] A^2",
+            sr[0][0], sr[0][1], sr[1][0], sr[1][1]
+        );
+        let _ = writeln!(s, "\n{}", r.toml_snippet());
+        s
+    }
+}
+
+/// Arguments of `pmsm-sim tune` (the command line's subcommand).
+#[derive(clap::Args, Debug, Clone)]
+pub struct TuneArgs {
+    /// MCAP log written by `pmsm-sim run` (protobuf or JSON period channel).
+    pub file: std::path::PathBuf,
+    /// Convergence window not scored, s (default: min(20 % of the run, 0.1 s)).
+    #[arg(long)]
+    pub skip_s: Option<f64>,
+    /// Fit one sigma for R (isotropic) instead of alpha, beta and their correlation.
+    #[arg(long)]
+    pub isotropic: bool,
+    /// Filter runs the search may use.
+    #[arg(long, default_value_t = 2000)]
+    pub max_evals: usize,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl TuneArgs {
+    /// Runs the subcommand: the report on stdout, errors on stderr.
+    pub fn run(&self) -> std::process::ExitCode {
+        match self.report() {
+            Ok(text) => {
+                print!("{text}");
+                std::process::ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("pmsm-sim: error: {e}");
+                std::process::ExitCode::FAILURE
+            }
+        }
+    }
+
+    fn report(&self) -> Result<String, TuneError> {
+        let run = LoggedRun::read(&self.file)?;
+        let skip = match self.skip_s {
+            None => None,
+            Some(t) if t.is_finite() && t >= 0.0 => {
+                Some((t / run.scenario.ts_s()).round() as usize)
+            }
+            Some(t) => {
+                return Err(option_err(
+                    "--skip-s",
+                    format!("must be finite and >= 0, got {t}"),
+                ));
+            }
+        };
+        let opts = TuneOptions {
+            skip,
+            r_shape: if self.isotropic {
+                RShape::Isotropic
+            } else {
+                RShape::Full
+            },
+            max_evaluations: self.max_evals,
+            ..TuneOptions::default()
+        };
+        let rep = tune_logged_run(&run, &opts)?;
+        if self.json {
+            serde_json::to_string_pretty(&rep)
+                .map(|j| format!("{j}\n"))
+                .map_err(|e| option_err("--json", e.to_string()))
+        } else {
+            Ok(rep.render(&self.file.display().to_string()))
+        }
+    }
 }
 
 #[cfg(test)]

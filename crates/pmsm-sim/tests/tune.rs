@@ -84,16 +84,34 @@ fn tuned_r_matches_the_sensor_and_nis_is_two() {
         b.angle_error.unwrap_or_else(|| panic!("no angle error")),
         a.angle_error.unwrap_or_else(|| panic!("no angle error")),
     );
-    println!("true R {true_r:?}\nproposed R {:?}\nQ diag {:?}", rep.r, [rep.q[0][0], rep.q[1][1], rep.q[2][2], rep.q[3][3]]);
-    println!("tuned {:?}, at bound {:?}, {} evaluations, converged {}", rep.tuned, rep.at_bound, rep.evaluations, rep.converged);
-    println!("mean NIS {:.3} -> {:.3}; L {:.1} -> {:.1}", b.mean_nis, a.mean_nis, b.log_likelihood, a.log_likelihood);
-    println!("angle error rms {:.4} -> {:.4} deg, mean {:.4} -> {:.4}, max {:.4} -> {:.4}", ea.rms_deg, eb.rms_deg, ea.mean_deg, eb.mean_deg, ea.max_abs_deg, eb.max_abs_deg);
+    println!(
+        "true R {true_r:?}\nproposed R {:?}\nQ diag {:?}",
+        rep.r,
+        [rep.q[0][0], rep.q[1][1], rep.q[2][2], rep.q[3][3]]
+    );
+    println!(
+        "tuned {:?}, at bound {:?}, {} evaluations, converged {}",
+        rep.tuned, rep.at_bound, rep.evaluations, rep.converged
+    );
+    println!(
+        "mean NIS {:.3} -> {:.3}; L {:.1} -> {:.1}",
+        b.mean_nis, a.mean_nis, b.log_likelihood, a.log_likelihood
+    );
+    println!(
+        "angle error rms {:.4} -> {:.4} deg, mean {:.4} -> {:.4}, max {:.4} -> {:.4}",
+        ea.rms_deg, eb.rms_deg, ea.mean_deg, eb.mean_deg, ea.max_abs_deg, eb.max_abs_deg
+    );
     assert!(rep.converged);
     assert!(a.log_likelihood > b.log_likelihood);
     // R within 10 % of the sensor's (each variance), correlation within 0.05 of 1/sqrt 5.
     for d in 0..2 {
         let rel = rep.r[d][d] / true_r[d][d] - 1.0;
-        assert!(rel.abs() < 0.10, "R[{d}][{d}] {} vs {} ({rel:+.3})", rep.r[d][d], true_r[d][d]);
+        assert!(
+            rel.abs() < 0.10,
+            "R[{d}][{d}] {} vs {} ({rel:+.3})",
+            rep.r[d][d],
+            true_r[d][d]
+        );
     }
     let rho = rep.r[0][1] / (rep.r[0][0] * rep.r[1][1]).sqrt();
     assert!((rho - 5f64.sqrt().recip()).abs() < 0.05, "rho {rho}");
@@ -101,7 +119,12 @@ fn tuned_r_matches_the_sensor_and_nis_is_two() {
     assert!(b.mean_nis > 3.0, "{}", b.mean_nis);
     assert!((a.mean_nis - 2.0).abs() < 0.15, "{}", a.mean_nis);
     // The angle is not worse than with the default by more than 0.05 deg rms.
-    assert!(eb.rms_deg < ea.rms_deg + 0.05, "{} vs {}", eb.rms_deg, ea.rms_deg);
+    assert!(
+        eb.rms_deg < ea.rms_deg + 0.05,
+        "{} vs {}",
+        eb.rms_deg,
+        ea.rms_deg
+    );
 }
 
 #[test]
@@ -113,11 +136,21 @@ fn isotropic_r_fits_the_mean_variance() {
         r_shape: RShape::Isotropic,
         ..TuneOptions::default()
     };
-    let rep = tune_qr(&sc.observer_params(), sc.ts_s(), &rec.u, &rec.i, None, &opts)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let rep = tune_qr(
+        &sc.observer_params(),
+        sc.ts_s(),
+        &rec.u,
+        &rec.i,
+        None,
+        &opts,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let true_r = sensor_r_ab(&sc.sensors);
     let mean_var = 0.5 * (true_r[0][0] + true_r[1][1]);
-    println!("isotropic R {:?} vs mean variance {mean_var}, NIS {}", rep.r, rep.after.mean_nis);
+    println!(
+        "isotropic R {:?} vs mean variance {mean_var}, NIS {}",
+        rep.r, rep.after.mean_nis
+    );
     assert_eq!(rep.r[0][1], 0.0);
     assert_eq!(rep.r[0][0], rep.r[1][1]);
     assert!((rep.r[0][0] / mean_var - 1.0).abs() < 0.15, "{:?}", rep.r);
@@ -172,7 +205,8 @@ fn mcap_log_gives_the_same_result_as_the_arrays() {
             },
         )
         .unwrap_or_else(|e| panic!("{e}"));
-        log.finish(Some(&out.metrics)).unwrap_or_else(|e| panic!("{e}"));
+        log.finish(Some(&out.metrics))
+            .unwrap_or_else(|e| panic!("{e}"));
         let m = tune_qr_mcap(&path, &opts).unwrap_or_else(|e| panic!("{e}"));
         assert!(m.replay_matches_log, "{encoding:?}");
         if encoding == LogEncoding::Protobuf {
@@ -191,6 +225,47 @@ fn mcap_log_gives_the_same_result_as_the_arrays() {
         assert_eq!(m.scenario, "tune-test");
         assert_eq!(m.sensor_r, sensor_r_ab(&sc.sensors));
     }
+    // The command line on the protobuf log: JSON report, text report, errors.
+    let exe = env!("CARGO_BIN_EXE_pmsm-sim");
+    let pb = dir.join("Protobuf.mcap");
+    let out = std::process::Command::new(exe)
+        .args(["tune", "--json", "--skip-s", "0.03", "--max-evals", "150"])
+        .arg(&pb)
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(v["replay_matches_log"], true);
+    assert_eq!(v["report"]["skip"], 300);
+    let r00 = v["report"]["r"][0][0].as_f64().unwrap_or(f64::NAN);
+    assert_eq!(r00, arrays.r[0][0]);
+    let out = std::process::Command::new(exe)
+        .args(["tune", "--skip-s", "0.03", "--max-evals", "150"])
+        .arg(&pb)
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    for needle in [
+        "mean NIS (2 expected)",
+        "angle error rms",
+        "[observer_noise]",
+        "r = [[",
+    ] {
+        assert!(text.contains(needle), "{needle} not in\n{text}");
+    }
+    let out = std::process::Command::new(exe)
+        .args(["tune", "--skip-s=-1"])
+        .arg(&pb)
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--skip-s"));
     // A file that is not a log, and one that does not exist: errors naming the file.
     let junk = dir.join("junk.mcap");
     std::fs::write(&junk, b"not an mcap file").unwrap_or_else(|e| panic!("{e}"));
@@ -223,16 +298,41 @@ fn bad_input_is_refused_with_a_reason() {
     ));
     let th = vec![0.0; 10];
     assert!(matches!(
-        tune_qr(&m, 1e-4, &z, &z, Some(AngleTruth { theta_rad: &th, omega_rad_s: None }), &opts),
+        tune_qr(
+            &m,
+            1e-4,
+            &z,
+            &z,
+            Some(AngleTruth {
+                theta_rad: &th,
+                omega_rad_s: None
+            }),
+            &opts
+        ),
         Err(TuneError::TruthLength { .. })
     ));
     for bad in [
-        TuneOptions { max_evaluations: 0, ..opts },
-        TuneOptions { bound_decades: f64::NAN, ..opts },
-        TuneOptions { x0: [0.0, f64::INFINITY, 0.0, 0.0], ..opts },
-        TuneOptions { min_speed_rad_s: Some(-1.0), ..opts },
+        TuneOptions {
+            max_evaluations: 0,
+            ..opts
+        },
+        TuneOptions {
+            bound_decades: f64::NAN,
+            ..opts
+        },
+        TuneOptions {
+            x0: [0.0, f64::INFINITY, 0.0, 0.0],
+            ..opts
+        },
+        TuneOptions {
+            min_speed_rad_s: Some(-1.0),
+            ..opts
+        },
     ] {
-        assert!(matches!(tune_qr(&m, 1e-4, &z, &z, None, &bad), Err(TuneError::Option { .. })));
+        assert!(matches!(
+            tune_qr(&m, 1e-4, &z, &z, None, &bad),
+            Err(TuneError::Option { .. })
+        ));
     }
     let mut start = opts.start;
     start.sigma_w = 0.0;
@@ -243,8 +343,18 @@ fn bad_input_is_refused_with_a_reason() {
     // Non-finite rows are rejected by the filter, counted, and not scored.
     let mut i = z.clone();
     i[600] = [f64::NAN, 0.0];
-    let rep = tune_qr(&m, 1e-4, &z, &i, None, &TuneOptions { max_evaluations: 30, ..opts })
-        .unwrap_or_else(|e| panic!("{e}"));
+    let rep = tune_qr(
+        &m,
+        1e-4,
+        &z,
+        &i,
+        None,
+        &TuneOptions {
+            max_evaluations: 30,
+            ..opts
+        },
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(rep.samples_rejected, 1);
     assert!(rep.after.log_likelihood.is_finite());
 }

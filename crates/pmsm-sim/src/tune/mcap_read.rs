@@ -91,9 +91,10 @@ pub(crate) fn read_log(path: &Path) -> Result<RawLog, TuneError> {
                             })?;
                             periods.push(p);
                         } else if topic == TOPIC_SCENARIO && scenario.is_none() {
-                            scenario = Some(scenario_from_json(&data).map_err(|e| {
-                                err(path, format!("scenario message: {e}"))
-                            })?);
+                            scenario = Some(
+                                scenario_from_json(&data)
+                                    .map_err(|e| err(path, format!("scenario message: {e}")))?,
+                            );
                         }
                     }
                     _ => {}
@@ -112,7 +113,10 @@ pub(crate) fn read_log(path: &Path) -> Result<RawLog, TuneError> {
         if p.k != i as u64 {
             return Err(err(
                 path,
-                format!("periods are not contiguous from 0: period {} at index {i}", p.k),
+                format!(
+                    "periods are not contiguous from 0: period {} at index {i}",
+                    p.k
+                ),
             ));
         }
     }

@@ -199,7 +199,10 @@ mod tests {
         let rosen = |x: &[f64]| 100.0 * (x[1] - x[0] * x[0]).powi(2) + (1.0 - x[0]).powi(2);
         let r = minimize(rosen, &[-1.2, 1.0], &[0.5], &NmOptions::default());
         assert!(r.converged, "{r:?}");
-        assert!((r.x[0] - 1.0).abs() < 1e-4 && (r.x[1] - 1.0).abs() < 1e-4, "{r:?}");
+        assert!(
+            (r.x[0] - 1.0).abs() < 1e-4 && (r.x[1] - 1.0).abs() < 1e-4,
+            "{r:?}"
+        );
         assert!(r.f < 1e-8);
         assert!(r.evaluations <= 1000);
     }
@@ -244,7 +247,10 @@ mod tests {
         };
         let r = minimize(g, &[1.0, 0.0], &[1.0], &NmOptions::default());
         assert!(r.f.is_finite());
-        assert!((r.x[0] - 2.0).abs() < 1e-4 && (r.x[1] + 1.0).abs() < 1e-4, "{r:?}");
+        assert!(
+            (r.x[0] - 2.0).abs() < 1e-4 && (r.x[1] + 1.0).abs() < 1e-4,
+            "{r:?}"
+        );
     }
 
     #[test]
