@@ -104,7 +104,7 @@ fn tuned_r_matches_the_sensor_and_nis_is_two() {
     assert!(rep.converged);
     assert!(a.log_likelihood > b.log_likelihood);
     // R within 10 % of the sensor's (each variance), correlation within 0.05 of 1/sqrt 5.
-    for d in 0..2 {
+    for d in [0, 1] {
         let rel = rep.r[d][d] / true_r[d][d] - 1.0;
         assert!(
             rel.abs() < 0.10,
@@ -216,7 +216,7 @@ fn mcap_log_gives_the_same_result_as_the_arrays() {
         } else {
             // JSON numbers may read back one unit in the last place off.
             println!("JSON replay difference {:e} rad", m.replay_max_diff_rad);
-            for d in 0..2 {
+            for d in [0, 1] {
                 let rel = m.report.r[d][d] / arrays.r[d][d] - 1.0;
                 assert!(rel.abs() < 1e-3, "{rel}");
             }

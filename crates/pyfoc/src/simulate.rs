@@ -35,7 +35,9 @@ pub(crate) fn scenario_of(obj: &Bound<'_, PyAny>) -> PyResult<pmsm_sim::scenario
         .call_method1("fspath", (obj,))
         .and_then(|p| p.extract())
         .map_err(|_| {
-            PyTypeError::new_err("scenario: expected a preset name, a str or os.PathLike path, or a dict")
+            PyTypeError::new_err(
+                "scenario: expected a preset name, a str or os.PathLike path, or a dict",
+            )
         })?;
     if Scenario::preset_text(&text).is_some() {
         return Scenario::preset(&text).map_err(err);

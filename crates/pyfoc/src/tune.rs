@@ -16,9 +16,9 @@ fn to_py(e: TuneError) -> PyErr {
         TuneError::Config(_) | TuneError::Option { .. } => ConfigError::new_err(e.to_string()),
         TuneError::NoUsableFilter(_) => FilterError::new_err(e.to_string()),
         TuneError::Log { .. } => PyfocError::new_err(e.to_string()),
-        TuneError::LengthMismatch { .. } | TuneError::TruthLength { .. } | TuneError::TooShort { .. } => {
-            PyValueError::new_err(e.to_string())
-        }
+        TuneError::LengthMismatch { .. }
+        | TuneError::TruthLength { .. }
+        | TuneError::TooShort { .. } => PyValueError::new_err(e.to_string()),
     }
 }
 
@@ -108,11 +108,23 @@ pub(crate) fn tune_qr<'py>(
             motor.ld, motor.lq
         )));
     }
-    let opts = options(skip, r_shape, max_evals, x0, discretization, min_speed, bound_decades)?;
+    let opts = options(
+        skip,
+        r_shape,
+        max_evals,
+        x0,
+        discretization,
+        min_speed,
+        bound_decades,
+    )?;
     let u = rows2(u_ab, "u_ab")?;
     let i = rows2(i_ab, "i_ab")?;
-    let th = theta_true.map(|o| vector(o, "theta_true", None)).transpose()?;
-    let w = omega_true.map(|o| vector(o, "omega_true", None)).transpose()?;
+    let th = theta_true
+        .map(|o| vector(o, "theta_true", None))
+        .transpose()?;
+    let w = omega_true
+        .map(|o| vector(o, "omega_true", None))
+        .transpose()?;
     if w.is_some() && th.is_none() {
         return Err(PyValueError::new_err("omega_true needs theta_true"));
     }
@@ -154,7 +166,15 @@ pub(crate) fn tune_qr_mcap<'py>(
     bound_decades: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let path = path_string(path, "path")?;
-    let opts = options(skip, r_shape, max_evals, x0, discretization, min_speed, bound_decades)?;
+    let opts = options(
+        skip,
+        r_shape,
+        max_evals,
+        x0,
+        discretization,
+        min_speed,
+        bound_decades,
+    )?;
     let m: McapTuneReport = py
         .detach(|| {
             let run = pmsm_sim::tune::LoggedRun::read(std::path::Path::new(&path))?;
