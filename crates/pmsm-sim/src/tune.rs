@@ -282,7 +282,7 @@ impl Default for TuneOptions {
         Self {
             skip: None,
             r_shape: RShape::Full,
-            max_evaluations: 2000,
+            max_evaluations: 5000,
             start: NormalizedNoise::default(),
             bound_decades: 3.0,
             discretization: Discretization::LagFree,
@@ -975,7 +975,7 @@ pub struct TuneArgs {
     #[arg(long)]
     pub isotropic: bool,
     /// Filter runs the search may use.
-    #[arg(long, default_value_t = 2000)]
+    #[arg(long, default_value_t = 5000)]
     pub max_evals: usize,
     /// Print the report as JSON on stdout.
     #[arg(long)]

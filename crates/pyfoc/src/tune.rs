@@ -83,7 +83,7 @@ fn report_dict<'py>(py: Python<'py>, rep: &TuneReport, d: &Bound<'py, PyDict>) -
 /// default and the tuned filter. Returns a dict (see pyfoc.pyi). Releases the GIL.
 #[pyfunction]
 #[pyo3(signature = (motor, ts, u_ab, i_ab, *, theta_true = None, omega_true = None, skip = None,
-    r_shape = "full", max_evals = 2000, x0 = None, discretization = "lag_free",
+    r_shape = "full", max_evals = 5000, x0 = None, discretization = "lag_free",
     min_speed = None, bound_decades = 3.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn tune_qr<'py>(
@@ -151,7 +151,7 @@ pub(crate) fn tune_qr<'py>(
 /// scenario's sensor produces), `replay_matches_log` and `replay_max_diff_rad`. Releases the
 /// GIL.
 #[pyfunction]
-#[pyo3(signature = (path, *, skip = None, r_shape = "full", max_evals = 2000, x0 = None,
+#[pyo3(signature = (path, *, skip = None, r_shape = "full", max_evals = 5000, x0 = None,
     discretization = "lag_free", min_speed = None, bound_decades = 3.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn tune_qr_mcap<'py>(
