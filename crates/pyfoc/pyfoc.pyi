@@ -65,9 +65,18 @@ class StepOutput(TypedDict):
 class Ekf:
     """EKF observer of a surface PMSM, states [i_alpha, i_beta, omega_e, theta].
 
-    q (4x4 or diagonal), r (2x2 or diagonal), x0 (4), p0 (4x4 or diagonal) default to the
-    motor- and ts-scaled defaults of ekf-core; x0/p0 describe the estimate one period before
-    the first sample.
+    q (4x4 or diagonal), r (2x2 or diagonal), x0 (shape (4,)), p0 (4x4 or diagonal) default to
+    the motor- and ts-scaled defaults of ekf-core; x0/p0 describe the estimate one period
+    before the first sample.
+
+    Inputs: any real numeric array-like (float, int, unsigned; any strides, read-only and
+    broadcast views included); complex, bool, object, string and other dtypes raise TypeError,
+    wrong shapes ValueError (naming the argument), records too large for the machine's memory
+    MemoryError (before anything is allocated). Non-finite samples are rejected rows.
+
+    Threads: every method takes the filter's lock with the GIL released, so calls on one Ekf
+    from several threads are serialized (each completes, in some order; the state then
+    continues from whichever ran last) and other Python threads keep running meanwhile.
     """
 
     state: npt.NDArray[np.float64]
@@ -92,7 +101,8 @@ class Ekf:
         covariance_update: Literal["joseph", "standard"] = "joseph",
     ) -> None: ...
     def run(self, u_ab: npt.ArrayLike, i_ab: npt.ArrayLike, *, u_prev: npt.ArrayLike | None = None) -> RunOutput:
-        """Filter a record of shape (N, 2) each; continues from the current state. Releases the GIL."""
+        """Filter a record of shape (N, 2) each; continues from the current state (row 0 predicts
+        with u_prev if given, else u_last). Releases the GIL."""
     def step(self, u_prev: npt.ArrayLike, i: npt.ArrayLike) -> StepOutput:
         """One sample: predict with u_prev, correct with i."""
     def reset(self, x: npt.ArrayLike, p: npt.ArrayLike) -> None:
@@ -103,6 +113,7 @@ def simulate(
     *,
     duration: float | None = None,
     seed: int | None = None,
+    mcap: str | os.PathLike[str] | None = None,
 ) -> dict[str, Any]:
     """Run the drive simulator (pmsm-sim) on a preset name, a TOML path or a dict with the TOML
     layout (None: the "default" preset). Returns arrays aligned on the PWM period: ``t``,
@@ -111,4 +122,110 @@ def simulate(
     desktop EKF's ``theta_est``/``omega_est``/``angle_error_deg``/``nis``/``p_diag`` (N, 4),
     the controller's own observer (``controller_theta_est``/``controller_omega_est``, foc
     scenarios) and the seed filter (``seed_theta_est``, when it runs); plus ``metrics`` (dict,
-    as ``pmsm-sim --json``), ``completed`` and ``scenario``. Releases the GIL."""
+    as ``pmsm-sim --json``), ``completed`` and ``scenario``. With ``mcap``, the run is also
+    logged to that MCAP file (as ``pmsm-sim run`` writes it; SimulationError if it cannot be
+    created). Malformed scenarios raise ConfigError; a run whose trace would not fit in
+    memory raises MemoryError before it starts. Releases the GIL."""
+
+class AngleError(TypedDict):
+    rms_deg: float
+    mean_deg: float
+    max_abs_deg: float
+    samples: int
+
+class FilterScore(TypedDict):
+    log_likelihood: float | None
+    """-0.5 sum(log det S_k + NIS_k) over the scored samples (None if the filter failed)."""
+    mean_nis: float | None
+    angle_error: AngleError | None
+    failure: str | None
+
+class NormalizedNoise(TypedDict):
+    sigma_z: list[float]
+    """Sensor noise std [alpha, beta], fraction of I_c = psi_f / Ls."""
+    rho_z: float
+    sigma_i: float
+    """Current model error per sample, fraction of I_c."""
+    sigma_w: float
+    """Speed random walk, rad per sample, per sample (w_e Ts units)."""
+    sigma_th: float
+    """Angle random walk, rad per sample."""
+
+class TuneReport(TypedDict):
+    q: npt.NDArray[np.float64]
+    """Proposed Q, (4, 4), SI (A^2, A^2, (rad/s)^2, rad^2): pass to Ekf(q=...)."""
+    r: npt.NDArray[np.float64]
+    """Proposed R, (2, 2), A^2: pass to Ekf(r=...)."""
+    tuned: NormalizedNoise
+    start: NormalizedNoise
+    r_shape: Literal["full", "isotropic"]
+    before: FilterScore
+    """The default (start) filter on the record."""
+    after: FilterScore
+    """The tuned filter on the record."""
+    mean_nis_before: float
+    mean_nis_after: float
+    evaluations: int
+    converged: bool
+    at_bound: list[str]
+    """Parameters that ended on the search box (the data do not pin them)."""
+    skip: int
+    samples_scored: int
+    samples_rejected: int
+    characteristic_current_a: float
+    ts_s: float
+    toml: str
+    """The proposal as a TOML table (scenario files cannot set the observer's noise)."""
+
+class McapTuneReport(TuneReport):
+    scenario: str
+    periods: int
+    sensor_r: npt.NDArray[np.float64]
+    """The R the scenario's current sensor produces (two-phase sensing), (2, 2), A^2."""
+    replay_matches_log: bool
+    """The default filter replayed on the log reproduces the logged observer's angle."""
+    replay_max_diff_rad: float
+    min_speed_rad_s: float
+
+def tune_qr(
+    motor: Motor,
+    ts: float,
+    u_ab: npt.ArrayLike,
+    i_ab: npt.ArrayLike,
+    *,
+    theta_true: npt.ArrayLike | None = None,
+    omega_true: npt.ArrayLike | None = None,
+    skip: int | None = None,
+    r_shape: Literal["full", "isotropic"] = "full",
+    max_evals: int = 5000,
+    x0: npt.ArrayLike | None = None,
+    discretization: Literal["lag_free", "forward_euler"] = "lag_free",
+    min_speed: float | None = None,
+    bound_decades: float = 3.0,
+) -> TuneReport:
+    """Propose Q and R for Ekf from a record by maximizing the innovation log-likelihood
+    L = -0.5 sum_k (log det S_k + NIS_k) over the samples after ``skip`` (default
+    min(N/5, 0.1 s / ts)), with Nelder-Mead on the logs of the normalized noise levels
+    (ekf_core::noise units), each within ``bound_decades`` decades of the default.
+    ``u_ab``/``i_ab`` (N, 2) as for Ekf.run; ``theta_true`` (and ``omega_true``, for the
+    window |omega| >= ``min_speed``) add the angle error before/after. ``r_shape="full"``
+    fits alpha and beta sigmas and their correlation (what phase-current sensing gives),
+    "isotropic" one sigma. Each evaluation is one filter pass over the record.
+    ValueError for shapes/too short records, ConfigError for bad parameters or options.
+    Releases the GIL."""
+
+def tune_qr_mcap(
+    path: str | os.PathLike[str],
+    *,
+    skip: int | None = None,
+    r_shape: Literal["full", "isotropic"] = "full",
+    max_evals: int = 5000,
+    x0: npt.ArrayLike | None = None,
+    discretization: Literal["lag_free", "forward_euler"] = "lag_free",
+    min_speed: float | None = None,
+    bound_decades: float = 3.0,
+) -> McapTuneReport:
+    """tune_qr on a pmsm-sim MCAP log (protobuf or JSON period channel): motor and Ts from
+    its scenario, the voltage the simulator's observer was given, the true angle and speed;
+    the angle-error window defaults to |omega| >= 5 % of rated speed. PyfocError naming the
+    file when it cannot be read. Releases the GIL."""

@@ -19,5 +19,6 @@ pub mod sensors;
 pub mod sim;
 pub mod suite;
 pub mod svpwm;
+pub mod tune;
 
 pub use error::{FieldError, SimError};

@@ -95,6 +95,9 @@ enum Command {
         #[arg(long, default_value_t = 2.0)]
         t_end: f64,
     },
+    /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
+    /// NIS and angle error of the default and the tuned filter.
+    Tune(pmsm_sim::tune::TuneArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -193,6 +196,7 @@ fn main() -> ExitCode {
             t_fault,
             t_end,
         }) => faults_command(&out, t_fault, t_end),
+        Some(Command::Tune(args)) => Ok(args.run()),
     };
     match result {
         Ok(code) => code,

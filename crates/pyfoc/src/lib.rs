@@ -13,11 +13,19 @@ use ekf_core::{
     CovarianceUpdate, Discretization, EkfError, Estimate, Float, MotorParams, ObserverConfig,
     PmsmObserver, Status,
 };
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
+use std::sync::{Mutex, PoisonError};
+
+use numpy::{PyArray1, PyArray2};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyModule};
+
+mod convert;
+mod simulate;
+mod tune;
+
+use convert::{pair, rows2, square, try_vec, vec4};
 
 create_exception!(
     pyfoc,
@@ -192,67 +200,34 @@ impl Observer {
 ///
 /// `Ekf(motor, ts, *, q=None, r=None, x0=None, p0=None, discretization="lag_free",
 /// dtype="float64", covariance_update="joseph")`.
-#[pyclass(module = "pyfoc")]
+///
+/// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
+/// calls on one `Ekf` from several threads are serialized (each completes, in some order)
+/// while other Python threads keep running.
+#[pyclass(frozen, module = "pyfoc")]
 struct Ekf {
-    observer: Observer,
-    /// Voltage used to predict the first row of the next `run`.
-    u_last: [f64; 2],
+    inner: Mutex<EkfInner>,
     ts: f64,
     dtype: &'static str,
 }
 
-/// Reads a config matrix given as an `n x n` array or a length-`n` diagonal.
-fn square<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[[f64; N]; N]> {
-    let a = float_array(obj, name)?;
-    let shape = a.shape().to_vec();
-    let v: Vec<f64> = a.to_vec()?;
-    match shape.as_slice() {
-        [n] if *n == N => Ok(core::array::from_fn(|r| {
-            core::array::from_fn(|c| if r == c { v[r] } else { 0.0 })
-        })),
-        [n, m] if *n == N && *m == N => Ok(core::array::from_fn(|r| {
-            core::array::from_fn(|c| v[r * N + c])
-        })),
-        _ => Err(PyValueError::new_err(format!(
-            "{name}: expected a ({N}, {N}) matrix or a length-{N} diagonal, got shape {shape:?}"
-        ))),
-    }
+/// The mutable part of an [`Ekf`].
+struct EkfInner {
+    observer: Observer,
+    /// Voltage used to predict the first row of the next `run`.
+    u_last: [f64; 2],
 }
 
-/// `numpy.ascontiguousarray(obj, dtype=float64)` for real numeric input; TypeError otherwise.
-fn float_array<'py>(
-    obj: &Bound<'py, PyAny>,
-    name: &str,
-) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
-    let py = obj.py();
-    let np = py.import("numpy")?;
-    let arr = np
-        .call_method1("asarray", (obj,))
-        .map_err(|e| PyTypeError::new_err(format!("{name}: not convertible to an array: {e}")))?;
-    let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
-    if !matches!(kind.as_str(), "f" | "i" | "u") {
-        let dtype = arr.getattr("dtype")?.str()?.to_string();
-        return Err(PyTypeError::new_err(format!(
-            "{name}: expected a real numeric array, got dtype {dtype}"
-        )));
+impl Ekf {
+    /// Runs `f` on the filter with the GIL released and the lock held (a panic in another
+    /// call cannot leave the filter half-updated: its steps commit whole, so a poisoned lock
+    /// is taken over).
+    fn with<R: Send>(&self, py: Python<'_>, f: impl FnOnce(&mut EkfInner) -> R + Send) -> R {
+        py.detach(|| {
+            let mut guard = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
+            f(&mut guard)
+        })
     }
-    let kwargs = PyDict::new(py);
-    kwargs.set_item("dtype", np.getattr("float64")?)?;
-    let arr = np.call_method("ascontiguousarray", (arr,), Some(&kwargs))?;
-    Ok(arr.cast_into::<numpy::PyArrayDyn<f64>>()?)
-}
-
-/// An `(N, 2)` float array, flattened row-major (copied, so the GIL can be released safely);
-/// ValueError naming the argument for another shape.
-fn rows2(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
-    let a = float_array(obj, name)?;
-    let shape = a.shape().to_vec();
-    if shape.len() != 2 || shape[1] != 2 {
-        return Err(PyValueError::new_err(format!(
-            "{name}: expected shape (N, 2), got {shape:?}"
-        )));
-    }
-    Ok(a.to_vec()?)
 }
 
 /// Output columns of `run`.
@@ -267,16 +242,18 @@ struct Columns {
 }
 
 impl Columns {
-    fn with_capacity(n: usize) -> Self {
-        Self {
-            theta: Vec::with_capacity(n),
-            omega: Vec::with_capacity(n),
-            omega_mech: Vec::with_capacity(n),
-            i_alpha: Vec::with_capacity(n),
-            i_beta: Vec::with_capacity(n),
-            nis: Vec::with_capacity(n),
-            status: Vec::with_capacity(n),
-        }
+    /// Room for `n` rows, or MemoryError.
+    fn with_capacity(n: usize) -> PyResult<Self> {
+        let v = || try_vec::<f64>(n, "run output");
+        Ok(Self {
+            theta: v()?,
+            omega: v()?,
+            omega_mech: v()?,
+            i_alpha: v()?,
+            i_beta: v()?,
+            nis: v()?,
+            status: try_vec::<i8>(n, "run output")?,
+        })
     }
 
     fn push(&mut self, r: &Row) {
@@ -299,19 +276,6 @@ impl Columns {
         out.set_item("nis", PyArray1::from_vec(py, self.nis))?;
         out.set_item("status", PyArray1::from_vec(py, self.status))?;
         Ok(out)
-    }
-}
-
-/// A length-2 vector.
-fn pair(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; 2]> {
-    let a = float_array(obj, name)?;
-    let v: Vec<f64> = a.to_vec()?;
-    match v.as_slice() {
-        [a, b] => Ok([*a, *b]),
-        _ => Err(PyValueError::new_err(format!(
-            "{name}: expected 2 values, got shape {:?}",
-            a.shape()
-        ))),
     }
 }
 
@@ -389,15 +353,7 @@ impl Ekf {
         let q = q.map(|o| square::<4>(o, "q")).transpose()?;
         let r = r.map(|o| square::<2>(o, "r")).transpose()?;
         let p0 = p0.map(|o| square::<4>(o, "p0")).transpose()?;
-        let x0 = match x0 {
-            None => None,
-            Some(o) => {
-                let v: Vec<f64> = float_array(o, "x0")?.to_vec()?;
-                Some(<[f64; 4]>::try_from(v.as_slice()).map_err(|_| {
-                    PyValueError::new_err(format!("x0: expected 4 values, got {}", v.len()))
-                })?)
-            }
-        };
+        let x0 = x0.map(|o| vec4(o, "x0")).transpose()?;
         let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
         let (observer, dtype) = match dtype {
             "float64" => (
@@ -415,8 +371,10 @@ impl Ekf {
             }
         };
         Ok(Self {
-            observer,
-            u_last: [0.0, 0.0],
+            inner: Mutex::new(EkfInner {
+                observer,
+                u_last: [0.0, 0.0],
+            }),
             ts,
             dtype,
         })
@@ -429,7 +387,7 @@ impl Ekf {
     /// for a new filter). The GIL is released while the filter runs.
     #[pyo3(signature = (u_ab, i_ab, *, u_prev = None))]
     fn run<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         u_ab: &Bound<'py, PyAny>,
         i_ab: &Bound<'py, PyAny>,
@@ -444,21 +402,18 @@ impl Ekf {
                 i.len() / 2
             )));
         }
-        if let Some(p) = u_prev {
-            self.u_last = pair(p, "u_prev")?;
-        }
-        let first = self.u_last;
-        let observer = &mut self.observer;
-        let (cols, last) = py.detach(|| {
-            let mut cols = Columns::with_capacity(u.len() / 2);
-            let mut prev = first;
+        let u_prev = u_prev.map(|p| pair(p, "u_prev")).transpose()?;
+        convert::check_memory((u.len() / 2) as u128 * 49, "run output")?;
+        let mut cols = Columns::with_capacity(u.len() / 2)?;
+        let cols = self.with(py, move |inner| {
+            let mut prev = u_prev.unwrap_or(inner.u_last);
             for (uk, ik) in u.chunks_exact(2).zip(i.chunks_exact(2)) {
-                cols.push(&observer.step(prev, [ik[0], ik[1]]));
+                cols.push(&inner.observer.step(prev, [ik[0], ik[1]]));
                 prev = [uk[0], uk[1]];
             }
-            (cols, prev)
+            inner.u_last = prev;
+            cols
         });
-        self.u_last = last;
         cols.into_dict(py)
     }
 
@@ -468,14 +423,14 @@ impl Ekf {
     /// or `"rejected"` for a non-finite sample, in which case the state is unchanged).
     /// Does not change the voltage `run` uses for its next first row.
     fn step<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         u_prev: &Bound<'py, PyAny>,
         i: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = pair(u_prev, "u_prev")?;
         let i = pair(i, "i")?;
-        let r = self.observer.step(u, i);
+        let r = self.with(py, |inner| inner.observer.step(u, i));
         let out = PyDict::new(py);
         out.set_item("theta", r.theta)?;
         out.set_item("omega", r.omega)?;
@@ -495,25 +450,23 @@ impl Ekf {
     /// State `[i_alpha, i_beta, omega_e, theta]` as a `(4,)` float64 array.
     #[getter]
     fn state<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.observer.state())
+        let x = self.with(py, |inner| inner.observer.state());
+        PyArray1::from_slice(py, &x)
     }
 
     /// State covariance as a `(4, 4)` float64 array.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let rows: Vec<Vec<f64>> = self
-            .observer
-            .covariance()
-            .iter()
-            .map(|r| r.to_vec())
-            .collect();
+        let p = self.with(py, |inner| inner.observer.covariance());
+        let rows: Vec<Vec<f64>> = p.iter().map(|r| r.to_vec()).collect();
         Ok(PyArray2::from_vec2(py, &rows)?)
     }
 
     /// Voltage `[u_alpha, u_beta]` that predicts the first row of the next `run`.
     #[getter]
     fn u_last<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.u_last)
+        let u = self.with(py, |inner| inner.u_last);
+        PyArray1::from_slice(py, &u)
     }
 
     /// Sample time, s.
@@ -530,11 +483,8 @@ impl Ekf {
 
     /// Replaces state (length 4) and covariance (4 x 4). `FilterError` and nothing changed
     /// when either is not finite.
-    fn reset(&mut self, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
-        let xv: Vec<f64> = float_array(x, "x")?.to_vec()?;
-        let x = <[f64; 4]>::try_from(xv.as_slice()).map_err(|_| {
-            PyValueError::new_err(format!("x: expected 4 values, got {}", xv.len()))
-        })?;
+    fn reset(&self, py: Python<'_>, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+        let x = vec4(x, "x")?;
         let p = square::<4>(p, "p")?;
         fn go<T: Float>(
             o: &mut PmsmObserver<T>,
@@ -547,10 +497,10 @@ impl Ekf {
                 Matrix4::from_fn(|i, j| c(p[i][j])),
             )
         }
-        let res = match &mut self.observer {
+        let res = self.with(py, |inner| match &mut inner.observer {
             Observer::F64(o) => go(o, x, p),
             Observer::F32(o) => go(o, x, p),
-        };
+        });
         res.map_err(|e| FilterError::new_err(e.to_string()))
     }
 
@@ -559,159 +509,15 @@ impl Ekf {
     }
 }
 
-/// Reads a scenario: a preset name, a path to a TOML file, or a dict with the TOML layout.
-fn scenario_of(obj: &Bound<'_, PyAny>) -> PyResult<pmsm_sim::scenario::Scenario> {
-    use pmsm_sim::scenario::Scenario;
-    let py = obj.py();
-    let err = |e: pmsm_sim::SimError| ConfigError::new_err(e.to_string());
-    if obj.is_instance_of::<PyDict>() {
-        let text: String = py
-            .import("json")?
-            .call_method1("dumps", (obj,))?
-            .extract()?;
-        let sc: Scenario = serde_json::from_str(&text)
-            .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
-        sc.validate()
-            .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
-        return Ok(sc);
-    }
-    let text: String = py
-        .import("os")?
-        .call_method1("fspath", (obj,))
-        .and_then(|p| p.extract())
-        .map_err(|_| PyTypeError::new_err("scenario: expected a preset name, a path or a dict"))?;
-    if Scenario::preset_text(&text).is_some() {
-        return Scenario::preset(&text).map_err(err);
-    }
-    let path = std::path::Path::new(&text);
-    if path.exists() {
-        return Scenario::from_file(path).map_err(err);
-    }
-    Err(ConfigError::new_err(format!(
-        "scenario {text:?} is neither a preset nor an existing file"
-    )))
-}
-
-/// Columns of a simulation trace.
-fn trace_dict<'py>(
-    py: Python<'py>,
-    out: &pmsm_sim::sim::RunOutput,
-) -> PyResult<Bound<'py, PyDict>> {
-    let s = &out.trace.samples;
-    let d = PyDict::new(py);
-    let col = |f: &dyn Fn(&pmsm_sim::sim::Sample) -> f64| s.iter().map(f).collect::<Vec<f64>>();
-    let put = |name: &str, v: Vec<f64>| d.set_item(name, PyArray1::from_vec(py, v));
-    let put2 =
-        |name: &str, f: &dyn Fn(&pmsm_sim::sim::Sample) -> Vec<f64>, w: usize| -> PyResult<()> {
-            let rows: Vec<Vec<f64>> = s.iter().map(f).collect();
-            let arr = if rows.is_empty() {
-                PyArray2::zeros(py, [0, w], false)
-            } else {
-                PyArray2::from_vec2(py, &rows)?
-            };
-            d.set_item(name, arr)
-        };
-    put("t", col(&|x| x.t_s))?;
-    put("theta", col(&|x| x.truth.theta_e_rad))?;
-    put("omega", col(&|x| x.truth.omega_e_rad_s))?;
-    put("speed_rpm", col(&|x| x.truth.speed_rpm))?;
-    put("torque", col(&|x| x.truth.torque_nm))?;
-    put("load_torque", col(&|x| x.truth.load_torque_nm))?;
-    put("speed_ref_rpm", col(&|x| x.control.speed_ref_rpm))?;
-    put2("i_ab", &|x| x.truth.i_ab_a.to_vec(), 2)?;
-    put2("i_dq", &|x| x.truth.i_dq_a.to_vec(), 2)?;
-    put2("i_ab_meas", &|x| x.measured.i_ab_a.to_vec(), 2)?;
-    put2("u_ab", &|x| x.inverter.u_ab_v.to_vec(), 2)?;
-    put2("duties", &|x| x.inverter.duties.to_vec(), 3)?;
-    put("theta_est", col(&|x| x.observer.theta_e_rad))?;
-    put("omega_est", col(&|x| x.observer.omega_e_rad_s))?;
-    put("angle_error_deg", col(&|x| x.observer.angle_error_deg))?;
-    put("nis", col(&|x| x.observer.nis))?;
-    put2("p_diag", &|x| x.observer.p_diag.to_vec(), 4)?;
-    if s.iter().any(|x| x.controller_observer.is_some()) {
-        let nan = f64::NAN;
-        put(
-            "controller_theta_est",
-            col(&|x| x.controller_observer.map_or(nan, |o| o.theta_e_rad)),
-        )?;
-        put(
-            "controller_omega_est",
-            col(&|x| x.controller_observer.map_or(nan, |o| o.omega_e_rad_s)),
-        )?;
-    }
-    if s.iter().any(|x| x.seed_filter.is_some()) {
-        let nan = f64::NAN;
-        put(
-            "seed_theta_est",
-            col(&|x| x.seed_filter.map_or(nan, |o| o.theta_e_rad)),
-        )?;
-    }
-    Ok(d)
-}
-
-/// Runs the simulator (closed loop, the scenario's controller, the observer alongside) and
-/// returns a dict of arrays aligned on the PWM period (`t`, true `theta`/`omega`, `i_ab`,
-/// measured `i_ab_meas`, applied `u_ab`, `duties`, the observer's `theta_est`/`omega_est`/
-/// `angle_error_deg`/`nis`/`p_diag`, ...) plus `metrics` (dict, as `pmsm-sim --json`) and
-/// `completed` (False when the run stopped early; the arrays then hold what was simulated).
-/// The GIL is released while it runs.
-#[pyfunction]
-#[pyo3(signature = (scenario = None, *, duration = None, seed = None))]
-fn simulate<'py>(
-    py: Python<'py>,
-    scenario: Option<&Bound<'py, PyAny>>,
-    duration: Option<f64>,
-    seed: Option<u64>,
-) -> PyResult<Bound<'py, PyDict>> {
-    let mut sc = match scenario {
-        Some(obj) => scenario_of(obj)?,
-        None => pmsm_sim::scenario::Scenario::preset("default")
-            .map_err(|e| ConfigError::new_err(e.to_string()))?,
-    };
-    if let Some(d) = duration {
-        if !(d.is_finite() && d > 0.0) {
-            return Err(ConfigError::new_err(format!(
-                "duration must be positive, got {d}"
-            )));
-        }
-        sc = sc.with_duration(d);
-    }
-    if let Some(s) = seed {
-        sc.seed = s;
-    }
-    let out = py
-        .detach(|| {
-            pmsm_sim::sim::run_with(
-                &sc,
-                pmsm_sim::sim::RunOptions {
-                    record_trace: true,
-                    ..Default::default()
-                },
-            )
-        })
-        .map_err(|e| match e {
-            pmsm_sim::SimError::Scenario { .. } => ConfigError::new_err(e.to_string()),
-            other => SimulationError::new_err(other.to_string()),
-        })?;
-    let d = trace_dict(py, &out)?;
-    let metrics = serde_json::to_string(&out.metrics)
-        .map_err(|e| SimulationError::new_err(format!("metrics: {e}")))?;
-    d.set_item(
-        "metrics",
-        py.import("json")?.call_method1("loads", (metrics,))?,
-    )?;
-    d.set_item("completed", out.end.is_completed())?;
-    d.set_item("scenario", sc.name.clone())?;
-    Ok(d)
-}
-
 /// `pyfoc`: the sensorless PMSM observer of `ekf-core` on numpy arrays.
 #[pymodule]
 fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_class::<Motor>()?;
     m.add_class::<Ekf>()?;
-    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(tune::tune_qr, m)?)?;
+    m.add_function(wrap_pyfunction!(tune::tune_qr_mcap, m)?)?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
