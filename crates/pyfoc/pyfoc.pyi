@@ -229,3 +229,10 @@ def tune_qr_mcap(
     its scenario, the voltage the simulator's observer was given, the true angle and speed;
     the angle-error window defaults to |omega| >= 5 % of rated speed. PyfocError naming the
     file when it cannot be read. Releases the GIL."""
+
+def suite(*, short: bool = False, seed: int = 1, ideal: bool = False) -> dict[str, Any]:
+    """The observer suite of `pmsm-sim suite`: the three reference motors at 10/50/100 %
+    rated speed, a rated load step and starts from unknown angles; the seed's filter, the
+    flux + PLL baseline and the default EKF side by side. Returns the report as a dict
+    (`motors`, `steady`, `transients`, `checks`, ...) plus `markdown` (the printed tables) and
+    `all_pass`. SimulationError if a run fails. Releases the GIL."""

@@ -23,6 +23,7 @@ use pyo3::types::{PyDict, PyModule};
 
 mod convert;
 mod simulate;
+mod suite;
 mod tune;
 
 use convert::{pair, rows2, square, try_vec, vec4};
@@ -518,6 +519,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(tune::tune_qr, m)?)?;
     m.add_function(wrap_pyfunction!(tune::tune_qr_mcap, m)?)?;
+    m.add_function(wrap_pyfunction!(suite::suite, m)?)?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
