@@ -130,6 +130,8 @@ impl Motor {
 
 /// The observer in the precision the user chose.
 #[derive(Clone)]
+// One per `Ekf` object, behind its lock; boxing the larger variant would buy nothing.
+#[allow(clippy::large_enum_variant)]
 enum Observer {
     F64(PmsmObserver<f64>),
     F32(PmsmObserver<f32>),
