@@ -152,7 +152,9 @@ pub(crate) fn finite<T: Float>(v: &[T]) -> bool {
 
 /// `(m + m^T) / 2`.
 fn symmetrize<T: Float, const N: usize>(m: &SMatrix<T, N, N>) -> SMatrix<T, N, N> {
-    (m + m.transpose()) * T::from_subset(&0.5)
+    // Halved before the sum: the same result for normal numbers, no overflow near `MAX`.
+    let h = T::from_subset(&0.5);
+    m * h + m.transpose() * h
 }
 
 impl<T: Float, const NX: usize, const NZ: usize> Ekf<T, NX, NZ> {

@@ -33,6 +33,10 @@ pub enum Param {
     BranchFlipSigma,
     /// Trace factor of the covariance health check, `CovarianceHealth::trace_factor`.
     HealthTraceFactor,
+    /// Current bound of the covariance health check, `CovarianceHealth::current_factor`.
+    HealthCurrentFactor,
+    /// Speed bound of the covariance health check, `CovarianceHealth::max_w_ts_rad`.
+    HealthMaxSpeed,
 }
 
 /// A matrix named in a [`ConfigError`].
@@ -61,6 +65,9 @@ pub enum ConfigError {
     NotSymmetric(Matrix),
     /// The matrix has a negative eigenvalue.
     NotPositiveSemiDefinite(Matrix),
+    /// The matrix must be positive definite (the measurement noise `R`: `S` must stay
+    /// invertible).
+    NotPositiveDefinite(Matrix),
     /// The initial state `x0` holds a NaN or an infinity.
     NonFiniteInitialState,
     /// The parameter is too large for the sample time: its discrete update would be unstable
@@ -69,6 +76,8 @@ pub enum ConfigError {
     /// The covariance health check is on but `trace(P0)` is zero, so its bound
     /// `trace_factor * trace(P0)` would reject every covariance.
     ZeroInitialCovarianceTrace,
+    /// The covariance health check is on but `trace_factor * trace(P0)` overflows.
+    TooLargeInitialCovariance,
 }
 
 impl fmt::Display for Param {
@@ -88,6 +97,8 @@ impl fmt::Display for Param {
             Param::GateSettledNis => "innovation_gate.settled_nis",
             Param::BranchFlipSigma => "branch_check.flip_angle_sigma_rad",
             Param::HealthTraceFactor => "covariance_health.trace_factor",
+            Param::HealthCurrentFactor => "covariance_health.current_factor",
+            Param::HealthMaxSpeed => "covariance_health.max_w_ts_rad",
         })
     }
 }
@@ -110,12 +121,18 @@ impl fmt::Display for ConfigError {
             ConfigError::ZeroPolePairs => f.write_str("pole_pairs must be at least 1"),
             ConfigError::NonFiniteMatrix(m) => write!(f, "{m} holds a NaN or an infinity"),
             ConfigError::NotSymmetric(m) => write!(f, "{m} is not symmetric"),
+            ConfigError::NotPositiveDefinite(m) => {
+                write!(f, "{m} is not positive definite (it must be invertible)")
+            }
             ConfigError::NotPositiveSemiDefinite(m) => {
                 write!(f, "{m} is not positive semi-definite (negative eigenvalue)")
             }
             ConfigError::NonFiniteInitialState => f.write_str("x0 holds a NaN or an infinity"),
             ConfigError::TooLargeForTs(p) => {
                 write!(f, "{p} is too large for ts_s (unstable discrete update)")
+            }
+            ConfigError::TooLargeInitialCovariance => {
+                f.write_str("covariance_health: trace_factor * trace(P0) is not finite")
             }
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",

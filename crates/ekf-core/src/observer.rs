@@ -81,12 +81,15 @@
 //!
 //! **Covariance health** ([`CovarianceHealth`]). `P` must have a positive diagonal and
 //! `trace(P) <= trace_factor * trace(P0)` (its entries are finite: every step that would make
-//! them non-finite is refused). `trace(P)` mixes units; with [`default_p0`] it is dominated by
+//! them non-finite is refused), and the state must be plausible: `|i_a| + |i_b|` at most
+//! `current_factor` (100) times the short-circuit current `psi_f / Ls`, `|w_e| Ts <= pi`. (The
+//! state bound matters after absurd but finite data, e.g. a sample of 1e30 A accepted during
+//! convergence: without it the next steps overflow and are refused forever.) `trace(P)` mixes units; with [`default_p0`] it is dominated by
 //! the speed variance, `(0.05 / Ts)^2`, so the default bound (factor 100) means a speed
 //! standard deviation of about `0.5 / Ts` (5000 rad/s el. at 10 kHz): the filter has lost the
 //! rotor entirely. On failure the observer resets itself: currents = the measured currents
-//! (after [`PmsmObserver::predict`]: the estimated ones), speed and angle kept when finite
-//! (else 0), `P = P0`, gate and branch test restarted; reported as `covariance_reset`. The
+//! (after [`PmsmObserver::predict`]: the estimated ones), each 0 when beyond its bound;
+//! speed kept when within its bound, angle when finite (else 0), `P = P0`, gate and branch test restarted; reported as `covariance_reset`. The
 //! check runs after every `step`, `predict` and `correct`, and also when a step is refused
 //! for a singular `S` or a non-finite result while the stored `P` is unhealthy (then the
 //! reset replaces the error).
@@ -228,20 +231,28 @@ impl<T: Float> Default for InnovationGate<T> {
 }
 
 /// Covariance health check (module docs, "Covariance health"): after every step
-/// `P` must be finite, its diagonal positive, and `trace(P) <= trace_factor * trace(P0)`;
-/// otherwise the observer resets itself (currents = the measured currents, speed and angle
-/// kept, `P = P0`) and reports it.
+/// `P` must be finite, its diagonal positive, and `trace(P) <= trace_factor * trace(P0)`, and
+/// the state plausible (`|i_a| + |i_b| <= current_factor * psi_f / Ls`,
+/// `|w_e| Ts <= max_w_ts_rad`); otherwise the observer resets itself (currents = the measured
+/// currents, speed and angle kept when plausible, `P = P0`) and reports it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CovarianceHealth<T> {
     /// Bound on `trace(P)` as a multiple of `trace(P0)`.
     pub trace_factor: T,
+    /// Bound on `|i_a| + |i_b|` as a multiple of the characteristic current `psi_f / Ls` (the
+    /// short-circuit current, the largest steady current of the machine at any speed).
+    pub current_factor: T,
+    /// Bound on `|w_e| Ts`, rad per sample (`pi`: the Nyquist limit of the sampled model).
+    pub max_w_ts_rad: T,
 }
 
 impl<T: Float> Default for CovarianceHealth<T> {
-    /// `trace_factor = 100`.
+    /// `trace_factor = 100`, `current_factor = 100`, `max_w_ts_rad = pi`.
     fn default() -> Self {
         Self {
             trace_factor: to_t(100.0),
+            current_factor: to_t(100.0),
+            max_w_ts_rad: T::pi(),
         }
     }
 }
@@ -289,7 +300,18 @@ impl<T: Float> ObserverConfig<T> {
         positive(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
         check_psd(&self.noise.q, Matrix::Q)?;
         check_psd(&self.noise.r, Matrix::R)?;
+        // S = H P H^T + R must stay invertible whatever P becomes: R positive definite.
+        let r = &self.noise.r;
+        if !(r[(0, 0)] > T::zero() && r[(0, 0)] * r[(1, 1)] - r[(0, 1)] * r[(1, 0)] > T::zero()) {
+            return Err(ConfigError::NotPositiveDefinite(Matrix::R));
+        }
         check_psd(&self.p0, Matrix::P0)?;
+        // Forward Euler's current pole `1 - Rs Ts / Ls` must lie inside the unit circle.
+        if self.discretization == Discretization::ForwardEuler
+            && !(self.motor.rs_ohm * self.ts_s < to_t::<T>(2.0) * self.motor.ls_h)
+        {
+            return Err(ConfigError::TooLargeForTs(Param::Rs));
+        }
         if !all_finite(&self.x0) {
             return Err(ConfigError::NonFiniteInitialState);
         }
@@ -305,9 +327,15 @@ impl<T: Float> ObserverConfig<T> {
         }
         if let Some(h) = &self.covariance_health {
             positive(h.trace_factor, Param::HealthTraceFactor)?;
+            positive(h.current_factor, Param::HealthCurrentFactor)?;
+            positive(h.max_w_ts_rad, Param::HealthMaxSpeed)?;
             // P0 is finite and positive semi-definite here, so its trace is finite and >= 0.
             if self.p0.trace() <= T::zero() {
                 return Err(ConfigError::ZeroInitialCovarianceTrace);
+            }
+            // The bound itself must be finite, or an overflowing P would pass it.
+            if !(h.trace_factor * self.p0.trace()).is_finite() {
+                return Err(ConfigError::TooLargeInitialCovariance);
             }
         }
         Ok(())
@@ -658,6 +686,10 @@ struct GateState<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct HealthState<T> {
     trace_bound: T,
+    /// Bound on `|i_a| + |i_b|`, A.
+    current_bound: T,
+    /// Bound on `|w_e|`, rad/s.
+    speed_bound: T,
     p0: Sym4<T>,
 }
 
@@ -763,6 +795,8 @@ impl<T: Float> PmsmObserver<T> {
             }),
             health: cfg.covariance_health.map(|h| HealthState {
                 trace_bound: h.trace_factor * p0.trace(),
+                current_bound: h.current_factor * cfg.motor.characteristic_current_a(),
+                speed_bound: h.max_w_ts_rad / cfg.ts_s,
                 p0,
             }),
             events: Events::default(),
@@ -802,7 +836,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         let (x, p) = structured::predict(&self.model, &self.x, &self.p, u_prev);
         if !(finite(x.as_slice()) && p.all_finite()) {
-            if self.unhealthy(&self.p) {
+            if self.unhealthy(&self.x, &self.p) {
                 self.events = Events::default();
                 self.self_reset(None);
                 return Ok(());
@@ -812,7 +846,7 @@ impl<T: Float> PmsmObserver<T> {
         self.x = x;
         self.p = p;
         self.events = Events::default();
-        if self.unhealthy(&self.p) {
+        if self.unhealthy(&self.x, &self.p) {
             self.self_reset(None);
         }
         Ok(())
@@ -858,13 +892,13 @@ impl<T: Float> PmsmObserver<T> {
                 self.p = pm;
                 self.last = c;
                 self.gate_rejected();
-                if self.unhealthy(&self.p) {
+                if self.unhealthy(&self.x, &self.p) {
                     self.self_reset(Some(i));
                 }
                 return Ok(self.estimate());
             }
             Err(e) => {
-                if self.unhealthy(&self.p) {
+                if self.unhealthy(&self.x, &self.p) {
                     self.events = Events::default();
                     self.self_reset(Some(i));
                     return Ok(self.estimate());
@@ -902,7 +936,7 @@ impl<T: Float> PmsmObserver<T> {
                 b.sum = T::zero();
             }
         }
-        if self.unhealthy(&self.p) {
+        if self.unhealthy(&self.x, &self.p) {
             self.self_reset(Some(i));
         }
         Ok(self.estimate())
@@ -939,10 +973,11 @@ impl<T: Float> PmsmObserver<T> {
         self.events.flipped = true;
     }
 
-    /// `true` when the health check is on and `P` fails it: a non-positive (or NaN) diagonal
-    /// entry, or `trace(P)` above the bound (or NaN).
+    /// `true` when the health check is on and fails: a non-positive (or NaN) diagonal entry
+    /// of `P`, `trace(P)` above the bound (or NaN), or a current or speed estimate beyond its
+    /// bound (or NaN).
     #[inline(always)]
-    fn unhealthy(&self, p: &Sym4<T>) -> bool {
+    fn unhealthy(&self, x: &Vector4<T>, p: &Sym4<T>) -> bool {
         match &self.health {
             Some(h) => {
                 let z = T::zero();
@@ -950,14 +985,17 @@ impl<T: Float> PmsmObserver<T> {
                     && p.p00 > z
                     && p.p11 > z
                     && p.p22 > z
-                    && p.p33 > z)
+                    && p.p33 > z
+                    && x[0].abs() + x[1].abs() <= h.current_bound
+                    && x[2].abs() <= h.speed_bound)
             }
             None => false,
         }
     }
 
     /// The self-reset of the health check: currents = the measured currents (or the current
-    /// estimate if none, or 0 if that is not finite), speed and angle kept if finite else 0,
+    /// estimate if none; 0 beyond the bound), speed kept if within its bound, angle if finite
+    /// (else 0),
     /// `P = P0`, gate and branch check restarted; reported in the events and counters.
     #[cold]
     #[inline(never)]
@@ -965,12 +1003,20 @@ impl<T: Float> PmsmObserver<T> {
         let Some(h) = &self.health else {
             return;
         };
-        let keep = |v: T| if v.is_finite() { v } else { T::zero() };
+        // `!(|v| <= bound)` also catches NaN.
+        let keep = |v: T, bound: T| if v.abs() <= bound { v } else { T::zero() };
+        let ib_max = h.current_bound;
         let (ia, ib) = match i {
-            Some([a, b]) => (keep(a), keep(b)),
-            None => (keep(self.x[0]), keep(self.x[1])),
+            Some([a, b]) => (keep(a, ib_max), keep(b, ib_max)),
+            None => (keep(self.x[0], ib_max), keep(self.x[1], ib_max)),
         };
-        self.x = Vector4::new(ia, ib, keep(self.x[2]), wrap_angle(keep(self.x[3])));
+        let w = keep(self.x[2], h.speed_bound);
+        let th = if self.x[3].is_finite() {
+            wrap_angle(self.x[3])
+        } else {
+            T::zero()
+        };
+        self.x = Vector4::new(ia, ib, w, th);
         self.p = h.p0;
         self.restart_safeguards();
         self.events.reset = true;

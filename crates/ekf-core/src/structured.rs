@@ -48,7 +48,8 @@ impl<T: Float> Sym4<T> {
     /// Reads the upper triangle after forcing symmetry, `(m + m^T) / 2`.
     pub(crate) fn from_matrix(m: &Matrix4<T>) -> Self {
         let h: T = to_t(0.5);
-        let s = |r: usize, c: usize| (m[(r, c)] + m[(c, r)]) * h;
+        // Halved before the sum: no overflow near `MAX`.
+        let s = |r: usize, c: usize| m[(r, c)] * h + m[(c, r)] * h;
         Self {
             p00: m[(0, 0)],
             p01: s(0, 1),
