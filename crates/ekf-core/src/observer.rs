@@ -302,13 +302,14 @@ impl<T: Float> ObserverConfig<T> {
         check_psd(&self.noise.r, Matrix::R)?;
         // S = H P H^T + R must stay invertible whatever P becomes: R positive definite.
         let r = &self.noise.r;
-        if !(r[(0, 0)] > T::zero() && r[(0, 0)] * r[(1, 1)] - r[(0, 1)] * r[(1, 0)] > T::zero()) {
+        // (R is finite here: `check_psd` refused NaN and infinities.)
+        if r[(0, 0)] <= T::zero() || r[(0, 0)] * r[(1, 1)] - r[(0, 1)] * r[(1, 0)] <= T::zero() {
             return Err(ConfigError::NotPositiveDefinite(Matrix::R));
         }
         check_psd(&self.p0, Matrix::P0)?;
         // Forward Euler's current pole `1 - Rs Ts / Ls` must lie inside the unit circle.
         if self.discretization == Discretization::ForwardEuler
-            && !(self.motor.rs_ohm * self.ts_s < to_t::<T>(2.0) * self.motor.ls_h)
+            && self.motor.rs_ohm * self.ts_s >= to_t::<T>(2.0) * self.motor.ls_h
         {
             return Err(ConfigError::TooLargeForTs(Param::Rs));
         }
