@@ -33,7 +33,7 @@ if ! FUZZ_SECONDS=20 cargo test --release --locked -p ekf-core -p foc --test fuz
     cat "$fuzz_log"
     exit 1
 fi
-grep -E '^fuzz |test result' "$fuzz_log"
+grep -oE 'fuzz [^:]+: [0-9]+ cases in [0-9.]+ s|test result.*' "$fuzz_log"
 
 step "Python venv (.venv): numpy, maturin, pytest, filterpy"
 venv=.venv
