@@ -371,3 +371,80 @@ fn fuzz_generic_f32() {
 fn fuzz_generic_f64() {
     fuzz_generic::<f64>("generic Ekf f64", 256);
 }
+
+/// The flux-observer baseline: fuzzed parameters (motor, Ts, gains, timing, angle output) and
+/// inputs; a refused configuration is refused by `validate` too, a refused step changes
+/// nothing, an accepted one gives a finite estimate with the angle in `[-pi, pi]`.
+fn fuzz_flux<T: Float>(name: &str, cases: u32) {
+    use ekf_core::{FluxAngleOutput, FluxObserver, FluxObserverConfig, FluxTiming};
+    harness::fuzz(
+        name,
+        cases,
+        (
+            params(),
+            (param(1e3), param(1e3), any::<bool>(), any::<bool>()),
+            prop::collection::vec(call(50.0, 5.0), 0..64),
+        ),
+        |(p, (gain, bw, centred, pll), calls)| {
+            let t = |v: f64| T::from_subset(&v);
+            let base = config::<T>(&p);
+            let mut cfg = FluxObserverConfig::new(base.motor, base.ts_s);
+            if p.seed_noise {
+                // Now and then keep the derived defaults; otherwise fuzz the gains too.
+            } else {
+                cfg.observer_gain_rad_s = t(gain);
+                cfg.pll_bandwidth_rad_s = t(bw);
+            }
+            if centred {
+                cfg.timing = FluxTiming::Centred;
+            }
+            if pll {
+                cfg.angle_output = FluxAngleOutput::Pll;
+            }
+            let Ok(mut obs) = FluxObserver::new(&cfg) else {
+                CONFIGS_REFUSED.fetch_add(1, Relaxed);
+                prop_assert!(cfg.validate().is_err());
+                return Ok(());
+            };
+            CONFIGS_OK.fetch_add(1, Relaxed);
+            let pi = T::pi();
+            for c in &calls {
+                let (u, i) = match *c {
+                    Call::Step(u, i) => (u, i),
+                    Call::Predict(u) => (u, [0.0; 2]),
+                    Call::Correct(i) => ([0.0; 2], i),
+                    Call::Reset(x, _) => ([x[0], x[1]], [x[2], x[3]]),
+                };
+                let before = obs.estimate();
+                match obs.step(u.map(t), i.map(t)) {
+                    Ok(e) => {
+                        CALLS_OK.fetch_add(1, Relaxed);
+                        prop_assert!(
+                            finite(&[e.theta_rad, e.omega_e_rad_s, e.theta_pll_rad])
+                                && finite(&e.eta_wb)
+                                && e.theta_rad >= -pi
+                                && e.theta_rad <= pi,
+                            "{c:?}: {e:?}"
+                        );
+                    }
+                    Err(_) => {
+                        CALLS_REFUSED.fetch_add(1, Relaxed);
+                        prop_assert_eq!(obs.estimate(), before, "{:?} changed the observer", c);
+                    }
+                }
+            }
+            Ok(())
+        },
+        stats,
+    );
+}
+
+#[test]
+fn fuzz_flux_f32() {
+    fuzz_flux::<f32>("flux observer f32", 256);
+}
+
+#[test]
+fn fuzz_flux_f64() {
+    fuzz_flux::<f64>("flux observer f64", 256);
+}
