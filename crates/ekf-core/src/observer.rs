@@ -91,8 +91,10 @@
 //! (after [`PmsmObserver::predict`]: the estimated ones), each 0 when beyond its bound;
 //! speed kept when within its bound, angle when finite (else 0), `P = P0`, gate and branch test restarted; reported as `covariance_reset`. The
 //! check runs after every `step`, `predict` and `correct`, and also when a step is refused
-//! for a singular `S` or a non-finite result while the stored `P` is unhealthy (then the
-//! reset replaces the error).
+//! for a singular `S` or a non-finite result: when the stored `P` or state is unhealthy, or
+//! at the [`MAX_REFUSALS`]-th (3rd) such refusal in a row, the reset replaces the error (so the
+//! filter is never stuck on a state it cannot step from, e.g. an `S` singular to rounding in
+//! `f32`). Refusals of non-finite input are the caller's and do not count.
 
 use nalgebra::{Cholesky, Matrix2, Matrix4, SMatrix, Vector2, Vector4};
 
@@ -688,9 +690,15 @@ struct GateState<T> {
     open: bool,
 }
 
+/// Steps refused in a row (singular `S`, non-finite result) after which the covariance health
+/// check resets the filter.
+pub const MAX_REFUSALS: u32 = 3;
+
 /// Covariance health constants.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct HealthState<T> {
+    /// Steps refused in a row for a singular `S` or a non-finite result.
+    refusals: u32,
     trace_bound: T,
     /// Bound on `|i_a| + |i_b|`, A.
     current_bound: T,
@@ -800,6 +808,7 @@ impl<T: Float> PmsmObserver<T> {
                 open: false,
             }),
             health: cfg.covariance_health.map(|h| HealthState {
+                refusals: 0,
                 trace_bound: h.trace_factor * p0.trace(),
                 current_bound: h.current_factor * cfg.motor.characteristic_current_a(),
                 speed_bound: h.max_w_ts_rad / cfg.ts_s,
@@ -842,12 +851,15 @@ impl<T: Float> PmsmObserver<T> {
         }
         let (x, p) = structured::predict(&self.model, &self.x, &self.p, u_prev);
         if !(finite(x.as_slice()) && p.all_finite()) {
-            if self.unhealthy(&self.x, &self.p) {
+            if self.refused_resets() {
                 self.events = Events::default();
                 self.self_reset(None);
                 return Ok(());
             }
             return Err(EkfError::NonFiniteResult);
+        }
+        if let Some(h) = &mut self.health {
+            h.refusals = 0;
         }
         self.x = x;
         self.p = p;
@@ -904,7 +916,7 @@ impl<T: Float> PmsmObserver<T> {
                 return Ok(self.estimate());
             }
             Err(e) => {
-                if self.unhealthy(&self.x, &self.p) {
+                if self.refused_resets() {
                     self.events = Events::default();
                     self.self_reset(Some(i));
                     return Ok(self.estimate());
@@ -912,6 +924,9 @@ impl<T: Float> PmsmObserver<T> {
                 return Err(e);
             }
         };
+        if let Some(h) = &mut self.health {
+            h.refusals = 0;
+        }
         self.x = x;
         self.p = p;
         self.last = c;
@@ -994,6 +1009,28 @@ impl<T: Float> PmsmObserver<T> {
                     && p.p33 > z
                     && x[0].abs() + x[1].abs() <= h.current_bound
                     && x[2].abs() <= h.speed_bound)
+            }
+            None => false,
+        }
+    }
+
+    /// Whether a step refused for a singular `S` or a non-finite result must reset the filter
+    /// (health check on): the stored `P` or state is unhealthy, or this is the
+    /// [`MAX_REFUSALS`]-th such refusal in a row (the filter cannot step from where it is,
+    /// e.g. an `S` that is singular to rounding in `f32`). Counts the refusal otherwise.
+    #[cold]
+    #[inline(never)]
+    fn refused_resets(&mut self) -> bool {
+        let unhealthy = self.unhealthy(&self.x, &self.p);
+        match &mut self.health {
+            Some(h) => {
+                h.refusals += 1;
+                if unhealthy || h.refusals >= MAX_REFUSALS {
+                    h.refusals = 0;
+                    true
+                } else {
+                    false
+                }
             }
             None => false,
         }
