@@ -62,26 +62,7 @@ fn lag_of_forward_euler_and_lag_free_default() {
 fn default_tuning_serves_the_three_reference_motors() {
     let ts = 1e-4;
     // name, motor, rated electrical speed (rad/s), sensor noise (A), rms bound (deg)
-    let motors = [
-        (
-            "servo",
-            MotorParams::servo(),
-            3000.0 / 60.0 * 2.0 * PI * 4.0,
-            0.02,
-        ),
-        (
-            "industrial 2.2 kW",
-            MotorParams::industrial_2k2(),
-            1500.0 / 60.0 * 2.0 * PI * 3.0,
-            0.02,
-        ),
-        (
-            "small fast",
-            MotorParams::small_fast(),
-            400.0 * 2.0 * PI,
-            0.1,
-        ),
-    ];
+    let motors = reference_motors();
     for (name, motor, rated, noise) in motors {
         let ic = motor.characteristic_current_a();
         for frac in [0.1, 0.5, 1.0] {

@@ -19,28 +19,8 @@ const N: usize = 1000;
 const DEADLINE: usize = 500;
 const LOCK_DEG: f64 = 5.0;
 
-/// name, motor, rated electrical speed (rad/s), sensor noise standard deviation (A)
 fn motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
-    [
-        (
-            "servo",
-            MotorParams::servo(),
-            3000.0 / 60.0 * 2.0 * PI * 4.0,
-            0.02,
-        ),
-        (
-            "industrial 2.2 kW",
-            MotorParams::industrial_2k2(),
-            1500.0 / 60.0 * 2.0 * PI * 3.0,
-            0.02,
-        ),
-        (
-            "small fast",
-            MotorParams::small_fast(),
-            400.0 * 2.0 * PI,
-            0.1,
-        ),
-    ]
+    reference_motors()
 }
 
 const SPEED_FRACTIONS: [f64; 6] = [-1.0, -0.5, -0.1, 0.1, 0.5, 1.0];

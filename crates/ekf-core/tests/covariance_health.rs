@@ -7,6 +7,8 @@
 //!   `cargo test --release -p ekf-core --test covariance_health -- --ignored --nocapture`.
 //! - Self-reset: a covariance forced bad through `reset` (huge, negative diagonal) is caught
 //!   by the next step, which resets the observer to its documented state and reports it.
+mod common;
+use common::reference_motors;
 use core::f64::consts::PI;
 use ekf_core::nalgebra::{Cholesky, Matrix4, Vector4};
 use ekf_core::{MotorParams, ObserverConfig, ObserverCounters, PmsmObserver, default_p0};
@@ -28,28 +30,8 @@ impl Rng {
     }
 }
 
-/// name, motor, rated electrical speed (rad/s), sensor noise (A)
 fn motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
-    [
-        (
-            "servo",
-            MotorParams::servo(),
-            3000.0 / 60.0 * 2.0 * PI * 4.0,
-            0.02,
-        ),
-        (
-            "industrial 2.2 kW",
-            MotorParams::industrial_2k2(),
-            1500.0 / 60.0 * 2.0 * PI * 3.0,
-            0.02,
-        ),
-        (
-            "small fast",
-            MotorParams::small_fast(),
-            400.0 * 2.0 * PI,
-            0.1,
-        ),
-    ]
+    reference_motors()
 }
 
 struct Outcome {

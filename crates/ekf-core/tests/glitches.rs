@@ -23,32 +23,12 @@
 //!   the channel recovers, the observer locks again within 50 ms (asserted).
 mod common;
 use common::*;
-use core::f64::consts::PI;
 use ekf_core::{EkfError, Estimate, MotorParams, ObserverConfig, PmsmObserver, wrap_angle};
 
 const TS: f64 = 1e-4;
 
 fn motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
-    [
-        (
-            "servo",
-            MotorParams::servo(),
-            3000.0 / 60.0 * 2.0 * PI * 4.0,
-            0.02,
-        ),
-        (
-            "industrial 2.2 kW",
-            MotorParams::industrial_2k2(),
-            1500.0 / 60.0 * 2.0 * PI * 3.0,
-            0.02,
-        ),
-        (
-            "small fast",
-            MotorParams::small_fast(),
-            400.0 * 2.0 * PI,
-            0.1,
-        ),
-    ]
+    reference_motors()
 }
 
 fn trace(motor: MotorParams<f64>, rated: f64, noise: f64, n: usize) -> Trace {

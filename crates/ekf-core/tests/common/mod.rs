@@ -4,7 +4,33 @@
 //! `t_k` with Gaussian noise from a seeded generator.
 #![allow(dead_code)]
 
+use core::f64::consts::PI;
 use ekf_core::{Estimate, MotorParams, ObserverConfig, PmsmObserver, wrap_angle};
+
+/// The three reference motors of `design.md` section 6 as the tests use them: name, motor,
+/// rated electrical speed (rad/s), current-sensor noise standard deviation (A).
+pub fn reference_motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
+    [
+        (
+            "servo",
+            MotorParams::servo(),
+            3000.0 / 60.0 * 2.0 * PI * 4.0,
+            0.02,
+        ),
+        (
+            "industrial 2.2 kW",
+            MotorParams::industrial_2k2(),
+            1500.0 / 60.0 * 2.0 * PI * 3.0,
+            0.02,
+        ),
+        (
+            "small fast",
+            MotorParams::small_fast(),
+            400.0 * 2.0 * PI,
+            0.1,
+        ),
+    ]
+}
 
 /// Samples aligned on k: `u[k]` held over `[t_k, t_k+1)`, `i_meas[k]`, `th[k]`, `w[k]` at `t_k`.
 pub struct Trace {
