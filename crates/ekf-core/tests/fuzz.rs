@@ -407,9 +407,8 @@ fn fuzz_flux<T: Float>(name: &str, cases: u32) {
             let t = |v: f64| T::from_subset(&v);
             let base = config::<T>(&p);
             let mut cfg = FluxObserverConfig::new(base.motor, base.ts_s);
-            if p.seed_noise {
-                // Now and then keep the derived defaults; otherwise fuzz the gains too.
-            } else {
+            // Fuzz the gains too, except now and then (`seed_noise`): the derived defaults.
+            if !p.seed_noise {
                 cfg.observer_gain_rad_s = t(gain);
                 cfg.pll_bandwidth_rad_s = t(bw);
             }
