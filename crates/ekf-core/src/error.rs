@@ -37,6 +37,32 @@ pub enum Param {
     HealthCurrentFactor,
     /// Speed bound of the covariance health check, `CovarianceHealth::max_w_ts_rad`.
     HealthMaxSpeed,
+    /// Initial standard deviation of the tracked flux, `ParameterTracking::psi_f_sigma0`.
+    TrackingPsiSigma,
+    /// Initial standard deviation of the tracked resistance, `ParameterTracking::rs_sigma0`.
+    TrackingRsSigma,
+    /// Random walk of the tracked flux, `ParameterTracking::psi_f_walk_per_sqrt_s`.
+    TrackingPsiWalk,
+    /// Random walk of the tracked resistance, `ParameterTracking::rs_walk_per_sqrt_s`.
+    TrackingRsWalk,
+    /// Speed below which tracking freezes, `ParameterTracking::min_speed_rad_s`.
+    TrackingMinSpeed,
+    /// Bounds of the tracked flux, `ParameterTracking::psi_f_range`.
+    TrackingPsiRange,
+    /// Bounds of the tracked resistance, `ParameterTracking::rs_range`.
+    TrackingRsRange,
+    /// `ParameterTracking::reference_temperature_c`.
+    TrackingReferenceTemperature,
+    /// `ParameterTracking::rs_temperature_coefficient_per_k`.
+    TrackingTemperatureCoefficient,
+    /// `RsTracking::Split::magnet_coefficient_per_k` (must be negative).
+    TrackingMagnetCoefficient,
+    /// `RsTracking::Split::link_sigma_k`.
+    TrackingLinkSigma,
+    /// `RsTracking::Split::measurement_sigma`.
+    TrackingWindowSigma,
+    /// `RsTracking::Split::window_samples` (at least 1).
+    TrackingWindow,
 }
 
 /// A matrix named in a [`ConfigError`].
@@ -78,6 +104,8 @@ pub enum ConfigError {
     ZeroInitialCovarianceTrace,
     /// The covariance health check is on but `trace_factor * trace(P0)` overflows.
     TooLargeInitialCovariance,
+    /// The parameter is outside its documented range.
+    OutOfRange(Param),
 }
 
 impl fmt::Display for Param {
@@ -99,6 +127,21 @@ impl fmt::Display for Param {
             Param::HealthTraceFactor => "covariance_health.trace_factor",
             Param::HealthCurrentFactor => "covariance_health.current_factor",
             Param::HealthMaxSpeed => "covariance_health.max_w_ts_rad",
+            Param::TrackingPsiSigma => "parameter_tracking.psi_f_sigma0",
+            Param::TrackingRsSigma => "parameter_tracking.rs_sigma0",
+            Param::TrackingPsiWalk => "parameter_tracking.psi_f_walk_per_sqrt_s",
+            Param::TrackingRsWalk => "parameter_tracking.rs_walk_per_sqrt_s",
+            Param::TrackingMinSpeed => "parameter_tracking.min_speed_rad_s",
+            Param::TrackingPsiRange => "parameter_tracking.psi_f_range",
+            Param::TrackingRsRange => "parameter_tracking.rs_range",
+            Param::TrackingReferenceTemperature => "parameter_tracking.reference_temperature_c",
+            Param::TrackingMagnetCoefficient => "parameter_tracking.rs.magnet_coefficient_per_k",
+            Param::TrackingLinkSigma => "parameter_tracking.rs.link_sigma_k",
+            Param::TrackingWindowSigma => "parameter_tracking.rs.measurement_sigma",
+            Param::TrackingWindow => "parameter_tracking.rs.window_samples",
+            Param::TrackingTemperatureCoefficient => {
+                "parameter_tracking.rs_temperature_coefficient_per_k"
+            }
         })
     }
 }
@@ -134,6 +177,7 @@ impl fmt::Display for ConfigError {
             ConfigError::TooLargeInitialCovariance => {
                 f.write_str("covariance_health: trace_factor * trace(P0) is not finite")
             }
+            ConfigError::OutOfRange(p) => write!(f, "{p} is outside its documented range"),
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",
             ),

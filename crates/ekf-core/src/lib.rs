@@ -21,7 +21,7 @@ pub use motor::MotorParams;
 pub use noise::NoiseCovariances;
 pub use observer::{
     BranchCheck, CovarianceHealth, Discretization, Estimate, InnovationGate, ObserverConfig,
-    ObserverCounters, PmsmModel, PmsmObserver, Status, default_p0,
+    ObserverCounters, ParameterTracking, PmsmModel, PmsmObserver, RsTracking, Status, default_p0,
 };
 
 /// Re-export of the `nalgebra` this crate is built on, for its matrix types.

@@ -96,512 +96,26 @@
 //! filter is never stuck on a state it cannot step from, e.g. an `S` singular to rounding in
 //! `f32`). Refusals of non-finite input are the caller's and do not count.
 
-use nalgebra::{Cholesky, Matrix2, Matrix4, SMatrix, Vector2, Vector4};
+mod config;
+pub(crate) mod model;
+mod safeguards;
+mod tracking;
 
-use crate::ekf::{
-    Correction, CovarianceUpdate, EkfError, MeasurementModel, ProcessModel, all_finite, finite,
-};
-use crate::motor::positive;
+pub use config::{ObserverConfig, default_p0};
+pub use model::{Discretization, PmsmModel};
+pub use safeguards::{BranchCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS};
+pub use tracking::{ParameterTracking, RsTracking};
+
+use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
+
+use crate::ekf::{Correction, EkfError, finite};
 use crate::structured;
 use crate::structured::{Outcome, Sym4};
-use crate::trig::sin_cos_small;
-use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t, wrap_angle};
-
-/// How the continuous model is turned into one step of the filter (module docs).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Discretization {
-    /// The seed's forward-Euler step; EMF at the start-of-period angle (lags by ~`w Ts / 2`).
-    ForwardEuler,
-    /// Exact for a held voltage and a constant-speed rotation; no half-sample lag.
-    #[default]
-    LagFree,
-}
-
-/// Everything the observer needs; start from [`ObserverConfig::new`] or
-/// [`ObserverConfig::seed`] and change fields as needed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ObserverConfig<T: Float> {
-    /// Motor parameters.
-    pub motor: MotorParams<T>,
-    /// Sample (PWM) period, seconds.
-    pub ts_s: T,
-    /// Discretization of the model.
-    pub discretization: Discretization,
-    /// Process and measurement noise covariances.
-    pub noise: NoiseCovariances<T>,
-    /// Initial estimate `[i_a, i_b, w_e, theta]`, one period before the first sample.
-    pub x0: Vector4<T>,
-    /// Initial covariance `P0` (4 x 4).
-    pub p0: Matrix4<T>,
-    /// Covariance update method of the correction.
-    pub covariance_update: CovarianceUpdate,
-    /// The status reads [`Status::Uncertain`] while the angle's standard deviation
-    /// `sqrt(P[3][3])` exceeds this limit, radians. The innovation gate and the branch check
-    /// act only while the angle's variance is below this limit ("tracking").
-    pub angle_sigma_limit_rad: T,
-    /// Wrong-branch (`theta + pi`) detection and recovery; `None` turns it off.
-    pub branch_check: Option<BranchCheck<T>>,
-    /// Innovation (NIS) gate against measurement glitches; `None` turns it off.
-    pub innovation_gate: Option<InnovationGate<T>>,
-    /// Covariance health check with self-reset; `None` turns it off.
-    pub covariance_health: Option<CovarianceHealth<T>>,
-}
-
-/// Wrong-branch detection (module docs, "Wrong branch"): `(w, th)` and `(-w, th + pi)` give
-/// the same back-EMF, and only `dth/dt = w` tells them apart. On the wrong branch the
-/// prediction turns the angle estimate at `w_hat` while the corrections hold it on the
-/// measured back-EMF, which turns the other way: the corrections `K_th y` keep cancelling the
-/// predicted motion. The check accumulates that "missing motion" (a CUSUM test on the angle):
-///
-/// ```text
-/// b_k = min(-w_hat K_th y_k, 2 Ts w_hat^2)        backward correction times |w_hat|
-/// S_k = max(0, S_k-1 + b_k - allowance Ts w_hat^2)   while tracking and |w_hat| > min_speed_rad_s
-/// S_k = 0                                             otherwise
-/// flip when S_k > threshold_rad |w_hat|
-/// ```
-///
-/// `S` is the missing motion weighted by `|w_hat|` (rad^2/s), which needs neither the sign of
-/// `w_hat` nor a division; at a steady speed `S / |w_hat|` is the missing motion in radians.
-/// The clamp of `b_k` (at most two predicted steps' worth per sample) keeps the first samples
-/// of a convergence, where the filter makes large jumps, from counting as much evidence.
-///
-/// On the right branch the corrections average zero and `S` stays near 0 (it drifts by
-/// `-allowance |w| Ts` rad per sample); on the wrong branch they cancel about `|w| Ts` per
-/// sample and `S` grows by about `(1 - allowance) |w| Ts` rad per sample. The flip moves the state to the
-/// other branch: `theta += pi`, `w = -w`, `P = T P T` with `T = diag(1, 1, -1, 1)`, then
-/// `P33 += flip_angle_sigma_rad^2`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BranchCheck<T> {
-    /// Missing motion (rad) that triggers the flip.
-    pub threshold_rad: T,
-    /// The check sleeps (and forgets) while `|w_hat|` is at or below this speed, rad/s
-    /// electrical (near standstill the back-EMF, hence the branch, is not observable).
-    pub min_speed_rad_s: T,
-    /// Fraction of the predicted motion `|w_hat| Ts` the corrections may cancel per sample
-    /// without counting as evidence (between 0 and 1).
-    pub allowance: T,
-    /// Added to the angle's standard deviation (in quadrature, `P33 += sigma^2`) by a flip:
-    /// the wrong branch's equilibrium is not exactly `pi` away, and the flipped estimate
-    /// must be free to move.
-    pub flip_angle_sigma_rad: T,
-}
-
-impl<T: Float> BranchCheck<T> {
-    /// The default for a sample time: threshold `0.5` rad, minimum speed `0.002 / Ts`
-    /// (0.002 rad per sample, 20 rad/s at 10 kHz), allowance `0.5`,
-    /// `flip_angle_sigma_rad = 0.5`.
-    pub fn default_for(ts_s: T) -> Self {
-        Self {
-            threshold_rad: to_t(0.5),
-            min_speed_rad_s: to_t::<T>(0.002) / ts_s,
-            allowance: to_t(0.5),
-            flip_angle_sigma_rad: to_t(0.5),
-        }
-    }
-}
-
-/// Innovation gate (module docs, "Innovation gate"): while settled, a sample whose normalized
-/// innovation squared `NIS = y^T S^-1 y` exceeds `nis_threshold` is not used (the step is
-/// prediction only). For a consistent filter NIS is chi-square with 2 degrees of freedom, so
-/// `P(NIS > g) = exp(-g / 2)`: `g = 2 ln(1 / p)` rejects a fraction `p` of good samples
-/// (`g = 13.8` for `p = 1e-3`, `27.6` for `1e-6`, `41.4` for `1e-9`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InnovationGate<T> {
-    /// NIS above which a sample is rejected (chi-square, 2 degrees of freedom).
-    pub nis_threshold: T,
-    /// After this many consecutive rejections the next sample is accepted whatever its NIS,
-    /// and the gate stays open until an accepted sample's NIS is back below the threshold (so
-    /// a real change of the currents is not locked out). 0 never rejects.
-    pub max_consecutive: u32,
-    /// The gate acts only while the filter is settled: the angle's standard deviation below
-    /// `angle_sigma_limit_rad` and the running mean of the accepted samples' NIS (each clamped
-    /// to `nis_threshold`, averaged over about 16 samples) at or below this level. A
-    /// consistent filter's mean NIS is 2; during a convergence it is far larger.
-    pub settled_nis: T,
-}
-
-impl<T: Float> Default for InnovationGate<T> {
-    /// `nis_threshold = 41.4` (a good sample is rejected with probability 1e-9, once in 28 h
-    /// at 10 kHz), `max_consecutive = 2`, `settled_nis = 6`.
-    ///
-    /// `max_consecutive` is small on purpose: a glitch is one sample (two at most), while a
-    /// real fast transient (a rated load step on a low-inertia motor) also raises the NIS past
-    /// the threshold; with 10 the gate held off 10 real samples there and the angle error of
-    /// the small fast motor reached 8.3 deg (pmsm-sim suite), with 2 it is 1.9 deg.
-    fn default() -> Self {
-        Self {
-            nis_threshold: to_t(41.4),
-            max_consecutive: 2,
-            settled_nis: to_t(6.0),
-        }
-    }
-}
-
-/// Covariance health check (module docs, "Covariance health"): after every step
-/// `P` must be finite, its diagonal positive, and `trace(P) <= trace_factor * trace(P0)`, and
-/// the state plausible (`|i_a| + |i_b| <= current_factor * psi_f / Ls`,
-/// `|w_e| Ts <= max_w_ts_rad`); otherwise the observer resets itself (currents = the measured
-/// currents, speed and angle kept when plausible, `P = P0`) and reports it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CovarianceHealth<T> {
-    /// Bound on `trace(P)` as a multiple of `trace(P0)`.
-    pub trace_factor: T,
-    /// Bound on `|i_a| + |i_b|` as a multiple of the characteristic current `psi_f / Ls` (the
-    /// short-circuit current, the largest steady current of the machine at any speed).
-    pub current_factor: T,
-    /// Bound on `|w_e| Ts`, rad per sample (`pi`: the Nyquist limit of the sampled model).
-    pub max_w_ts_rad: T,
-}
-
-impl<T: Float> Default for CovarianceHealth<T> {
-    /// `trace_factor = 100`, `current_factor = 100`, `max_w_ts_rad = pi`.
-    fn default() -> Self {
-        Self {
-            trace_factor: to_t(100.0),
-            current_factor: to_t(100.0),
-            max_w_ts_rad: T::pi(),
-        }
-    }
-}
-
-impl<T: Float> ObserverConfig<T> {
-    /// The project default: [`Discretization::LagFree`], [`NoiseCovariances::scaled`], Joseph
-    /// update, `x0 = 0` (rotor angle and speed unknown), [`default_p0`], and the three
-    /// safeguards on: [`BranchCheck::default_for`], [`InnovationGate::default`],
-    /// [`CovarianceHealth::default`].
-    pub fn new(motor: MotorParams<T>, ts_s: T) -> Self {
-        Self {
-            motor,
-            ts_s,
-            discretization: Discretization::LagFree,
-            noise: NoiseCovariances::scaled(&motor, ts_s),
-            x0: Vector4::zeros(),
-            p0: default_p0(&motor, ts_s),
-            covariance_update: CovarianceUpdate::Joseph,
-            angle_sigma_limit_rad: to_t(0.2),
-            branch_check: Some(BranchCheck::default_for(ts_s)),
-            innovation_gate: Some(InnovationGate::default()),
-            covariance_health: Some(CovarianceHealth::default()),
-        }
-    }
-
-    /// The seed's filter: [`Discretization::ForwardEuler`], [`NoiseCovariances::seed`] and the
-    /// standard covariance update (seed step 6, made symmetric); `x0`, `P0` as in
-    /// [`new`](Self::new); no branch check, no innovation gate, no covariance health check.
-    pub fn seed(motor: MotorParams<T>, ts_s: T) -> Self {
-        Self {
-            discretization: Discretization::ForwardEuler,
-            noise: NoiseCovariances::seed(),
-            covariance_update: CovarianceUpdate::StandardSymmetrized,
-            branch_check: None,
-            innovation_gate: None,
-            covariance_health: None,
-            ..Self::new(motor, ts_s)
-        }
-    }
-
-    /// Checks every field; the observer's constructor calls it.
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        self.motor.validate()?;
-        positive(self.ts_s, Param::Ts)?;
-        positive(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
-        check_psd(&self.noise.q, Matrix::Q)?;
-        check_psd(&self.noise.r, Matrix::R)?;
-        // S = H P H^T + R must stay invertible whatever P becomes: R positive definite.
-        let r = &self.noise.r;
-        // (R is finite here: `check_psd` refused NaN and infinities.)
-        if r[(0, 0)] <= T::zero() || r[(0, 0)] * r[(1, 1)] - r[(0, 1)] * r[(1, 0)] <= T::zero() {
-            return Err(ConfigError::NotPositiveDefinite(Matrix::R));
-        }
-        check_psd(&self.p0, Matrix::P0)?;
-        // Forward Euler's current pole `1 - Rs Ts / Ls` must lie inside the unit circle.
-        if self.discretization == Discretization::ForwardEuler
-            && self.motor.rs_ohm * self.ts_s >= to_t::<T>(2.0) * self.motor.ls_h
-        {
-            return Err(ConfigError::TooLargeForTs(Param::Rs));
-        }
-        if !all_finite(&self.x0) {
-            return Err(ConfigError::NonFiniteInitialState);
-        }
-        if let Some(b) = &self.branch_check {
-            positive(b.threshold_rad, Param::BranchThreshold)?;
-            non_negative(b.min_speed_rad_s, Param::BranchMinSpeed)?;
-            non_negative(b.allowance, Param::BranchAllowance)?;
-            non_negative(b.flip_angle_sigma_rad, Param::BranchFlipSigma)?;
-        }
-        if let Some(g) = &self.innovation_gate {
-            positive(g.nis_threshold, Param::GateNisThreshold)?;
-            positive(g.settled_nis, Param::GateSettledNis)?;
-        }
-        if let Some(h) = &self.covariance_health {
-            positive(h.trace_factor, Param::HealthTraceFactor)?;
-            positive(h.current_factor, Param::HealthCurrentFactor)?;
-            positive(h.max_w_ts_rad, Param::HealthMaxSpeed)?;
-            // P0 is finite and positive semi-definite here, so its trace is finite and >= 0.
-            if self.p0.trace() <= T::zero() {
-                return Err(ConfigError::ZeroInitialCovarianceTrace);
-            }
-            // The bound itself must be finite, or an overflowing P would pass it.
-            if !(h.trace_factor * self.p0.trace()).is_finite() {
-                return Err(ConfigError::TooLargeInitialCovariance);
-            }
-        }
-        Ok(())
-    }
-}
-
-/// `Ok` when `v` is finite and not negative.
-fn non_negative<T: Float>(v: T, param: Param) -> Result<(), ConfigError> {
-    if !v.is_finite() {
-        Err(ConfigError::NonFinite(param))
-    } else if v < T::zero() {
-        Err(ConfigError::NotPositive(param))
-    } else {
-        Ok(())
-    }
-}
-
-/// Default initial covariance: `diag((0.1 I_c)^2, (0.1 I_c)^2, (0.05 / Ts)^2, pi^2)`, i.e. the
-/// currents roughly known, the speed unknown up to `0.05` rad per sample, the angle unknown.
-pub fn default_p0<T: Float>(motor: &MotorParams<T>, ts_s: T) -> Matrix4<T> {
-    let si = motor.characteristic_current_a() * to_t(0.1);
-    let sw = to_t::<T>(0.05) / ts_s;
-    let pi = T::pi();
-    Matrix4::from_diagonal(&Vector4::new(si * si, si * si, sw * sw, pi * pi))
-}
-
-/// Symmetric (to rounding) and positive semi-definite: `m + delta I` has a Cholesky factor for
-/// `delta = 1e3 eps max|m_ij|`, i.e. no eigenvalue below `-delta`.
-fn check_psd<T: Float, const N: usize>(
-    m: &SMatrix<T, N, N>,
-    which: Matrix,
-) -> Result<(), ConfigError> {
-    if !all_finite(m) {
-        return Err(ConfigError::NonFiniteMatrix(which));
-    }
-    let scale = m.iter().fold(T::zero(), |acc, v| acc.max(v.abs()));
-    if scale == T::zero() {
-        return Ok(());
-    }
-    let tol = T::default_epsilon() * to_t(1e3) * scale;
-    if (m - m.transpose()).iter().any(|d| d.abs() > tol) {
-        return Err(ConfigError::NotSymmetric(which));
-    }
-    let shifted = m + SMatrix::<T, N, N>::identity() * tol;
-    if Cholesky::new(shifted).is_none() {
-        return Err(ConfigError::NotPositiveSemiDefinite(which));
-    }
-    Ok(())
-}
-
-/// The PMSM process and measurement model with its per-`Ts` constants; implements
-/// [`ProcessModel`] (input `[u_a, u_b]`) and [`MeasurementModel`] (`z = [i_a, i_b]`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PmsmModel<T: Float> {
-    discretization: Discretization,
-    ts: T,
-    /// `a = Rs / Ls`, 1/s.
-    a: T,
-    /// `c = psi_f / Ls`, A/rad.
-    c: T,
-    /// Current decay per sample: `alpha = exp(-a Ts)` (lag-free) or `1 - a Ts` (Euler).
-    decay: T,
-    /// Input gain per sample: `(1 - alpha) / Rs` (lag-free) or `Ts / Ls` (Euler), A/V.
-    input_gain: T,
-    /// `Q` made symmetric, `(Q + Q^T) / 2`.
-    q: Matrix4<T>,
-    /// `R` made symmetric, `(R + R^T) / 2`.
-    r: Matrix2<T>,
-    update: CovarianceUpdate,
-}
-
-/// Back-EMF term of one step and its derivatives (lag-free or forward Euler).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct TransitionTerms<T> {
-    /// EMF contribution to `i_a-`, `i_b-`.
-    pub ea: T,
-    pub eb: T,
-    /// `d i_a- / d w`, `d i_a- / d th`.
-    pub ea_w: T,
-    pub ea_th: T,
-    /// `d i_b- / d w`, `d i_b- / d th`.
-    pub eb_w: T,
-    pub eb_th: T,
-}
-
-impl<T: Float> PmsmModel<T> {
-    /// The model for a validated configuration.
-    pub fn new(cfg: &ObserverConfig<T>) -> Self {
-        let m = &cfg.motor;
-        let ts = cfg.ts_s;
-        let a = m.rs_ohm / m.ls_h;
-        let (decay, input_gain) = match cfg.discretization {
-            Discretization::ForwardEuler => (T::one() - a * ts, ts / m.ls_h),
-            Discretization::LagFree => {
-                // 1 - exp(-a Ts) without cancellation.
-                let one_minus_alpha = -(-a * ts).exp_m1();
-                (T::one() - one_minus_alpha, one_minus_alpha / m.rs_ohm)
-            }
-        };
-        Self {
-            discretization: cfg.discretization,
-            ts,
-            a,
-            c: m.psi_f_wb / m.ls_h,
-            decay,
-            input_gain,
-            q: (cfg.noise.q + cfg.noise.q.transpose()) * to_t::<T>(0.5),
-            r: (cfg.noise.r + cfg.noise.r.transpose()) * to_t::<T>(0.5),
-            update: cfg.covariance_update,
-        }
-    }
-
-    /// Sample time `Ts`, s.
-    pub fn ts(&self) -> T {
-        self.ts
-    }
-
-    /// Current decay per sample (`alpha` or `1 - a Ts`).
-    pub fn decay(&self) -> T {
-        self.decay
-    }
-
-    /// Voltage-to-current gain per sample, A/V.
-    pub fn input_gain(&self) -> T {
-        self.input_gain
-    }
-
-    /// Covariance update method the observer uses with this model.
-    pub fn covariance_update(&self) -> CovarianceUpdate {
-        self.update
-    }
-
-    /// `Q` as configured, made symmetric at construction, `(Q + Q^T) / 2`.
-    pub(crate) fn q_sym(&self) -> &Matrix4<T> {
-        &self.q
-    }
-
-    /// `R` as configured, made symmetric at construction, `(R + R^T) / 2`.
-    pub(crate) fn r_sym(&self) -> &Matrix2<T> {
-        &self.r
-    }
-
-    /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
-    #[inline(always)]
-    pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
-        let (s, co) = th.sin_cos_angle();
-        let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
-        let c = self.c;
-        // EMF term c w (-j e^{j th}) G, and its derivatives.
-        TransitionTerms {
-            ea: c * (s * m_re + co * m_im),
-            eb: c * (s * m_im - co * m_re),
-            ea_th: c * (co * m_re - s * m_im),
-            eb_th: c * (co * m_im + s * m_re),
-            ea_w: c * (s * mp_re + co * mp_im),
-            eb_w: c * (s * mp_im - co * mp_re),
-        }
-    }
-
-    /// The discretization in use.
-    pub fn discretization(&self) -> Discretization {
-        self.discretization
-    }
-
-    /// `(G, w G, d(w G)/dw)` of the lag-free step as `(re, im)` pairs (module docs).
-    #[inline(always)]
-    fn emf_gain(&self, w: T) -> ((T, T), (T, T), (T, T)) {
-        let ts = self.ts;
-        match self.discretization {
-            Discretization::ForwardEuler => ((ts, T::zero()), (w * ts, T::zero()), (ts, T::zero())),
-            Discretization::LagFree => {
-                let a = self.a;
-                let one_minus_alpha = T::one() - self.decay;
-                let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
-                let two = T::one() + T::one();
-                // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
-                let cos_m1 = -two * sh * sh;
-                let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
-                // N = e^{j w Ts} - alpha.
-                let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
-                let inv_d2 = T::one() / (a * a + w * w);
-                // G = N / (a + j w) = N (a - j w) / (a^2 + w^2).
-                let g_re = (n_re * a + n_im * w) * inv_d2;
-                let g_im = (n_im * a - n_re * w) * inv_d2;
-                // G' = j (Ts e^{j w Ts} - G) / (a + j w).
-                let (t_re, t_im) = (ts * ex_re - g_re, ts * ex_im - g_im);
-                // j (t) = -t_im + j t_re; divide by (a + j w).
-                let (jt_re, jt_im) = (-t_im, t_re);
-                let gp_re = (jt_re * a + jt_im * w) * inv_d2;
-                let gp_im = (jt_im * a - jt_re * w) * inv_d2;
-                (
-                    (g_re, g_im),
-                    (w * g_re, w * g_im),
-                    (g_re + w * gp_re, g_im + w * gp_im),
-                )
-            }
-        }
-    }
-}
-
-impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
-    fn transition(&self, x: &Vector4<T>, u: &Vector2<T>) -> (Vector4<T>, Matrix4<T>) {
-        let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
-        let TransitionTerms {
-            ea,
-            eb,
-            ea_w,
-            ea_th,
-            eb_w,
-            eb_th,
-        } = self.transition_terms(th, w);
-        let xn = Vector4::new(
-            self.decay * ia + self.input_gain * u[0] + ea,
-            self.decay * ib + self.input_gain * u[1] + eb,
-            w,
-            th + self.ts * w,
-        );
-        let z = T::zero();
-        let o = T::one();
-        #[rustfmt::skip]
-        let phi = Matrix4::new(
-            self.decay, z,          ea_w, ea_th,
-            z,          self.decay, eb_w, eb_th,
-            z,          z,          o,    z,
-            z,          z,          self.ts, o,
-        );
-        (xn, phi)
-    }
-
-    fn process_noise(&self) -> &Matrix4<T> {
-        &self.q
-    }
-
-    fn normalize(&self, x: &mut Vector4<T>) {
-        x[3] = wrap_angle(x[3]);
-    }
-}
-
-impl<T: Float> MeasurementModel<T, 4, 2> for PmsmModel<T> {
-    fn observe(&self, x: &Vector4<T>) -> (Vector2<T>, SMatrix<T, 2, 4>) {
-        let z = T::zero();
-        let o = T::one();
-        #[rustfmt::skip]
-        let h = SMatrix::<T, 2, 4>::new(
-            o, z, z, z,
-            z, o, z, z,
-        );
-        (Vector2::new(x[0], x[1]), h)
-    }
-
-    fn measurement_noise(&self) -> &Matrix2<T> {
-        &self.r
-    }
-
-    fn normalize(&self, x: &mut Vector4<T>) {
-        x[3] = wrap_angle(x[3]);
-    }
-}
+use crate::{ConfigError, Float, to_t, wrap_angle};
+use safeguards::{
+    BranchState, Events, GateState, HealthState, Verdict, gate_accepted_high, gate_verdict,
+};
+use tracking::Tracker;
 
 /// Whether the angle estimate can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -638,6 +152,21 @@ pub struct Estimate<T> {
     pub branch_flipped: bool,
     /// The covariance health check failed in this step and the observer reset itself.
     pub covariance_reset: bool,
+    /// Tracked permanent-magnet flux linkage, Wb (the configured value when tracking is off).
+    pub psi_f_wb: T,
+    /// Standard deviation of the tracked flux linkage, Wb (0 when tracking is off).
+    pub psi_f_sigma_wb: T,
+    /// Tracked stator resistance, ohm (the configured value when tracking is off).
+    pub rs_ohm: T,
+    /// Standard deviation of the tracked resistance, ohm (0 when tracking is off).
+    pub rs_sigma_ohm: T,
+    /// Winding temperature derived from the tracked resistance, deg C:
+    /// `T_ref + (Rs_hat / Rs_ref - 1) / alpha_cu` (the reference temperature when tracking is
+    /// off).
+    pub winding_temperature_c: T,
+    /// The parameters were tracked in this step (else frozen: low speed, angle uncertain, or
+    /// tracking off).
+    pub parameters_tracking: bool,
 }
 
 /// Event counters of an observer since its construction (saturating).
@@ -651,99 +180,6 @@ pub struct ObserverCounters {
     pub branch_flips: u32,
     /// Self-resets by the covariance health check.
     pub covariance_resets: u32,
-}
-
-/// What happened in the last step (copied into [`Estimate`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Events {
-    rejected: bool,
-    flipped: bool,
-    reset: bool,
-}
-
-/// Branch check constants and state.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct BranchState<T> {
-    threshold: T,
-    /// `min_speed^2`.
-    min_speed2: T,
-    /// `allowance Ts`.
-    k: T,
-    /// `2 Ts`.
-    two_ts: T,
-    /// `flip_angle_sigma_rad^2`.
-    flip_var: T,
-    /// CUSUM of the missing motion weighted by `|w_hat|`, rad^2/s.
-    sum: T,
-}
-
-/// Innovation gate constants and state.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct GateState<T> {
-    threshold: T,
-    max_consecutive: u32,
-    settled_nis: T,
-    /// Running mean of the accepted samples' clamped NIS (starts at the threshold: unsettled).
-    nis_mean: T,
-    consecutive: u32,
-    /// Open after `max_consecutive` rejections, until an accepted NIS is below the threshold.
-    open: bool,
-}
-
-/// Steps refused in a row (singular `S`, non-finite result) after which the covariance health
-/// check resets the filter.
-pub const MAX_REFUSALS: u32 = 3;
-
-/// Covariance health constants.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct HealthState<T> {
-    /// Steps refused in a row for a singular `S` or a non-finite result.
-    refusals: u32,
-    trace_bound: T,
-    /// Bound on `|i_a| + |i_b|`, A.
-    current_bound: T,
-    /// Bound on `|w_e|`, rad/s.
-    speed_bound: T,
-    p0: Sym4<T>,
-}
-
-/// The gate's decision on one sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Verdict {
-    /// NIS at or below the threshold (or no gate): accept.
-    Low,
-    /// NIS above the threshold but the gate does not act (not settled, or open): accept.
-    High,
-    /// NIS above the threshold after `max_consecutive` rejections: accept and open the gate.
-    Reopen,
-    /// Reject: prediction only.
-    Reject,
-}
-
-/// The gate's decision for a sample with `NIS > threshold` (no state change here).
-#[cold]
-#[inline(never)]
-fn gate_verdict<T: Float>(g: &GateState<T>, tracking: bool) -> Verdict {
-    if !(tracking && g.nis_mean <= g.settled_nis && !g.open) {
-        Verdict::High
-    } else if g.consecutive < g.max_consecutive {
-        Verdict::Reject
-    } else {
-        Verdict::Reopen
-    }
-}
-
-/// Bookkeeping of an accepted sample whose NIS was above the threshold: it counts at the
-/// threshold in the running mean; a reopening is counted and opens the gate.
-#[cold]
-#[inline(never)]
-fn gate_accepted_high<T: Float>(g: &mut GateState<T>, counters: &mut ObserverCounters, v: Verdict) {
-    if v == Verdict::Reopen {
-        g.open = true;
-        counters.gate_reopened = counters.gate_reopened.saturating_add(1);
-    }
-    g.consecutive = 0;
-    g.nis_mean += (g.threshold - g.nis_mean) * to_t::<T>(1.0 / 16.0);
 }
 
 /// The PMSM alpha-beta EKF observer (seed's model; module docs give equations and timing).
@@ -760,10 +196,13 @@ pub struct PmsmObserver<T: Float> {
     p: Sym4<T>,
     last: Correction<T, 2>,
     inv_pole_pairs: T,
+    /// Configured `(psi_f, Rs, reference temperature)`, reported when tracking is off.
+    nominal: (T, T, T),
     angle_var_limit: T,
     branch: Option<BranchState<T>>,
     gate: Option<GateState<T>>,
     health: Option<HealthState<T>>,
+    tracker: Option<Tracker<T>>,
     events: Events,
     counters: ObserverCounters,
 }
@@ -790,6 +229,12 @@ impl<T: Float> PmsmObserver<T> {
             p: p0,
             last: zero_correction(),
             inv_pole_pairs: T::one() / to_t(f64::from(cfg.motor.pole_pairs)),
+            nominal: (
+                cfg.motor.psi_f_wb,
+                cfg.motor.rs_ohm,
+                cfg.parameter_tracking
+                    .map_or(to_t(20.0), |t| t.reference_temperature_c),
+            ),
             angle_var_limit: cfg.angle_sigma_limit_rad * cfg.angle_sigma_limit_rad,
             branch: cfg.branch_check.map(|b| BranchState {
                 threshold: b.threshold_rad,
@@ -814,6 +259,9 @@ impl<T: Float> PmsmObserver<T> {
                 speed_bound: h.max_w_ts_rad / cfg.ts_s,
                 p0,
             }),
+            tracker: cfg
+                .parameter_tracking
+                .map(|t| Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts)),
             events: Events::default(),
             counters: ObserverCounters::default(),
         })
@@ -838,8 +286,29 @@ impl<T: Float> PmsmObserver<T> {
             }
             // All four finite but their sum overflows: absurd, yet valid input; go on.
         }
-        let (xm, pm) = structured::predict(&self.model, &self.x, &self.p, u_prev);
-        self.correct_prior(xm, pm, i)
+        let (xm, pm, tm) = self.prior(u_prev);
+        self.correct_prior(xm, pm, tm, i)
+    }
+
+    /// The prediction `(x-, P-)` and, with tracking, the prior of the tracked parameters.
+    #[inline(always)]
+    fn prior(&mut self, u_prev: [T; 2]) -> (Vector4<T>, Sym4<T>, Option<Tracker<T>>) {
+        let q = self.model.q_sym();
+        match &mut self.tracker {
+            None => {
+                let (xm, pm, _) =
+                    structured::predict(self.model.discrete(), q, &self.x, &self.p, u_prev);
+                (xm, pm, None)
+            }
+            Some(tr) => {
+                let active =
+                    tr.should_track(self.p.p33 <= self.angle_var_limit, self.x[2], self.p.p22);
+                let disc = self.model.discrete_at(tr.psi, tr.rs);
+                let (xm, mut pm, t) = structured::predict(&disc, q, &self.x, &self.p, u_prev);
+                let tm = tr.predict(&disc, &t, &mut pm, active);
+                (xm, pm, Some(tm))
+            }
+        }
     }
 
     /// Prediction only (e.g. to coast over a missing current sample), with the voltage held
@@ -849,8 +318,8 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p) = structured::predict(&self.model, &self.x, &self.p, u_prev);
-        if !(finite(x.as_slice()) && p.all_finite()) {
+        let (x, p, tm) = self.prior(u_prev);
+        if !(finite(x.as_slice()) && p.all_finite() && tm.is_none_or(|t| t.finite())) {
             if self.refused_resets() {
                 self.events = Events::default();
                 self.self_reset(None);
@@ -863,6 +332,9 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = p;
+        if tm.is_some() {
+            self.tracker = tm;
+        }
         self.events = Events::default();
         if self.unhealthy(&self.x, &self.p) {
             self.self_reset(None);
@@ -876,7 +348,7 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        self.correct_prior(self.x, self.p, i)
+        self.correct_prior(self.x, self.p, self.tracker, i)
     }
 
     /// Correction of the prior `(xm, pm)` with the currents `i`, innovation gate, branch check
@@ -886,6 +358,7 @@ impl<T: Float> PmsmObserver<T> {
         &mut self,
         xm: Vector4<T>,
         pm: Sym4<T>,
+        tm: Option<Tracker<T>>,
         i: [T; 2],
     ) -> Result<Estimate<T>, EkfError> {
         // Common path first: every test below is one comparison on good data; the rare
@@ -902,12 +375,21 @@ impl<T: Float> PmsmObserver<T> {
             }
             _ => false,
         });
-        let (x, p, c, dth) = match outcome {
-            Ok(Outcome::Updated(post)) => post,
+        let (post, tn) = match outcome {
+            Ok(Outcome::Updated(post)) => match &tm {
+                None => (post, None),
+                Some(t) => match t.correct(&post) {
+                    Some(tn) => (post, Some(tn)),
+                    None => return self.refused(EkfError::NonFiniteResult, i),
+                },
+            },
             Ok(Outcome::Skipped(c)) => {
                 // Rejected by the gate: the step is the prediction only.
                 self.x = xm;
                 self.p = pm;
+                if tm.is_some() {
+                    self.tracker = tm;
+                }
                 self.last = c;
                 self.gate_rejected();
                 if self.unhealthy(&self.x, &self.p) {
@@ -915,20 +397,17 @@ impl<T: Float> PmsmObserver<T> {
                 }
                 return Ok(self.estimate());
             }
-            Err(e) => {
-                if self.refused_resets() {
-                    self.events = Events::default();
-                    self.self_reset(Some(i));
-                    return Ok(self.estimate());
-                }
-                return Err(e);
-            }
+            Err(e) => return self.refused(e, i),
         };
+        let (x, c, dth) = (post.x, post.correction, post.dth);
         if let Some(h) = &mut self.health {
             h.refusals = 0;
         }
         self.x = x;
-        self.p = p;
+        self.p = post.p;
+        if tn.is_some() {
+            self.tracker = tn;
+        }
         self.last = c;
         self.events = Events::default();
         if let Some(g) = &mut self.gate {
@@ -963,6 +442,19 @@ impl<T: Float> PmsmObserver<T> {
         Ok(self.estimate())
     }
 
+    /// A step refused for `e` (singular `S`, non-finite result): the state is kept and the
+    /// error returned, unless the health check resets the filter (then its estimate).
+    #[cold]
+    #[inline(never)]
+    fn refused(&mut self, e: EkfError, i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        if self.refused_resets() {
+            self.events = Events::default();
+            self.self_reset(Some(i));
+            return Ok(self.estimate());
+        }
+        Err(e)
+    }
+
     /// Bookkeeping of a rejected sample: counted and reported.
     #[cold]
     #[inline(never)]
@@ -990,6 +482,9 @@ impl<T: Float> PmsmObserver<T> {
         self.x[3] = wrap_angle(self.x[3] + T::pi());
         self.p = self.p.flip_speed();
         self.p.p33 += b.flip_var;
+        if let Some(t) = &mut self.tracker {
+            t.flip_speed();
+        }
         self.counters.branch_flips = self.counters.branch_flips.saturating_add(1);
         self.events.flipped = true;
     }
@@ -1061,6 +556,9 @@ impl<T: Float> PmsmObserver<T> {
         };
         self.x = Vector4::new(ia, ib, w, th);
         self.p = h.p0;
+        if let Some(t) = &mut self.tracker {
+            t.restart(true);
+        }
         self.restart_safeguards();
         self.events.reset = true;
         self.counters.covariance_resets = self.counters.covariance_resets.saturating_add(1);
@@ -1086,6 +584,25 @@ impl<T: Float> PmsmObserver<T> {
         } else {
             Status::Tracking
         };
+        let (psi_f_wb, psi_f_sigma_wb, rs_ohm, rs_sigma_ohm, winding_temperature_c, tracking) =
+            match &self.tracker {
+                Some(t) => (
+                    t.psi,
+                    t.c_pp.sqrt(),
+                    t.rs,
+                    t.rs_sigma(),
+                    t.winding_temperature_c(),
+                    t.active,
+                ),
+                None => (
+                    self.nominal.0,
+                    T::zero(),
+                    self.nominal.1,
+                    T::zero(),
+                    self.nominal.2,
+                    false,
+                ),
+            };
         Estimate {
             theta_rad: x[3],
             omega_e_rad_s: x[2],
@@ -1097,6 +614,12 @@ impl<T: Float> PmsmObserver<T> {
             rejected: self.events.rejected,
             branch_flipped: self.events.flipped,
             covariance_reset: self.events.reset,
+            psi_f_wb,
+            psi_f_sigma_wb,
+            rs_ohm,
+            rs_sigma_ohm,
+            winding_temperature_c,
+            parameters_tracking: tracking,
         }
     }
 
@@ -1139,7 +662,40 @@ impl<T: Float> PmsmObserver<T> {
         self.p = Sym4::from_matrix(&p);
         self.last = zero_correction();
         self.events = Events::default();
+        if let Some(t) = &mut self.tracker {
+            t.restart(false);
+        }
         self.restart_safeguards();
+        Ok(())
+    }
+
+    /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.
+    pub fn parameters(&self) -> (T, T) {
+        match &self.tracker {
+            Some(t) => (t.psi, t.rs),
+            None => (self.nominal.0, self.nominal.1),
+        }
+    }
+
+    /// Sets the tracked `(psi_f, Rs)` (e.g. from a previous run or a commissioning) and
+    /// clears their cross-covariance with the state; their variances are kept. Refused,
+    /// nothing changed, when tracking is off, a value is not finite or outside the
+    /// configured range.
+    pub fn set_parameters(&mut self, psi_f_wb: T, rs_ohm: T) -> Result<(), EkfError> {
+        let Some(t) = &mut self.tracker else {
+            return Err(EkfError::NonFiniteInput);
+        };
+        let k = &t.k;
+        if !(psi_f_wb >= k.psi_min
+            && psi_f_wb <= k.psi_max
+            && rs_ohm >= k.rs_min
+            && rs_ohm <= k.rs_max)
+        {
+            return Err(EkfError::NonFiniteInput);
+        }
+        t.psi = psi_f_wb;
+        t.rs = rs_ohm;
+        t.restart(false);
         Ok(())
     }
 }

@@ -27,6 +27,7 @@
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
 use crate::ekf::{Correction, CovarianceUpdate, EkfError, finite};
+use crate::observer::model::{Discrete, TransitionTerms};
 use crate::{Float, PmsmModel, to_t, wrap_angle};
 
 /// The 10 unique entries of a symmetric 4 x 4 matrix.
@@ -100,19 +101,21 @@ impl<T: Float> Sym4<T> {
 }
 
 /// Structured prediction: `(x-, P-)` from the posterior `(x, P)` and the input held over the
-/// period. Values are not checked here.
+/// period, with the step's constants `disc` and the process noise `q`; also the EMF terms
+/// (the Jacobian's blocks). Values are not checked here.
 #[inline(always)]
 pub(crate) fn predict<T: Float>(
-    model: &PmsmModel<T>,
+    disc: &Discrete<T>,
+    q: &Matrix4<T>,
     x: &Vector4<T>,
     p: &Sym4<T>,
     u: [T; 2],
-) -> (Vector4<T>, Sym4<T>) {
+) -> (Vector4<T>, Sym4<T>, TransitionTerms<T>) {
     let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
-    let t = model.transition_terms(th, w);
-    let d = model.decay();
-    let g = model.input_gain();
-    let ts = model.ts();
+    let t = disc.transition_terms(th, w);
+    let d = disc.decay;
+    let g = disc.input_gain;
+    let ts = disc.ts;
     let xn = Vector4::new(
         d * ia + g * u[0] + t.ea,
         d * ib + g * u[1] + t.eb,
@@ -142,7 +145,7 @@ pub(crate) fn predict<T: Float>(
     let u01 = d * p01 + a1 * p12 + a2 * p13;
     let u10 = d * p01 + b1 * p02 + b2 * p03;
     let u11 = d * p11 + b1 * p12 + b2 * p13;
-    let q = *model.q_sym();
+    let q = *q;
     let half: T = to_t(0.5);
     let n01 = d * u01 + t00 * b1 + t01 * b2;
     let n10 = d * u10 + t10 * a1 + t11 * a2;
@@ -159,7 +162,7 @@ pub(crate) fn predict<T: Float>(
         p23: p22 * ts + p23 + q[(2, 3)],
         p33: mc10 * ts + ts * p23 + p33 + q[(3, 3)],
     };
-    (xn, pn)
+    (xn, pn, t)
 }
 
 /// `true` when the sum of the values is finite: false for any NaN or infinity (they
@@ -175,9 +178,21 @@ fn sum_is_finite<T: Float, const N: usize>(v: &[T; N]) -> bool {
     ((acc[0] + acc[1]) + (acc[2] + acc[3])).is_finite()
 }
 
-/// Result of a correction: state, covariance, diagnostics and the angle correction
-/// `K_th y` (rad, before wrapping) the update added to the prior angle.
-pub(crate) type Posterior<T> = (Vector4<T>, Sym4<T>, Correction<T, 2>, T);
+/// Result of a correction.
+pub(crate) struct Posterior<T: Float> {
+    /// Posterior state.
+    pub x: Vector4<T>,
+    /// Posterior covariance.
+    pub p: Sym4<T>,
+    /// Innovation, its covariance, NIS.
+    pub correction: Correction<T, 2>,
+    /// The angle correction `K_th y` (rad, before wrapping) the update added to the prior.
+    pub dth: T,
+    /// `S^-1` as `(i00, i01, i11)` (for the tracked parameters' gain).
+    pub inv_s: (T, T, T),
+    /// The gain `K` (rows `i_a, i_b, w, th`).
+    pub k: [[T; 2]; 4],
+}
 
 /// What [`correct`] did.
 pub(crate) enum Outcome<T: Float> {
@@ -279,7 +294,14 @@ pub(crate) fn correct<T: Float>(
     ]) {
         return Err(EkfError::NonFiniteResult);
     }
-    Ok(Outcome::Updated((xn, pn, correction, dth)))
+    Ok(Outcome::Updated(Posterior {
+        x: xn,
+        p: pn,
+        correction,
+        dth,
+        inv_s: (i00, i01, i11),
+        k: [[k00, k01], [k10, k11], [k20, k21], [k30, k31]],
+    }))
 }
 
 /// Joseph form on 2 x 2 blocks (module docs), written out on scalars: `E = I - K1`,

@@ -2,10 +2,10 @@
 //! model, for both discretizations and both covariance updates, in f64 and f32.
 mod common;
 use common::*;
-use ekf_core::nalgebra::Vector2;
+use ekf_core::nalgebra::{Matrix2, SMatrix, SVector, Vector2, Vector4};
 use ekf_core::{
-    CovarianceUpdate, Discretization, Ekf, Float, MotorParams, ObserverConfig, ObserverCounters,
-    PmsmModel, PmsmObserver,
+    CovarianceUpdate, Discretization, Ekf, Float, MeasurementModel, MotorParams, ObserverConfig,
+    ObserverCounters, PmsmModel, PmsmObserver, ProcessModel, RsTracking,
 };
 
 fn trace() -> Trace {
@@ -34,6 +34,9 @@ fn compare<T: Float + Into<f64>>(
 ) -> (f64, f64, f64) {
     let tr = trace();
     let mut cfg = ObserverConfig::new(MotorParams::<T>::servo(), conv(1e-4));
+    // The 4-state filter; the tracking's augmented filter is compared in
+    // `tracking_equals_generic_5_state`.
+    cfg.parameter_tracking = None;
     cfg.discretization = disc;
     cfg.covariance_update = update;
     cfg.x0[2] = conv(150.0);
@@ -129,4 +132,185 @@ fn separate_predict_and_correct_equal_step() {
         assert_eq!(ea, eb);
         u_prev = *u;
     }
+}
+
+/// The tracking's augmented model `[i_a, i_b, w, th, psi_f]` for the generic filter, built
+/// from the public 4-state model at the flux of the state: prediction, the exact Jacobian
+/// (the flux's column is the EMF term per weber), `Q` with the flux's random walk while
+/// active.
+struct Augmented {
+    cfg: ObserverConfig<f64>,
+    q: SMatrix<f64, 5, 5>,
+    r: Matrix2<f64>,
+    active: bool,
+}
+
+impl ProcessModel<f64, 5, 2> for Augmented {
+    fn transition(
+        &self,
+        x: &SVector<f64, 5>,
+        u: &SVector<f64, 2>,
+    ) -> (SVector<f64, 5>, SMatrix<f64, 5, 5>) {
+        let mut c = self.cfg;
+        c.motor.psi_f_wb = x[4];
+        let m = PmsmModel::new(&c);
+        let x4 = Vector4::new(x[0], x[1], x[2], x[3]);
+        let (xn4, phi4) = m.transition(&x4, u);
+        let mut xn = SVector::<f64, 5>::zeros();
+        let mut phi = SMatrix::<f64, 5, 5>::identity();
+        for r in 0..4 {
+            xn[r] = xn4[r];
+            for col in 0..4 {
+                phi[(r, col)] = phi4[(r, col)];
+            }
+        }
+        xn[4] = x[4];
+        if self.active {
+            for r in 0..2 {
+                let emf = xn4[r] - (m.decay() * x[r] + m.input_gain() * u[r]);
+                phi[(r, 4)] = emf / x[4];
+            }
+        }
+        (xn, phi)
+    }
+
+    fn process_noise(&self) -> &SMatrix<f64, 5, 5> {
+        &self.q
+    }
+
+    fn normalize(&self, x: &mut SVector<f64, 5>) {
+        x[3] = ekf_core::wrap_angle(x[3]);
+    }
+}
+
+impl MeasurementModel<f64, 5, 2> for Augmented {
+    fn observe(&self, x: &SVector<f64, 5>) -> (SVector<f64, 2>, SMatrix<f64, 2, 5>) {
+        let mut h = SMatrix::<f64, 2, 5>::zeros();
+        h[(0, 0)] = 1.0;
+        h[(1, 1)] = 1.0;
+        (Vector2::new(x[0], x[1]), h)
+    }
+
+    fn measurement_noise(&self) -> &Matrix2<f64> {
+        &self.r
+    }
+
+    fn normalize(&self, x: &mut SVector<f64, 5>) {
+        x[3] = ekf_core::wrap_angle(x[3]);
+    }
+}
+
+/// With flux tracking on (Rs fixed), the observer's block-wise augmented update equals the
+/// generic 5-state filter, told the same active/frozen schedule, on a trace where the motor's
+/// flux is 10 % below the configured one.
+#[test]
+fn tracking_equals_generic_5_state() {
+    let tr = trace_with_flux(0.9);
+    let motor = MotorParams::<f64>::servo();
+    let mut cfg = ObserverConfig::new(motor, 1e-4);
+    let mut tracking = cfg.parameter_tracking.expect("on by default");
+    tracking.rs = RsTracking::Fixed;
+    cfg.parameter_tracking = Some(tracking);
+    cfg.x0[2] = 150.0;
+    let mut obs = PmsmObserver::new(&cfg).expect("valid");
+    let psi0 = motor.psi_f_wb;
+    let var0 = (tracking.psi_f_sigma0 * psi0).powi(2);
+    let q_psi = (tracking.psi_f_walk_per_sqrt_s * psi0).powi(2) * 1e-4;
+    let mut x0 = SVector::<f64, 5>::zeros();
+    let mut p0 = SMatrix::<f64, 5, 5>::zeros();
+    for r in 0..4 {
+        x0[r] = cfg.x0[r];
+        for c in 0..4 {
+            p0[(r, c)] = cfg.p0[(r, c)];
+        }
+    }
+    x0[4] = psi0;
+    p0[(4, 4)] = var0;
+    let mut ekf = Ekf::<f64, 5, 2>::new(x0, p0, cfg.covariance_update);
+    let (mut dx, mut dp, mut dpsi) = (0.0f64, 0.0f64, 0.0f64);
+    let mut u_prev = [0.0, 0.0];
+    let mut active_steps = 0;
+    for (u, i) in tr.u.iter().zip(&tr.i_meas) {
+        let est = obs.step(u_prev, *i).expect("finite");
+        let active = est.parameters_tracking;
+        active_steps += usize::from(active);
+        let mut p = *ekf.covariance();
+        let mut q = SMatrix::<f64, 5, 5>::zeros();
+        for r in 0..4 {
+            for c in 0..4 {
+                q[(r, c)] = cfg.noise.q[(r, c)];
+            }
+        }
+        if active {
+            if p[(4, 4)] < var0 {
+                q[(4, 4)] = q_psi;
+            }
+        } else {
+            // Frozen: the flux is a constant for the step, its correlations dropped.
+            for r in 0..4 {
+                p[(r, 4)] = 0.0;
+                p[(4, r)] = 0.0;
+            }
+        }
+        let x = *ekf.state();
+        ekf.reset(x, p).expect("finite");
+        let model = Augmented {
+            cfg,
+            q,
+            r: cfg.noise.r,
+            active,
+        };
+        ekf.predict(&model, &Vector2::from(u_prev)).expect("finite");
+        ekf.correct(&model, &Vector2::from(*i)).expect("finite");
+        let xs = obs.state();
+        for r in 0..4 {
+            let d = xs[r] - ekf.state()[r];
+            let d = if r == 3 { ekf_core::wrap_angle(d) } else { d };
+            dx = dx.max(d.abs() / (1.0 + ekf.state()[r].abs()));
+        }
+        dpsi = dpsi.max((est.psi_f_wb - ekf.state()[4]).abs() / psi0);
+        let pc = obs.covariance();
+        for r in 0..4 {
+            for c in 0..4 {
+                dp = dp.max(
+                    (pc[(r, c)] - ekf.covariance()[(r, c)]).abs()
+                        / (1.0 + ekf.covariance()[(r, c)].abs()),
+                );
+            }
+        }
+        u_prev = *u;
+    }
+    println!(
+        "tracking vs generic 5-state: state {dx:.2e}, covariance {dp:.2e}, psi {dpsi:.2e}, \
+         {active_steps} active steps, final psi {:.4} (truth {:.4})",
+        obs.parameters().0,
+        0.9 * psi0
+    );
+    assert!(active_steps > 1000, "tracking never became active");
+    assert!(
+        dx < 1e-9 && dp < 1e-9 && dpsi < 1e-9,
+        "{dx:e} {dp:e} {dpsi:e}"
+    );
+    assert!((obs.parameters().0 / (0.9 * psi0) - 1.0).abs() < 0.01);
+}
+
+/// The trace of `trace()` on a motor whose flux is `psi_scale` times the servo's.
+fn trace_with_flux(psi_scale: f64) -> Trace {
+    let base = MotorParams::servo();
+    let motor = MotorParams {
+        psi_f_wb: base.psi_f_wb * psi_scale,
+        ..base
+    };
+    let speed = |t: f64| 200.0 + 8000.0 * t;
+    let iq = |t: f64| if t < 0.1 { 1.0 } else { 4.0 };
+    simulate(&Scenario {
+        motor,
+        ts: 1e-4,
+        n: 3000,
+        speed: &speed,
+        iq_ref: &iq,
+        th0: 1.0,
+        noise_a: 0.05,
+        seed: 5,
+    })
 }

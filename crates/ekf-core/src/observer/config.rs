@@ -1,0 +1,178 @@
+//! The observer's configuration: [`ObserverConfig`], its defaults and its validation.
+
+use nalgebra::{Cholesky, Matrix4, SMatrix, Vector4};
+
+use super::{BranchCheck, CovarianceHealth, Discretization, InnovationGate, ParameterTracking};
+use crate::ekf::{CovarianceUpdate, all_finite};
+use crate::motor::positive;
+use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t};
+
+/// Everything the observer needs; start from [`ObserverConfig::new`] or
+/// [`ObserverConfig::seed`] and change fields as needed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObserverConfig<T: Float> {
+    /// Motor parameters.
+    pub motor: MotorParams<T>,
+    /// Sample (PWM) period, seconds.
+    pub ts_s: T,
+    /// Discretization of the model.
+    pub discretization: Discretization,
+    /// Process and measurement noise covariances.
+    pub noise: NoiseCovariances<T>,
+    /// Initial estimate `[i_a, i_b, w_e, theta]`, one period before the first sample.
+    pub x0: Vector4<T>,
+    /// Initial covariance `P0` (4 x 4).
+    pub p0: Matrix4<T>,
+    /// Covariance update method of the correction.
+    pub covariance_update: CovarianceUpdate,
+    /// The status reads [`Status::Uncertain`] while the angle's standard deviation
+    /// `sqrt(P[3][3])` exceeds this limit, radians. The innovation gate and the branch check
+    /// act only while the angle's variance is below this limit ("tracking").
+    pub angle_sigma_limit_rad: T,
+    /// Wrong-branch (`theta + pi`) detection and recovery; `None` turns it off.
+    pub branch_check: Option<BranchCheck<T>>,
+    /// Innovation (NIS) gate against measurement glitches; `None` turns it off.
+    pub innovation_gate: Option<InnovationGate<T>>,
+    /// Covariance health check with self-reset; `None` turns it off.
+    pub covariance_health: Option<CovarianceHealth<T>>,
+    /// Online tracking of `psi_f` and `Rs` (module [`tracking`](super::tracking) docs);
+    /// `None` turns it off (the configured values are used as they are).
+    pub parameter_tracking: Option<ParameterTracking<T>>,
+}
+
+impl<T: Float> ObserverConfig<T> {
+    /// The project default: [`Discretization::LagFree`], [`NoiseCovariances::scaled`], Joseph
+    /// update, `x0 = 0` (rotor angle and speed unknown), [`default_p0`], and the three
+    /// safeguards on: [`BranchCheck::default_for`], [`InnovationGate::default`],
+    /// [`CovarianceHealth::default`]; and online tracking of `psi_f` and `Rs`
+    /// ([`ParameterTracking::default_for`]).
+    pub fn new(motor: MotorParams<T>, ts_s: T) -> Self {
+        Self {
+            motor,
+            ts_s,
+            discretization: Discretization::LagFree,
+            noise: NoiseCovariances::scaled(&motor, ts_s),
+            x0: Vector4::zeros(),
+            p0: default_p0(&motor, ts_s),
+            covariance_update: CovarianceUpdate::Joseph,
+            angle_sigma_limit_rad: to_t(0.2),
+            branch_check: Some(BranchCheck::default_for(ts_s)),
+            innovation_gate: Some(InnovationGate::default()),
+            covariance_health: Some(CovarianceHealth::default()),
+            parameter_tracking: Some(ParameterTracking::default_for(ts_s)),
+        }
+    }
+
+    /// The seed's filter: [`Discretization::ForwardEuler`], [`NoiseCovariances::seed`] and the
+    /// standard covariance update (seed step 6, made symmetric); `x0`, `P0` as in
+    /// [`new`](Self::new); no branch check, no innovation gate, no covariance health check,
+    /// no parameter tracking.
+    pub fn seed(motor: MotorParams<T>, ts_s: T) -> Self {
+        Self {
+            discretization: Discretization::ForwardEuler,
+            noise: NoiseCovariances::seed(),
+            covariance_update: CovarianceUpdate::StandardSymmetrized,
+            branch_check: None,
+            innovation_gate: None,
+            covariance_health: None,
+            parameter_tracking: None,
+            ..Self::new(motor, ts_s)
+        }
+    }
+
+    /// Checks every field; the observer's constructor calls it.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.motor.validate()?;
+        positive(self.ts_s, Param::Ts)?;
+        positive(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
+        check_psd(&self.noise.q, Matrix::Q)?;
+        check_psd(&self.noise.r, Matrix::R)?;
+        // S = H P H^T + R must stay invertible whatever P becomes: R positive definite.
+        let r = &self.noise.r;
+        // (R is finite here: `check_psd` refused NaN and infinities.)
+        if r[(0, 0)] <= T::zero() || r[(0, 0)] * r[(1, 1)] - r[(0, 1)] * r[(1, 0)] <= T::zero() {
+            return Err(ConfigError::NotPositiveDefinite(Matrix::R));
+        }
+        check_psd(&self.p0, Matrix::P0)?;
+        // Forward Euler's current pole `1 - Rs Ts / Ls` must lie inside the unit circle.
+        if self.discretization == Discretization::ForwardEuler
+            && self.motor.rs_ohm * self.ts_s >= to_t::<T>(2.0) * self.motor.ls_h
+        {
+            return Err(ConfigError::TooLargeForTs(Param::Rs));
+        }
+        if !all_finite(&self.x0) {
+            return Err(ConfigError::NonFiniteInitialState);
+        }
+        if let Some(b) = &self.branch_check {
+            positive(b.threshold_rad, Param::BranchThreshold)?;
+            non_negative(b.min_speed_rad_s, Param::BranchMinSpeed)?;
+            non_negative(b.allowance, Param::BranchAllowance)?;
+            non_negative(b.flip_angle_sigma_rad, Param::BranchFlipSigma)?;
+        }
+        if let Some(g) = &self.innovation_gate {
+            positive(g.nis_threshold, Param::GateNisThreshold)?;
+            positive(g.settled_nis, Param::GateSettledNis)?;
+        }
+        if let Some(t) = &self.parameter_tracking {
+            t.validate()?;
+        }
+        if let Some(h) = &self.covariance_health {
+            positive(h.trace_factor, Param::HealthTraceFactor)?;
+            positive(h.current_factor, Param::HealthCurrentFactor)?;
+            positive(h.max_w_ts_rad, Param::HealthMaxSpeed)?;
+            // P0 is finite and positive semi-definite here, so its trace is finite and >= 0.
+            if self.p0.trace() <= T::zero() {
+                return Err(ConfigError::ZeroInitialCovarianceTrace);
+            }
+            // The bound itself must be finite, or an overflowing P would pass it.
+            if !(h.trace_factor * self.p0.trace()).is_finite() {
+                return Err(ConfigError::TooLargeInitialCovariance);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// `Ok` when `v` is finite and not negative.
+pub(super) fn non_negative<T: Float>(v: T, param: Param) -> Result<(), ConfigError> {
+    if !v.is_finite() {
+        Err(ConfigError::NonFinite(param))
+    } else if v < T::zero() {
+        Err(ConfigError::NotPositive(param))
+    } else {
+        Ok(())
+    }
+}
+
+/// Default initial covariance: `diag((0.1 I_c)^2, (0.1 I_c)^2, (0.05 / Ts)^2, pi^2)`, i.e. the
+/// currents roughly known, the speed unknown up to `0.05` rad per sample, the angle unknown.
+pub fn default_p0<T: Float>(motor: &MotorParams<T>, ts_s: T) -> Matrix4<T> {
+    let si = motor.characteristic_current_a() * to_t(0.1);
+    let sw = to_t::<T>(0.05) / ts_s;
+    let pi = T::pi();
+    Matrix4::from_diagonal(&Vector4::new(si * si, si * si, sw * sw, pi * pi))
+}
+
+/// Symmetric (to rounding) and positive semi-definite: `m + delta I` has a Cholesky factor for
+/// `delta = 1e3 eps max|m_ij|`, i.e. no eigenvalue below `-delta`.
+fn check_psd<T: Float, const N: usize>(
+    m: &SMatrix<T, N, N>,
+    which: Matrix,
+) -> Result<(), ConfigError> {
+    if !all_finite(m) {
+        return Err(ConfigError::NonFiniteMatrix(which));
+    }
+    let scale = m.iter().fold(T::zero(), |acc, v| acc.max(v.abs()));
+    if scale == T::zero() {
+        return Ok(());
+    }
+    let tol = T::default_epsilon() * to_t(1e3) * scale;
+    if (m - m.transpose()).iter().any(|d| d.abs() > tol) {
+        return Err(ConfigError::NotSymmetric(which));
+    }
+    let shifted = m + SMatrix::<T, N, N>::identity() * tol;
+    if Cholesky::new(shifted).is_none() {
+        return Err(ConfigError::NotPositiveSemiDefinite(which));
+    }
+    Ok(())
+}

@@ -1,0 +1,313 @@
+//! The PMSM process and measurement model and its discretization (module docs of
+//! [`observer`](crate::observer) give the equations).
+
+use nalgebra::{Matrix2, Matrix4, SMatrix, Vector2, Vector4};
+
+use super::ObserverConfig;
+use crate::ekf::{CovarianceUpdate, MeasurementModel, ProcessModel};
+use crate::trig::sin_cos_small;
+use crate::{Float, to_t, wrap_angle};
+
+/// How the continuous model is turned into one step of the filter (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Discretization {
+    /// The seed's forward-Euler step; EMF at the start-of-period angle (lags by ~`w Ts / 2`).
+    ForwardEuler,
+    /// Exact for a held voltage and a constant-speed rotation; no half-sample lag.
+    #[default]
+    LagFree,
+}
+
+/// The constants of one discrete step: `Ts`, `a = Rs / Ls`, `c = psi_f / Ls`, the current
+/// decay and the input gain. Fixed for the configured parameters ([`PmsmModel::discrete`]),
+/// or recomputed each step from the tracked `psi_f` and `Rs` ([`PmsmModel::discrete_at`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Discrete<T> {
+    pub discretization: Discretization,
+    pub ts: T,
+    /// `a = Rs / Ls`, 1/s.
+    pub a: T,
+    /// `c = psi_f / Ls`, A/rad.
+    pub c: T,
+    /// `1 / Ls`, 1/H.
+    pub inv_ls: T,
+    /// Current decay per sample: `alpha = exp(-a Ts)` (lag-free) or `1 - a Ts` (Euler).
+    pub decay: T,
+    /// `1 - decay`, computed without cancellation.
+    pub one_minus_decay: T,
+    /// Input gain per sample: `(1 - alpha) / Rs` (lag-free) or `Ts / Ls` (Euler), A/V.
+    pub input_gain: T,
+}
+
+/// The PMSM process and measurement model with its per-`Ts` constants; implements
+/// [`ProcessModel`] (input `[u_a, u_b]`) and [`MeasurementModel`] (`z = [i_a, i_b]`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PmsmModel<T: Float> {
+    /// The step's constants for the configured `Rs`, `Ls`, `psi_f`.
+    disc: Discrete<T>,
+    /// Configured `Rs`, ohm.
+    rs: T,
+    /// `Q` made symmetric, `(Q + Q^T) / 2`.
+    q: Matrix4<T>,
+    /// `R` made symmetric, `(R + R^T) / 2`.
+    r: Matrix2<T>,
+    update: CovarianceUpdate,
+}
+
+/// Back-EMF term of one step and its derivatives (lag-free or forward Euler).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TransitionTerms<T> {
+    /// EMF contribution to `i_a-`, `i_b-`.
+    pub ea: T,
+    pub eb: T,
+    /// `d i_a- / d w`, `d i_a- / d th`.
+    pub ea_w: T,
+    pub ea_th: T,
+    /// `d i_b- / d w`, `d i_b- / d th`.
+    pub eb_w: T,
+    pub eb_th: T,
+    /// `d i_a- / d psi_f`, `d i_b- / d psi_f` (the EMF term per weber).
+    pub ea_psi: T,
+    pub eb_psi: T,
+}
+
+impl<T: Float> PmsmModel<T> {
+    /// The model for a validated configuration.
+    pub fn new(cfg: &ObserverConfig<T>) -> Self {
+        let m = &cfg.motor;
+        let ts = cfg.ts_s;
+        let a = m.rs_ohm / m.ls_h;
+        let (decay, input_gain) = match cfg.discretization {
+            Discretization::ForwardEuler => (T::one() - a * ts, ts / m.ls_h),
+            Discretization::LagFree => {
+                // 1 - exp(-a Ts) without cancellation.
+                let one_minus_alpha = -(-a * ts).exp_m1();
+                (T::one() - one_minus_alpha, one_minus_alpha / m.rs_ohm)
+            }
+        };
+        Self {
+            disc: Discrete {
+                discretization: cfg.discretization,
+                ts,
+                a,
+                c: m.psi_f_wb / m.ls_h,
+                inv_ls: T::one() / m.ls_h,
+                decay,
+                one_minus_decay: T::one() - decay,
+                input_gain,
+            },
+            rs: m.rs_ohm,
+            q: (cfg.noise.q + cfg.noise.q.transpose()) * to_t::<T>(0.5),
+            r: (cfg.noise.r + cfg.noise.r.transpose()) * to_t::<T>(0.5),
+            update: cfg.covariance_update,
+        }
+    }
+
+    /// Sample time `Ts`, s.
+    pub fn ts(&self) -> T {
+        self.disc.ts
+    }
+
+    /// Current decay per sample (`alpha` or `1 - a Ts`).
+    pub fn decay(&self) -> T {
+        self.disc.decay
+    }
+
+    /// Voltage-to-current gain per sample, A/V.
+    pub fn input_gain(&self) -> T {
+        self.disc.input_gain
+    }
+
+    /// Covariance update method the observer uses with this model.
+    pub fn covariance_update(&self) -> CovarianceUpdate {
+        self.update
+    }
+
+    /// `Q` as configured, made symmetric at construction, `(Q + Q^T) / 2`.
+    pub(crate) fn q_sym(&self) -> &Matrix4<T> {
+        &self.q
+    }
+
+    /// `R` as configured, made symmetric at construction, `(R + R^T) / 2`.
+    pub(crate) fn r_sym(&self) -> &Matrix2<T> {
+        &self.r
+    }
+
+    /// The discretization in use.
+    pub fn discretization(&self) -> Discretization {
+        self.disc.discretization
+    }
+
+    /// The step's constants for the configured parameters.
+    #[inline(always)]
+    pub(crate) fn discrete(&self) -> &Discrete<T> {
+        &self.disc
+    }
+
+    /// The step's constants for a flux linkage `psi_f` and a resistance `rs` (tracked values;
+    /// `Ls` as configured). Lag-free: `alpha = alpha0 exp(-x)` with
+    /// `x = (rs - Rs0) Ts / Ls`, the exponential by its Taylor series to `x^4` (relative
+    /// error below `x^5 / 120`, 1e-6 for `|x| <= 0.16`, i.e. `rs` within `Rs0 +- 2 Rs0` on
+    /// the reference motors); no `exp` on the MCU.
+    #[inline(always)]
+    pub(crate) fn discrete_at(&self, psi_f: T, rs: T) -> Discrete<T> {
+        let d0 = &self.disc;
+        let a = rs * d0.inv_ls;
+        let c = psi_f * d0.inv_ls;
+        match d0.discretization {
+            Discretization::ForwardEuler => {
+                let one_minus_decay = a * d0.ts;
+                Discrete {
+                    a,
+                    c,
+                    decay: T::one() - one_minus_decay,
+                    one_minus_decay,
+                    ..*d0
+                }
+            }
+            Discretization::LagFree => {
+                let x = (rs - self.rs) * d0.ts * d0.inv_ls;
+                // 1 - exp(-x) = x - x^2/2 + x^3/6 - x^4/24 (Horner).
+                let one_minus_ex = x
+                    * (T::one()
+                        - x * (to_t::<T>(0.5)
+                            - x * (to_t::<T>(1.0 / 6.0) - x * to_t::<T>(1.0 / 24.0))));
+                // 1 - alpha0 e^{-x} = (1 - alpha0) + alpha0 (1 - e^{-x}).
+                let one_minus_decay = d0.one_minus_decay + d0.decay * one_minus_ex;
+                Discrete {
+                    a,
+                    c,
+                    decay: T::one() - one_minus_decay,
+                    one_minus_decay,
+                    input_gain: one_minus_decay / rs,
+                    ..*d0
+                }
+            }
+        }
+    }
+
+    /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
+    #[inline(always)]
+    pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
+        self.disc.transition_terms(th, w)
+    }
+}
+
+impl<T: Float> Discrete<T> {
+    /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
+    #[inline(always)]
+    pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
+        let (s, co) = th.sin_cos_angle();
+        let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
+        let c = self.c;
+        // EMF term c w (-j e^{j th}) G, and its derivatives.
+        let ua = s * m_re + co * m_im;
+        let ub = s * m_im - co * m_re;
+        TransitionTerms {
+            ea: c * ua,
+            eb: c * ub,
+            ea_th: c * (co * m_re - s * m_im),
+            eb_th: c * (co * m_im + s * m_re),
+            ea_w: c * (s * mp_re + co * mp_im),
+            eb_w: c * (s * mp_im - co * mp_re),
+            ea_psi: self.inv_ls * ua,
+            eb_psi: self.inv_ls * ub,
+        }
+    }
+
+    /// `(G, w G, d(w G)/dw)` of the lag-free step as `(re, im)` pairs (module docs).
+    #[inline(always)]
+    fn emf_gain(&self, w: T) -> ((T, T), (T, T), (T, T)) {
+        let ts = self.ts;
+        match self.discretization {
+            Discretization::ForwardEuler => ((ts, T::zero()), (w * ts, T::zero()), (ts, T::zero())),
+            Discretization::LagFree => {
+                let a = self.a;
+                let one_minus_alpha = self.one_minus_decay;
+                let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
+                let two = T::one() + T::one();
+                // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
+                let cos_m1 = -two * sh * sh;
+                let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
+                // N = e^{j w Ts} - alpha.
+                let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
+                let inv_d2 = T::one() / (a * a + w * w);
+                // G = N / (a + j w) = N (a - j w) / (a^2 + w^2).
+                let g_re = (n_re * a + n_im * w) * inv_d2;
+                let g_im = (n_im * a - n_re * w) * inv_d2;
+                // G' = j (Ts e^{j w Ts} - G) / (a + j w).
+                let (t_re, t_im) = (ts * ex_re - g_re, ts * ex_im - g_im);
+                // j (t) = -t_im + j t_re; divide by (a + j w).
+                let (jt_re, jt_im) = (-t_im, t_re);
+                let gp_re = (jt_re * a + jt_im * w) * inv_d2;
+                let gp_im = (jt_im * a - jt_re * w) * inv_d2;
+                (
+                    (g_re, g_im),
+                    (w * g_re, w * g_im),
+                    (g_re + w * gp_re, g_im + w * gp_im),
+                )
+            }
+        }
+    }
+}
+
+impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
+    fn transition(&self, x: &Vector4<T>, u: &Vector2<T>) -> (Vector4<T>, Matrix4<T>) {
+        let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
+        let TransitionTerms {
+            ea,
+            eb,
+            ea_w,
+            ea_th,
+            eb_w,
+            eb_th,
+            ..
+        } = self.transition_terms(th, w);
+        let d = &self.disc;
+        let xn = Vector4::new(
+            d.decay * ia + d.input_gain * u[0] + ea,
+            d.decay * ib + d.input_gain * u[1] + eb,
+            w,
+            th + d.ts * w,
+        );
+        let z = T::zero();
+        let o = T::one();
+        #[rustfmt::skip]
+        let phi = Matrix4::new(
+            d.decay, z,       ea_w, ea_th,
+            z,       d.decay, eb_w, eb_th,
+            z,       z,       o,    z,
+            z,       z,       d.ts, o,
+        );
+        (xn, phi)
+    }
+
+    fn process_noise(&self) -> &Matrix4<T> {
+        &self.q
+    }
+
+    fn normalize(&self, x: &mut Vector4<T>) {
+        x[3] = wrap_angle(x[3]);
+    }
+}
+
+impl<T: Float> MeasurementModel<T, 4, 2> for PmsmModel<T> {
+    fn observe(&self, x: &Vector4<T>) -> (Vector2<T>, SMatrix<T, 2, 4>) {
+        let z = T::zero();
+        let o = T::one();
+        #[rustfmt::skip]
+        let h = SMatrix::<T, 2, 4>::new(
+            o, z, z, z,
+            z, o, z, z,
+        );
+        (Vector2::new(x[0], x[1]), h)
+    }
+
+    fn measurement_noise(&self) -> &Matrix2<T> {
+        &self.r
+    }
+
+    fn normalize(&self, x: &mut Vector4<T>) {
+        x[3] = wrap_angle(x[3]);
+    }
+}
