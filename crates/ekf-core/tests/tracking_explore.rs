@@ -85,6 +85,7 @@ fn explore() {
                 let err = angle_errors_deg(&tr, &est);
                 let (mean, rms, max) = stats(&err[n / 2..]);
                 let e = est.last().unwrap();
+                let act = est.iter().filter(|e| e.parameters_tracking).count();
                 let off = ObserverConfig {
                     parameter_tracking: None,
                     ..cfg
@@ -92,7 +93,7 @@ fn explore() {
                 let (_, rms_off, _) =
                     stats(&angle_errors_deg(&tr, &run_observer(&off, &tr))[n / 2..]);
                 println!(
-                    "{name:10} {:>4.0}% {case:7} rms {rms:6.3} mean {mean:7.3} max {max:6.3} (off {rms_off:6.3}) psi {:+6.2}% rs {:+6.1}%",
+                    "{name:10} {:>4.0}% {case:7} rms {rms:6.3} mean {mean:7.3} max {max:6.3} (off {rms_off:6.3}) psi {:+6.2}% rs {:+6.1}% act {act}",
                     frac * 100.0,
                     (e.psi_f_wb / motor.psi_f_wb - 1.0) * 100.0,
                     (e.rs_ohm / motor.rs_ohm - 1.0) * 100.0

@@ -80,8 +80,9 @@
 //!
 //! ```text
 //! e   = i_dq_ref - i_dq
-//! u_d = PI_d(e_d) - w Ls i_q                      (cross-coupling decoupling, measured i)
-//! u_q = PI_q(e_q) + w Ls i_d + w psi_f            (decoupling, back-EMF feed-forward)
+//! u_d = PI_d(e_d) + Rs i_d - w Ls i_q             (cross-coupling decoupling, measured i)
+//! u_q = PI_q(e_q) + Rs i_q + w Ls i_d + w psi_f    (resistive drop, decoupling, back-EMF
+//!                                                   feed-forward; psi_f, Rs tracked online)
 //! |u_dq| <= max_modulation * u_dc / sqrt(3), d axis first, q gets the rest
 //! ```
 //!
@@ -729,17 +730,18 @@ impl Foc {
         }
     }
 
-    /// Decoupling and back-EMF feed-forward in `frame` for the measured currents `i`.
+    /// Resistive drop, decoupling and back-EMF feed-forward in `frame` for the measured
+    /// currents `i`, with the observer's tracked `psi_f` and `Rs` (the configured ones when
+    /// its parameter tracking is off): `u_d = Rs i_d - w Ls i_q`,
+    /// `u_q = Rs i_q + w Ls i_d + w psi_f`. The tracked flux is the one that, with the tracked
+    /// `Rs`, explains the q-axis voltage, so a warm motor needs no integrator action.
     fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
+        let (psi_f, rs) = self.observer.parameters();
         let wl = frame.omega * self.cfg.motor.ls_h;
-        let emf = if frame.emf {
-            frame.omega * self.cfg.motor.psi_f_wb
-        } else {
-            0.0
-        };
+        let emf = if frame.emf { frame.omega * psi_f } else { 0.0 };
         Dq {
-            d: -wl * i.q,
-            q: wl * i.d + emf,
+            d: rs * i.d - wl * i.q,
+            q: rs * i.q + wl * i.d + emf,
         }
     }
 

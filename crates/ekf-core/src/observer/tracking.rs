@@ -116,7 +116,9 @@ pub struct ParameterTracking<T> {
     /// Random walk of `Rs`, fraction of the configured value per square root of a second.
     pub rs_walk_per_sqrt_s: T,
     /// Tracking is frozen while `|w_hat|` is below this speed, rad/s electrical, while the
-    /// speed's standard deviation exceeds a tenth of `|w_hat|`, and while the angle is
+    /// speed's standard deviation exceeds a tenth of `|w_hat|`, while the speed departs from
+    /// its low-pass over 64 samples by more than 1 % plus three standard deviations (fast
+    /// acceleration), and while the angle is
     /// uncertain.
     pub min_speed_rad_s: T,
     /// Tracking starts only after the angle has been tracked above the minimum speed for
@@ -136,8 +138,9 @@ pub struct ParameterTracking<T> {
 }
 
 impl<T: Float> ParameterTracking<T> {
-    /// The default for a sample time: initial (and ceiling) standard deviations 20 % of
-    /// `psi_f` and 50 % of `Rs`; random walks 1 % of `psi_f` and 5 % of `Rs` per square root
+    /// The default for a sample time: initial (and ceiling) standard deviations 10 % of
+    /// `psi_f` (a start 20 % off converges; a larger value makes the first adaptation after a
+    /// hand-over jumpy) and 50 % of `Rs`; random walks 1 % of `psi_f` and 5 % of `Rs` per square root
     /// of a second; frozen below `|w_e| = 0.002 / Ts` (20 rad/s el. at 10 kHz; 2.4 % of the
     /// servo's rated speed) and for the first 500 samples (50 ms at 10 kHz) after the angle
     /// is tracked; `psi_f` within `[0.5, 1.5]` and `Rs` within `[0.3, 3]` times the
@@ -145,7 +148,7 @@ impl<T: Float> ParameterTracking<T> {
     /// NdFeB thermal link of 20 K, windows of 100 samples, 0.2 % per window.
     pub fn default_for(ts_s: T) -> Self {
         Self {
-            psi_f_sigma0: to_t(0.2),
+            psi_f_sigma0: to_t(0.1),
             rs_sigma0: to_t(0.5),
             psi_f_walk_per_sqrt_s: to_t(0.01),
             rs_walk_per_sqrt_s: to_t(0.05),
@@ -233,6 +236,8 @@ pub(super) struct Tracker<T> {
     /// Samples in a row with the angle tracked above the minimum speed (up to the settling
     /// time).
     pub settled: u32,
+    /// Low-pass of the speed estimate (steadiness test), rad/s.
+    pub w_lp: T,
     /// The split filter, if on.
     pub split: Option<Split<T>>,
     pub k: TrackerConstants<T>,
@@ -346,18 +351,26 @@ impl<T: Float> Tracker<T> {
             c_pp: k.var0_psi,
             active: false,
             settled: 0,
+            w_lp: T::zero(),
             split,
             k,
         }
     }
 
     /// Whether the parameters are tracked in the coming step: the angle has been tracked
-    /// for the settling time, the speed estimate `w` is at least the minimum and known to 10 %
-    /// (its variance `w_var <= (w / 10)^2`). Counts the settling time.
+    /// for the settling time, the speed estimate `w` is at least the minimum, known to 10 %
+    /// (its variance `w_var <= (w / 10)^2`) and steady (within 1 % plus 3 standard deviations
+    /// of its low-pass over 64 samples: during a fast acceleration the speed estimate lags and the flux would absorb
+    /// the lag). Counts the settling time.
     #[inline(always)]
     pub fn should_track(&mut self, angle_tracking: bool, w: T, w_var: T) -> bool {
         let w2 = w * w;
-        if !(angle_tracking && w2 >= self.k.min_speed2 && w_var * to_t(100.0) <= w2) {
+        // Steady speed: within 1 % plus three of its standard deviations of its low-pass
+        // (time constant 64 samples).
+        self.w_lp += (w - self.w_lp) * to_t::<T>(1.0 / 64.0);
+        let dw = w - self.w_lp;
+        let steady = dw * dw <= w_var * to_t(9.0) + w2 * to_t(1e-4);
+        if !(angle_tracking && steady && w2 >= self.k.min_speed2 && w_var * to_t(100.0) <= w2) {
             self.settled = 0;
             return false;
         }
