@@ -669,6 +669,13 @@ impl<T: Float> PmsmObserver<T> {
         Ok(())
     }
 
+    /// The flux's rows of the augmented covariance: its cross-covariance with
+    /// `[i_a, i_b, w_e, theta]` and its variance (`None` when tracking is off). The cross-
+    /// covariance is zero while the tracking is frozen.
+    pub fn flux_covariance(&self) -> Option<(Vector4<T>, T)> {
+        self.tracker.as_ref().map(|t| (Vector4::from(t.x), t.c_pp))
+    }
+
     /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.
     pub fn parameters(&self) -> (T, T) {
         match &self.tracker {
@@ -678,7 +685,8 @@ impl<T: Float> PmsmObserver<T> {
     }
 
     /// Sets the tracked `(psi_f, Rs)` (e.g. from a previous run or a commissioning) and
-    /// clears their cross-covariance with the state; their variances are kept. Refused,
+    /// clears their cross-covariance with the state; their variances are kept. The thermal
+    /// link of the `Rs` split filter takes them as its temperature reference. Refused,
     /// nothing changed, when tracking is off, a value is not finite or outside the
     /// configured range.
     pub fn set_parameters(&mut self, psi_f_wb: T, rs_ohm: T) -> Result<(), EkfError> {
@@ -696,6 +704,10 @@ impl<T: Float> PmsmObserver<T> {
         t.psi = psi_f_wb;
         t.rs = rs_ohm;
         t.restart(false);
+        let (c_pp, k) = (t.c_pp, t.k);
+        if let Some(s) = &mut t.split {
+            s.anchor(psi_f_wb, rs_ohm, c_pp, &k);
+        }
         Ok(())
     }
 }

@@ -1,6 +1,6 @@
 //! Covariance health.
 //!
-//! - Long run: `P` of the default `f32` observer stays symmetric positive definite over many
+//! - Long run: `P` of the default `f32` observer, augmented by the tracked flux (5 x 5), stays symmetric positive definite over many
 //!   steps on the three reference motors, the speed sweeping through +-rated with reversals,
 //!   the current reference varying, with sensor noise. The short version (1e6 steps in all)
 //!   runs with every `cargo test`; the long one (1e8 steps in all) on demand:
@@ -10,7 +10,7 @@
 mod common;
 use common::reference_motors;
 use core::f64::consts::PI;
-use ekf_core::nalgebra::{Cholesky, Matrix4, Vector4};
+use ekf_core::nalgebra::{Cholesky, Matrix4, Matrix5, Vector4};
 use ekf_core::{MotorParams, ObserverConfig, ObserverCounters, PmsmObserver, default_p0};
 
 const TS: f64 = 1e-4;
@@ -88,15 +88,24 @@ fn run(motor: MotorParams<f64>, rated: f64, noise: f64, steps: u64, seed: u64) -
         }
         if k % 16 == 0 {
             out.checks += 1;
-            let p: Matrix4<f64> = obs.covariance().map(f64::from);
-            assert_eq!(p, p.transpose(), "P not symmetric at step {k}");
-            let d = Vector4::new(p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]);
+            let p4: Matrix4<f64> = obs.covariance().map(f64::from);
+            assert_eq!(p4, p4.transpose(), "P not symmetric at step {k}");
+            // The augmented covariance of [i_a, i_b, w, th, psi_f] (the tracked flux's rows).
+            let (xc, cc) = obs.flux_covariance().expect("tracking is on by default");
+            let mut p = Matrix5::<f64>::zeros();
+            p.fixed_view_mut::<4, 4>(0, 0).copy_from(&p4);
+            for r in 0..4 {
+                p[(r, 4)] = f64::from(xc[r]);
+                p[(4, r)] = f64::from(xc[r]);
+            }
+            p[(4, 4)] = f64::from(cc);
+            let d = p.diagonal();
             if d.iter().any(|v| *v <= 0.0) {
                 out.not_pd += 1;
             } else {
                 // Correlation matrix: its smallest eigenvalue says how close P is to singular.
                 let s = d.map(|v| 1.0 / v.sqrt());
-                let corr = Matrix4::from_diagonal(&s) * p * Matrix4::from_diagonal(&s);
+                let corr = Matrix5::from_diagonal(&s) * p * Matrix5::from_diagonal(&s);
                 if Cholesky::new(corr).is_none() {
                     out.not_pd += 1;
                 } else if k % 4096 == 0 {

@@ -16,7 +16,7 @@ use ekf_core::nalgebra::Vector2;
 use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{
     CovarianceUpdate, Discretization, Ekf, Float, MotorParams, NoiseCovariances, ObserverConfig,
-    PmsmModel, PmsmObserver, observer::MAX_REFUSALS,
+    PmsmModel, PmsmObserver, RsTracking, observer::MAX_REFUSALS,
 };
 use proptest::prelude::*;
 use proptest::test_runner::TestCaseError;
@@ -87,6 +87,9 @@ struct Params {
     lag_free: bool,
     joseph: bool,
     seed_noise: bool,
+    /// Parameter tracking: 0 off, 1 flux only (`Rs` fixed), 2 the default (flux and the split
+    /// filter for `Rs`).
+    tracking: u8,
 }
 
 fn params() -> impl Strategy<Value = Params> {
@@ -101,11 +104,19 @@ fn params() -> impl Strategy<Value = Params> {
             [param(1e-2), param(1e-2), param(1e4), param(10.0)],
             [any_f64(1.0), any_f64(1.0), any_f64(1e3), any_f64(4.0)],
         ),
-        param(0.2),
+        (param(0.2), 0u8..3),
         (any::<bool>(), any::<bool>(), prop::bool::weighted(0.2)),
     )
         .prop_map(
-            |(motor, ts, (q, r), (p0, x0), sigma_limit, (lag_free, joseph, seed_noise))| Params {
+            |(
+                motor,
+                ts,
+                (q, r),
+                (p0, x0),
+                (sigma_limit, tracking),
+                (lag_free, joseph, seed_noise),
+            )| Params {
+                tracking,
                 motor,
                 ts,
                 q,
@@ -147,6 +158,15 @@ fn config<T: Float>(p: &Params) -> ObserverConfig<T> {
     cfg.p0 = Matrix4::from_diagonal(&Vector4::from(p.p0.map(t)));
     cfg.x0 = Vector4::from(p.x0.map(t));
     cfg.angle_sigma_limit_rad = t(p.sigma_limit);
+    match p.tracking {
+        0 => cfg.parameter_tracking = None,
+        1 => {
+            if let Some(tr) = &mut cfg.parameter_tracking {
+                tr.rs = RsTracking::Fixed;
+            }
+        }
+        _ => {}
+    }
     cfg
 }
 
@@ -164,6 +184,7 @@ fn drive<T: Float>(obs: &mut PmsmObserver<T>, calls: &[Call]) -> Result<(), Test
     let pi = T::pi();
     for c in calls {
         let (x0, p0) = (*obs.state(), obs.covariance());
+        let (par0, fc0) = (obs.parameters(), obs.flux_covariance());
         let (ok, est) = match *c {
             Call::Step(u, i) => match obs.step(u.map(t), i.map(t)) {
                 Ok(e) => (true, Some(e)),
@@ -190,7 +211,29 @@ fn drive<T: Float>(obs: &mut PmsmObserver<T>, calls: &[Call]) -> Result<(), Test
             };
             prop_assert!(same(x.as_slice(), x0.as_slice()), "{c:?} changed x");
             prop_assert!(same(p.as_slice(), p0.as_slice()), "{c:?} changed P");
+            let (par, fc) = (obs.parameters(), obs.flux_covariance());
+            prop_assert!(
+                same(&[par.0, par.1], &[par0.0, par0.1]),
+                "{c:?} changed psi_f, Rs"
+            );
+            if let (Some((xa, ca)), Some((xb, cb))) = (fc, fc0) {
+                prop_assert!(
+                    same(xa.as_slice(), xb.as_slice()) && same(&[ca], &[cb]),
+                    "{c:?} changed the flux covariance"
+                );
+            }
             continue;
+        }
+        let (psi, rs) = obs.parameters();
+        prop_assert!(
+            psi.is_finite() && rs.is_finite() && psi > T::zero() && rs > T::zero(),
+            "{c:?}: tracked psi_f {psi:?}, Rs {rs:?}"
+        );
+        if let Some((xc, cc)) = obs.flux_covariance() {
+            prop_assert!(
+                finite(xc.as_slice()) && cc.is_finite() && cc > T::zero(),
+                "{c:?}: flux covariance {xc:?} {cc:?}"
+            );
         }
         prop_assert!(finite(x.as_slice()), "{c:?}: state {x:?}");
         prop_assert!(finite(p.as_slice()), "{c:?}: P {p:?}");
@@ -202,6 +245,11 @@ fn drive<T: Float>(obs: &mut PmsmObserver<T>, calls: &[Call]) -> Result<(), Test
                 "{c:?}: estimate {e:?}"
             );
             prop_assert!(!is_nan(e.nis), "{c:?}: NIS {:?}", e.nis);
+            prop_assert!(
+                finite(&[e.psi_f_wb, e.psi_f_sigma_wb, e.rs_ohm, e.rs_sigma_ohm])
+                    && e.winding_temperature_c.is_finite(),
+                "{c:?}: tracked parameters {e:?}"
+            );
         }
     }
     Ok(())

@@ -114,7 +114,7 @@ impl<T: Float> ObserverConfig<T> {
             positive(g.settled_nis, Param::GateSettledNis)?;
         }
         if let Some(t) = &self.parameter_tracking {
-            t.validate()?;
+            t.validate_for(self.motor.psi_f_wb, self.motor.rs_ohm, self.ts_s)?;
         }
         if let Some(h) = &self.covariance_health {
             positive(h.trace_factor, Param::HealthTraceFactor)?;

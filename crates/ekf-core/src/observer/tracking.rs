@@ -219,6 +219,37 @@ impl<T: Float> ParameterTracking<T> {
     }
 }
 
+impl<T: Float> ParameterTracking<T> {
+    /// [`validate`](Self::validate), and the derived variances finite and positive for the
+    /// motor's `psi_f`, `Rs` and the sample time (no overflow or underflow to 0), the
+    /// kelvins per ohm finite.
+    pub fn validate_for(&self, psi_f: T, rs: T, ts_s: T) -> Result<(), ConfigError> {
+        self.validate()?;
+        let usable = |v: T| v.is_finite() && v > T::zero();
+        let sq = |v: T| v * v;
+        if !usable(sq(self.psi_f_sigma0 * psi_f)) {
+            return Err(ConfigError::OutOfRange(Param::TrackingPsiSigma));
+        }
+        if !usable(sq(self.rs_sigma0 * rs)) {
+            return Err(ConfigError::OutOfRange(Param::TrackingRsSigma));
+        }
+        let q_psi = sq(self.psi_f_walk_per_sqrt_s * psi_f) * ts_s;
+        if !q_psi.is_finite() {
+            return Err(ConfigError::OutOfRange(Param::TrackingPsiWalk));
+        }
+        let q_rs = sq(self.rs_walk_per_sqrt_s * rs) * ts_s * to_t(f64::from(u32::MAX));
+        if !q_rs.is_finite() {
+            return Err(ConfigError::OutOfRange(Param::TrackingRsWalk));
+        }
+        if !(T::one() / (self.rs_temperature_coefficient_per_k * rs)).is_finite() {
+            return Err(ConfigError::OutOfRange(
+                Param::TrackingTemperatureCoefficient,
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Running state of the tracking: the EKF's flux with its cross-covariance and variance,
 /// and the split filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -268,6 +299,12 @@ pub(super) struct Split<T> {
     pub h_rs: T,
     pub link_offset: T,
     pub r_link: T,
+    /// Whether the link is anchored (module docs: the temperature reference is the state at
+    /// the first convergence, or the values given to `set_parameters`).
+    pub anchored: bool,
+    /// Temperature coefficients `alpha_cu`, `beta` (1/K).
+    pub alpha: T,
+    pub beta: T,
 }
 
 /// Constants of the tracking.
@@ -341,6 +378,9 @@ impl<T: Float> Tracker<T> {
                     h_rs: -T::one() / (rs0 * alpha),
                     link_offset: T::one() / alpha - T::one() / b,
                     r_link: sq(link_sigma_k),
+                    anchored: false,
+                    alpha,
+                    beta: b,
                 })
             }
         };
@@ -370,7 +410,7 @@ impl<T: Float> Tracker<T> {
         self.w_lp += (w - self.w_lp) * to_t::<T>(1.0 / 64.0);
         let dw = w - self.w_lp;
         let steady = dw * dw <= w_var * to_t(9.0) + w2 * to_t(1e-4);
-        if !(angle_tracking && steady && w2 >= self.k.min_speed2 && w_var * to_t(100.0) <= w2) {
+        if !(angle_tracking && steady && w2 >= self.k.min_speed2 && w_var * to_t(25.0) <= w2) {
             self.settled = 0;
             return false;
         }
@@ -474,7 +514,7 @@ impl<T: Float> Tracker<T> {
             s.sum_w += post.x[2];
             s.n += 1;
             if s.n >= s.window
-                && let Some(rs) = s.update(self.rs, k)
+                && let Some(rs) = s.update(self.rs, next.c_pp, k)
             {
                 next.rs = rs;
             }
@@ -556,8 +596,19 @@ impl<T: Float> Split<T> {
     /// `r = mean(i_q) / mean(w)`, then the thermal link. Returns the new `Rs` (bounded).
     #[cold]
     #[inline(never)]
-    fn update(&mut self, rs_used: T, k: &TrackerConstants<T>) -> Option<T> {
+    fn update(&mut self, rs_used: T, c_pp: T, k: &TrackerConstants<T>) -> Option<T> {
         let inv_n = T::one() / to_t::<T>(f64::from(self.n));
+        if !self.anchored {
+            // The link's reference: the first window after the EKF's flux has converged
+            // (standard deviation within 0.5 % of the configured flux).
+            let converged = c_pp <= k.psi0 * k.psi0 * to_t(2.5e-5);
+            let psi = self.sum_psi * inv_n;
+            self.clear_window();
+            if converged {
+                self.anchor(psi, rs_used, c_pp, k);
+            }
+            return None;
+        }
         let (sum_psi, sum_iq, sum_w) = (self.sum_psi, self.sum_iq, self.sum_w);
         self.clear_window();
         // Only where the resistive drop is small beside the EMF (`|Rs0 i_q| <= 0.1 |w| psi0`):
@@ -579,6 +630,19 @@ impl<T: Float> Split<T> {
         self.psi = clamp(self.psi, k.psi_min, k.psi_max);
         self.rs = clamp(self.rs, k.rs_min, k.rs_max);
         Some(self.rs)
+    }
+
+    /// Anchors the thermal link at `(psi, rs)` (its temperature reference) and restarts the
+    /// filter there: the flux's variance `c_pp`, the resistance's the initial one.
+    pub fn anchor(&mut self, psi: T, rs: T, c_pp: T, k: &TrackerConstants<T>) {
+        self.psi = psi;
+        self.rs = rs;
+        self.c00 = c_pp;
+        self.c01 = T::zero();
+        self.c11 = k.var0_rs;
+        self.h_psi = T::one() / (psi * self.beta);
+        self.h_rs = -T::one() / (rs * self.alpha);
+        self.anchored = true;
     }
 
     /// Kalman update of `(psi, Rs)` with a scalar measurement of gradient `(h0, h1)`,
