@@ -78,4 +78,4 @@ def test_seed_filter_matches_filterpy_to_1e_9(seed_record):
     rel = diff.max(axis=0) / np.abs(ref).max(axis=0)
     print("max relative difference per state vs filterpy:", rel)
     assert np.all(rel < 1e-9), rel
-    assert np.all(out["status"] != pyfoc.STATUS_REJECTED)
+    assert np.all(out["status"] != pyfoc.Status.REJECTED)
