@@ -484,6 +484,12 @@ def test_recursive_and_deep_dicts_raise():
     d["motor"]["self"] = d
     with pytest.raises((ValueError, RecursionError)):
         pyfoc.simulate(d)
+    # Inside an internally tagged enum (a load term), serde buffers the whole value: without
+    # the nesting limit this would recurse until the stack overflows.
+    d = scenario_dict()
+    d["load"] = [{"kind": "step", "extra": d}]
+    with pytest.raises(ValueError):
+        pyfoc.simulate(d)
     deep = {}
     node = deep
     for _ in range(10_000):
