@@ -48,7 +48,7 @@ trap 'rm -rf "$tmp"' EXIT
 "$venv/bin/python" tests/data/gen_seed_reference.py --out "$tmp/seed_reference.csv" >"$tmp/gen.log"
 "$venv/bin/python" tests/data/compare_csv.py tests/data/seed_reference.csv "$tmp/seed_reference.csv"
 
-step "pyfoc: clippy, build into the venv (maturin), pytest"
+step "pyfoc: clippy, build into the venv (maturin), pytest (with mypy.stubtest of pyfoc.pyi)"
 cargo clippy -p pyfoc --all-targets --locked -- -D warnings
 (cd crates/pyfoc && VIRTUAL_ENV="$PWD/../../$venv" PATH="$PWD/../../$venv/bin:$PATH" maturin develop --locked --quiet)
 "$venv/bin/python" -m pytest crates/pyfoc/tests -q

@@ -4,20 +4,43 @@ Timing: row k of ``u_ab`` is the voltage held over [t_k, t_k+1), row k of ``i_ab
 sampled at t_k; row k of the output is the estimate at t_k, predicted with ``u_ab[k-1]`` and
 corrected with ``i_ab[k]``. SI units; angles and speeds electrical unless named ``_mech``.
 """
+import enum
 import os
-from typing import Any, Literal, TypedDict
+from typing import Any, Literal, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
 
+# The TypedDicts below (RunOutput, StepOutput, TuneReport, ...) describe the returned dicts for
+# type checkers only; they do not exist at runtime (crates/pyfoc/stubtest-allowlist.txt).
+
+__all__ = [
+    "Motor",
+    "Ekf",
+    "simulate",
+    "tune_qr",
+    "tune_qr_mcap",
+    "suite",
+    "SimulationError",
+    "PyfocError",
+    "ConfigError",
+    "FilterError",
+    "Status",
+    "__version__",
+]
+
 __version__: str
 
-STATUS_TRACKING: int
-"""Row status: the angle's standard deviation is below its limit."""
-STATUS_UNCERTAIN: int
-"""Row status: the angle is not trustworthy yet (not converged, or near standstill)."""
-STATUS_REJECTED: int
-"""Row status: non-finite voltage or current; the filter state was kept."""
+class Status(enum.IntEnum):
+    """Status of an estimate: the value of each row of ``Ekf.run(...)["status"]`` (int8) and
+    the ``status`` of ``Ekf.step``."""
+
+    TRACKING = 0
+    """The angle's standard deviation is below its limit."""
+    UNCERTAIN = 1
+    """The filter ran but the angle is not trustworthy yet (not converged, or near standstill)."""
+    REJECTED = 2
+    """Non-finite voltage or current: the sample was refused and the state kept."""
 
 class PyfocError(ValueError):
     """Base class of pyfoc's errors."""
@@ -31,18 +54,26 @@ class FilterError(PyfocError):
 class SimulationError(PyfocError):
     """The simulator could not run the scenario."""
 
+@final
 class Motor:
-    """Motor parameters: Rs (ohm), Ls (H), psi_f (Wb), pole pairs; ld/lq default to ls."""
+    """Motor parameters: Rs (ohm), Ls (H), psi_f (Wb), pole pairs; ld/lq default to ls.
+    Immutable."""
 
-    rs: float
-    ls: float
-    psi_f: float
-    pole_pairs: int
-    ld: float
-    lq: float
-    def __init__(
-        self, rs: float, ls: float, psi_f: float, pole_pairs: int, *, ld: float | None = None, lq: float | None = None
-    ) -> None: ...
+    @property
+    def rs(self) -> float: ...
+    @property
+    def ls(self) -> float: ...
+    @property
+    def psi_f(self) -> float: ...
+    @property
+    def pole_pairs(self) -> int: ...
+    @property
+    def ld(self) -> float: ...
+    @property
+    def lq(self) -> float: ...
+    def __new__(
+        cls, rs: float, ls: float, psi_f: float, pole_pairs: int, *, ld: float | None = None, lq: float | None = None
+    ) -> Motor: ...
 
 class RunOutput(TypedDict):
     theta: npt.NDArray[np.float64]
@@ -52,6 +83,7 @@ class RunOutput(TypedDict):
     i_beta: npt.NDArray[np.float64]
     nis: npt.NDArray[np.float64]
     status: npt.NDArray[np.int8]
+    """The values of Status."""
 
 class StepOutput(TypedDict):
     theta: float
@@ -60,8 +92,9 @@ class StepOutput(TypedDict):
     i_alpha: float
     i_beta: float
     nis: float
-    status: Literal["tracking", "uncertain", "rejected"]
+    status: Status
 
+@final
 class Ekf:
     """EKF observer of a surface PMSM, states [i_alpha, i_beta, omega_e, theta].
 
@@ -69,26 +102,37 @@ class Ekf:
     the motor- and ts-scaled defaults of ekf-core; x0/p0 describe the estimate one period
     before the first sample.
 
-    Inputs: any real numeric array-like (float, int, unsigned; any strides, read-only and
-    broadcast views included); complex, bool, object, string and other dtypes raise TypeError,
-    wrong shapes ValueError (naming the argument), records too large for the machine's memory
-    MemoryError (before anything is allocated). Non-finite samples are rejected rows.
+    Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
+    unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
+    sequences of numbers); None, str, and ndarrays of complex, object, string, datetime or
+    structured dtype raise TypeError, wrong shapes ValueError (naming the argument), records
+    too large for the machine's memory MemoryError (before anything is allocated).
+    Non-finite samples are rejected rows (Status.REJECTED).
+
+    Properties are read-only; ``state``, ``covariance`` and ``u_last`` return copies.
 
     Threads: every method takes the filter's lock with the GIL released, so calls on one Ekf
     from several threads are serialized (each completes, in some order; the state then
     continues from whichever ran last) and other Python threads keep running meanwhile.
     """
 
-    state: npt.NDArray[np.float64]
-    """[i_alpha, i_beta, omega_e, theta], shape (4,)."""
-    covariance: npt.NDArray[np.float64]
-    """State covariance, shape (4, 4)."""
-    u_last: npt.NDArray[np.float64]
-    """Voltage that predicts the first row of the next run()."""
-    ts: float
-    dtype: Literal["float64", "float32"]
-    def __init__(
-        self,
+    @property
+    def state(self) -> npt.NDArray[np.float64]:
+        """[i_alpha, i_beta, omega_e, theta], shape (4,)."""
+    @property
+    def covariance(self) -> npt.NDArray[np.float64]:
+        """State covariance, shape (4, 4)."""
+    @property
+    def u_last(self) -> npt.NDArray[np.float64]:
+        """Voltage that predicts the first row of the next run()."""
+    @property
+    def ts(self) -> float:
+        """Sample time, s."""
+    @property
+    def dtype(self) -> Literal["float64", "float32"]:
+        """Precision of the filter."""
+    def __new__(
+        cls,
         motor: Motor,
         ts: float,
         *,
@@ -99,7 +143,7 @@ class Ekf:
         discretization: Literal["lag_free", "forward_euler"] = "lag_free",
         dtype: Literal["float64", "float32"] = "float64",
         covariance_update: Literal["joseph", "standard"] = "joseph",
-    ) -> None: ...
+    ) -> Ekf: ...
     def run(self, u_ab: npt.ArrayLike, i_ab: npt.ArrayLike, *, u_prev: npt.ArrayLike | None = None) -> RunOutput:
         """Filter a record of shape (N, 2) each; continues from the current state (row 0 predicts
         with u_prev if given, else u_last). Releases the GIL."""
@@ -122,7 +166,8 @@ def simulate(
     desktop EKF's ``theta_est``/``omega_est``/``angle_error_deg``/``nis``/``p_diag`` (N, 4),
     the controller's own observer (``controller_theta_est``/``controller_omega_est``, foc
     scenarios) and the seed filter (``seed_theta_est``, when it runs); plus ``metrics`` (dict,
-    as ``pmsm-sim --json``), ``completed`` and ``scenario``. With ``mcap``, the run is also
+    as ``pmsm-sim --json`` but NaN kept where JSON writes null), ``completed`` and
+    ``scenario``. With ``mcap``, the run is also
     logged to that MCAP file (as ``pmsm-sim run`` writes it; SimulationError if it cannot be
     created). Malformed scenarios raise ConfigError; a run whose trace would not fit in
     memory raises MemoryError before it starts. Releases the GIL."""
@@ -134,9 +179,9 @@ class AngleError(TypedDict):
     samples: int
 
 class FilterScore(TypedDict):
-    log_likelihood: float | None
-    """-0.5 sum(log det S_k + NIS_k) over the scored samples (None if the filter failed)."""
-    mean_nis: float | None
+    log_likelihood: float
+    """-0.5 sum(log det S_k + NIS_k) over the scored samples (-inf if the filter failed)."""
+    mean_nis: float
     angle_error: AngleError | None
     failure: str | None
 

@@ -15,10 +15,11 @@ use ekf_core::{
 };
 use std::sync::{Mutex, PoisonError};
 
-use numpy::{PyArray1, PyArray2};
+use numpy::{PyArray1, PyArray2, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyModule};
 
 mod convert;
@@ -26,7 +27,7 @@ mod simulate;
 mod suite;
 mod tune;
 
-use convert::{pair, rows2, square, try_vec, vec4};
+use convert::{fixed, rows2, square, to_vec, try_vec};
 
 create_exception!(
     pyfoc,
@@ -53,15 +54,64 @@ create_exception!(
     "A filter operation was refused (e.g. a non-finite reset); the filter is unchanged."
 );
 
-/// Row status in `Ekf.run` output: the angle's standard deviation is below its limit.
-const STATUS_TRACKING: i8 = 0;
-/// Row status: the filter ran but the angle is not trustworthy (not converged, standstill).
-const STATUS_UNCERTAIN: i8 = 1;
-/// Row status: the sample was rejected (non-finite voltage or current); the state was kept.
-const STATUS_REJECTED: i8 = 2;
+/// The status of an output row: the members of the Python `IntEnum` `pyfoc.Status`, whose
+/// values are the codes of `Ekf.run`'s int8 `status` array.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+#[repr(i8)]
+enum RowStatus {
+    /// The angle's standard deviation is below its limit.
+    Tracking = 0,
+    /// The filter ran but the angle is not trustworthy (not converged, standstill).
+    Uncertain = 1,
+    /// The sample was rejected (non-finite voltage or current); the state was kept.
+    Rejected = 2,
+}
+
+impl RowStatus {
+    /// Every member with its Python name, in value order.
+    const MEMBERS: [(&'static str, RowStatus); 3] = [
+        ("TRACKING", RowStatus::Tracking),
+        ("UNCERTAIN", RowStatus::Uncertain),
+        ("REJECTED", RowStatus::Rejected),
+    ];
+
+    /// The observer's status of an accepted sample.
+    fn of(s: Status) -> Self {
+        match s {
+            Status::Tracking => RowStatus::Tracking,
+            Status::Uncertain => RowStatus::Uncertain,
+        }
+    }
+
+    /// `pyfoc.Status(self)`.
+    fn to_py(self, py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+        static STATUS: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+        STATUS.import(py, "pyfoc", "Status")?.call1((self as i8,))
+    }
+
+    /// The `IntEnum` class `pyfoc.Status`.
+    fn py_class(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+        let members: Vec<(&str, i8)> = Self::MEMBERS.iter().map(|&(n, s)| (n, s as i8)).collect();
+        let kw = PyDict::new(py);
+        kw.set_item("module", "pyfoc")?;
+        let cls = py
+            .import("enum")?
+            .getattr("IntEnum")?
+            .call(("Status", members), Some(&kw))?;
+        cls.setattr(
+            "__doc__",
+            "Status of an estimate: the value of each row of `Ekf.run(...)[\"status\"]` (int8) \
+             and the `status` of `Ekf.step`. TRACKING: the angle's standard deviation is below \
+             its limit; UNCERTAIN: the filter ran but the angle is not trustworthy yet (not \
+             converged, or near standstill); REJECTED: non-finite voltage or current, the sample \
+             was refused and the state kept.",
+        )?;
+        Ok(cls)
+    }
+}
 
 /// Motor parameters (SI): `Motor(rs, ls, psi_f, pole_pairs, *, ld=None, lq=None)`.
-#[pyclass(frozen, module = "pyfoc")]
+#[pyclass(frozen, skip_from_py_object, module = "pyfoc")]
 #[derive(Clone, Copy)]
 struct Motor {
     #[pyo3(get)]
@@ -137,35 +187,28 @@ enum Observer {
     F32(PmsmObserver<f32>),
 }
 
-/// One output row in f64 with its status code.
+/// The float outputs of `run` (one `(N,)` float64 array each) and `step` (one float each),
+/// by name; [`outputs`] gives their values in the same order. Adding an output is one name
+/// here and one value there (and a line in `pyfoc.pyi`).
+const OUTPUTS: [&str; 6] = ["theta", "omega", "omega_mech", "i_alpha", "i_beta", "nis"];
+
+/// The values of [`OUTPUTS`] for an estimate, in f64.
+fn outputs<T: Float + Into<f64>>(e: &Estimate<T>) -> [f64; OUTPUTS.len()] {
+    [
+        e.theta_rad.into(),
+        e.omega_e_rad_s.into(),
+        e.omega_mech_rad_s.into(),
+        e.i_alpha_a.into(),
+        e.i_beta_a.into(),
+        e.nis.into(),
+    ]
+}
+
+/// One output row.
 #[derive(Clone, Copy)]
 struct Row {
-    theta: f64,
-    omega: f64,
-    omega_mech: f64,
-    i_alpha: f64,
-    i_beta: f64,
-    nis: f64,
-    status: i8,
-}
-
-fn row_of<T: Float + Into<f64>>(e: &Estimate<T>, status: i8) -> Row {
-    Row {
-        theta: e.theta_rad.into(),
-        omega: e.omega_e_rad_s.into(),
-        omega_mech: e.omega_mech_rad_s.into(),
-        i_alpha: e.i_alpha_a.into(),
-        i_beta: e.i_beta_a.into(),
-        nis: e.nis.into(),
-        status,
-    }
-}
-
-fn status_code(s: Status) -> i8 {
-    match s {
-        Status::Tracking => STATUS_TRACKING,
-        Status::Uncertain => STATUS_UNCERTAIN,
-    }
+    values: [f64; OUTPUTS.len()],
+    status: RowStatus,
 }
 
 impl Observer {
@@ -173,8 +216,14 @@ impl Observer {
     fn step(&mut self, u: [f64; 2], i: [f64; 2]) -> Row {
         fn go<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: [T; 2], i: [T; 2]) -> Row {
             match o.step(u, i) {
-                Ok(e) => row_of(&e, status_code(e.status)),
-                Err(_) => row_of(&o.estimate(), STATUS_REJECTED),
+                Ok(e) => Row {
+                    values: outputs(&e),
+                    status: RowStatus::of(e.status),
+                },
+                Err(_) => Row {
+                    values: outputs(&o.estimate()),
+                    status: RowStatus::Rejected,
+                },
             }
         }
         match self {
@@ -210,7 +259,11 @@ impl Observer {
 #[pyclass(frozen, module = "pyfoc")]
 struct Ekf {
     inner: Mutex<EkfInner>,
+    /// Sample time, s.
+    #[pyo3(get)]
     ts: f64,
+    /// Precision of the filter, `"float64"` or `"float32"`.
+    #[pyo3(get)]
     dtype: &'static str,
 }
 
@@ -233,50 +286,40 @@ impl Ekf {
     }
 }
 
-/// Output columns of `run`.
+/// Output columns of `run`: one per [`OUTPUTS`] name, and the status codes.
 struct Columns {
-    theta: Vec<f64>,
-    omega: Vec<f64>,
-    omega_mech: Vec<f64>,
-    i_alpha: Vec<f64>,
-    i_beta: Vec<f64>,
-    nis: Vec<f64>,
+    values: [Vec<f64>; OUTPUTS.len()],
     status: Vec<i8>,
 }
 
 impl Columns {
     /// Room for `n` rows, or MemoryError.
     fn with_capacity(n: usize) -> PyResult<Self> {
-        let v = || try_vec::<f64>(n, "run output");
+        let mut values: [Vec<f64>; OUTPUTS.len()] = Default::default();
+        for v in &mut values {
+            *v = try_vec(n, "run output")?;
+        }
         Ok(Self {
-            theta: v()?,
-            omega: v()?,
-            omega_mech: v()?,
-            i_alpha: v()?,
-            i_beta: v()?,
-            nis: v()?,
-            status: try_vec::<i8>(n, "run output")?,
+            values,
+            status: try_vec(n, "run output")?,
         })
     }
 
+    /// Bytes per row.
+    const ROW_BYTES: u128 = (OUTPUTS.len() * 8 + 1) as u128;
+
     fn push(&mut self, r: &Row) {
-        self.theta.push(r.theta);
-        self.omega.push(r.omega);
-        self.omega_mech.push(r.omega_mech);
-        self.i_alpha.push(r.i_alpha);
-        self.i_beta.push(r.i_beta);
-        self.nis.push(r.nis);
-        self.status.push(r.status);
+        for (col, v) in self.values.iter_mut().zip(r.values) {
+            col.push(v);
+        }
+        self.status.push(r.status as i8);
     }
 
     fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         let out = PyDict::new(py);
-        out.set_item("theta", PyArray1::from_vec(py, self.theta))?;
-        out.set_item("omega", PyArray1::from_vec(py, self.omega))?;
-        out.set_item("omega_mech", PyArray1::from_vec(py, self.omega_mech))?;
-        out.set_item("i_alpha", PyArray1::from_vec(py, self.i_alpha))?;
-        out.set_item("i_beta", PyArray1::from_vec(py, self.i_beta))?;
-        out.set_item("nis", PyArray1::from_vec(py, self.nis))?;
+        for (name, col) in OUTPUTS.iter().zip(self.values) {
+            out.set_item(name, PyArray1::from_vec(py, col))?;
+        }
         out.set_item("status", PyArray1::from_vec(py, self.status))?;
         Ok(out)
     }
@@ -356,7 +399,7 @@ impl Ekf {
         let q = q.map(|o| square::<4>(o, "q")).transpose()?;
         let r = r.map(|o| square::<2>(o, "r")).transpose()?;
         let p0 = p0.map(|o| square::<4>(o, "p0")).transpose()?;
-        let x0 = x0.map(|o| vec4(o, "x0")).transpose()?;
+        let x0 = x0.map(|o| fixed::<4>(o, "x0")).transpose()?;
         let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
         let (observer, dtype) = match dtype {
             "float64" => (
@@ -384,8 +427,8 @@ impl Ekf {
     }
 
     /// Runs the filter over a record; returns a dict of `(N,)` float64 arrays `theta`, `omega`,
-    /// `omega_mech`, `i_alpha`, `i_beta`, `nis` and an int8 array `status` (0 tracking,
-    /// 1 uncertain, 2 rejected sample). Continues from the filter's current state: row 0
+    /// `omega_mech`, `i_alpha`, `i_beta`, `nis` and an int8 array `status` (the values of
+    /// `pyfoc.Status`). Continues from the filter's current state: row 0
     /// predicts with `u_prev` if given, else with the last row of the previous `run` (zero
     /// for a new filter). The GIL is released while the filter runs.
     #[pyo3(signature = (u_ab, i_ab, *, u_prev = None))]
@@ -398,16 +441,18 @@ impl Ekf {
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = rows2(u_ab, "u_ab")?;
         let i = rows2(i_ab, "i_ab")?;
-        if u.len() != i.len() {
+        let n = u.shape()[0];
+        if n != i.shape()[0] {
             return Err(PyValueError::new_err(format!(
-                "u_ab and i_ab must have the same length, got {} and {}",
-                u.len() / 2,
-                i.len() / 2
+                "u_ab and i_ab must have the same length, got {n} and {}",
+                i.shape()[0]
             )));
         }
-        let u_prev = u_prev.map(|p| pair(p, "u_prev")).transpose()?;
-        convert::check_memory((u.len() / 2) as u128 * 49, "run output")?;
-        let mut cols = Columns::with_capacity(u.len() / 2)?;
+        let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        // The copies of both inputs and the output columns, probed at once.
+        convert::ensure_memory(n as u128 * (32 + Columns::ROW_BYTES), "run")?;
+        let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
+        let mut cols = Columns::with_capacity(n)?;
         let cols = self.with(py, move |inner| {
             let mut prev = u_prev.unwrap_or(inner.u_last);
             for (uk, ik) in u.chunks_exact(2).zip(i.chunks_exact(2)) {
@@ -422,8 +467,8 @@ impl Ekf {
 
     /// One sample: predicts with `u_prev` (voltage held over the previous period), corrects
     /// with `i` (currents sampled now). Returns a dict of floats (`theta`, `omega`,
-    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`) and `status` (`"tracking"`, `"uncertain"`,
-    /// or `"rejected"` for a non-finite sample, in which case the state is unchanged).
+    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`) and `status`, a `pyfoc.Status`
+    /// (`REJECTED` for a non-finite sample, in which case the state is unchanged).
     /// Does not change the voltage `run` uses for its next first row.
     fn step<'py>(
         &self,
@@ -431,22 +476,14 @@ impl Ekf {
         u_prev: &Bound<'py, PyAny>,
         i: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let u = pair(u_prev, "u_prev")?;
-        let i = pair(i, "i")?;
+        let u = fixed::<2>(u_prev, "u_prev")?;
+        let i = fixed::<2>(i, "i")?;
         let r = self.with(py, |inner| inner.observer.step(u, i));
         let out = PyDict::new(py);
-        out.set_item("theta", r.theta)?;
-        out.set_item("omega", r.omega)?;
-        out.set_item("omega_mech", r.omega_mech)?;
-        out.set_item("i_alpha", r.i_alpha)?;
-        out.set_item("i_beta", r.i_beta)?;
-        out.set_item("nis", r.nis)?;
-        let status = match r.status {
-            STATUS_TRACKING => "tracking",
-            STATUS_UNCERTAIN => "uncertain",
-            _ => "rejected",
-        };
-        out.set_item("status", status)?;
+        for (name, v) in OUTPUTS.iter().zip(r.values) {
+            out.set_item(name, v)?;
+        }
+        out.set_item("status", r.status.to_py(py)?)?;
         Ok(out)
     }
 
@@ -472,22 +509,10 @@ impl Ekf {
         PyArray1::from_slice(py, &u)
     }
 
-    /// Sample time, s.
-    #[getter]
-    fn ts(&self) -> f64 {
-        self.ts
-    }
-
-    /// Precision of the filter, `"float64"` or `"float32"`.
-    #[getter]
-    fn dtype(&self) -> &'static str {
-        self.dtype
-    }
-
     /// Replaces state (length 4) and covariance (4 x 4). `FilterError` and nothing changed
     /// when either is not finite.
     fn reset(&self, py: Python<'_>, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
-        let x = vec4(x, "x")?;
+        let x = fixed::<4>(x, "x")?;
         let p = square::<4>(p, "p")?;
         fn go<T: Float>(
             o: &mut PmsmObserver<T>,
@@ -526,9 +551,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
     m.add("FilterError", py.get_type::<FilterError>())?;
-    m.add("STATUS_TRACKING", STATUS_TRACKING)?;
-    m.add("STATUS_UNCERTAIN", STATUS_UNCERTAIN)?;
-    m.add("STATUS_REJECTED", STATUS_REJECTED)?;
+    m.add("Status", RowStatus::py_class(py)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -5,7 +5,7 @@ use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{check_memory, path_string};
+use crate::convert::{ensure_memory, nesting_within, path_of};
 use crate::{ConfigError, SimulationError};
 
 /// Bytes per period of a recorded run: the trace's sample and the output columns (about 45
@@ -20,11 +20,10 @@ pub(crate) fn scenario_of(obj: &Bound<'_, PyAny>) -> PyResult<pmsm_sim::scenario
     let py = obj.py();
     let err = |e: pmsm_sim::SimError| ConfigError::new_err(e.to_string());
     if obj.is_instance_of::<PyDict>() {
-        let text: String = py
-            .import("json")?
-            .call_method1("dumps", (obj,))?
-            .extract()?;
-        let sc: Scenario = serde_json::from_str(&text)
+        // Deserialization recurses with the data (internally tagged enums buffer whole
+        // values): a recursive or absurdly deep dict is refused before it can exhaust the stack.
+        nesting_within(obj, 32, "scenario dict")?;
+        let sc: Scenario = pythonize::depythonize(obj)
             .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
         sc.validate()
             .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
@@ -140,29 +139,17 @@ pub(crate) fn simulate<'py>(
     }
     sc.validate()
         .map_err(|e| ConfigError::new_err(format!("{}: {e}", sc.name)))?;
-    let mcap_path = mcap.map(|m| path_string(m, "mcap")).transpose()?;
+    let mcap_path = mcap.map(|m| path_of(m, "mcap")).transpose()?;
     let periods = sc.periods();
-    check_memory(
+    // MemoryError rather than an abort inside the simulator when the trace cannot fit.
+    ensure_memory(
         periods as u128 * bytes_per_period(),
         &format!("simulating {periods} periods with a trace"),
     )?;
-    // A fallible probe of the trace's allocation: MemoryError rather than an abort inside
-    // the simulator when the memory is not there.
-    let mut probe: Vec<pmsm_sim::sim::Sample> = Vec::new();
-    probe.try_reserve_exact(periods).map_err(|_| {
-        pyo3::exceptions::PyMemoryError::new_err(format!(
-            "simulating {periods} periods with a trace: cannot allocate the trace"
-        ))
-    })?;
-    drop(probe);
     let mut log = match &mcap_path {
         Some(p) => Some(
-            pmsm_sim::mcap_log::McapLog::create(
-                std::path::Path::new(p),
-                &sc,
-                pmsm_sim::mcap_log::LogOptions::default(),
-            )
-            .map_err(|e| SimulationError::new_err(e.to_string()))?,
+            pmsm_sim::mcap_log::McapLog::create(p, &sc, pmsm_sim::mcap_log::LogOptions::default())
+                .map_err(|e| SimulationError::new_err(e.to_string()))?,
         ),
         None => None,
     };
@@ -193,12 +180,9 @@ pub(crate) fn simulate<'py>(
             other => SimulationError::new_err(other.to_string()),
         })?;
     let d = trace_dict(py, &out)?;
-    let metrics = serde_json::to_string(&out.metrics)
+    let metrics = pythonize::pythonize(py, &out.metrics)
         .map_err(|e| SimulationError::new_err(format!("metrics: {e}")))?;
-    d.set_item(
-        "metrics",
-        py.import("json")?.call_method1("loads", (metrics,))?,
-    )?;
+    d.set_item("metrics", metrics)?;
     d.set_item("completed", out.end.is_completed())?;
     d.set_item("scenario", sc.name.clone())?;
     Ok(d)

@@ -2,7 +2,7 @@
 
 use pmsm_sim::suite::{SuiteOptions, run_suite};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyMapping};
+use pyo3::types::PyDict;
 
 use crate::{PyfocError, SimulationError};
 
@@ -27,13 +27,9 @@ pub(crate) fn suite(
     let report = py
         .detach(|| run_suite(&opts))
         .map_err(|e| SimulationError::new_err(e.to_string()))?;
-    let json = serde_json::to_string(&report).map_err(|e| PyfocError::new_err(e.to_string()))?;
-    let d = PyDict::new(py);
-    d.update(
-        py.import("json")?
-            .call_method1("loads", (json,))?
-            .cast::<PyMapping>()?,
-    )?;
+    let d = pythonize::pythonize(py, &report)
+        .map_err(|e| PyfocError::new_err(e.to_string()))?
+        .cast_into::<PyDict>()?;
     d.set_item("markdown", report.to_markdown())?;
     d.set_item("all_pass", report.all_pass())?;
     Ok(d)

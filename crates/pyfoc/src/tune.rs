@@ -8,7 +8,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{path_string, rows2, vec4, vector};
+use crate::convert::{ensure_memory, fixed, path_of, rows2, to_vec, vector};
 use crate::{ConfigError, FilterError, Motor, PyfocError};
 
 fn to_py(e: TuneError) -> PyErr {
@@ -54,7 +54,10 @@ fn options(
         skip,
         r_shape,
         max_evaluations: max_evals,
-        x0: x0.map(|o| vec4(o, "x0")).transpose()?.unwrap_or([0.0; 4]),
+        x0: x0
+            .map(|o| fixed::<4>(o, "x0"))
+            .transpose()?
+            .unwrap_or([0.0; 4]),
         discretization,
         min_speed_rad_s: min_speed,
         bound_decades,
@@ -62,19 +65,19 @@ fn options(
     })
 }
 
-/// The report as a dict: the JSON layout of `TuneReport` (NaN/inf read as None), `q`, `r`
-/// as arrays, shortcuts `mean_nis_before`/`mean_nis_after`, and the `toml` snippet.
-fn report_dict<'py>(py: Python<'py>, rep: &TuneReport, d: &Bound<'py, PyDict>) -> PyResult<()> {
-    let json = serde_json::to_string(rep).map_err(|e| PyfocError::new_err(e.to_string()))?;
-    let obj = py.import("json")?.call_method1("loads", (json,))?;
-    d.update(obj.cast::<pyo3::types::PyMapping>()?)?;
+/// The report as a dict: the serde layout of `TuneReport`, `q`, `r` as arrays, shortcuts
+/// `mean_nis_before`/`mean_nis_after`, and the `toml` snippet.
+fn report_dict<'py>(py: Python<'py>, rep: &TuneReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = pythonize::pythonize(py, rep)
+        .map_err(|e| PyfocError::new_err(e.to_string()))?
+        .cast_into::<PyDict>()?;
     let flat = |m: &[f64], n: usize| PyArray1::from_slice(py, m).reshape([n, n]);
     d.set_item("q", flat(rep.q.as_flattened(), 4)?)?;
     d.set_item("r", flat(rep.r.as_flattened(), 2)?)?;
     d.set_item("mean_nis_before", rep.before.mean_nis)?;
     d.set_item("mean_nis_after", rep.after.mean_nis)?;
     d.set_item("toml", rep.toml_snippet())?;
-    Ok(())
+    Ok(d)
 }
 
 /// Proposes Q and R for the observer from a record by maximizing the innovation
@@ -128,6 +131,14 @@ pub(crate) fn tune_qr<'py>(
     if w.is_some() && th.is_none() {
         return Err(PyValueError::new_err("omega_true needs theta_true"));
     }
+    // The copies of the inputs, probed at once.
+    let len =
+        |a: &Option<crate::convert::RealArray<'_>>| a.as_ref().map_or(0, |a| a.as_array().len());
+    let values = u.as_array().len() + i.as_array().len() + len(&th) + len(&w);
+    ensure_memory(8 * values as u128, "tune_qr")?;
+    let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
+    let th = th.map(|a| to_vec(&a, "theta_true")).transpose()?;
+    let w = w.map(|a| to_vec(&a, "omega_true")).transpose()?;
     let params = motor.params::<f64>();
     let rep = py
         .detach(|| {
@@ -140,9 +151,7 @@ pub(crate) fn tune_qr<'py>(
             pmsm_sim::tune::tune_qr(&params, ts, u, i, truth, &opts)
         })
         .map_err(to_py)?;
-    let d = PyDict::new(py);
-    report_dict(py, &rep, &d)?;
-    Ok(d)
+    report_dict(py, &rep)
 }
 
 /// `tune_qr` on a `pmsm-sim` MCAP log (protobuf or JSON): motor and Ts from its scenario,
@@ -165,7 +174,7 @@ pub(crate) fn tune_qr_mcap<'py>(
     min_speed: Option<f64>,
     bound_decades: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let path = path_string(path, "path")?;
+    let path = path_of(path, "path")?;
     let opts = options(
         skip,
         r_shape,
@@ -177,12 +186,11 @@ pub(crate) fn tune_qr_mcap<'py>(
     )?;
     let m: McapTuneReport = py
         .detach(|| {
-            let run = pmsm_sim::tune::LoggedRun::read(std::path::Path::new(&path))?;
+            let run = pmsm_sim::tune::LoggedRun::read(&path)?;
             tune_logged_run(&run, &opts)
         })
         .map_err(to_py)?;
-    let d = PyDict::new(py);
-    report_dict(py, &m.report, &d)?;
+    let d = report_dict(py, &m.report)?;
     d.set_item("scenario", &m.scenario)?;
     d.set_item("periods", m.periods)?;
     d.set_item(

@@ -1,4 +1,5 @@
 """The Python API: shapes, dtypes, errors, chunking, non-finite samples, threads."""
+import enum
 import threading
 
 import numpy as np
@@ -89,7 +90,7 @@ def test_run_tracks_and_output_layout():
     assert np.sqrt(np.mean(err[1000:] ** 2)) < 1.0
     np.testing.assert_allclose(out["omega"][-1], 800.0, rtol=1e-2)
     np.testing.assert_allclose(out["omega_mech"], out["omega"] / 4)
-    assert out["status"][-1] == pyfoc.STATUS_TRACKING
+    assert out["status"][-1] == pyfoc.Status.TRACKING
     assert ekf.state.shape == (4,) and ekf.covariance.shape == (4, 4)
     np.testing.assert_allclose(ekf.covariance, ekf.covariance.T)
     assert ekf.state[3] == out["theta"][-1]
@@ -113,7 +114,42 @@ def test_step_equals_run():
     for k in range(len(u)):
         est = ekf.step(u_prev, i[k])
         assert est["theta"] == out["theta"][k] and est["omega"] == out["omega"][k]
+        assert isinstance(est["status"], pyfoc.Status) and est["status"] == out["status"][k]
         u_prev = u[k]
+
+
+def test_status_is_one_int_enum_for_run_and_step():
+    assert issubclass(pyfoc.Status, enum.IntEnum)
+    assert [(m.name, m.value) for m in pyfoc.Status] == [("TRACKING", 0), ("UNCERTAIN", 1), ("REJECTED", 2)]
+    u, i, _ = record(300)
+    i[150] = np.nan
+    out = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u, i)
+    # The int8 codes are the enum's values: each converts back to a member.
+    assert {pyfoc.Status(int(v)) for v in out["status"]} == {
+        pyfoc.Status.UNCERTAIN, pyfoc.Status.TRACKING, pyfoc.Status.REJECTED}
+    assert out["status"][150] == pyfoc.Status.REJECTED
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    assert ekf.step([0.0, 0.0], [0.0, 0.0])["status"] is pyfoc.Status.UNCERTAIN
+
+
+@pytest.mark.parametrize("attr", ["state", "covariance", "u_last", "ts", "dtype"])
+def test_ekf_properties_are_read_only(attr):
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    with pytest.raises(AttributeError):
+        setattr(ekf, attr, getattr(ekf, attr))
+    # The arrays are copies: writing into one does not reach the filter.
+    value = getattr(ekf, attr)
+    if isinstance(value, np.ndarray):
+        value[...] = 7.0
+        assert np.all(getattr(ekf, attr) != 7.0)
+
+
+@pytest.mark.parametrize("attr", ["rs", "ls", "psi_f", "pole_pairs", "ld", "lq"])
+def test_motor_is_immutable(attr):
+    m = pyfoc.Motor(**SERVO)
+    with pytest.raises(AttributeError):
+        setattr(m, attr, 1.0)
+    assert getattr(m, attr) == SERVO.get(attr, SERVO["ls"])
 
 
 def test_float32_filter_is_close_to_float64():
@@ -132,13 +168,13 @@ def test_non_finite_samples_are_rejected_and_reported():
     bad_u[200] = [np.inf, 0.0]  # row 201 predicts with it
     ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
     out = ekf.run(bad_u, bad_i)
-    assert np.flatnonzero(out["status"] == pyfoc.STATUS_REJECTED).tolist() == [100, 201]
+    assert np.flatnonzero(out["status"] == pyfoc.Status.REJECTED).tolist() == [100, 201]
     # A rejected row repeats the previous estimate: the state was kept.
     assert out["theta"][100] == out["theta"][99]
     assert out["theta"][201] == out["theta"][200]
     assert np.all(np.isfinite(out["theta"])) and np.all(np.isfinite(ekf.covariance))
     est = ekf.step([np.nan, 0.0], [0.0, 0.0])
-    assert est["status"] == "rejected"
+    assert est["status"] is pyfoc.Status.REJECTED
     before = ekf.state.copy()
     with pytest.raises(pyfoc.FilterError):
         ekf.reset([0.0, 0.0, np.nan, 0.0], np.eye(4))

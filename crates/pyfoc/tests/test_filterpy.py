@@ -1,5 +1,5 @@
 """pyfoc's seed configuration against filterpy's ExtendedKalmanFilter set up as the seed's
-filter (forward Euler, seed Q/R) on the same data: identical to 1e-9 in f64."""
+filter (forward Euler, seed Q/R) on the same data: identical to 1e-14 (relative) in f64."""
 import numpy as np
 import pytest
 
@@ -64,7 +64,7 @@ def run_filterpy(rec):
     return out
 
 
-def test_seed_filter_matches_filterpy_to_1e_9(seed_record):
+def test_seed_filter_matches_filterpy_to_1e_14(seed_record):
     rec = seed_record
     motor = pyfoc.Motor(rs=rec["rs"], ls=rec["ls"], psi_f=rec["psi_f"], pole_pairs=rec["pole_pairs"])
     ekf = pyfoc.Ekf(motor, ts=rec["ts"], q=rec["q"], r=rec["r"], x0=rec["x0"], p0=rec["p0"],
@@ -77,5 +77,7 @@ def test_seed_filter_matches_filterpy_to_1e_9(seed_record):
     diff[:, 3] = np.abs(wrap(ours[:, 3] - ref[:, 3]))
     rel = diff.max(axis=0) / np.abs(ref).max(axis=0)
     print("max relative difference per state vs filterpy:", rel)
-    assert np.all(rel < 1e-9), rel
-    assert np.all(out["status"] != pyfoc.STATUS_REJECTED)
+    # Measured: 6.6e-16 at most (float64 rounding of a different operation order); asserted
+    # with a 15x margin for other platforms' BLAS and libm.
+    assert np.all(rel < 1e-14), rel
+    assert np.all(out["status"] != pyfoc.Status.REJECTED)

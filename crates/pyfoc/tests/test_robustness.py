@@ -88,8 +88,12 @@ def test_constructor_bad_shapes_raise(name, bad):
 
 # --- dtypes -----------------------------------------------------------------------------------
 
-ACCEPTED = [np.float64, np.float32, np.float16, np.int64, np.int8, np.uint16, np.longdouble]
-REFUSED = [np.complex128, np.complex64, object, bool, "U3", "S3", "datetime64[s]", [("a", "f8"), ("b", "f8")]]
+# The dtypes numpy casts to float64 under `same_kind` rules. bool is among them (False/True
+# read as 0/1, as numpy's own arithmetic does); the others would lose data (complex), parse
+# text, or turn dates and objects into numbers, and stay TypeErrors.
+ACCEPTED = [np.float64, np.float32, np.float16, np.int64, np.int8, np.uint16, np.longdouble, bool]
+REFUSED = [np.complex128, np.complex64, object, "U3", "S3", "datetime64[s]", "timedelta64[ms]",
+           [("a", "f8"), ("b", "f8")]]
 
 
 @pytest.mark.parametrize("dtype", ACCEPTED, ids=str)
@@ -176,13 +180,13 @@ def test_non_finite_and_extreme_samples(value, where):
     assert np.all(np.isfinite(f.state)) and np.all(np.isfinite(f.covariance))
     assert np.all(np.isfinite(out["theta"]))
     if not np.isfinite(value):
-        assert pyfoc.STATUS_REJECTED in out["status"]
+        assert pyfoc.Status.REJECTED in out["status"]
 
 
 def test_all_nan_record():
     f = ekf()
     out = f.run(np.full((20, 2), np.nan), np.full((20, 2), np.nan))
-    assert np.all(out["status"] == pyfoc.STATUS_REJECTED)
+    assert np.all(out["status"] == pyfoc.Status.REJECTED)
     assert np.all(f.state == 0.0)
 
 
@@ -190,8 +194,8 @@ def test_all_nan_record():
 def test_non_finite_u_prev(u_prev):
     u, i = good(10)
     out = ekf().run(u, i, u_prev=u_prev)
-    assert out["status"][0] == pyfoc.STATUS_REJECTED
-    assert np.all(out["status"][1:] != pyfoc.STATUS_REJECTED)
+    assert out["status"][0] == pyfoc.Status.REJECTED
+    assert np.all(out["status"][1:] != pyfoc.Status.REJECTED)
 
 
 @pytest.mark.parametrize("name, value", [
@@ -479,6 +483,12 @@ def test_recursive_and_deep_dicts_raise():
     d = scenario_dict()
     d["motor"]["self"] = d
     with pytest.raises((ValueError, RecursionError)):
+        pyfoc.simulate(d)
+    # Inside an internally tagged enum (a load term), serde buffers the whole value: without
+    # the nesting limit this would recurse until the stack overflows.
+    d = scenario_dict()
+    d["load"] = [{"kind": "step", "extra": d}]
+    with pytest.raises(ValueError):
         pyfoc.simulate(d)
     deep = {}
     node = deep
