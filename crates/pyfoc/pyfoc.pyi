@@ -82,6 +82,12 @@ class RunOutput(TypedDict):
     i_alpha: npt.NDArray[np.float64]
     i_beta: npt.NDArray[np.float64]
     nis: npt.NDArray[np.float64]
+    psi_f: npt.NDArray[np.float64]
+    """Tracked flux linkage, Wb (the configured one with tracking="off")."""
+    rs: npt.NDArray[np.float64]
+    """Stator resistance in use, ohm (tracked with tracking="default")."""
+    winding_temperature: npt.NDArray[np.float64]
+    """Winding temperature derived from rs, deg C (20 at the configured rs)."""
     status: npt.NDArray[np.int8]
     """The values of Status."""
 
@@ -92,6 +98,12 @@ class StepOutput(TypedDict):
     i_alpha: float
     i_beta: float
     nis: float
+    psi_f: float
+    """Tracked flux linkage, Wb (the configured one with tracking="off")."""
+    rs: float
+    """Stator resistance in use, ohm (tracked with tracking="default")."""
+    winding_temperature: float
+    """Winding temperature derived from rs, deg C (20 at the configured rs)."""
     status: Status
 
 @final
@@ -100,7 +112,9 @@ class Ekf:
 
     q (4x4 or diagonal), r (2x2 or diagonal), x0 (shape (4,)), p0 (4x4 or diagonal) default to
     the motor- and ts-scaled defaults of ekf-core; x0/p0 describe the estimate one period
-    before the first sample.
+    before the first sample. tracking: "default" tracks the flux linkage online and the
+    resistance by the split filter with the thermal link (ekf-core's ObserverConfig::new),
+    "flux" the flux only (rs fixed), "off" uses the motor's parameters as given.
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -143,6 +157,7 @@ class Ekf:
         discretization: Literal["lag_free", "forward_euler"] = "lag_free",
         dtype: Literal["float64", "float32"] = "float64",
         covariance_update: Literal["joseph", "standard"] = "joseph",
+        tracking: Literal["default", "flux", "off"] = "default",
     ) -> Ekf: ...
     def run(self, u_ab: npt.ArrayLike, i_ab: npt.ArrayLike, *, u_prev: npt.ArrayLike | None = None) -> RunOutput:
         """Filter a record of shape (N, 2) each; continues from the current state (row 0 predicts

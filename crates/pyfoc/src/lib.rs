@@ -11,7 +11,7 @@
 use ekf_core::nalgebra::{Matrix2, Matrix4, Vector4};
 use ekf_core::{
     CovarianceUpdate, Discretization, EkfError, Estimate, Float, MotorParams, ObserverConfig,
-    PmsmObserver, Status,
+    PmsmObserver, RsTracking, Status,
 };
 use std::sync::{Mutex, PoisonError};
 
@@ -190,7 +190,17 @@ enum Observer {
 /// The float outputs of `run` (one `(N,)` float64 array each) and `step` (one float each),
 /// by name; [`outputs`] gives their values in the same order. Adding an output is one name
 /// here and one value there (and a line in `pyfoc.pyi`).
-const OUTPUTS: [&str; 6] = ["theta", "omega", "omega_mech", "i_alpha", "i_beta", "nis"];
+const OUTPUTS: [&str; 9] = [
+    "theta",
+    "omega",
+    "omega_mech",
+    "i_alpha",
+    "i_beta",
+    "nis",
+    "psi_f",
+    "rs",
+    "winding_temperature",
+];
 
 /// The values of [`OUTPUTS`] for an estimate, in f64.
 fn outputs<T: Float + Into<f64>>(e: &Estimate<T>) -> [f64; OUTPUTS.len()] {
@@ -201,6 +211,9 @@ fn outputs<T: Float + Into<f64>>(e: &Estimate<T>) -> [f64; OUTPUTS.len()] {
         e.i_alpha_a.into(),
         e.i_beta_a.into(),
         e.nis.into(),
+        e.psi_f_wb.into(),
+        e.rs_ohm.into(),
+        e.winding_temperature_c.into(),
     ]
 }
 
@@ -335,11 +348,21 @@ fn build<T: Float>(
     p0: Option<[[f64; 4]; 4]>,
     disc: Discretization,
     update: CovarianceUpdate,
+    tracking: Tracking,
 ) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
     let conv = |v: f64| T::from_subset(&v);
     let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
     cfg.discretization = disc;
     cfg.covariance_update = update;
+    match tracking {
+        Tracking::Default => {}
+        Tracking::Flux => {
+            if let Some(t) = &mut cfg.parameter_tracking {
+                t.rs = RsTracking::Fixed;
+            }
+        }
+        Tracking::Off => cfg.parameter_tracking = None,
+    }
     if let Some(q) = q {
         cfg.noise.q = Matrix4::from_fn(|i, j| conv(q[i][j]));
     }
@@ -355,11 +378,23 @@ fn build<T: Float>(
     PmsmObserver::new(&cfg)
 }
 
+/// Online parameter tracking of an [`Ekf`] (`tracking=` argument).
+#[derive(Clone, Copy)]
+enum Tracking {
+    /// `"default"`: the flux tracked, `Rs` by the split filter with the thermal link.
+    Default,
+    /// `"flux"`: the flux tracked, `Rs` fixed.
+    Flux,
+    /// `"off"`: the configured parameters as they are.
+    Off,
+}
+
 #[pymethods]
 impl Ekf {
     #[new]
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
-        discretization = "lag_free", dtype = "float64", covariance_update = "joseph"))]
+        discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
+        tracking = "default"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -371,6 +406,7 @@ impl Ekf {
         discretization: &str,
         dtype: &str,
         covariance_update: &str,
+        tracking: &str,
     ) -> PyResult<Self> {
         if motor.ld != motor.lq {
             return Err(ConfigError::new_err(format!(
@@ -396,6 +432,16 @@ impl Ekf {
                 )));
             }
         };
+        let tracking = match tracking {
+            "default" => Tracking::Default,
+            "flux" => Tracking::Flux,
+            "off" => Tracking::Off,
+            other => {
+                return Err(ConfigError::new_err(format!(
+                    "tracking must be 'default', 'flux' or 'off', got {other:?}"
+                )));
+            }
+        };
         let q = q.map(|o| square::<4>(o, "q")).transpose()?;
         let r = r.map(|o| square::<2>(o, "r")).transpose()?;
         let p0 = p0.map(|o| square::<4>(o, "p0")).transpose()?;
@@ -403,11 +449,15 @@ impl Ekf {
         let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
         let (observer, dtype) = match dtype {
             "float64" => (
-                Observer::F64(build(motor, ts, q, r, x0, p0, disc, update).map_err(cfg_err)?),
+                Observer::F64(
+                    build(motor, ts, q, r, x0, p0, disc, update, tracking).map_err(cfg_err)?,
+                ),
                 "float64",
             ),
             "float32" => (
-                Observer::F32(build(motor, ts, q, r, x0, p0, disc, update).map_err(cfg_err)?),
+                Observer::F32(
+                    build(motor, ts, q, r, x0, p0, disc, update, tracking).map_err(cfg_err)?,
+                ),
                 "float32",
             ),
             other => {
@@ -427,7 +477,8 @@ impl Ekf {
     }
 
     /// Runs the filter over a record; returns a dict of `(N,)` float64 arrays `theta`, `omega`,
-    /// `omega_mech`, `i_alpha`, `i_beta`, `nis` and an int8 array `status` (the values of
+    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`, `psi_f`, `rs`, `winding_temperature` (the
+    /// tracked parameters) and an int8 array `status` (the values of
     /// `pyfoc.Status`). Continues from the filter's current state: row 0
     /// predicts with `u_prev` if given, else with the last row of the previous `run` (zero
     /// for a new filter). The GIL is released while the filter runs.
@@ -467,7 +518,8 @@ impl Ekf {
 
     /// One sample: predicts with `u_prev` (voltage held over the previous period), corrects
     /// with `i` (currents sampled now). Returns a dict of floats (`theta`, `omega`,
-    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`) and `status`, a `pyfoc.Status`
+    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`, `psi_f`, `rs`, `winding_temperature`) and
+    /// `status`, a `pyfoc.Status`
     /// (`REJECTED` for a non-finite sample, in which case the state is unchanged).
     /// Does not change the voltage `run` uses for its next first row.
     fn step<'py>(
