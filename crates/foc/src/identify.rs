@@ -1,5 +1,5 @@
 //! Self-commissioning: measures `Rs`, `Ld`, `Lq`, `psi_f`, the inverter's voltage error and
-//! (optionally) the inertia and viscous friction of a motor the drive knows nothing about.
+//! (optionally) the inertia of a motor the drive knows nothing about.
 //!
 //! [`Identifier::tick`] takes the same [`TickInput`] as [`Foc::tick`](crate::Foc::tick), once
 //! per PWM period, and returns duties; [`identify_period`] is the interrupt body for the
@@ -20,7 +20,7 @@
 //! | [`IdentifyStep::InductanceD`] | `Ld` | the DC voltage held, plus a sinusoidal voltage along d; the current's response at the injection frequency, demodulated over whole periods, fitted to the exact zero-order-hold model of the RL circuit with the computation delay, `i[k+1] = a i[k] + b u[k-d]`: `L = Ts (1 - a) / (b (-ln a))` |
 //! | [`IdentifyStep::InductanceQ`] | `Lq` | the same along q (the DC d current holds the rotor); at two frequencies `w` and `w/2`, so that the rotor's small oscillation (an apparent `-K/w^2` in `L`) is extrapolated away: `Lq = (4 L(w) - L(w/2)) / 3` |
 //! | [`IdentifyStep::Spin`] | `psi_f` | I/f: the test current along a frame that turns with a jerk-limited ramp to `spin_speed_rad_s`; at constant speed the mean frame voltage gives the active-flux EMF `E = u - (Rs + j w Lq) i` (dead-time voltage removed), `|E| = w (psi_f + (Ld - Lq) i_d)`, its angle the load angle and so `i_d` |
-//! | [`IdentifyStep::Inertia`] | `J`, `B` (optional) | the frame accelerates to 1.4 x the spin speed and back at the same rate; the torque (from the load angle) up minus down is `2 J a` whatever the friction; `B` from the torque at constant speed |
+//! | [`IdentifyStep::Inertia`] | `J` (optional) | the frame accelerates to 1.4 x the spin speed and back at the same rate; the torque (from the load angle) up minus down is `2 J a` whatever the friction (friction itself, a load angle of a fraction of a degree, is below what the EMF angle resolves, and not reported) |
 //!
 //! The standstill steps take about 0.8 s with the default durations, the spin about 1.2 s
 //! (1.7 s with the inertia).
@@ -485,8 +485,6 @@ pub struct Identified {
     pub inverter_voltage_error_v: f32,
     /// Inertia, kg m^2 (`None` unless measured).
     pub j_kg_m2: Option<f32>,
-    /// Viscous friction, N m s/rad on the mechanical speed (with the inertia).
-    pub b_nm_s_rad: Option<f32>,
     /// Current-sensor offsets removed, A (phases a and b, or alpha and beta).
     pub current_offsets_a: [f32; 2],
     /// Ticks spent in each step of [`IdentifyStep::ALL`].
@@ -673,10 +671,8 @@ pub struct Identifier {
     lq_hf: f32,
     psi: Option<f32>,
     j: Option<f32>,
-    b: Option<f32>,
     u_hold: f32,
     hf_u: f32,
-    torque_0: f32,
     torque_up: f32,
     mv: Move,
     u_lim: f32,
@@ -735,10 +731,8 @@ impl Identifier {
             lq_hf: 0.0,
             psi: None,
             j: None,
-            b: None,
             u_hold: 0.0,
             hf_u: 0.0,
-            torque_0: 0.0,
             torque_up: 0.0,
             mv: Move::default(),
             u_lim: 0.0,
@@ -826,7 +820,6 @@ impl Identifier {
             psi_f_wb: self.psi,
             inverter_voltage_error_v: self.v_err,
             j_kg_m2: self.j,
-            b_nm_s_rad: self.b,
             current_offsets_a: self.offsets,
             step_ticks: self.step_ticks,
             ticks: self.tick,
@@ -1324,11 +1317,12 @@ impl Identifier {
     /// The active-flux EMF `E = u - (Rs + j w Lq) i - dead-time voltage` in the frame.
     fn emf(&self, u: (f32, f32), i: (f32, f32)) -> (f32, f32) {
         let imag = sqrt(i.0 * i.0 + i.1 * i.1).max(1e-6);
-        // Fundamental of the dead-time error along the current: 3/pi of its DC value.
+        // The bridge loses the dead-time voltage along the current (the command includes
+        // it): its fundamental is 3/pi of the DC value measured along a phase axis.
         let k = 3.0 / PI * self.v_err / imag;
         (
-            u.0 - self.rs * i.0 + self.omega * self.lq * i.1 + k * i.0,
-            u.1 - self.rs * i.1 - self.omega * self.lq * i.0 + k * i.1,
+            u.0 - self.rs * i.0 + self.omega * self.lq * i.1 - k * i.0,
+            u.1 - self.rs * i.1 - self.omega * self.lq * i.0 - k * i.1,
         )
     }
 
@@ -1440,8 +1434,6 @@ impl Identifier {
                             });
                         }
                         self.j = Some(j);
-                        let w_m = self.cfg.spin_speed_rad_s / self.cfg.pole_pairs as f32;
-                        self.b = Some(self.torque_0 / w_m);
                         done = true;
                     }
                 }
@@ -1502,7 +1494,6 @@ impl Identifier {
             });
         }
         self.psi = Some(psi);
-        self.torque_0 = self.torque(psi, i_r);
         Ok(())
     }
 }

@@ -61,9 +61,6 @@ pub struct MotorValues {
     /// Inertia, kg m^2.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub j_kg_m2: Option<f64>,
-    /// Viscous friction, N m s/rad.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub b_nm_s_rad: Option<f64>,
     /// Inverter voltage error along the phase-a axis at the test current, V (true:
     /// `4/3 t_dead / Ts u_dc`, the simulator's dead-time model).
     pub inverter_voltage_error_v: f64,
@@ -149,7 +146,6 @@ fn values(m: &crate::plant::MotorModel, v_err: f64) -> MotorValues {
         lq_h: m.lq_h,
         psi_f_wb: Some(m.psi_f_wb),
         j_kg_m2: Some(m.j_kg_m2),
-        b_nm_s_rad: Some(m.b_nm_s_rad),
         inverter_voltage_error_v: v_err,
     }
 }
@@ -161,7 +157,6 @@ fn identified_values(r: &Identified) -> MotorValues {
         lq_h: f64::from(r.lq_h),
         psi_f_wb: r.psi_f_wb.map(f64::from),
         j_kg_m2: r.j_kg_m2.map(f64::from),
-        b_nm_s_rad: r.b_nm_s_rad.map(f64::from),
         inverter_voltage_error_v: f64::from(r.inverter_voltage_error_v),
     }
 }
@@ -182,7 +177,6 @@ fn errors(id: &MotorValues, t: &MotorValues) -> MotorValues {
         lq_h: pct(id.lq_h, t.lq_h),
         psi_f_wb: opt(id.psi_f_wb, t.psi_f_wb),
         j_kg_m2: opt(id.j_kg_m2, t.j_kg_m2),
-        b_nm_s_rad: opt(id.b_nm_s_rad, t.b_nm_s_rad),
         inverter_voltage_error_v: pct(id.inverter_voltage_error_v, t.inverter_voltage_error_v),
     }
 }
@@ -435,6 +429,13 @@ pub fn with_identified(scenario: &Scenario, report: &IdentifyReport) -> Result<S
     Ok(sc)
 }
 
+/// Plug and spin: [`identify`] (no log, no plot), then [`with_identified`].
+pub fn plug_and_spin(scenario: &Scenario) -> Result<(Scenario, IdentifyReport), SimError> {
+    let report = identify(scenario, &IdentifyOptions::default())?;
+    let sc = with_identified(scenario, &report)?;
+    Ok((sc, report))
+}
+
 /// The report as a table: true vs identified with % errors, then the step times.
 pub fn table(r: &IdentifyReport) -> String {
     use std::fmt::Write;
@@ -449,7 +450,7 @@ pub fn table(r: &IdentifyReport) -> String {
         "quantity", "true", "identified", "error %"
     );
     let t = &r.truth;
-    let rows: [(&str, f64, Option<f64>, Option<f64>); 7] = {
+    let rows: [(&str, f64, Option<f64>, Option<f64>); 6] = {
         let id = r.identified.as_ref();
         let e = r.errors_pct.as_ref();
         [
@@ -467,12 +468,6 @@ pub fn table(r: &IdentifyReport) -> String {
                 t.j_kg_m2.unwrap_or(f64::NAN),
                 id.and_then(|v| v.j_kg_m2),
                 e.and_then(|v| v.j_kg_m2),
-            ),
-            (
-                "B (N m s/rad)",
-                t.b_nm_s_rad.unwrap_or(f64::NAN),
-                id.and_then(|v| v.b_nm_s_rad),
-                e.and_then(|v| v.b_nm_s_rad),
             ),
             (
                 "inverter voltage error (V)",
