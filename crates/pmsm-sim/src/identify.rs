@@ -19,7 +19,7 @@
 
 use std::path::{Path, PathBuf};
 
-use foc::{IdentifyConfig, IdentifyStep, Identified, Identifier, TickInput};
+use foc::{Identified, Identifier, IdentifyConfig, IdentifyStep, TickInput};
 use serde::Serialize;
 
 use crate::SimError;
@@ -31,9 +31,7 @@ use crate::plant::{Plant, PlantState};
 use crate::plot::PlotSink;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use crate::sensors::CurrentSensor;
-use crate::sim::{
-    ControlRecord, InverterRecord, Measured, Sample, SampleSink, Truth,
-};
+use crate::sim::{ControlRecord, InverterRecord, Measured, Sample, SampleSink, Truth};
 
 /// Outputs of [`identify`].
 #[derive(Clone, Debug, Default)]
@@ -134,8 +132,12 @@ pub fn identify_config(scenario: &Scenario) -> Result<IdentifyConfig, SimError> 
     cfg = cfg.with_spin(w_spin, w_spin / 0.4);
     cfg.measure_inertia = true;
     cfg.pole_pairs = scenario.motor.pole_pairs;
-    cfg.validate()
-        .map_err(|e| err("controller", format!("identification settings refused: {e}")))?;
+    cfg.validate().map_err(|e| {
+        err(
+            "controller",
+            format!("identification settings refused: {e}"),
+        )
+    })?;
     Ok(cfg)
 }
 
@@ -413,7 +415,10 @@ pub fn with_identified(scenario: &Scenario, report: &IdentifyReport) -> Result<S
             t_s: report.total_time_s,
             reason: format!(
                 "identification failed: {}",
-                report.error.as_deref().unwrap_or("no flux linkage measured")
+                report
+                    .error
+                    .as_deref()
+                    .unwrap_or("no flux linkage measured")
             ),
         })?;
     let mut sc = scenario.clone();
@@ -454,7 +459,12 @@ pub fn table(r: &IdentifyReport) -> String {
         let id = r.identified.as_ref();
         let e = r.errors_pct.as_ref();
         [
-            ("Rs (ohm)", t.rs_ohm, id.map(|v| v.rs_ohm), e.map(|v| v.rs_ohm)),
+            (
+                "Rs (ohm)",
+                t.rs_ohm,
+                id.map(|v| v.rs_ohm),
+                e.map(|v| v.rs_ohm),
+            ),
             ("Ld (H)", t.ld_h, id.map(|v| v.ld_h), e.map(|v| v.ld_h)),
             ("Lq (H)", t.lq_h, id.map(|v| v.lq_h), e.map(|v| v.lq_h)),
             (
