@@ -930,7 +930,7 @@ impl Identifier {
             let m = self.sums.mean();
             let lim = 0.2 * self.cfg.test_current_a;
             for v in [m[0], m[1]] {
-                if !(v.abs() <= lim) {
+                if v.is_nan() || v.abs() > lim {
                     return Err(IdentifyError::Implausible {
                         quantity: Quantity::CurrentOffset,
                         value: v,
@@ -1055,7 +1055,7 @@ impl Identifier {
         (c * v.alpha + s * v.beta, -s * v.alpha + c * v.beta)
     }
 
-    fn from_frame(&self, d: f32, q: f32) -> AlphaBeta {
+    fn frame_to_ab(&self, d: f32, q: f32) -> AlphaBeta {
         let (s, c) = self.frame_sc;
         AlphaBeta {
             alpha: c * d - s * q,
@@ -1069,7 +1069,7 @@ impl Identifier {
         let lim = self.u_lim;
         let u_d = self.pi_d.step(i_ref - i_d, 0.0, -lim, lim);
         self.check_saturation(u_d.abs() >= 0.999 * lim, i_d, i_ref)?;
-        Ok(self.from_frame(u_d, 0.0))
+        Ok(self.frame_to_ab(u_d, 0.0))
     }
 
     fn check_saturation(
@@ -1184,9 +1184,9 @@ impl Identifier {
         let (s, c) = sin_cos(TAU * (k % n_hf) as f32 / n_hf as f32);
         let u_x = self.hf_u * c;
         let u = if q {
-            self.from_frame(self.u_hold, u_x)
+            self.frame_to_ab(self.u_hold, u_x)
         } else {
-            self.from_frame(self.u_hold + u_x, 0.0)
+            self.frame_to_ab(self.u_hold + u_x, 0.0)
         };
         let (i_d, i_q) = self.to_frame(i_ab);
         let i_x = if q { i_q } else { i_d };
@@ -1346,10 +1346,10 @@ impl Identifier {
         let i_f = self.cfg.spin_current_a;
         // Frame speed for this tick.
         let k = self.n - 1;
-        let moving = match (self.step, self.phase) {
-            (IdentifyStep::Spin, 0) | (IdentifyStep::Inertia, 0 | 1) => true,
-            _ => false,
-        };
+        let moving = matches!(
+            (self.step, self.phase),
+            (IdentifyStep::Spin, 0) | (IdentifyStep::Inertia, 0 | 1)
+        );
         if moving {
             self.omega += self.mv.accel_at(k) * ts;
         }
@@ -1376,18 +1376,16 @@ impl Identifier {
         let e = self.emf((u_d, u_q), (i_d, i_q));
         let mut done = false;
         match (self.step, self.phase) {
-            (IdentifyStep::Spin, 0) => {
-                if k + 1 >= self.mv.len() {
-                    self.omega = self.cfg.spin_speed_rad_s;
-                    self.next_phase();
-                }
+            (IdentifyStep::Spin, 0) if k + 1 >= self.mv.len() => {
+                self.omega = self.cfg.spin_speed_rad_s;
+                self.next_phase();
             }
-            (IdentifyStep::Spin, 1) => {
-                if self.n >= ticks(self.cfg.spin_settle_time_s, ts) {
-                    self.next_phase();
-                    self.quarter = [Sums::default(); 4];
-                }
+            (IdentifyStep::Spin, 0) => {}
+            (IdentifyStep::Spin, 1) if self.n >= ticks(self.cfg.spin_settle_time_s, ts) => {
+                self.next_phase();
+                self.quarter = [Sums::default(); 4];
             }
+            (IdentifyStep::Spin, 1) => {}
             (IdentifyStep::Spin, _) => {
                 let len = ticks(self.cfg.spin_measure_time_s, ts);
                 let qi = ((k * 4) / len).min(3) as usize;
@@ -1468,11 +1466,11 @@ impl Identifier {
         let w = self.cfg.spin_speed_rad_s;
         let i_f = self.cfg.spin_current_a;
         let floor = 0.1 * (self.rs * i_f + w * self.ld.max(self.lq) * i_f);
-        if !(e_mag > floor) {
+        if e_mag.is_nan() || e_mag <= floor {
             return Err(IdentifyError::RotorLocked { emf_v: e_mag });
         }
         let g = Self::load_angle(e);
-        if !(g.abs() < 1.3) {
+        if g.is_nan() || g.abs() >= 1.3 {
             return Err(IdentifyError::LostSync { load_angle_rad: g });
         }
         // Each quarter of the window must see the same EMF (a rotor that slips or jams
@@ -1545,7 +1543,8 @@ mod tests {
     fn bad_settings_are_typed_errors() {
         let ok = IdentifyConfig::new(1e-4, 300.0, 2.0).with_spin(200.0, 500.0);
         assert!(Identifier::new(&ok).is_ok());
-        let cases: [(&str, fn(&mut IdentifyConfig)); 8] = [
+        type Edit = fn(&mut IdentifyConfig);
+        let cases: [(&str, Edit); 8] = [
             ("ts_s", |c| c.ts_s = f32::NAN),
             ("test_current_a", |c| c.test_current_a = -1.0),
             ("over_current_a", |c| c.over_current_a = 2.0),

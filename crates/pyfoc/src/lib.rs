@@ -22,6 +22,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyModule};
 
 mod convert;
+mod identify;
 mod simulate;
 mod suite;
 mod tune;
@@ -522,6 +523,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tune::tune_qr, m)?)?;
     m.add_function(wrap_pyfunction!(tune::tune_qr_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(suite::suite, m)?)?;
+    m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
