@@ -9,6 +9,7 @@ pub mod deadtime;
 pub mod fault;
 pub mod hal;
 pub mod health;
+pub mod identify;
 pub mod pi;
 pub mod startup;
 pub mod svpwm;
@@ -25,6 +26,10 @@ pub use controller::{
 pub use deadtime::DeadTimeCompensation;
 pub use fault::{Fault, FaultInfo};
 pub use health::{HealthReport, LossReason};
+pub use identify::{
+    Identified, Identifier, IdentifyConfig, IdentifyConfigError, IdentifyError, IdentifyFailure,
+    IdentifyOutput, IdentifyStep, identify_period,
+};
 pub use pi::{Pi, PiGains};
 pub use startup::State;
 pub use svpwm::{Modulation, SAFE_DUTIES, duties_to_alpha_beta, svpwm};

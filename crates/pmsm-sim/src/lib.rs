@@ -7,6 +7,7 @@ mod error;
 pub mod fault_suite;
 pub mod faults;
 pub mod foc_drive;
+pub mod identify;
 pub mod inverter;
 pub mod mcap_log;
 pub mod metrics;

@@ -95,6 +95,22 @@ enum Command {
         #[arg(long, default_value_t = 2.0)]
         t_end: f64,
     },
+    /// Self-commissioning: identify the scenario's motor (Rs, Ld, Lq, psi_f, J, inverter
+    /// voltage error) from standstill and a short spin; true vs identified table, MCAP log
+    /// and SVG plot in <out> (default out/<scenario name>/).
+    Identify {
+        /// Scenario file or preset name (default: "default").
+        scenario: Option<String>,
+        /// Print one JSON object on stdout (paths go to stderr).
+        #[arg(long)]
+        json: bool,
+        /// Override the scenario's random seed.
+        #[arg(long)]
+        seed: Option<u64>,
+        /// Output directory.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
     Tune(pmsm_sim::tune::TuneArgs),
@@ -120,6 +136,10 @@ struct RunArgs {
     /// Override the scenario's duration, s.
     #[arg(long)]
     duration: Option<f64>,
+    /// Plug and spin: identify the motor first, then run sensorless (foc) with the
+    /// identified parameters only (the true ones stay in the plant).
+    #[arg(long)]
+    identify: bool,
     /// Do not run the seed filter alongside.
     #[arg(long)]
     no_seed_filter: bool,
@@ -196,6 +216,12 @@ fn main() -> ExitCode {
             t_fault,
             t_end,
         }) => faults_command(&out, t_fault, t_end),
+        Some(Command::Identify {
+            scenario,
+            json,
+            seed,
+            out,
+        }) => identify_command(scenario.as_deref(), json, seed, out),
         Some(Command::Tune(args)) => Ok(args.run()),
     };
     match result {
@@ -264,6 +290,37 @@ fn out_err(path: &Path, e: impl std::fmt::Display) -> SimError {
     }
 }
 
+/// `pmsm-sim identify`: exit 0 when identified, 1 when the sequence stopped with an error.
+fn identify_command(
+    what: Option<&str>,
+    json: bool,
+    seed: Option<u64>,
+    out: Option<PathBuf>,
+) -> Result<ExitCode, SimError> {
+    use pmsm_sim::identify::{IdentifyOptions, identify, output_paths, table};
+    let scenario = load(what.unwrap_or("default"))?;
+    let dir = out.unwrap_or_else(|| Path::new("out").join(dir_name(&scenario.name)));
+    std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
+    let (mcap, svg) = output_paths(&dir);
+    let opts = IdentifyOptions {
+        mcap: Some(mcap),
+        svg: Some(svg),
+        seed,
+    };
+    let r = identify(&scenario, &opts)?;
+    if json {
+        let text = pmsm_sim::identify::json(&r).map_err(|e| out_err(&dir, e))?;
+        println!("{text}");
+    } else {
+        print!("{}", table(&r));
+    }
+    Ok(if r.ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
 fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError> {
     let mut scenario = load(what.unwrap_or("default"))?;
     if let Some(seed) = args.seed {
@@ -274,6 +331,11 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     }
     if args.no_seed_filter {
         scenario.observer.seed_filter = false;
+    }
+    if args.identify {
+        let (sc, report) = pmsm_sim::identify::plug_and_spin(&scenario)?;
+        eprint!("{}", pmsm_sim::identify::table(&report));
+        scenario = sc;
     }
     scenario.validate().map_err(|e| SimError::Scenario {
         file: what.unwrap_or("preset default").to_string(),

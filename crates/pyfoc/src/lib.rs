@@ -23,6 +23,7 @@ use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyModule};
 
 mod convert;
+mod identify;
 mod simulate;
 mod suite;
 mod tune;
@@ -599,6 +600,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tune::tune_qr, m)?)?;
     m.add_function(wrap_pyfunction!(tune::tune_qr_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(suite::suite, m)?)?;
+    m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
