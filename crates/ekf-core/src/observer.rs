@@ -154,11 +154,13 @@ pub struct Estimate<T> {
     pub covariance_reset: bool,
     /// Tracked permanent-magnet flux linkage, Wb (the configured value when tracking is off).
     pub psi_f_wb: T,
-    /// Standard deviation of the tracked flux linkage, Wb (0 when tracking is off).
+    /// Standard deviation of the tracked flux linkage, Wb (0 when tracking is off; refreshed
+    /// every 64 samples).
     pub psi_f_sigma_wb: T,
     /// Tracked stator resistance, ohm (the configured value when tracking is off).
     pub rs_ohm: T,
-    /// Standard deviation of the tracked resistance, ohm (0 when tracking is off).
+    /// Standard deviation of the tracked resistance, ohm (0 when it is not tracked; refreshed
+    /// every 64 samples).
     pub rs_sigma_ohm: T,
     /// Winding temperature derived from the tracked resistance, deg C:
     /// `T_ref + (Rs_hat / Rs_ref - 1) / alpha_cu` (the reference temperature when tracking is
@@ -286,27 +288,38 @@ impl<T: Float> PmsmObserver<T> {
             }
             // All four finite but their sum overflows: absurd, yet valid input; go on.
         }
-        let (xm, pm, tm) = self.prior(u_prev);
-        self.correct_prior(xm, pm, tm, i)
+        // Two monomorphic paths: the one without tracking carries none of its code.
+        if self.tracker.is_some() {
+            let (xm, pm, tm) = self.prior::<true>(u_prev);
+            self.correct_prior::<true>(xm, pm, tm, i)
+        } else {
+            let (xm, pm, _) = self.prior::<false>(u_prev);
+            self.correct_prior::<false>(xm, pm, None, i)
+        }
     }
 
-    /// The prediction `(x-, P-)` and, with tracking, the prior of the tracked parameters.
+    /// The prediction `(x-, P-)` and, with tracking (`TRACK`, the tracker present), the prior
+    /// of the tracked parameters (nothing is stored here).
     #[inline(always)]
-    fn prior(&mut self, u_prev: [T; 2]) -> (Vector4<T>, Sym4<T>, Option<Tracker<T>>) {
+    fn prior<const TRACK: bool>(
+        &self,
+        u_prev: [T; 2],
+    ) -> (Vector4<T>, Sym4<T>, Option<Tracker<T>>) {
         let q = self.model.q_sym();
-        match &mut self.tracker {
-            None => {
-                let (xm, pm, _) =
-                    structured::predict(self.model.discrete(), q, &self.x, &self.p, u_prev);
-                (xm, pm, None)
-            }
-            Some(tr) => {
+        match &self.tracker {
+            Some(tr) if TRACK => {
+                let mut tr = *tr;
                 let active =
                     tr.should_track(self.p.p33 <= self.angle_var_limit, self.x[2], self.p.p22);
                 let disc = self.model.discrete_at(tr.psi, tr.rs);
                 let (xm, mut pm, t) = structured::predict(&disc, q, &self.x, &self.p, u_prev);
-                let tm = tr.predict(&disc, &t, &mut pm, active);
+                let tm = tr.predict(&disc, &t, &self.x, &mut pm, active);
                 (xm, pm, Some(tm))
+            }
+            _ => {
+                let (xm, pm, _) =
+                    structured::predict(self.model.discrete(), q, &self.x, &self.p, u_prev);
+                (xm, pm, None)
             }
         }
     }
@@ -318,7 +331,11 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p, tm) = self.prior(u_prev);
+        let (x, p, tm) = if self.tracker.is_some() {
+            self.prior::<true>(u_prev)
+        } else {
+            self.prior::<false>(u_prev)
+        };
         if !(finite(x.as_slice()) && p.all_finite() && tm.is_none_or(|t| t.finite())) {
             if self.refused_resets() {
                 self.events = Events::default();
@@ -348,13 +365,17 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        self.correct_prior(self.x, self.p, self.tracker, i)
+        if self.tracker.is_some() {
+            self.correct_prior::<true>(self.x, self.p, self.tracker, i)
+        } else {
+            self.correct_prior::<false>(self.x, self.p, None, i)
+        }
     }
 
     /// Correction of the prior `(xm, pm)` with the currents `i`, innovation gate, branch check
     /// and covariance health (module docs).
     #[inline(always)]
-    fn correct_prior(
+    fn correct_prior<const TRACK: bool>(
         &mut self,
         xm: Vector4<T>,
         pm: Sym4<T>,
@@ -377,17 +398,17 @@ impl<T: Float> PmsmObserver<T> {
         });
         let (post, tn) = match outcome {
             Ok(Outcome::Updated(post)) => match &tm {
-                None => (post, None),
-                Some(t) => match t.correct(&post) {
+                Some(t) if TRACK => match t.correct(&post) {
                     Some(tn) => (post, Some(tn)),
                     None => return self.refused(EkfError::NonFiniteResult, i),
                 },
+                _ => (post, None),
             },
             Ok(Outcome::Skipped(c)) => {
                 // Rejected by the gate: the step is the prediction only.
                 self.x = xm;
                 self.p = pm;
-                if tm.is_some() {
+                if TRACK && tm.is_some() {
                     self.tracker = tm;
                 }
                 self.last = c;
@@ -405,7 +426,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = post.p;
-        if tn.is_some() {
+        if TRACK && tn.is_some() {
             self.tracker = tn;
         }
         self.last = c;
@@ -588,9 +609,9 @@ impl<T: Float> PmsmObserver<T> {
             match &self.tracker {
                 Some(t) => (
                     t.psi,
-                    t.c_pp.sqrt(),
+                    t.psi_sigma,
                     t.rs,
-                    t.rs_sigma(),
+                    t.rs_sigma,
                     t.winding_temperature_c(),
                     t.active,
                 ),

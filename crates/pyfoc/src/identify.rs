@@ -1,7 +1,7 @@
 //! `pyfoc.identify`: self-commissioning of a scenario's motor (`pmsm_sim::identify`).
 
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyMapping};
+use pyo3::types::PyDict;
 
 use crate::simulate::scenario_of;
 use crate::{PyfocError, SimulationError};
@@ -30,12 +30,8 @@ pub(crate) fn identify<'py>(
     let report = py
         .detach(|| pmsm_sim::identify::identify(&sc, &opts))
         .map_err(|e| SimulationError::new_err(e.to_string()))?;
-    let json = serde_json::to_string(&report).map_err(|e| PyfocError::new_err(e.to_string()))?;
-    let d = PyDict::new(py);
-    d.update(
-        py.import("json")?
-            .call_method1("loads", (json,))?
-            .cast::<PyMapping>()?,
-    )?;
+    let d = pythonize::pythonize(py, &report)
+        .map_err(|e| PyfocError::new_err(e.to_string()))?
+        .cast_into::<PyDict>()?;
     Ok(d)
 }

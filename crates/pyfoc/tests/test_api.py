@@ -83,7 +83,8 @@ def test_run_tracks_and_output_layout():
     u, i, th = record()
     ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
     out = ekf.run(u, i)
-    assert set(out) == {"theta", "omega", "omega_mech", "i_alpha", "i_beta", "nis", "status"}
+    assert set(out) == {"theta", "omega", "omega_mech", "i_alpha", "i_beta", "nis", "psi_f", "rs",
+                        "winding_temperature", "status"}
     assert all(v.shape == (len(u),) for v in out.values())
     assert out["status"].dtype == np.int8
     err = np.degrees(np.angle(np.exp(1j * (out["theta"] - th))))
@@ -214,3 +215,24 @@ def test_threads_each_get_a_result():
     for t in threads:
         t.join()
     assert len(outcomes) == 4 and "ok" in outcomes
+
+
+def test_tracking_outputs_follow_a_mismatched_flux():
+    """Told a flux 10 % high, the default Ekf tracks the true one; tracking="off" keeps the told
+    one and its angle is biased by several degrees."""
+    u, i, th = record(8000)
+    told = dict(SERVO, psi_f=SERVO["psi_f"] * 1.1)
+    out = pyfoc.Ekf(pyfoc.Motor(**told), ts=1e-4).run(u, i)
+    np.testing.assert_allclose(out["psi_f"][-1], SERVO["psi_f"], rtol=0.01)
+    assert np.all(out["rs"] > 0) and np.all(np.isfinite(out["winding_temperature"]))
+    err = np.degrees(np.angle(np.exp(1j * (out["theta"] - th))))
+    off = pyfoc.Ekf(pyfoc.Motor(**told), ts=1e-4, tracking="off").run(u, i)
+    err_off = np.degrees(np.angle(np.exp(1j * (off["theta"] - th))))
+    assert np.all(off["psi_f"] == told["psi_f"])
+    rms = np.sqrt(np.mean(err[6000:] ** 2))
+    rms_off = np.sqrt(np.mean(err_off[6000:] ** 2))
+    assert rms < 0.5 and rms_off > 3.0, (rms, rms_off)
+    step = pyfoc.Ekf(pyfoc.Motor(**told), ts=1e-4, tracking="flux").step(u[0], i[0])
+    assert step["psi_f"] == told["psi_f"] and step["rs"] == SERVO["rs"]
+    with pytest.raises(pyfoc.ConfigError):
+        pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, tracking="rs")

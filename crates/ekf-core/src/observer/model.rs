@@ -69,6 +69,9 @@ pub(crate) struct TransitionTerms<T> {
     /// `d i_a- / d psi_f`, `d i_b- / d psi_f` (the EMF term per weber).
     pub ea_psi: T,
     pub eb_psi: T,
+    /// `sin th`, `cos th` of the start-of-period angle.
+    pub sin_th: T,
+    pub cos_th: T,
 }
 
 impl<T: Float> PmsmModel<T> {
@@ -212,6 +215,8 @@ impl<T: Float> Discrete<T> {
             eb_w: c * (s * mp_im - co * mp_re),
             ea_psi: self.inv_ls * ua,
             eb_psi: self.inv_ls * ub,
+            sin_th: s,
+            cos_th: co,
         }
     }
 

@@ -69,6 +69,8 @@
 //! `T = T_ref + (Rs_hat / Rs_ref - 1) / alpha_cu` with the configured `Rs` taken at `T_ref`
 //! and copper's `alpha_cu = 0.00393 / K` by default ([`Estimate::winding_temperature_c`](super::Estimate::winding_temperature_c)).
 
+use nalgebra::Vector4;
+
 use super::config::non_negative;
 use super::model::{Discrete, TransitionTerms};
 use crate::motor::positive;
@@ -269,6 +271,11 @@ pub(super) struct Tracker<T> {
     pub settled: u32,
     /// Low-pass of the speed estimate (steadiness test), rad/s.
     pub w_lp: T,
+    /// Reported standard deviations of `psi_f` and `Rs` (refreshed every 64 steps) and the
+    /// steps since.
+    pub psi_sigma: T,
+    pub rs_sigma: T,
+    pub since_sigma: u32,
     /// The split filter, if on.
     pub split: Option<Split<T>>,
     pub k: TrackerConstants<T>,
@@ -392,6 +399,13 @@ impl<T: Float> Tracker<T> {
             active: false,
             settled: 0,
             w_lp: T::zero(),
+            psi_sigma: k.var0_psi.sqrt(),
+            rs_sigma: if split.is_some() {
+                k.var0_rs.sqrt()
+            } else {
+                T::zero()
+            },
+            since_sigma: 0,
             split,
             k,
         }
@@ -422,29 +436,55 @@ impl<T: Float> Tracker<T> {
     }
 
     /// The tracker's part of the prediction (module docs): returns the prior tracker and
-    /// adds the flux's terms to the prior `P-` of the state. `t` holds the step's EMF terms.
+    /// adds the flux's terms to the prior `P-` of the state. `t` holds the step's EMF terms,
+    /// `x` is the posterior the step starts from. While active, also one sample of the split
+    /// filter's window (and its update at the window's end).
     #[inline(always)]
     pub fn predict(
         &self,
         disc: &Discrete<T>,
         t: &TransitionTerms<T>,
+        x: &Vector4<T>,
         pm: &mut Sym4<T>,
         active: bool,
     ) -> Self {
+        let mut base = *self;
+        // The standard deviations reported, refreshed every 64 steps (two square roots, a
+        // library call each on the MCU).
+        base.since_sigma += 1;
+        if base.since_sigma >= 64 {
+            base.refresh_sigmas();
+        }
+        if let Some(s) = &mut base.split
+            && active
+        {
+            // One sample of the split filter's window: the flux, i_q and w at the start of
+            // the period (the posterior the prediction starts from).
+            s.sum_psi += self.psi;
+            s.sum_iq += x[1] * t.cos_th - x[0] * t.sin_th;
+            s.sum_w += x[2];
+            s.n += 1;
+            if s.n >= s.window
+                && let Some(rs) = s.update(self.rs, self.c_pp, &self.k)
+            {
+                base.rs = rs;
+            }
+        }
+        let this = &base;
         if !active {
             // Frozen: the flux is a known constant for this step (the 4-state filter
             // exactly, at the frozen value); its correlation with the state is dropped.
             return Self {
                 x: [T::zero(); 4],
                 active,
-                ..*self
+                ..*this
             };
         }
         let d = disc.decay;
         // Jacobian column of psi_f (current rows): the EMF term per weber.
         let (g0, g1) = (t.ea_psi, t.eb_psi);
-        let c = self.c_pp;
-        let xo = &self.x;
+        let c = this.c_pp;
+        let xo = &this.x;
         // X- = Phi4 X + Gamma c.
         let xm = [
             d * xo[0] + t.ea_w * xo[2] + t.ea_th * xo[3] + g0 * c,
@@ -465,19 +505,26 @@ impl<T: Float> Tracker<T> {
             x: xm,
             active,
             // Process noise, not above the ceiling (the variance stays bounded).
-            c_pp: if c < self.k.var0_psi {
-                c + self.k.q_psi
+            c_pp: if c < this.k.var0_psi {
+                c + this.k.q_psi
             } else {
                 c
             },
-            ..*self
+            ..*this
         }
     }
 
+    /// Recomputes the reported standard deviations.
+    #[cold]
+    #[inline(never)]
+    fn refresh_sigmas(&mut self) {
+        self.since_sigma = 0;
+        self.psi_sigma = self.c_pp.sqrt();
+        self.rs_sigma = self.split.map_or(T::zero(), |s| s.c11.sqrt());
+    }
+
     /// The tracker's part of the correction of the prior `self` with the posterior `post` of
-    /// the state (its gain and `S^-1`), and the split filter's window (with the step's
-    /// `sin`, `cos` of the angle the currents `ia`, `ib` are at). `None` if a result is not
-    /// finite.
+    /// the state (its gain and `S^-1`). `None` if a result is not finite.
     #[inline(always)]
     pub fn correct(&self, post: &Posterior<T>) -> Option<Self> {
         if !self.active {
@@ -500,25 +547,12 @@ impl<T: Float> Tracker<T> {
         let c = self.c_pp - (kp0 * l0 + kp1 * l1);
         // Rounding must not leave the variance non-positive.
         let floor = T::default_epsilon() * k.var0_psi;
-        let mut next = Self {
+        let next = Self {
             x,
             psi,
             c_pp: if c > floor { c } else { floor },
             ..*self
         };
-        if let Some(s) = &mut next.split {
-            // One sample of the window: the lumped flux, i_q and w of the posterior.
-            let (sn, cs) = post.x[3].sin_cos_angle();
-            s.sum_psi += psi;
-            s.sum_iq += post.x[1] * cs - post.x[0] * sn;
-            s.sum_w += post.x[2];
-            s.n += 1;
-            if s.n >= s.window
-                && let Some(rs) = s.update(self.rs, next.c_pp, k)
-            {
-                next.rs = rs;
-            }
-        }
         next.finite().then_some(next)
     }
 
@@ -570,11 +604,7 @@ impl<T: Float> Tracker<T> {
         }
         self.active = false;
         self.settled = 0;
-    }
-
-    /// Standard deviation of `Rs`, ohm (0 when it is fixed).
-    pub fn rs_sigma(&self) -> T {
-        self.split.map_or(T::zero(), |s| s.c11.sqrt())
+        self.refresh_sigmas();
     }
 
     /// Winding temperature from the tracked `Rs`, deg C.
