@@ -18,6 +18,7 @@ __all__ = [
     "Motor",
     "Ekf",
     "simulate",
+    "identify",
     "tune_qr",
     "tune_qr_mcap",
     "suite",
@@ -289,6 +290,15 @@ def tune_qr_mcap(
     its scenario, the voltage the simulator's observer was given, the true angle and speed;
     the angle-error window defaults to |omega| >= 5 % of rated speed. PyfocError naming the
     file when it cannot be read. Releases the GIL."""
+
+def identify(
+    scenario: str | os.PathLike[str] | dict[str, Any], *, seed: int | None = None
+) -> dict[str, Any]:
+    """Self-commissioning of the scenario's motor (pmsm-sim identify): Rs, Ld, Lq, psi_f, J and
+    the inverter's voltage error from standstill and a short I/f spin, with the scenario's
+    inverter and sensing. Returns the report as a dict (ok, identified, truth, errors_pct,
+    steps, total_time_s, error, error_kind, failed_step, pwm_off_at_end); a failed
+    identification is reported (ok False), not raised. Releases the GIL."""
 
 def suite(*, short: bool = False, seed: int = 1, ideal: bool = False) -> dict[str, Any]:
     """The observer suite of `pmsm-sim suite`: the three reference motors at 10/50/100 %

@@ -115,7 +115,7 @@ use crate::{ConfigError, Float, to_t, wrap_angle};
 use safeguards::{
     BranchState, Events, GateState, HealthState, Verdict, gate_accepted_high, gate_verdict,
 };
-use tracking::Tracker;
+use tracking::{Tracker, TrackerSlow};
 
 /// Whether the angle estimate can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -205,6 +205,8 @@ pub struct PmsmObserver<T: Float> {
     gate: Option<GateState<T>>,
     health: Option<HealthState<T>>,
     tracker: Option<Tracker<T>>,
+    /// The tracking's constants and split filter (present with `tracker`).
+    slow: Option<TrackerSlow<T>>,
     events: Events,
     counters: ObserverCounters,
 }
@@ -225,6 +227,13 @@ impl<T: Float> PmsmObserver<T> {
         x0[3] = wrap_angle(x0[3]);
         let ts = cfg.ts_s;
         let p0 = Sym4::from_matrix(&cfg.p0);
+        let (tracker, slow) = match cfg.parameter_tracking {
+            Some(t) => {
+                let (tracker, slow) = Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts);
+                (Some(tracker), Some(slow))
+            }
+            None => (None, None),
+        };
         Ok(Self {
             model: PmsmModel::new(cfg),
             x: x0,
@@ -261,9 +270,8 @@ impl<T: Float> PmsmObserver<T> {
                 speed_bound: h.max_w_ts_rad / cfg.ts_s,
                 p0,
             }),
-            tracker: cfg
-                .parameter_tracking
-                .map(|t| Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts)),
+            tracker,
+            slow,
             events: Events::default(),
             counters: ObserverCounters::default(),
         })
@@ -306,14 +314,15 @@ impl<T: Float> PmsmObserver<T> {
         u_prev: [T; 2],
     ) -> (Vector4<T>, Sym4<T>, Option<Tracker<T>>) {
         let q = self.model.q_sym();
-        match &self.tracker {
-            Some(tr) if TRACK => {
+        match (&self.tracker, &self.slow) {
+            (Some(tr), Some(slow)) if TRACK => {
+                let k = &slow.k;
                 let mut tr = *tr;
                 let active =
-                    tr.should_track(self.p.p33 <= self.angle_var_limit, self.x[2], self.p.p22);
+                    tr.should_track(k, self.p.p33 <= self.angle_var_limit, self.x[2], self.p.p22);
                 let disc = self.model.discrete_at(tr.psi, tr.rs);
                 let (xm, mut pm, t) = structured::predict(&disc, q, &self.x, &self.p, u_prev);
-                let tm = tr.predict(&disc, &t, &self.x, &mut pm, active);
+                let tm = tr.predict(k, &disc, &t, &self.x, &mut pm, active);
                 (xm, pm, Some(tm))
             }
             _ => {
@@ -351,6 +360,7 @@ impl<T: Float> PmsmObserver<T> {
         self.p = p;
         if tm.is_some() {
             self.tracker = tm;
+            self.tracker_housekeeping();
         }
         self.events = Events::default();
         if self.unhealthy(&self.x, &self.p) {
@@ -397,8 +407,8 @@ impl<T: Float> PmsmObserver<T> {
             _ => false,
         });
         let (post, tn) = match outcome {
-            Ok(Outcome::Updated(post)) => match &tm {
-                Some(t) if TRACK => match t.correct(&post) {
+            Ok(Outcome::Updated(post)) => match (&tm, &self.slow) {
+                (Some(t), Some(slow)) if TRACK => match t.correct(&slow.k, &post) {
                     Some(tn) => (post, Some(tn)),
                     None => return self.refused(EkfError::NonFiniteResult, i),
                 },
@@ -410,6 +420,7 @@ impl<T: Float> PmsmObserver<T> {
                 self.p = pm;
                 if TRACK && tm.is_some() {
                     self.tracker = tm;
+                    self.tracker_housekeeping();
                 }
                 self.last = c;
                 self.gate_rejected();
@@ -428,6 +439,7 @@ impl<T: Float> PmsmObserver<T> {
         self.p = post.p;
         if TRACK && tn.is_some() {
             self.tracker = tn;
+            self.tracker_housekeeping();
         }
         self.last = c;
         self.events = Events::default();
@@ -461,6 +473,17 @@ impl<T: Float> PmsmObserver<T> {
             self.self_reset(Some(i));
         }
         Ok(self.estimate())
+    }
+
+    /// The tracking's slow work after a committed step, when due (a full window of the split
+    /// filter, the reported deviations).
+    #[inline(always)]
+    fn tracker_housekeeping(&mut self) {
+        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow)
+            && t.housekeeping_due(&slow.k)
+        {
+            t.housekeeping(slow);
+        }
     }
 
     /// A step refused for `e` (singular `S`, non-finite result): the state is kept and the
@@ -577,8 +600,8 @@ impl<T: Float> PmsmObserver<T> {
         };
         self.x = Vector4::new(ia, ib, w, th);
         self.p = h.p0;
-        if let Some(t) = &mut self.tracker {
-            t.restart(true);
+        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) {
+            t.restart(slow, true);
         }
         self.restart_safeguards();
         self.events.reset = true;
@@ -606,16 +629,16 @@ impl<T: Float> PmsmObserver<T> {
             Status::Tracking
         };
         let (psi_f_wb, psi_f_sigma_wb, rs_ohm, rs_sigma_ohm, winding_temperature_c, tracking) =
-            match &self.tracker {
-                Some(t) => (
+            match (&self.tracker, &self.slow) {
+                (Some(t), Some(slow)) => (
                     t.psi,
                     t.psi_sigma,
                     t.rs,
                     t.rs_sigma,
-                    t.winding_temperature_c(),
+                    t.winding_temperature_c(&slow.k),
                     t.active,
                 ),
-                None => (
+                _ => (
                     self.nominal.0,
                     T::zero(),
                     self.nominal.1,
@@ -683,8 +706,8 @@ impl<T: Float> PmsmObserver<T> {
         self.p = Sym4::from_matrix(&p);
         self.last = zero_correction();
         self.events = Events::default();
-        if let Some(t) = &mut self.tracker {
-            t.restart(false);
+        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) {
+            t.restart(slow, false);
         }
         self.restart_safeguards();
         Ok(())
@@ -711,10 +734,10 @@ impl<T: Float> PmsmObserver<T> {
     /// nothing changed, when tracking is off, a value is not finite or outside the
     /// configured range.
     pub fn set_parameters(&mut self, psi_f_wb: T, rs_ohm: T) -> Result<(), EkfError> {
-        let Some(t) = &mut self.tracker else {
+        let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) else {
             return Err(EkfError::NonFiniteInput);
         };
-        let k = &t.k;
+        let k = slow.k;
         if !(psi_f_wb >= k.psi_min
             && psi_f_wb <= k.psi_max
             && rs_ohm >= k.rs_min
@@ -724,10 +747,9 @@ impl<T: Float> PmsmObserver<T> {
         }
         t.psi = psi_f_wb;
         t.rs = rs_ohm;
-        t.restart(false);
-        let (c_pp, k) = (t.c_pp, t.k);
-        if let Some(s) = &mut t.split {
-            s.anchor(psi_f_wb, rs_ohm, c_pp, &k);
+        t.restart(slow, false);
+        if let Some(s) = &mut slow.split {
+            s.anchor(psi_f_wb, rs_ohm, t.c_pp, &k);
         }
         Ok(())
     }

@@ -118,7 +118,7 @@ pub struct ParameterTracking<T> {
     /// Random walk of `Rs`, fraction of the configured value per square root of a second.
     pub rs_walk_per_sqrt_s: T,
     /// Tracking is frozen while `|w_hat|` is below this speed, rad/s electrical, while the
-    /// speed's standard deviation exceeds a tenth of `|w_hat|`, while the speed departs from
+    /// speed's standard deviation exceeds a fifth of `|w_hat|`, while the speed departs from
     /// its low-pass over 64 samples by more than 1 % plus three standard deviations (fast
     /// acceleration), and while the angle is
     /// uncertain.
@@ -252,8 +252,9 @@ impl<T: Float> ParameterTracking<T> {
     }
 }
 
-/// Running state of the tracking: the EKF's flux with its cross-covariance and variance,
-/// and the split filter.
+/// The per-step state of the tracking (small: it is copied through a step and committed only
+/// when the step succeeds): the EKF's flux with its cross-covariance and variance, the `Rs`
+/// in use, the activity test, the split filter's window sums, the reported deviations.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Tracker<T> {
     /// Tracked (lumped) `psi_f`, Wb: the EKF's augmented state.
@@ -271,14 +272,24 @@ pub(super) struct Tracker<T> {
     pub settled: u32,
     /// Low-pass of the speed estimate (steadiness test), rad/s.
     pub w_lp: T,
+    /// Window sums of the split filter: lumped flux, `i_q`, `w`; samples in the window.
+    pub sum_psi: T,
+    pub sum_iq: T,
+    pub sum_w: T,
+    pub n: u32,
     /// Reported standard deviations of `psi_f` and `Rs` (refreshed every 64 steps) and the
     /// steps since.
     pub psi_sigma: T,
     pub rs_sigma: T,
     pub since_sigma: u32,
-    /// The split filter, if on.
-    pub split: Option<Split<T>>,
+}
+
+/// The slow part of the tracking: constants, and the split filter (changed in place at the
+/// end of a window, after a step has been committed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct TrackerSlow<T> {
     pub k: TrackerConstants<T>,
+    pub split: Option<Split<T>>,
 }
 
 /// The split filter of `(psi_f, Rs)` (module docs).
@@ -291,14 +302,8 @@ pub(super) struct Split<T> {
     pub c00: T,
     pub c01: T,
     pub c11: T,
-    /// Window sums: lumped flux, `i_q`, `w`; samples in the window.
-    pub sum_psi: T,
-    pub sum_iq: T,
-    pub sum_w: T,
-    pub n: u32,
-    /// Constants: window length, process noise per window, measurement variance, link
-    /// gradient `(1 / (psi0 beta), -1 / (Rs0 alpha))` and its variance, offset of the link.
-    pub window: u32,
+    /// Constants: process noise per window, measurement variance, link gradient
+    /// `(1 / (psi_a beta), -1 / (Rs_a alpha))` at the anchor, offset and variance of the link.
     pub q_psi: T,
     pub q_rs: T,
     pub r_m: T,
@@ -325,6 +330,8 @@ pub(super) struct TrackerConstants<T> {
     pub var0_rs: T,
     pub min_speed2: T,
     pub settle_samples: u32,
+    /// Samples per window of the split filter (`u32::MAX` without it).
+    pub window: u32,
     pub psi_min: T,
     pub psi_max: T,
     pub rs_min: T,
@@ -338,15 +345,16 @@ pub(super) struct TrackerConstants<T> {
 }
 
 impl<T: Float> Tracker<T> {
-    /// A tracker at the configured parameters with the initial covariance.
-    pub fn new(cfg: &ParameterTracking<T>, psi0: T, rs0: T, ts_s: T) -> Self {
+    /// A tracker at the configured parameters with the initial covariance, and its slow part.
+    pub fn new(cfg: &ParameterTracking<T>, psi0: T, rs0: T, ts_s: T) -> (Self, TrackerSlow<T>) {
         let sq = |v: T| v * v;
-        let k = TrackerConstants {
+        let mut k = TrackerConstants {
             q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * ts_s,
             var0_psi: sq(cfg.psi_f_sigma0 * psi0),
             var0_rs: sq(cfg.rs_sigma0 * rs0),
             min_speed2: sq(cfg.min_speed_rad_s),
             settle_samples: cfg.settle_samples,
+            window: u32::MAX,
             psi_min: cfg.psi_f_range[0] * psi0,
             psi_max: cfg.psi_f_range[1] * psi0,
             rs_min: cfg.rs_range[0] * rs0,
@@ -364,6 +372,7 @@ impl<T: Float> Tracker<T> {
                 window_samples,
                 measurement_sigma,
             } => {
+                k.window = window_samples;
                 let window_s = ts_s * to_t(f64::from(window_samples));
                 let alpha = cfg.rs_temperature_coefficient_per_k;
                 Some(Split {
@@ -372,15 +381,10 @@ impl<T: Float> Tracker<T> {
                     c00: k.var0_psi,
                     c01: T::zero(),
                     c11: k.var0_rs,
-                    sum_psi: T::zero(),
-                    sum_iq: T::zero(),
-                    sum_w: T::zero(),
-                    n: 0,
-                    window: window_samples,
                     q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * window_s,
                     q_rs: sq(cfg.rs_walk_per_sqrt_s * rs0) * window_s,
                     r_m: sq(measurement_sigma * psi0),
-                    // h(psi, Rs) = (psi / psi0 - 1) / beta - (Rs / Rs0 - 1) / alpha, in K.
+                    // h(psi, Rs) = (psi / psi_a - 1) / beta - (Rs / Rs_a - 1) / alpha, in K.
                     h_psi: T::one() / (psi0 * b),
                     h_rs: -T::one() / (rs0 * alpha),
                     link_offset: T::one() / alpha - T::one() / b,
@@ -391,7 +395,7 @@ impl<T: Float> Tracker<T> {
                 })
             }
         };
-        Self {
+        let tracker = Self {
             psi: psi0,
             rs: rs0,
             x: [T::zero(); 4],
@@ -399,6 +403,10 @@ impl<T: Float> Tracker<T> {
             active: false,
             settled: 0,
             w_lp: T::zero(),
+            sum_psi: T::zero(),
+            sum_iq: T::zero(),
+            sum_w: T::zero(),
+            n: 0,
             psi_sigma: k.var0_psi.sqrt(),
             rs_sigma: if split.is_some() {
                 k.var0_rs.sqrt()
@@ -406,29 +414,34 @@ impl<T: Float> Tracker<T> {
                 T::zero()
             },
             since_sigma: 0,
-            split,
-            k,
-        }
+        };
+        (tracker, TrackerSlow { k, split })
     }
 
     /// Whether the parameters are tracked in the coming step: the angle has been tracked
-    /// for the settling time, the speed estimate `w` is at least the minimum, known to 10 %
-    /// (its variance `w_var <= (w / 10)^2`) and steady (within 1 % plus 3 standard deviations
-    /// of its low-pass over 64 samples: during a fast acceleration the speed estimate lags and the flux would absorb
-    /// the lag). Counts the settling time.
+    /// for the settling time, the speed estimate `w` is at least the minimum, known to 20 %
+    /// (its variance `w_var <= (w / 5)^2`) and steady (within 1 % plus 3 standard deviations
+    /// of its low-pass over 64 samples: during a fast acceleration the speed estimate lags
+    /// and the flux would absorb the lag). Counts the settling time.
     #[inline(always)]
-    pub fn should_track(&mut self, angle_tracking: bool, w: T, w_var: T) -> bool {
+    pub fn should_track(
+        &mut self,
+        k: &TrackerConstants<T>,
+        angle_tracking: bool,
+        w: T,
+        w_var: T,
+    ) -> bool {
         let w2 = w * w;
         // Steady speed: within 1 % plus three of its standard deviations of its low-pass
         // (time constant 64 samples).
         self.w_lp += (w - self.w_lp) * to_t::<T>(1.0 / 64.0);
         let dw = w - self.w_lp;
         let steady = dw * dw <= w_var * to_t(9.0) + w2 * to_t(1e-4);
-        if !(angle_tracking && steady && w2 >= self.k.min_speed2 && w_var * to_t(25.0) <= w2) {
+        if !(angle_tracking && steady && w2 >= k.min_speed2 && w_var * to_t(25.0) <= w2) {
             self.settled = 0;
             return false;
         }
-        if self.settled < self.k.settle_samples {
+        if self.settled < k.settle_samples {
             self.settled += 1;
             return false;
         }
@@ -438,53 +451,33 @@ impl<T: Float> Tracker<T> {
     /// The tracker's part of the prediction (module docs): returns the prior tracker and
     /// adds the flux's terms to the prior `P-` of the state. `t` holds the step's EMF terms,
     /// `x` is the posterior the step starts from. While active, also one sample of the split
-    /// filter's window (and its update at the window's end).
+    /// filter's window.
     #[inline(always)]
     pub fn predict(
         &self,
+        k: &TrackerConstants<T>,
         disc: &Discrete<T>,
         t: &TransitionTerms<T>,
         x: &Vector4<T>,
         pm: &mut Sym4<T>,
         active: bool,
     ) -> Self {
-        let mut base = *self;
-        // The standard deviations reported, refreshed every 64 steps (two square roots, a
-        // library call each on the MCU).
-        base.since_sigma += 1;
-        if base.since_sigma >= 64 {
-            base.refresh_sigmas();
-        }
-        if let Some(s) = &mut base.split
-            && active
-        {
-            // One sample of the split filter's window: the flux, i_q and w at the start of
-            // the period (the posterior the prediction starts from).
-            s.sum_psi += self.psi;
-            s.sum_iq += x[1] * t.cos_th - x[0] * t.sin_th;
-            s.sum_w += x[2];
-            s.n += 1;
-            if s.n >= s.window
-                && let Some(rs) = s.update(self.rs, self.c_pp, &self.k)
-            {
-                base.rs = rs;
-            }
-        }
-        let this = &base;
+        let since_sigma = self.since_sigma + 1;
         if !active {
             // Frozen: the flux is a known constant for this step (the 4-state filter
             // exactly, at the frozen value); its correlation with the state is dropped.
             return Self {
                 x: [T::zero(); 4],
                 active,
-                ..*this
+                since_sigma,
+                ..*self
             };
         }
         let d = disc.decay;
         // Jacobian column of psi_f (current rows): the EMF term per weber.
         let (g0, g1) = (t.ea_psi, t.eb_psi);
-        let c = this.c_pp;
-        let xo = &this.x;
+        let c = self.c_pp;
+        let xo = &self.x;
         // X- = Phi4 X + Gamma c.
         let xm = [
             d * xo[0] + t.ea_w * xo[2] + t.ea_th * xo[3] + g0 * c,
@@ -505,28 +498,22 @@ impl<T: Float> Tracker<T> {
             x: xm,
             active,
             // Process noise, not above the ceiling (the variance stays bounded).
-            c_pp: if c < this.k.var0_psi {
-                c + this.k.q_psi
-            } else {
-                c
-            },
-            ..*this
+            c_pp: if c < k.var0_psi { c + k.q_psi } else { c },
+            // One sample of the split filter's window: the flux, i_q and w at the start of
+            // the period (the posterior the prediction starts from).
+            sum_psi: self.sum_psi + self.psi,
+            sum_iq: self.sum_iq + (x[1] * t.cos_th - x[0] * t.sin_th),
+            sum_w: self.sum_w + x[2],
+            n: self.n + 1,
+            since_sigma,
+            ..*self
         }
-    }
-
-    /// Recomputes the reported standard deviations.
-    #[cold]
-    #[inline(never)]
-    fn refresh_sigmas(&mut self) {
-        self.since_sigma = 0;
-        self.psi_sigma = self.c_pp.sqrt();
-        self.rs_sigma = self.split.map_or(T::zero(), |s| s.c11.sqrt());
     }
 
     /// The tracker's part of the correction of the prior `self` with the posterior `post` of
     /// the state (its gain and `S^-1`). `None` if a result is not finite.
     #[inline(always)]
-    pub fn correct(&self, post: &Posterior<T>) -> Option<Self> {
+    pub fn correct(&self, k: &TrackerConstants<T>, post: &Posterior<T>) -> Option<Self> {
         if !self.active {
             return Some(*self);
         }
@@ -542,7 +529,6 @@ impl<T: Float> Tracker<T> {
             xm[3] - (k4[3][0] * l0 + k4[3][1] * l1),
         ];
         let (kp0, kp1) = (l0 * i00 + l1 * i01, l0 * i01 + l1 * i11);
-        let k = &self.k;
         let psi = clamp(self.psi + kp0 * y[0] + kp1 * y[1], k.psi_min, k.psi_max);
         let c = self.c_pp - (kp0 * l0 + kp1 * l1);
         // Rounding must not leave the variance non-positive.
@@ -556,29 +542,68 @@ impl<T: Float> Tracker<T> {
         next.finite().then_some(next)
     }
 
+    /// Whether the slow work is due (a full window, or the deviations to refresh).
+    #[inline(always)]
+    pub fn housekeeping_due(&self, k: &TrackerConstants<T>) -> bool {
+        self.n >= k.window || self.since_sigma >= 64
+    }
+
+    /// The slow work after a committed step: the split filter's update at the end of a
+    /// window (its `Rs` taken into use), the reported deviations.
+    #[cold]
+    #[inline(never)]
+    pub fn housekeeping(&mut self, slow: &mut TrackerSlow<T>) {
+        let k = &slow.k;
+        if self.n >= k.window {
+            let (sum_psi, sum_iq, sum_w, n) = (self.sum_psi, self.sum_iq, self.sum_w, self.n);
+            self.clear_window();
+            if let Some(s) = &mut slow.split {
+                let before = *s;
+                match s.update(self.rs, self.c_pp, (sum_psi, sum_iq, sum_w, n), k) {
+                    Some(rs) if s.finite() => self.rs = rs,
+                    Some(_) => *s = before,
+                    None => {}
+                }
+            }
+        }
+        if self.since_sigma >= 64 {
+            self.since_sigma = 0;
+            self.psi_sigma = self.c_pp.sqrt();
+            self.rs_sigma = slow.split.map_or(T::zero(), |s| s.c11.sqrt());
+        }
+    }
+
+    fn clear_window(&mut self) {
+        self.sum_psi = T::zero();
+        self.sum_iq = T::zero();
+        self.sum_w = T::zero();
+        self.n = 0;
+    }
+
     /// All values finite (one test on a sum).
     pub fn finite(&self) -> bool {
         let x = &self.x;
-        let split = self.split.map_or(T::zero(), |s| {
-            s.psi + s.rs + (s.c00 + s.c01 + s.c11) + (s.sum_psi + s.sum_iq + s.sum_w)
-        });
-        (self.psi + self.rs + self.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + split).is_finite()
+        (self.psi
+            + self.rs
+            + self.c_pp
+            + (x[0] + x[1])
+            + (x[2] + x[3])
+            + (self.sum_psi + self.sum_iq + self.sum_w))
+            .is_finite()
     }
 
     /// After a branch flip (`w = -w`): the speed row of `X` changes sign; the window
     /// restarts.
     pub fn flip_speed(&mut self) {
         self.x[2] = -self.x[2];
-        if let Some(s) = &mut self.split {
-            s.clear_window();
-        }
+        self.clear_window();
     }
 
     /// Reset by the health check or by [`PmsmObserver::reset`](super::PmsmObserver::reset):
     /// the estimates kept (the configured values if not finite), the cross-covariance cleared;
     /// with `covariance`, the variances back to their initial values.
-    pub fn restart(&mut self, covariance: bool) {
-        let k = self.k;
+    pub fn restart(&mut self, slow: &mut TrackerSlow<T>, covariance: bool) {
+        let k = slow.k;
         let keep = |v: T, nominal: T, lo: T, hi: T| {
             if v.is_finite() {
                 clamp(v, lo, hi)
@@ -592,7 +617,7 @@ impl<T: Float> Tracker<T> {
         if covariance || !self.c_pp.is_finite() {
             self.c_pp = k.var0_psi;
         }
-        if let Some(s) = &mut self.split {
+        if let Some(s) = &mut slow.split {
             s.psi = keep(s.psi, k.psi0, k.psi_min, k.psi_max);
             s.rs = self.rs;
             if covariance || !(s.c00 + s.c01 + s.c11).is_finite() {
@@ -600,47 +625,48 @@ impl<T: Float> Tracker<T> {
                 s.c01 = T::zero();
                 s.c11 = k.var0_rs;
             }
-            s.clear_window();
         }
+        self.clear_window();
         self.active = false;
         self.settled = 0;
-        self.refresh_sigmas();
+        self.since_sigma = 64;
+        self.housekeeping(slow);
     }
 
     /// Winding temperature from the tracked `Rs`, deg C.
-    pub fn winding_temperature_c(&self) -> T {
-        self.k.t_ref + (self.rs - self.k.rs0) * self.k.kelvin_per_ohm
+    pub fn winding_temperature_c(&self, k: &TrackerConstants<T>) -> T {
+        k.t_ref + (self.rs - k.rs0) * k.kelvin_per_ohm
     }
 }
 
 impl<T: Float> Split<T> {
-    fn clear_window(&mut self) {
-        self.sum_psi = T::zero();
-        self.sum_iq = T::zero();
-        self.sum_w = T::zero();
-        self.n = 0;
+    /// All values finite.
+    fn finite(&self) -> bool {
+        (self.psi + self.rs + (self.c00 + self.c01 + self.c11) + (self.h_psi + self.h_rs))
+            .is_finite()
     }
 
-    /// The split filter's step at the end of a window, with the `Rs` the EKF used over it:
-    /// random walk, the window's measurement `m = psi_mean + Rs_used r` with
-    /// `r = mean(i_q) / mean(w)`, then the thermal link. Returns the new `Rs` (bounded).
-    #[cold]
-    #[inline(never)]
-    fn update(&mut self, rs_used: T, c_pp: T, k: &TrackerConstants<T>) -> Option<T> {
-        let inv_n = T::one() / to_t::<T>(f64::from(self.n));
+    /// The split filter's step at the end of a window `(sums of psi, i_q, w; samples)`, with
+    /// the `Rs` the EKF used over it and its flux variance `c_pp`: random walk, the window's
+    /// measurement `m = psi_mean + Rs_used r` with `r = mean(i_q) / mean(w)`, then the thermal
+    /// link. Returns the new `Rs` (bounded), `None` when the window is not used.
+    fn update(
+        &mut self,
+        rs_used: T,
+        c_pp: T,
+        (sum_psi, sum_iq, sum_w, n): (T, T, T, u32),
+        k: &TrackerConstants<T>,
+    ) -> Option<T> {
+        let inv_n = T::one() / to_t::<T>(f64::from(n));
         if !self.anchored {
             // The link's reference: the first window after the EKF's flux has converged
             // (standard deviation within 0.5 % of the configured flux).
             let converged = c_pp <= k.psi0 * k.psi0 * to_t(2.5e-5);
-            let psi = self.sum_psi * inv_n;
-            self.clear_window();
             if converged {
-                self.anchor(psi, rs_used, c_pp, k);
+                self.anchor(sum_psi * inv_n, rs_used, c_pp, k);
             }
             return None;
         }
-        let (sum_psi, sum_iq, sum_w) = (self.sum_psi, self.sum_iq, self.sum_w);
-        self.clear_window();
         // Only where the resistive drop is small beside the EMF (`|Rs0 i_q| <= 0.1 |w| psi0`):
         // at low speed and high current the two nearly cancel along the thermal link, and
         // the EKF's flux follows a change of Rs too strongly for the loop to be stable.
