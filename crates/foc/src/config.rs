@@ -143,6 +143,11 @@ pub struct HealthConfig {
     pub lock_time_s: f32,
     /// Stall detection time, s.
     pub stall_time_s: f32,
+    /// The observer's tracked flux linkage outside `[lo, hi]` times the configured one is
+    /// unhealthy: heat moves a magnet's flux by at most about 20 % (NdFeB, -0.12 %/K), so a
+    /// fit farther off means the model no longer describes the motor (an open phase, a
+    /// demagnetized or wrong motor). Checked in closed loop only.
+    pub flux_range: [f32; 2],
     /// Re-acquisitions in a row (without `acquire_timeout_s` of closed loop in between)
     /// before [`Fault::ObserverLost`](crate::Fault::ObserverLost).
     pub max_reacquire: u8,
@@ -153,7 +158,7 @@ pub struct HealthConfig {
 impl Default for HealthConfig {
     /// `window_s` 5 ms, `nis_limit` 20 (ten times the expectation), `speed_tolerance` 0.3,
     /// `lock_angle_rad` 135 deg, `lost_time_s` 20 ms, `lock_time_s` 30 ms, `stall_time_s`
-    /// 0.5 s, `max_reacquire` 3, policy fall back and re-acquire.
+    /// 0.5 s, `flux_range` 0.7 to 1.3, `max_reacquire` 3, policy fall back and re-acquire.
     fn default() -> Self {
         Self {
             window_s: 5e-3,
@@ -163,6 +168,7 @@ impl Default for HealthConfig {
             lost_time_s: 20e-3,
             lock_time_s: 30e-3,
             stall_time_s: 0.5,
+            flux_range: [0.7, 1.3],
             max_reacquire: 3,
             policy: ObserverLossPolicy::FallBackAndReacquire,
         }
@@ -487,6 +493,13 @@ impl FocConfig {
         positive(h.lost_time_s, F::LostTime)?;
         positive(h.lock_time_s, F::LockTime)?;
         positive(h.stall_time_s, F::StallTime)?;
+        let [lo, hi] = h.flux_range;
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(ConfigError::NonFinite(F::FluxRange));
+        }
+        if !(lo > 0.0 && lo < 1.0 && hi > 1.0) {
+            return Err(ConfigError::OutOfRange(F::FluxRange));
+        }
         let step = self.max_current_step();
         if step.is_nan() {
             return Err(ConfigError::NonFinite(F::MaxCurrentStep));
@@ -571,6 +584,8 @@ pub enum Field {
     AcquireTimeout,
     HealthWindow,
     NisLimit,
+    /// `health.flux_range`.
+    FluxRange,
     SpeedTolerance,
     LockAngle,
     LostTime,
@@ -641,6 +656,11 @@ mod tests {
     #[test]
     fn bad_fields_are_named() {
         let base = FocConfig::new(MotorParams::servo(), 100e-6, 300.0);
+        let mut c = base;
+        c.health.flux_range = [1.1, 1.3];
+        assert_eq!(c.validate(), Err(ConfigError::OutOfRange(Field::FluxRange)));
+        c.health.flux_range = [0.7, f32::NAN];
+        assert_eq!(c.validate(), Err(ConfigError::NonFinite(Field::FluxRange)));
         let mut c = base;
         c.ts_s = f32::NAN;
         assert!(c.validate().is_err());

@@ -80,9 +80,9 @@
 //!
 //! ```text
 //! e   = i_dq_ref - i_dq
-//! u_d = PI_d(e_d) + Rs i_d - w Ls i_q             (cross-coupling decoupling, measured i)
-//! u_q = PI_q(e_q) + Rs i_q + w Ls i_d + w psi_f    (resistive drop, decoupling, back-EMF
-//!                                                   feed-forward; psi_f, Rs tracked online)
+//! u_d = PI_d(e_d) - w Ls i_q                      (cross-coupling decoupling, measured i)
+//! u_q = PI_q(e_q) + w Ls i_d + w psi_f            (decoupling, back-EMF feed-forward with the
+//!                                                  observer's tracked psi_f)
 //! |u_dq| <= max_modulation * u_dc / sqrt(3), d axis first, q gets the rest
 //! ```
 //!
@@ -344,7 +344,7 @@ impl Foc {
             advance_s: cfg.angle_advance_periods * ts,
             dead_time: DeadTimeCompensation::new(cfg.dead_time_s, ts, cfg.dead_time_band()),
             observer,
-            health: HealthMonitor::new(&cfg.health, ts, handover, exit_speed),
+            health: HealthMonitor::new(&cfg.health, ts, handover, exit_speed, cfg.motor.psi_f_wb),
             pi_d: Pi::new(cfg.current_pi_gains(), ts),
             pi_q: Pi::new(cfg.current_pi_gains(), ts),
             speed_pi: Pi::new(cfg.speed_pi_gains(), speed_ts),
@@ -730,18 +730,23 @@ impl Foc {
         }
     }
 
-    /// Resistive drop, decoupling and back-EMF feed-forward in `frame` for the measured
-    /// currents `i`, with the observer's tracked `psi_f` and `Rs` (the configured ones when
-    /// its parameter tracking is off): `u_d = Rs i_d - w Ls i_q`,
-    /// `u_q = Rs i_q + w Ls i_d + w psi_f`. The tracked flux is the one that, with the tracked
-    /// `Rs`, explains the q-axis voltage, so a warm motor needs no integrator action.
+    /// Decoupling and back-EMF feed-forward in `frame` for the measured currents `i`, with
+    /// the observer's tracked flux linkage (the configured one when its parameter tracking is
+    /// off): `u_d = -w Ls i_q`, `u_q = w Ls i_d + w psi_f`. The tracked flux is the one that,
+    /// with the `Rs` the observer uses, explains the q-axis voltage, so a warm motor's EMF is
+    /// fed forward as it is. The resistive drop is left to the PI integrators: a term
+    /// `Rs i` on the measured currents would cancel the winding's own damping of the rotor's
+    /// swing under I/f (a restart then failed to hand over in `tests/state_machine.rs`).
     fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
-        let (psi_f, rs) = self.observer.parameters();
         let wl = frame.omega * self.cfg.motor.ls_h;
-        let emf = if frame.emf { frame.omega * psi_f } else { 0.0 };
+        let emf = if frame.emf {
+            frame.omega * self.observer.parameters().0
+        } else {
+            0.0
+        };
         Dq {
-            d: rs * i.d - wl * i.q,
-            q: rs * i.q + wl * i.d + emf,
+            d: -wl * i.q,
+            q: wl * i.d + emf,
         }
     }
 

@@ -18,6 +18,11 @@
 //!   from the vector, or a speed estimate of the opposite sign to the ramp (beyond a quarter
 //!   of it), is the wrong solution; checked once the ramp is above half the hand-over speed.
 //!   In closed loop: the speed estimate has the opposite sign to the speed reference.
+//! - **Tracked flux** (closed loop): the observer's tracked flux linkage outside
+//!   `flux_range` (default 0.7 to 1.3) times the configured one. Heat moves it by about 12 %
+//!   per 100 K; a fit beyond the range means the model no longer describes the motor (an
+//!   open phase, a demagnetized or wrong motor). A warm motor is no loss: the tracked flux
+//!   and resistance keep the NIS consistent.
 //! - **Stall** (closed loop): the speed loop at its current limit while the estimated speed
 //!   stays below half the exit speed or has the wrong sign (an overload that drives the
 //!   rotor backwards). While this holds, the loss checks are suspended: a rotor that does
@@ -44,6 +49,8 @@ pub enum LossReason {
     Nis,
     /// Speed estimate and angle rate disagree.
     SpeedInconsistent,
+    /// The tracked flux linkage left `flux_range` (closed loop).
+    FluxImplausible,
     /// The estimate sits on the `theta + pi` solution.
     PiLock,
 }
@@ -98,6 +105,9 @@ pub struct HealthMonitor {
     bad_count: u32,
     ready_count: u32,
     stall_count: u32,
+    /// Bounds of the tracked flux linkage, Wb.
+    flux_lo: f32,
+    flux_hi: f32,
 }
 
 /// Number of ticks in `t` seconds, at least 1.
@@ -109,10 +119,18 @@ pub(crate) fn ticks(t_s: f32, ts_s: f32) -> u32 {
 impl HealthMonitor {
     /// A monitor with thresholds `cfg` at the PWM period `ts_s`, for the hand-over speed and
     /// the closed-loop exit speed (rad/s el.).
-    pub fn new(cfg: &HealthConfig, ts_s: f32, handover_rad_s: f32, exit_rad_s: f32) -> Self {
+    pub fn new(
+        cfg: &HealthConfig,
+        ts_s: f32,
+        handover_rad_s: f32,
+        exit_rad_s: f32,
+        psi_f_wb: f32,
+    ) -> Self {
         let k = ts_s / cfg.window_s;
         Self {
             cfg: *cfg,
+            flux_lo: cfg.flux_range[0] * psi_f_wb,
+            flux_hi: cfg.flux_range[1] * psi_f_wb,
             inv_ts: 1.0 / ts_s,
             handover: handover_rad_s,
             exit_speed: exit_rad_s,
@@ -214,6 +232,8 @@ impl HealthMonitor {
                     basic
                 } else if wrong_way && w.abs() > 0.25 * self.exit_speed {
                     Some(LossReason::PiLock)
+                } else if !(est.psi_f_wb >= self.flux_lo && est.psi_f_wb <= self.flux_hi) {
+                    Some(LossReason::FluxImplausible)
                 } else {
                     None
                 }
