@@ -104,6 +104,121 @@ pub const LIMIT_LOAD_STEP_DEG: f64 = 5.0;
 /// Limit: default EKF steady-state speed RMS, % of rated electrical speed.
 pub const LIMIT_SPEED_PCT: f64 = 1.0;
 
+/// Goal: EKF angle RMS (deg el.) told a wrong `psi_f`, `Rs` or temperature, at >= 50 % speed.
+pub const GOAL_MISMATCH_RMS_DEG: f64 = 0.5;
+/// Goal: EKF angle RMS (deg el.) told a wrong `Ls`, at >= 50 % speed.
+pub const GOAL_MISMATCH_LS_RMS_DEG: f64 = 1.0;
+/// Goal: the tracked `psi_f` within this of the truth (%) when told a wrong `psi_f`, at
+/// >= 50 % speed.
+pub const GOAL_MISMATCH_PSI_PCT: f64 = 1.0;
+
+/// A wrong motor the observers are told (module docs, "Mismatch rows"): the scenario's
+/// observer parameters scaled. The thermal cases are the motor 100 K warmer (or colder) than
+/// its parameters: told `psi_f / (1 - 0.12)` and `Rs / (1 + 0.393)` (or the reverse).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Mismatch {
+    /// Name in the tables.
+    pub name: &'static str,
+    /// Told `psi_f` / true `psi_f`.
+    pub psi_f: f64,
+    /// Told `Rs` / true `Rs`.
+    pub rs: f64,
+    /// Told `Ls` / true `Ls`.
+    pub ls: f64,
+}
+
+/// The mismatch cases of the suite.
+pub const MISMATCHES: [Mismatch; 8] = [
+    Mismatch {
+        name: "psi_f +10 %",
+        psi_f: 1.1,
+        rs: 1.0,
+        ls: 1.0,
+    },
+    Mismatch {
+        name: "psi_f -10 %",
+        psi_f: 0.9,
+        rs: 1.0,
+        ls: 1.0,
+    },
+    Mismatch {
+        name: "Rs +30 %",
+        psi_f: 1.0,
+        rs: 1.3,
+        ls: 1.0,
+    },
+    Mismatch {
+        name: "Rs -30 %",
+        psi_f: 1.0,
+        rs: 0.7,
+        ls: 1.0,
+    },
+    Mismatch {
+        name: "Ls +20 %",
+        psi_f: 1.0,
+        rs: 1.0,
+        ls: 1.2,
+    },
+    Mismatch {
+        name: "Ls -20 %",
+        psi_f: 1.0,
+        rs: 1.0,
+        ls: 0.8,
+    },
+    Mismatch {
+        name: "100 K hot",
+        psi_f: 1.0 / 0.88,
+        rs: 1.0 / 1.393,
+        ls: 1.0,
+    },
+    Mismatch {
+        name: "100 K cold",
+        psi_f: 1.0 / 1.12,
+        rs: 1.0 / 0.607,
+        ls: 1.0,
+    },
+];
+
+impl Mismatch {
+    /// `true` for the `Ls` cases (not tracked: their own goal).
+    pub fn is_ls(&self) -> bool {
+        self.ls != 1.0
+    }
+
+    /// `true` for the cases with the right `Rs` and `Ls` and a wrong `psi_f`.
+    pub fn is_psi_only(&self) -> bool {
+        self.psi_f != 1.0 && self.rs == 1.0 && self.ls == 1.0
+    }
+}
+
+/// One observer told a wrong motor ([`Mismatch`]), on one motor, in one steady window.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MismatchRow {
+    /// Observer (the default EKF or the baseline).
+    pub observer: ObserverKind,
+    /// Motor.
+    pub motor: SuiteMotor,
+    /// Mismatch case.
+    pub case: &'static str,
+    /// Condition (as [`SteadyRow::condition`]).
+    pub condition: String,
+    /// Speed, fraction of rated.
+    pub speed_fraction: f64,
+    /// Samples in the window (failed steps excluded).
+    pub samples: usize,
+    /// RMS angle error, deg el.
+    pub angle_rms_deg: f64,
+    /// Largest `|e_th|`, deg el.
+    pub angle_max_deg: f64,
+    /// Mean angle error, deg el.
+    pub angle_mean_deg: f64,
+    /// Mean tracked `psi_f` over the window against the truth, % (EKF; `None` for the
+    /// baseline, which does not track it).
+    pub psi_f_error_pct: Option<f64>,
+    /// Mean `Rs` in use over the window against the truth, %.
+    pub rs_error_pct: f64,
+}
+
 /// Options of [`run_suite`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct SuiteOptions {
@@ -307,6 +422,8 @@ pub struct SuiteReport {
     pub steady: Vec<SteadyRow>,
     /// Transient rows, by observer, motor.
     pub transients: Vec<TransientRow>,
+    /// Mismatch rows (module docs), by motor, case, observer, condition.
+    pub mismatch: Vec<MismatchRow>,
     /// Goals and limits.
     pub checks: Vec<Check>,
 }
@@ -521,6 +638,9 @@ struct Sums {
     max_e: f64,
     sum_w2: f64,
     max_w: f64,
+    /// Sums of the tracked `psi_f` and `Rs` (EKF).
+    sum_psi: f64,
+    sum_rs: f64,
 }
 
 impl Sums {
@@ -539,7 +659,11 @@ impl Sums {
 /// An observer stepped alongside the run, scoring itself per window.
 struct Scored {
     kind: ObserverKind,
+    /// The mismatch case told, if any (index in [`MISMATCHES`]).
+    told: Option<usize>,
     est: Estimator,
+    /// Tracked `(psi_f, Rs)` of the last step (the told ones for the baseline).
+    params: (f64, f64),
     plan: Plan,
     windows: Vec<Sums>,
     step: Sums,
@@ -551,8 +675,18 @@ struct Scored {
 }
 
 impl Scored {
-    fn new(kind: ObserverKind, scenario: &Scenario, plan: Plan) -> Result<Self, SimError> {
-        let params = scenario.observer_params();
+    fn new(
+        kind: ObserverKind,
+        told: Option<usize>,
+        scenario: &Scenario,
+        plan: Plan,
+    ) -> Result<Self, SimError> {
+        let mut params = scenario.observer_params();
+        if let Some(m) = told.map(|i| MISMATCHES[i]) {
+            params.psi_f_wb *= m.psi_f;
+            params.rs_ohm *= m.rs;
+            params.ls_h *= m.ls;
+        }
         let ts = scenario.ts_s();
         let est = match kind {
             ObserverKind::SeedEkf => Estimator::Ekf(Box::new(PmsmObserver::new(
@@ -567,7 +701,9 @@ impl Scored {
         };
         Ok(Self {
             kind,
+            told,
             est,
+            params: (params.psi_f_wb, params.rs_ohm),
             windows: vec![Sums::default(); plan.windows.len()],
             plan,
             step: Sums::default(),
@@ -583,6 +719,7 @@ impl SideObserver for Scored {
         match &mut self.est {
             Estimator::Ekf(o) => {
                 let e = o.step(u_prev, i_ab_a)?;
+                self.params = (e.psi_f_wb, e.rs_ohm);
                 let p: nalgebra::Matrix4<f64> = o.covariance();
                 Ok(SideEstimate {
                     theta_e_rad: e.theta_rad,
@@ -624,7 +761,11 @@ impl SideObserver for Scored {
         for (sums, w) in self.windows.iter_mut().zip(&self.plan.windows) {
             if in_window(w.3, w.4) {
                 match &own {
-                    Some(s) => sums.add(s),
+                    Some(s) => {
+                        sums.add(s);
+                        sums.sum_psi += self.params.0;
+                        sums.sum_rs += self.params.1;
+                    }
                     None => sums.failures += 1,
                 }
             }
@@ -638,12 +779,24 @@ impl SideObserver for Scored {
     }
 }
 
-/// Runs one scenario with the three observers alongside; an early end is an error.
-fn run_scored(sc: &Scenario, plan: &Plan) -> Result<(Vec<Scored>, String), SimError> {
+/// Runs one scenario with the three observers alongside (and, with `mismatch`, the default
+/// EKF and the baseline told each wrong motor of [`MISMATCHES`]); an early end is an error.
+fn run_scored(
+    sc: &Scenario,
+    plan: &Plan,
+    mismatch: bool,
+) -> Result<(Vec<Scored>, String), SimError> {
     let mut scored = ObserverKind::ALL
         .iter()
-        .map(|&k| Scored::new(k, sc, plan.clone()))
+        .map(|&k| Scored::new(k, None, sc, plan.clone()))
         .collect::<Result<Vec<_>, _>>()?;
+    if mismatch {
+        for i in 0..MISMATCHES.len() {
+            for k in [ObserverKind::DefaultEkf, ObserverKind::FluxBaseline] {
+                scored.push(Scored::new(k, Some(i), sc, plan.clone())?);
+            }
+        }
+    }
     // foc's own speed slew (half the acceleration of its current limit, for the motor's
     // inertia) would turn the scenario's ramps into slower ones and leave the windows on a
     // ramp; the profile's ramps are the acceleration here.
@@ -688,18 +841,20 @@ pub fn run_suite(opts: &SuiteOptions) -> Result<SuiteReport, SimError> {
     let mut motors = Vec::new();
     let mut steady = Vec::new();
     let mut transients = Vec::new();
+    let mut mismatch = Vec::new();
     let starts = start_angles_deg(opts.short);
     for motor in SuiteMotor::ALL {
         let plan = Plan::main(opts.short);
         let sc = scenario_with(motor, opts, &plan, INITIAL_ANGLE_RAD);
         let ts = sc.ts_s();
-        let (scored, end) = run_scored(&sc, &plan)?;
+        let (scored, end) = run_scored(&sc, &plan, true)?;
+        let truth = (sc.motor.psi_f_wb, sc.motor.rs_ohm);
         // Convergence from each start angle: per observer, the times (None: not converged).
         let conv_plan = Plan::convergence(opts.short);
         let mut conv: Vec<Vec<Option<f64>>> = vec![Vec::new(); ObserverKind::ALL.len()];
         for &deg in &starts {
             let csc = scenario_with(motor, opts, &conv_plan, deg.to_radians());
-            let (cs, _) = run_scored(&csc, &conv_plan)?;
+            let (cs, _) = run_scored(&csc, &conv_plan, false)?;
             for (times, o) in conv.iter_mut().zip(&cs) {
                 times.push(o.convergence_time_s(ts));
             }
@@ -718,7 +873,27 @@ pub fn run_suite(opts: &SuiteOptions) -> Result<SuiteReport, SimError> {
             duration_s: sc.duration_s,
             end,
         });
-        for (s, times) in scored.iter().zip(&conv) {
+        for s in scored.iter().filter(|s| s.told.is_some()) {
+            let case = MISMATCHES[s.told.unwrap_or(0)].name;
+            for (sums, w) in s.windows.iter().zip(&plan.windows) {
+                let n = sums.n as f64;
+                let ekf = s.kind == ObserverKind::DefaultEkf;
+                mismatch.push(MismatchRow {
+                    observer: s.kind,
+                    motor,
+                    case,
+                    condition: w.0.to_string(),
+                    speed_fraction: w.1,
+                    samples: sums.n,
+                    angle_rms_deg: (sums.sum_e2 / n).sqrt(),
+                    angle_max_deg: sums.max_e,
+                    angle_mean_deg: sums.sum_e / n,
+                    psi_f_error_pct: ekf.then(|| 100.0 * (sums.sum_psi / n / truth.0 - 1.0)),
+                    rs_error_pct: 100.0 * (sums.sum_rs / n / truth.1 - 1.0),
+                });
+            }
+        }
+        for (s, times) in scored.iter().filter(|s| s.told.is_none()).zip(&conv) {
             for (sums, w) in s.windows.iter().zip(&plan.windows) {
                 let n = sums.n as f64;
                 let speed_rms = (sums.sum_w2 / n).sqrt();
@@ -766,6 +941,7 @@ pub fn run_suite(opts: &SuiteOptions) -> Result<SuiteReport, SimError> {
         motors,
         steady,
         transients,
+        mismatch,
         checks: Vec::new(),
     };
     report.checks = report.evaluate();
@@ -867,6 +1043,40 @@ impl SuiteReport {
                 r.speed_rms_pct,
                 LIMIT_SPEED_PCT,
             ));
+        }
+        for r in self
+            .mismatch
+            .iter()
+            .filter(|r| r.observer == ObserverKind::DefaultEkf && r.speed_fraction >= 0.5)
+        {
+            let m = MISMATCHES.iter().find(|m| m.name == r.case);
+            let row = format!("{}, {}", r.condition, r.case);
+            if m.is_some_and(|m| m.is_ls()) {
+                out.push(check(
+                    "goal: EKF RMS told a wrong Ls (deg)",
+                    r.motor,
+                    &row,
+                    r.angle_rms_deg,
+                    GOAL_MISMATCH_LS_RMS_DEG,
+                ));
+            } else {
+                out.push(check(
+                    "goal: EKF RMS told a wrong psi_f, Rs or temperature (deg)",
+                    r.motor,
+                    &row,
+                    r.angle_rms_deg,
+                    GOAL_MISMATCH_RMS_DEG,
+                ));
+            }
+            if m.is_some_and(|m| m.is_psi_only()) {
+                out.push(check(
+                    "goal: tracked psi_f error told a wrong psi_f (%)",
+                    r.motor,
+                    &row,
+                    r.psi_f_error_pct.map_or(f64::NAN, f64::abs),
+                    GOAL_MISMATCH_PSI_PCT,
+                ));
+            }
         }
         for t in self
             .transients
@@ -1010,7 +1220,46 @@ impl SuiteReport {
         }
         let _ = writeln!(
             s,
-            "\n## Goals and limits (default EKF)\n\nGoals of the issue: RMS at most {GOAL_RMS_RATIO} x the baseline's in every steady-state row; |mean| at most {GOAL_MEAN_DEG} deg where w_e Ts <= {GOAL_MEAN_MAX_WTS} rad. Limits: RMS <= {LIMIT_RMS_DEG} deg, max <= {LIMIT_MAX_DEG} deg, speed RMS <= {LIMIT_SPEED_PCT} % of rated, converged from every start angle within the convergence phase, worst error through the load step <= {LIMIT_LOAD_STEP_DEG} deg.\n"
+            "\n## Mismatch: the observers told a wrong motor\n\nThe main runs again, the default EKF (online psi_f tracking, Rs by the split filter) and the baseline told a wrong motor; psi_f and Rs: the mean over the window of the EKF's tracked values (the baseline's are the told ones) against the truth.\n"
+        );
+        let _ = writeln!(
+            s,
+            "| motor | told | speed | EKF angle RMS / max / mean (deg) | baseline angle RMS / max / mean (deg) | EKF psi_f error (%) | EKF Rs error (%) |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+        for r in self
+            .mismatch
+            .iter()
+            .filter(|r| r.observer == ObserverKind::DefaultEkf)
+        {
+            let base = self.mismatch.iter().find(|b| {
+                b.observer == ObserverKind::FluxBaseline
+                    && b.motor == r.motor
+                    && b.case == r.case
+                    && b.condition == r.condition
+            });
+            let (brms, bmax, bmean) = base.map_or((f64::NAN, f64::NAN, f64::NAN), |b| {
+                (b.angle_rms_deg, b.angle_max_deg, b.angle_mean_deg)
+            });
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.3} / {:.3} / {:+.3} | {:.3} / {:.3} / {:+.3} | {:+.2} | {:+.1} |",
+                r.motor.name(),
+                r.case,
+                r.condition,
+                r.angle_rms_deg,
+                r.angle_max_deg,
+                r.angle_mean_deg,
+                brms,
+                bmax,
+                bmean,
+                r.psi_f_error_pct.unwrap_or(f64::NAN),
+                r.rs_error_pct
+            );
+        }
+        let _ = writeln!(
+            s,
+            "\n## Goals and limits (default EKF)\n\nGoals of the issue: RMS at most {GOAL_RMS_RATIO} x the baseline's in every steady-state row; |mean| at most {GOAL_MEAN_DEG} deg where w_e Ts <= {GOAL_MEAN_MAX_WTS} rad. Limits: RMS <= {LIMIT_RMS_DEG} deg, max <= {LIMIT_MAX_DEG} deg, speed RMS <= {LIMIT_SPEED_PCT} % of rated, converged from every start angle within the convergence phase, worst error through the load step <= {LIMIT_LOAD_STEP_DEG} deg. Mismatch goals at >= 50 % speed: RMS <= {GOAL_MISMATCH_RMS_DEG} deg told a wrong psi_f, Rs or temperature, <= {GOAL_MISMATCH_LS_RMS_DEG} deg told a wrong Ls; the tracked psi_f within {GOAL_MISMATCH_PSI_PCT} % told a wrong psi_f.\n"
         );
         let _ = writeln!(s, "| check | motor | row | value | limit | result |");
         let _ = writeln!(s, "|---|---|---|---|---|---|");
