@@ -124,6 +124,16 @@ pub struct ControllerEstimate {
     pub nis: f64,
     /// Whether it reports its angle as trusted (`Status::Tracking`).
     pub tracking: bool,
+    /// Tracked flux linkage, Wb (the configured one for an observer without tracking).
+    pub psi_f_wb: f64,
+    /// Its standard deviation, Wb (0 when not tracked).
+    pub psi_f_sigma_wb: f64,
+    /// Stator resistance in use, ohm (tracked, or the configured one).
+    pub rs_ohm: f64,
+    /// Its standard deviation, ohm (0 when not tracked).
+    pub rs_sigma_ohm: f64,
+    /// Winding temperature derived from `rs_ohm`, deg C (`NaN` when not known).
+    pub winding_temperature_c: f64,
 }
 
 /// What a controller commands in period `k`.

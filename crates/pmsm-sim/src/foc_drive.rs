@@ -196,6 +196,11 @@ impl DriveController for FocDrive {
                     p_diag: [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]].map(f64::from),
                     nis: f64::from(t.estimate.nis),
                     tracking: t.estimate.status == foc::ekf_core::Status::Tracking,
+                    psi_f_wb: f64::from(t.estimate.psi_f_wb),
+                    psi_f_sigma_wb: f64::from(t.estimate.psi_f_sigma_wb),
+                    rs_ohm: f64::from(t.estimate.rs_ohm),
+                    rs_sigma_ohm: f64::from(t.estimate.rs_sigma_ohm),
+                    winding_temperature_c: f64::from(t.estimate.winding_temperature_c),
                 }),
             },
         }

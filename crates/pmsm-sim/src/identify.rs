@@ -291,6 +291,8 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
                     i_dq_a: [state.i_d_a, state.i_q_a],
                     torque_nm: plant.torque_nm(),
                     load_torque_nm: 0.0,
+                    psi_f_wb: plant.motor().psi_f_wb,
+                    rs_ohm: plant.motor().rs_ohm,
                 },
                 measured: Measured {
                     i_abc_a: meas.i_abc_a,

@@ -13,7 +13,7 @@
 //! The per-period channel is protobuf by default: message encoding `protobuf`, schema encoding
 //! `protobuf` with a `FileDescriptorSet` ([`proto::file_descriptor_set`]; the `.proto` text is
 //! `src/schemas/period.proto`), encoded by hand ([`proto::PeriodEncoder`], about 60 ns and
-//! 700 bytes per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
+//! 900 bytes per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
 //! [`PERIOD_SCHEMA`] (same field names, about 40 times slower to write). The other channels are
 //! JSON (`jsonschema`): one message each.
 //!

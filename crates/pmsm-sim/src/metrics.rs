@@ -538,6 +538,7 @@ mod tests {
             p_diag: [0.0; 4],
             nis: 2.0,
             tracking: true,
+            ..ObserverSample::default()
         };
         s
     }

@@ -69,6 +69,10 @@ pub struct Truth {
     pub torque_nm: f64,
     /// Load torque held over `[t_k, t_k+1)`, N m.
     pub load_torque_nm: f64,
+    /// The plant's flux linkage now (drifts with temperature, module `faults`), Wb.
+    pub psi_f_wb: f64,
+    /// The plant's stator resistance now, ohm.
+    pub rs_ohm: f64,
 }
 
 /// What the sensors delivered at `t_k`.
@@ -99,6 +103,16 @@ pub struct ObserverSample {
     pub nis: f64,
     /// Whether the observer reports [`Status::Tracking`].
     pub tracking: bool,
+    /// Tracked flux linkage, Wb (the configured one for an observer without tracking).
+    pub psi_f_wb: f64,
+    /// Its standard deviation, Wb (0 when not tracked).
+    pub psi_f_sigma_wb: f64,
+    /// Stator resistance in use, ohm (tracked, or the configured one).
+    pub rs_ohm: f64,
+    /// Its standard deviation, ohm (0 when not tracked).
+    pub rs_sigma_ohm: f64,
+    /// Winding temperature derived from `rs_ohm`, deg C (`NaN` when not known).
+    pub winding_temperature_c: f64,
 }
 
 impl ObserverSample {
@@ -112,6 +126,11 @@ impl ObserverSample {
             p_diag: e.p_diag,
             nis: e.nis,
             tracking: e.tracking,
+            psi_f_wb: e.psi_f_wb,
+            psi_f_sigma_wb: e.psi_f_sigma_wb,
+            rs_ohm: e.rs_ohm,
+            rs_sigma_ohm: e.rs_sigma_ohm,
+            winding_temperature_c: e.winding_temperature_c,
         }
     }
 
@@ -124,6 +143,11 @@ impl ObserverSample {
             p_diag,
             nis: e.nis,
             tracking: e.status == Status::Tracking,
+            psi_f_wb: e.psi_f_wb,
+            psi_f_sigma_wb: e.psi_f_sigma_wb,
+            rs_ohm: e.rs_ohm,
+            rs_sigma_ohm: e.rs_sigma_ohm,
+            winding_temperature_c: e.winding_temperature_c,
         }
     }
 }
@@ -531,6 +555,8 @@ pub fn run_with_side_observers(
             i_dq_a: [state.i_d_a, state.i_q_a],
             torque_nm: plant.torque_nm(),
             load_torque_nm: load,
+            psi_f_wb: plant.motor().psi_f_wb,
+            rs_ohm: plant.motor().rs_ohm,
         };
         let sample = Sample {
             k: kk,

@@ -727,6 +727,11 @@ impl SideObserver for Scored {
                     p_diag: [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]],
                     nis: e.nis,
                     tracking: e.status == Status::Tracking,
+                    psi_f_wb: e.psi_f_wb,
+                    psi_f_sigma_wb: e.psi_f_sigma_wb,
+                    rs_ohm: e.rs_ohm,
+                    rs_sigma_ohm: e.rs_sigma_ohm,
+                    winding_temperature_c: e.winding_temperature_c,
                 })
             }
             Estimator::Flux(o) => {
@@ -737,6 +742,11 @@ impl SideObserver for Scored {
                     p_diag: [0.0; 4],
                     nis: 0.0,
                     tracking: true,
+                    psi_f_wb: self.params.0,
+                    psi_f_sigma_wb: 0.0,
+                    rs_ohm: self.params.1,
+                    rs_sigma_ohm: 0.0,
+                    winding_temperature_c: f64::NAN,
                 })
             }
         }

@@ -118,6 +118,8 @@ pub const MESSAGES: &[MessageDef] = &[
             f("i_dq_a", 5, Double, Repeated, "stator currents [d, q] in the true rotor frame, A"),
             f("torque_nm", 6, Double, Single, "electromagnetic torque, N m"),
             f("load_torque_nm", 7, Double, Single, "load torque held over [t_k, t_k+1), N m"),
+            f("psi_f_wb", 8, Double, Single, "the plant's flux linkage now (drifts with temperature), Wb"),
+            f("rs_ohm", 9, Double, Single, "the plant's stator resistance now, ohm"),
         ],
     },
     MessageDef {
@@ -140,6 +142,11 @@ pub const MESSAGES: &[MessageDef] = &[
             f("p_diag", 5, Double, Repeated, "covariance diagonal: i_alpha (A^2), i_beta (A^2), omega_e ((rad/s)^2), theta (rad^2)"),
             f("nis", 6, Double, Single, "normalized innovation squared of the correction"),
             f("tracking", 7, Bool, Single, "status Tracking (angle standard deviation below the limit)"),
+            f("psi_f_wb", 8, Double, Single, "tracked flux linkage, Wb (the configured one without tracking)"),
+            f("psi_f_sigma_wb", 9, Double, Single, "its standard deviation, Wb (0 when not tracked)"),
+            f("rs_ohm", 10, Double, Single, "stator resistance in use, ohm (tracked, or the configured one)"),
+            f("rs_sigma_ohm", 11, Double, Single, "its standard deviation, ohm (0 when not tracked)"),
+            f("winding_temperature_c", 12, Double, Single, "winding temperature derived from rs_ohm, deg C (NaN when not known)"),
         ],
     },
     MessageDef {
@@ -178,6 +185,11 @@ pub const MESSAGES: &[MessageDef] = &[
             f("p_diag", 3, Double, Repeated, "covariance diagonal (i_alpha, i_beta, omega_e, theta)"),
             f("nis", 4, Double, Single, "normalized innovation squared"),
             f("tracking", 5, Bool, Single, "its status is Tracking"),
+            f("psi_f_wb", 6, Double, Single, "tracked flux linkage, Wb"),
+            f("psi_f_sigma_wb", 7, Double, Single, "its standard deviation, Wb"),
+            f("rs_ohm", 8, Double, Single, "stator resistance in use, ohm"),
+            f("rs_sigma_ohm", 9, Double, Single, "its standard deviation, ohm"),
+            f("winding_temperature_c", 10, Double, Single, "winding temperature derived from rs_ohm, deg C"),
         ],
     },
     MessageDef {
@@ -202,7 +214,7 @@ const WT_LEN: u32 = 2;
 
 /// Bytes of a `pmsm_sim.Period` message besides its two strings, at most (the largest is
 /// about 700; a unit test keeps the margin).
-const PERIOD_MAX_FIXED: usize = 1024;
+const PERIOD_MAX_FIXED: usize = 1536;
 
 /// A message under construction in a buffer that is long enough (the caller sizes it): no
 /// capacity checks per field, the position in a register.
@@ -365,6 +377,11 @@ fn observer(e: &mut Enc<'_>, o: &ObserverSample) {
     e.doubles(5, &o.p_diag);
     e.double(6, o.nis);
     e.bool(7, o.tracking);
+    e.double(8, o.psi_f_wb);
+    e.double(9, o.psi_f_sigma_wb);
+    e.double(10, o.rs_ohm);
+    e.double(11, o.rs_sigma_ohm);
+    e.double(12, o.winding_temperature_c);
 }
 
 /// Encodes the `pmsm_sim.Period` message of a sample (the field numbers of [`MESSAGES`]; a
@@ -401,6 +418,8 @@ fn encode_period(e: &mut Enc<'_>, s: &Sample) {
         e.doubles(5, &t.i_dq_a);
         e.double(6, t.torque_nm);
         e.double(7, t.load_torque_nm);
+        e.double(8, t.psi_f_wb);
+        e.double(9, t.rs_ohm);
     });
     e.message(4, |e| {
         let m = &s.measured;
@@ -443,6 +462,11 @@ fn encode_period(e: &mut Enc<'_>, s: &Sample) {
                     e.doubles(3, &est.p_diag);
                     e.double(4, est.nis);
                     e.bool(5, est.tracking);
+                    e.double(6, est.psi_f_wb);
+                    e.double(7, est.psi_f_sigma_wb);
+                    e.double(8, est.rs_ohm);
+                    e.double(9, est.rs_sigma_ohm);
+                    e.double(10, est.winding_temperature_c);
                 });
             }
         });
@@ -710,6 +734,8 @@ mod tests {
         s.truth.i_dq_a = [next(), -next()];
         s.truth.torque_nm = next();
         s.truth.load_torque_nm = next();
+        s.truth.psi_f_wb = next();
+        s.truth.rs_ohm = next();
         s.measured.i_abc_a = [next(), next(), next()];
         s.measured.i_ab_a = [next(), next()];
         s.measured.u_dc_v = 300.0;
@@ -721,6 +747,11 @@ mod tests {
             p_diag: [next(), next(), next(), 1e-300],
             nis: next(),
             tracking: true,
+            psi_f_wb: next(),
+            psi_f_sigma_wb: next(),
+            rs_ohm: next(),
+            rs_sigma_ohm: next(),
+            winding_temperature_c: next(),
         };
         s.observer = obs();
         s.seed_filter = Some(obs());
@@ -745,6 +776,11 @@ mod tests {
             p_diag: [1e-3, 2e-3, 3.0, 4e-4],
             nis: 2.5,
             tracking: true,
+            psi_f_wb: 0.17,
+            psi_f_sigma_wb: 1e-4,
+            rs_ohm: 3.1,
+            rs_sigma_ohm: 0.05,
+            winding_temperature_c: 41.5,
         });
         s.inverter.pwm_enabled = true;
         s.inverter.duties = [0.2, 0.4, 0.6];
@@ -798,14 +834,14 @@ mod tests {
         assert_eq!(buf.len(), 4 + 20_000);
     }
 
-    /// The default's message is about 700 bytes (what the log size per period is made of),
-    /// well within the buffer reserved for it.
+    /// The default's message is about 900 bytes (what the log size per period is made of;
+    /// 700 before the tracked parameters), well within the buffer reserved for it.
     #[test]
     fn message_size() {
         let mut s = full_sample();
         let mut enc = PeriodEncoder::new();
         let n = enc.encode(&s).len();
-        assert!((600..800).contains(&n), "{n}");
+        assert!((800..1000).contains(&n), "{n}");
         s.control.telemetry.state = "";
         s.control.telemetry.fault = None;
         s.k = u64::MAX;

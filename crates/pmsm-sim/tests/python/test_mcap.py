@@ -147,6 +147,22 @@ def test_default_run_reads_back(sim_bin, tmp_path):
     assert abs(last["controller_observer"]["angle_error_deg"]) < 5.0
     assert len(last["control"]["telemetry"]["estimate"]["p_diag"]) == 4
     assert last["seed_filter"] is not None
+    # The tracked parameters (ekf-core's online tracking) against the plant's: the default
+    # scenario's motor is the one the observers are told, so the tracked flux stays at it.
+    psi_true, rs_true = last["truth"]["psi_f_wb"], last["truth"]["rs_ohm"]
+    assert psi_true == pytest.approx(0.175) and rs_true == pytest.approx(2.875)
+    for name in ("observer", "controller_observer"):
+        o = last[name]
+        assert abs(o["psi_f_wb"] / psi_true - 1.0) < 0.01, (name, o["psi_f_wb"])
+        assert 0.0 < o["psi_f_sigma_wb"] <= 0.1 * psi_true * (1 + 1e-6)  # at most the initial 10 %
+        assert abs(o["rs_ohm"] / rs_true - 1.0) < 0.05, (name, o["rs_ohm"])
+        assert o["rs_sigma_ohm"] > 0.0
+        assert abs(o["winding_temperature_c"] - 20.0) < 15.0
+    est = last["control"]["telemetry"]["estimate"]
+    assert est["psi_f_wb"] == last["controller_observer"]["psi_f_wb"]
+    # The seed's filter tracks nothing: the told values, no deviation.
+    assert last["seed_filter"]["psi_f_wb"] == pytest.approx(0.175)
+    assert last["seed_filter"]["psi_f_sigma_wb"] == 0.0
     scen = messages["/pmsm_sim/scenario"][0]
     assert scen["name"] == "default" and "[motor]" in scen["toml"]
     assert messages["/pmsm_sim/metrics"][0]["periods"] == 4000
