@@ -100,6 +100,9 @@ pub struct FaultCase {
     pub expected: Expected,
     /// Why that is expected.
     pub why: &'static str,
+    /// Simulated time of this case's run after the fault, s (`None`: to the suite's end
+    /// time).
+    pub run_after_fault_s: Option<f64>,
 }
 
 /// The suite's cases (module docs).
@@ -117,6 +120,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: RideThrough,
             why: "a slow offset is a plausible current; it adds torque ripple at the electrical frequency and angle error, not detected by foc (an offset calibration at standstill would be)",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "gain error step (b, +20 %)",
@@ -128,6 +132,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: RideThrough,
             why: "the current step is plausible; ripple at twice the electrical frequency",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "channel stuck (a)",
@@ -139,6 +144,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: Trip("current_sensor"),
             why: "foc's stuck-channel check: a reading repeated bit for bit while the current vector turns a quarter period (1.9 ms at 2000 rpm) cannot come from a live channel",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "dropout, one sample (a and b)",
@@ -149,6 +155,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: RideThrough,
             why: "foc rides through a missing sample: observer predicts only, last voltage reused",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "dropout, 5 ms (a)",
@@ -159,6 +166,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: Trip("non_finite_input"),
             why: "missing for more than samples.missing_trip_ticks (5) periods",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "noise burst (0.3 A, 50 ms)",
@@ -169,6 +177,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: RideThrough,
             why: "15 times the normal noise: the EKF weighs it by R; the angle error grows but stays bounded",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "glitch, one sample at 10x rated (a)",
@@ -179,6 +188,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: RideThrough,
             why: "rejected as physically implausible (a current cannot jump by more than ~u_dc Ts / Ls per period), treated as missing; the debounced over-current check never sees it",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "DC-bus sag to 70 % (0.2 s)",
@@ -189,6 +199,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: RideThrough,
             why: "210 V is above the 180 V under-voltage level; at 2000 rpm the voltage limit (121 V) is below the back-EMF (147 V): the speed drops until the EMF fits (no field weakening), and recovers",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "DC-bus sag to 50 %",
@@ -199,6 +210,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: Trip("bus_under_voltage"),
             why: "150 V is below the 180 V under-voltage level (0.6 U_nominal)",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "phase open (a)",
@@ -209,18 +221,35 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: TripAny(&["observer_lost", "stall", "over_current"]),
             why: "half the current vector is gone: torque ripple, the observer's model no longer fits the currents; foc has no open-phase detection, so a loss or stall check has to catch it",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "motor heating +100 K (Rs +39 %, psi_f -12 %, 0.2 s ramp)",
             spec: FaultSpec::ParamDrift {
                 t_s,
                 duration_s: Some(0.2),
+                time_constant_s: None,
                 temperature_rise_k: 100.0,
                 rs_per_k: 0.00393,
                 psi_f_per_k: -0.0012,
             },
             expected: RideThrough,
-            why: "the observer keeps the cold parameters: an angle bias of a few degrees and more current for the same torque",
+            why: "the observer tracks psi_f online (and Rs through the thermal link): the angle keeps its accuracy, and the health check sees no loss",
+            run_after_fault_s: None,
+        },
+        FaultCase {
+            name: "motor heating +100 K, thermal time constant 20 s, 60 s at rated load",
+            spec: FaultSpec::ParamDrift {
+                t_s,
+                duration_s: None,
+                time_constant_s: Some(20.0),
+                temperature_rise_k: 100.0,
+                rs_per_k: 0.00393,
+                psi_f_per_k: -0.0012,
+            },
+            expected: RideThrough,
+            why: "a realistic warm-up (95 % of the rise after 60 s): the tracked psi_f and Rs follow it, no fall-back, no trip",
+            run_after_fault_s: Some(60.0),
         },
         FaultCase {
             name: "locked rotor",
@@ -230,6 +259,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: TripAny(&["stall", "observer_lost"]),
             why: "the speed loop saturates at standstill: the stall check (0.5 s) trips; the observer cannot see a rotor that does not turn",
+            run_after_fault_s: None,
         },
         FaultCase {
             name: "load 5x rated (+6 N m, active)",
@@ -240,6 +270,7 @@ pub fn cases() -> Vec<FaultCase> {
             },
             expected: TripAny(&["stall", "observer_lost"]),
             why: "6 N m plus the fan against at most 4.7 N m at the 4.5 A limit: the rotor slows down and is driven backwards; the stall check trips (0.5 s at the limit with the speed low or reversed). (+4.5 N m is still carried, at 650 rpm)",
+            run_after_fault_s: None,
         },
     ]
 }
@@ -378,6 +409,9 @@ impl SampleSink for Score {
 /// Runs one case.
 pub fn run_case(case: &FaultCase, opts: &SuiteOptions) -> Result<CaseResult, SimError> {
     let mut sc = base_scenario(opts);
+    if let Some(t) = case.run_after_fault_s {
+        sc.duration_s = opts.t_fault_s + t;
+    }
     sc.faults = vec![case.spec.at(opts.t_fault_s)];
     sc.name = format!("faults: {}", case.name);
     let drive = FocDrive::from_scenario(&sc)?;

@@ -15,7 +15,7 @@
 //! | `glitch` | `channel`, `value_a` (default: ten times the rated current, `rated_torque_nm / (1.5 p psi_f)`) | current sensor | one sample reads `value_a` (no `duration_s`) |
 //! | `bus_sag` | `fraction` (in `(0, 1)`) | inverter, bus measurement | the DC bus drops to `(1 - fraction)` of its value (the controller measures it) |
 //! | `phase_open` | `phase` (`"a"`/`"b"`/`"c"`) | plant | the phase's current is zero (an open winding or a blown bond wire; [`Plant::open_phase`]) |
-//! | `param_drift` | `temperature_rise_k`, `rs_per_k` (default 0.00393, copper), `psi_f_per_k` (default -0.0012, NdFeB) | plant | the motor's `Rs` and `psi_f` ramp over `duration_s` (default: a step) to `(1 + coeff dT)` times their value and stay; the controller keeps its nominal parameters |
+//! | `param_drift` | `temperature_rise_k`, `rs_per_k` (default 0.00393, copper), `psi_f_per_k` (default -0.0012, NdFeB), `time_constant_s` (optional) | plant | the motor's `Rs` and `psi_f` ramp over `duration_s` (default: a step), or approach exponentially with `time_constant_s` (a thermal time constant), to `(1 + coeff dT)` times their value and stay; the controller keeps its nominal parameters (its observer tracks them) |
 //! | `locked_rotor` | - | plant (mechanics) | the rotor jams: speed zero while active |
 //! | `overload` | `torque_nm` | load | extra load torque while active (beyond rating when above `rated_torque_nm`) |
 //!
@@ -197,6 +197,10 @@ pub enum FaultSpec {
         /// Ramp time, s (default: a step).
         #[serde(default)]
         duration_s: Option<f64>,
+        /// Thermal time constant, s: the temperature approaches the rise exponentially,
+        /// `dT (1 - exp(-(t - t_s) / tau))` (instead of `duration_s`'s linear ramp).
+        #[serde(default)]
+        time_constant_s: Option<f64>,
         /// Temperature rise, K.
         temperature_rise_k: f64,
         /// Relative change of `Rs` per kelvin (default copper, 0.00393).
@@ -362,8 +366,21 @@ impl FaultSpec {
                 temperature_rise_k,
                 rs_per_k,
                 psi_f_per_k,
+                time_constant_s,
+                duration_s,
                 ..
             } => {
+                if let Some(tau) = time_constant_s {
+                    if !(tau.is_finite() && tau > 0.0) {
+                        return err("time_constant_s", format!("must be positive, is {tau}"));
+                    }
+                    if duration_s.is_some() {
+                        return err(
+                            "time_constant_s",
+                            "give either duration_s (a linear ramp) or time_constant_s".into(),
+                        );
+                    }
+                }
                 finite("temperature_rise_k", temperature_rise_k)?;
                 finite("rs_per_k", rs_per_k)?;
                 finite("psi_f_per_k", psi_f_per_k)?;
@@ -397,6 +414,8 @@ struct Armed {
     k1: u64,
     /// The stuck value, once captured.
     held: Option<f64>,
+    /// Thermal time constant in periods (0: none; `param_drift`).
+    tau_periods: f64,
 }
 
 impl Armed {
@@ -409,6 +428,8 @@ impl Armed {
     fn ramp(&self, k: u64) -> f64 {
         if k < self.k0 {
             0.0
+        } else if self.tau_periods > 0.0 {
+            -(-((k - self.k0) as f64) / self.tau_periods).exp_m1()
         } else if self.k1 == u64::MAX || k >= self.k1 {
             1.0
         } else {
@@ -451,11 +472,19 @@ impl FaultInjector {
                     (_, Some(d)) => k0 + periods(d).max(1),
                     (_, None) => u64::MAX,
                 };
+                let tau_periods = match spec {
+                    FaultSpec::ParamDrift {
+                        time_constant_s: Some(tau),
+                        ..
+                    } => tau / ts,
+                    _ => 0.0,
+                };
                 Armed {
                     spec,
                     k0,
                     k1,
                     held: None,
+                    tau_periods,
                 }
             })
             .collect();

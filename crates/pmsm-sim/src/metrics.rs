@@ -33,7 +33,7 @@
 use serde::Serialize;
 
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
-use crate::sim::{ObserverSample, Sample};
+use crate::sim::{ObserverSample, Sample, Truth};
 
 /// `|e_th|` below which the observer counts as converged, electrical degrees.
 pub const CONVERGED_DEG: f64 = 5.0;
@@ -74,6 +74,12 @@ pub struct ObserverMetrics {
     pub tracking_pct: f64,
     /// Mean normalized innovation squared over the window.
     pub nis_mean: f64,
+    /// Its flux linkage (tracked, or the configured one) at the last sample against the
+    /// plant's then, %.
+    pub psi_f_error_end_pct: f64,
+    /// Its stator resistance (tracked, or the configured one) at the last sample against the
+    /// plant's then, %.
+    pub rs_error_end_pct: f64,
 }
 
 /// Running sums over a set of samples.
@@ -114,6 +120,8 @@ pub struct ObserverScore {
     window: Sums,
     /// Every sample above the low-speed limit (the window when never converged).
     all: Sums,
+    /// The last sample's parameters: estimated and true `psi_f`, `Rs`.
+    params: [f64; 4],
 }
 
 impl ObserverScore {
@@ -126,7 +134,15 @@ impl ObserverScore {
             run_start: None,
             window: Sums::default(),
             all: Sums::default(),
+            params: [f64::NAN; 4],
         }
+    }
+
+    /// Records the parameters of the latest sample: the observer's `psi_f`, `Rs` and the
+    /// plant's (for the errors at the end).
+    #[inline]
+    pub fn params(&mut self, est: &ObserverSample, truth: &Truth) {
+        self.params = [est.psi_f_wb, est.rs_ohm, truth.psi_f_wb, truth.rs_ohm];
     }
 
     /// Adds one sample: time, true electrical speed, and the observer's sample.
@@ -171,6 +187,8 @@ impl ObserverScore {
             speed_error_max_rad_s: if s.n > 0 { s.max_w } else { f64::NAN },
             tracking_pct: 100.0 * s.tracking as f64 / nf,
             nis_mean: s.sum_nis / nf,
+            psi_f_error_end_pct: 100.0 * (self.params[0] / self.params[2] - 1.0),
+            rs_error_end_pct: 100.0 * (self.params[1] / self.params[3] - 1.0),
         })
     }
 }
@@ -186,7 +204,9 @@ impl ObserverMetrics {
     ) -> Option<Self> {
         let mut score = ObserverScore::new(rated_omega_e_rad_s);
         for s in samples {
-            score.push(s.t_s, s.truth.omega_e_rad_s, &pick(s)?);
+            let est = pick(s)?;
+            score.push(s.t_s, s.truth.omega_e_rad_s, &est);
+            score.params(&est, &s.truth);
         }
         score.finish(ts_s)
     }
@@ -466,14 +486,18 @@ impl MetricsAccumulator {
         self.periods += 1;
         self.observer
             .push(s.t_s, s.truth.omega_e_rad_s, &s.observer);
+        self.observer.params(&s.observer, &s.truth);
         if let (Some(score), Some(est)) = (self.seed_filter.as_mut(), s.seed_filter.as_ref()) {
             score.push(s.t_s, s.truth.omega_e_rad_s, est);
+            score.params(est, &s.truth);
         }
         if let Some(est) = s.controller_observer.as_ref() {
             let rated = self.rated_omega_e_rad_s;
-            self.controller_observer
-                .get_or_insert_with(|| ObserverScore::new(rated))
-                .push(s.t_s, s.truth.omega_e_rad_s, est);
+            let score = self
+                .controller_observer
+                .get_or_insert_with(|| ObserverScore::new(rated));
+            score.push(s.t_s, s.truth.omega_e_rad_s, est);
+            score.params(est, &s.truth);
         }
         self.closed_loop.push(s);
         self.drive.push(s);

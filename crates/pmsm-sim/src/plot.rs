@@ -2,14 +2,17 @@
 //! over time.
 //!
 //! [`PlotSink`] keeps every `stride`-th sample (at most about [`MAX_POINTS`] per curve) while
-//! the run goes, and [`PlotSink::write_svg`] draws three panels:
+//! the run goes, and [`PlotSink::write_svg`] draws four panels:
 //!
 //! 1. mechanical speed: true, estimated (the simulator's EKF and the controller's own, when
 //!    it has one), the scenario's reference and the controller's own (slewed; `foc`: the I/f
 //!    ramp speed in open loop), rpm;
 //! 2. angle error `wrap(th_hat - th)` of the observer(s), electrical degrees; the axis is
 //!    zoomed on the converged part (`|e| < 5 deg`), so the start-up excursion is clipped;
-//! 3. dq currents in the true rotor frame and the controller's references, A.
+//! 3. dq currents in the true rotor frame and the controller's references, A;
+//! 4. the motor's `psi_f` and `Rs`: the plant's (they drift with temperature, module
+//!    [`faults`](crate::faults)) and the observers' tracked ones, % of the plant's values at
+//!    the start.
 //!
 //! SVG only: plotters' SVG backend writes text as `<text>` elements and needs no font files,
 //! so the plot works on a headless machine without system fonts.
@@ -38,6 +41,9 @@ struct Point {
     ctl_ref_rpm: Option<f64>,
     i_dq: [f64; 2],
     i_dq_ref: [f64; 2],
+    /// `psi_f`: plant, simulator's EKF, controller's observer; `Rs` likewise.
+    psi: [f64; 3],
+    rs: [f64; 3],
 }
 
 /// Collects a decimated trace for the plot (module docs).
@@ -83,11 +89,11 @@ impl PlotSink {
 
     fn draw(&self, path: &Path, title: &str) -> Result<(), Box<dyn std::error::Error>> {
         let pts = &self.points;
-        let root = SVGBackend::new(path, (1200, 1000)).into_drawing_area();
+        let root = SVGBackend::new(path, (1200, 1300)).into_drawing_area();
         root.fill(&WHITE)?;
         let (top, rest) = root.split_vertically(40);
         top.titled(title, ("sans-serif", 22))?;
-        let panels = rest.split_evenly((3, 1));
+        let panels = rest.split_evenly((4, 1));
         let (t0, t1) = match (pts.first(), pts.last()) {
             (Some(a), Some(b)) if b.t > a.t => (a.t, b.t),
             (Some(a), _) => (a.t, a.t + 1e-3),
@@ -201,6 +207,52 @@ impl PlotSink {
             "i_d",
         )?;
         legend(&mut c)?;
+
+        // Panel 4: the motor's parameters, % of the plant's at the start.
+        let (psi0, rs0) = pts.first().map_or((1.0, 1.0), |p| (p.psi[0], p.rs[0]));
+        let pct = |v: f64, v0: f64| 100.0 * v / v0;
+        let (lo, hi) = range(pts.iter().flat_map(|p| {
+            [
+                pct(p.psi[0], psi0),
+                pct(p.psi[1], psi0),
+                pct(p.psi[2], psi0),
+                pct(p.rs[0], rs0),
+                pct(p.rs[1], rs0),
+                pct(p.rs[2], rs0),
+            ]
+        }));
+        let (lo, hi) = (lo.min(95.0), hi.max(105.0));
+        let mut c = chart(
+            &panels[3],
+            "motor parameters: plant vs tracked (% of the plant's at the start)",
+            t0..t1,
+            lo..hi,
+            "%",
+        )?;
+        let series: [(usize, bool, RGBColor, &str); 6] = [
+            (0, true, BLACK, "psi_f plant"),
+            (1, true, BLUE, "psi_f sim EKF"),
+            (2, true, GREEN, "psi_f controller"),
+            (0, false, RGBColor(128, 0, 0), "Rs plant"),
+            (1, false, RED, "Rs sim EKF"),
+            (2, false, MAGENTA, "Rs controller"),
+        ];
+        for (i, is_psi, color, label) in series {
+            line(
+                &mut c,
+                pts.iter().map(|p| {
+                    let v = if is_psi {
+                        pct(p.psi[i], psi0)
+                    } else {
+                        pct(p.rs[i], rs0)
+                    };
+                    (p.t, v)
+                }),
+                &color,
+                label,
+            )?;
+        }
+        legend(&mut c)?;
         root.present()?;
         Ok(())
     }
@@ -292,6 +344,16 @@ impl SampleSink for PlotSink {
                 ctl_ref_rpm: tel.speed_ref_rpm,
                 i_dq: s.truth.i_dq_a,
                 i_dq_ref: tel.i_dq_ref_a,
+                psi: [
+                    s.truth.psi_f_wb,
+                    s.observer.psi_f_wb,
+                    s.controller_observer.map_or(f64::NAN, |o| o.psi_f_wb),
+                ],
+                rs: [
+                    s.truth.rs_ohm,
+                    s.observer.rs_ohm,
+                    s.controller_observer.map_or(f64::NAN, |o| o.rs_ohm),
+                ],
             });
         }
         Ok(())

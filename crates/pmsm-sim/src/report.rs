@@ -38,7 +38,7 @@ pub fn table(m: &RunMetrics) -> String {
     cols.push(("EKF f64 (sim)", m.observer.as_ref()));
     cols.push(("seed filter", m.seed_filter.as_ref()));
     type Row = (&'static str, &'static str, fn(&ObserverMetrics) -> String);
-    let rows: [Row; 11] = [
+    let rows: [Row; 13] = [
         ("convergence time", "s", |o| {
             o.convergence_time_s
                 .map_or_else(|| "never".into(), |t| format!("{t:.4}"))
@@ -70,6 +70,12 @@ pub fn table(m: &RunMetrics) -> String {
         }),
         ("converged at end", "", |o| {
             if o.converged { "yes" } else { "no" }.into()
+        }),
+        ("psi_f at end vs plant", "%", |o| {
+            format!("{:+.2}", o.psi_f_error_end_pct)
+        }),
+        ("Rs at end vs plant", "%", |o| {
+            format!("{:+.2}", o.rs_error_end_pct)
         }),
     ];
     let width = 37 + 15 * cols.len();

@@ -37,6 +37,10 @@ pub const PRESETS: &[(&str, &str)] = &[
         include_str!("../scenarios/industrial-2k2.toml"),
     ),
     ("drone", include_str!("../scenarios/drone.toml")),
+    (
+        "motor-heating",
+        include_str!("../scenarios/motor-heating.toml"),
+    ),
 ];
 
 /// Which controller drives the plant.
