@@ -11,6 +11,7 @@ pub mod hal;
 pub mod health;
 pub mod pi;
 pub mod startup;
+mod state;
 pub mod svpwm;
 pub mod transforms;
 pub mod trig;
