@@ -643,14 +643,7 @@ impl Foc {
         if at_most(n2, u_max * u_max) {
             (u, false)
         } else {
-            let k = u_max / sqrt(n2);
-            (
-                Dq {
-                    d: u.d * k,
-                    q: u.q * k,
-                },
-                true,
-            )
+            (u * (u_max / sqrt(n2)), true)
         }
     }
 
