@@ -24,10 +24,12 @@ use glam::Vec2;
 
 use crate::trig::sin_cos;
 
-/// `1 / sqrt(3)`.
-const FRAC_1_SQRT_3: f32 = 0.577_350_26;
+/// `1 / sqrt(3)` (Clarke; the linear range of SVPWM, `u_dc / sqrt(3)`).
+pub(crate) const FRAC_1_SQRT_3: f32 = 0.577_350_26;
 /// `sqrt(3) / 2`.
-const SQRT_3_2: f32 = 0.866_025_4;
+pub(crate) const SQRT_3_2: f32 = 0.866_025_4;
+/// `sqrt(3)` (the f32 nearest, like the two above).
+pub(crate) const SQRT_3: f32 = 2.0 * SQRT_3_2;
 
 /// Three phase quantities (currents in A or voltages in V).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
