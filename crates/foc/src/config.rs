@@ -45,9 +45,7 @@ use core::fmt;
 use ekf_core::{MotorParams, ObserverConfig};
 
 use crate::pi::PiGains;
-
-/// `1 / sqrt(3)`.
-const FRAC_1_SQRT_3: f32 = 0.577_350_26;
+use crate::transforms::FRAC_1_SQRT_3;
 
 /// Default linear band of the dead-time compensation as a fraction of the current limit.
 const DEAD_TIME_BAND_FRACTION: f32 = 0.02;

@@ -104,9 +104,9 @@ use ekf_core::{Estimate, PmsmObserver};
 use crate::config::{ComputationDelay, ConfigError, FocConfig, Mode};
 use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
-use crate::health::{HealthMonitor, HealthReport, ticks};
-use crate::pi::{Pi, limit};
-use crate::startup::{Frame, Sequencer, State};
+use crate::health::HealthReport;
+use crate::pi::Pi;
+use crate::startup::{Frame, Inputs, Plan, Seed, Sequencer, State, Stop};
 use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
 use crate::transforms::{Abc, AlphaBeta, Dq};
 use crate::trig::{add_angles, at_most, max2, min2, sin_cos, sin_cos_small, sqrt, wrap};
@@ -247,16 +247,8 @@ impl core::error::Error for CommandError {}
 /// [`set_speed_ref_mech_rad_s`](Foc::set_speed_ref_mech_rad_s).
 #[derive(Clone, Debug)]
 pub struct Foc {
-    pub(crate) cfg: FocConfig,
+    cfg: FocConfig,
     // Constants derived from the configuration.
-    pub(crate) pole_pairs: f32,
-    pub(crate) inv_pole_pairs: f32,
-    pub(crate) handover: f32,
-    pub(crate) exit_speed: f32,
-    pub(crate) align_ticks: u32,
-    pub(crate) blend_ticks: u32,
-    pub(crate) acquire_ticks: u32,
-    pub(crate) stall_ticks: u32,
     over_current_sq: f32,
     /// Largest plausible change of the current vector per period, A, and its square.
     max_step_a: f32,
@@ -264,14 +256,12 @@ pub struct Foc {
     advance_s: f32,
     dead_time: DeadTimeCompensation,
     // Parts.
-    pub(crate) observer: PmsmObserver<f32>,
-    pub(crate) health: HealthMonitor,
+    observer: PmsmObserver<f32>,
     pi_d: Pi,
     pi_q: Pi,
-    pub(crate) speed_pi: Pi,
-    pub(crate) seq: Sequencer,
+    /// The state machine with the speed loop and the health monitor.
+    seq: Sequencer,
     // State.
-    pub(crate) state: State,
     fault: Option<FaultInfo>,
     tick_count: u32,
     /// Realized voltages computed by ticks k-1 and k-2.
@@ -290,7 +280,26 @@ pub struct Foc {
     stuck_angle: [f32; 2],
     /// Ticks phase a / b repeated its reading.
     stuck_ticks: [u16; 2],
-    pub(crate) report: HealthReport,
+}
+
+/// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
+/// its angle standard deviation (rad); the currents keep their estimate. Rare (start-up,
+/// re-acquisition): out of line.
+#[cold]
+#[inline(never)]
+fn reseed_observer(observer: &mut PmsmObserver<f32>, cfg: &FocConfig, seed: Seed) {
+    let x = observer.state();
+    let si = 0.1 * cfg.motor.characteristic_current_a();
+    let sw = 0.5 * cfg.startup.handover_speed_rad_s + 0.3 * seed.omega.abs();
+    let x = Vector4::new(x[0], x[1], seed.omega, wrap(seed.theta));
+    let p = Matrix4::from_diagonal(&Vector4::new(
+        si * si,
+        si * si,
+        sw * sw,
+        seed.sigma_theta * seed.sigma_theta,
+    ));
+    // Refused only for non-finite values, which these are not; nothing changes then.
+    let _ = observer.reset(x, p);
 }
 
 /// The first non-finite of three values (the last one if none is).
@@ -304,37 +313,14 @@ fn first_bad(a: f32, b: f32, c: f32) -> f32 {
     }
 }
 
-/// How the current references and the frame are set for this tick (from the state machine).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct Plan {
-    /// Control frame of this tick.
-    pub frame: Frame,
-    /// Current references in that frame, A.
-    pub i_ref: Dq,
-    /// The frame the current loops were in until this tick, when it changed.
-    pub reframe_from: Option<Frame>,
-}
-
 impl Foc {
     /// Validates `cfg` and builds an idle controller.
     pub fn new(cfg: &FocConfig) -> Result<Self, ConfigError> {
         cfg.validate()?;
         let observer = PmsmObserver::new(&cfg.observer).map_err(ConfigError::Observer)?;
         let ts = cfg.ts_s;
-        let pole_pairs = cfg.motor.pole_pairs as f32;
-        let handover = cfg.startup.handover_speed_rad_s;
-        let exit_speed = cfg.startup.exit_speed_ratio * handover;
-        let speed_ts = ts * f32::from(cfg.speed_divider);
         Ok(Self {
             cfg: *cfg,
-            pole_pairs,
-            inv_pole_pairs: 1.0 / pole_pairs,
-            handover,
-            exit_speed,
-            align_ticks: ticks(cfg.startup.align_time_s, ts),
-            blend_ticks: ticks(cfg.startup.blend_time_s, ts),
-            acquire_ticks: ticks(cfg.startup.acquire_timeout_s, ts),
-            stall_ticks: ticks(cfg.health.stall_time_s, ts),
             over_current_sq: cfg.over_current_a * cfg.over_current_a,
             // Capped so that `((n + 1) step)^2` stays finite for any count `n`: an infinite
             // step of the current vector (`d^2 = inf`) is then never accepted.
@@ -344,12 +330,9 @@ impl Foc {
             advance_s: cfg.angle_advance_periods * ts,
             dead_time: DeadTimeCompensation::new(cfg.dead_time_s, ts, cfg.dead_time_band()),
             observer,
-            health: HealthMonitor::new(&cfg.health, ts, handover, exit_speed, cfg.motor.psi_f_wb),
             pi_d: Pi::new(cfg.current_pi_gains(), ts),
             pi_q: Pi::new(cfg.current_pi_gains(), ts),
-            speed_pi: Pi::new(cfg.speed_pi_gains(), speed_ts),
-            seq: Sequencer::default(),
-            state: State::Idle,
+            seq: Sequencer::new(cfg),
             fault: None,
             tick_count: 0,
             u_hist: [AlphaBeta::default(); 2],
@@ -360,7 +343,6 @@ impl Foc {
             raw_last: [f32::NAN; 2],
             stuck_angle: [0.0; 2],
             stuck_ticks: [0; 2],
-            report: HealthReport::default(),
         })
     }
 
@@ -371,7 +353,7 @@ impl Foc {
 
     /// Current state.
     pub fn state(&self) -> State {
-        self.state
+        self.seq.state()
     }
 
     /// The latched fault, if any.
@@ -391,12 +373,12 @@ impl Foc {
 
     /// The speed command, rad/s mech. (sign = direction), as set.
     pub fn speed_target_mech_rad_s(&self) -> f32 {
-        self.seq.target_mech
+        self.seq.target_mech()
     }
 
     /// The health monitor's findings of the last tick (sensorless mode; default otherwise).
     pub fn health_report(&self) -> HealthReport {
-        self.report
+        self.seq.report()
     }
 
     /// Calls of [`tick`](Self::tick) so far (wrapping).
@@ -411,23 +393,15 @@ impl Foc {
         if let Some(f) = self.fault {
             return Err(CommandError::Faulted(f.fault));
         }
-        self.seq.stop_requested = false;
-        if self.state == State::Idle {
+        if self.seq.state() == State::Idle {
             self.reset_loops();
             let _ = self
                 .observer
                 .reset(self.cfg.observer.x0, self.cfg.observer.p0);
-            self.health.reset(0.0);
-            self.seq.begin();
-            self.state = match self.cfg.mode {
-                Mode::Sensored => State::ClosedLoop,
-                Mode::Sensorless if self.cfg.startup.align_time_s > 0.0 => State::Align,
-                Mode::Sensorless => {
-                    self.enter_open_loop_from_rest(core::f32::consts::PI);
-                    State::OpenLoop
-                }
-            };
         }
+        let (cfg, observer) = (&self.cfg, &mut self.observer);
+        self.seq
+            .start(cfg, &mut |seed| reseed_observer(observer, cfg, seed));
         Ok(())
     }
 
@@ -435,16 +409,16 @@ impl Foc {
     /// speed, then the I/f ramp down to standstill), then the PWM goes off (`Idle`). During
     /// alignment, and in sensored mode once the speed is near zero, it stops at once.
     pub fn stop(&mut self) {
-        if self.state == State::Align {
+        if self.seq.state() == State::Align {
             self.go_idle();
         } else {
-            self.seq.stop_requested = true;
+            self.seq.request_stop();
         }
     }
 
     /// Immediate stop: PWM off, `Idle` (the motor coasts). Does not clear a fault.
     pub fn disable(&mut self) {
-        if self.state != State::Fault {
+        if self.seq.state() != State::Fault {
             self.go_idle();
         }
     }
@@ -457,8 +431,7 @@ impl Foc {
         if !speed_mech_rad_s.is_finite() {
             return Err(CommandError::NonFinite);
         }
-        let max = self.cfg.max_speed_rad_s * self.inv_pole_pairs;
-        self.seq.target_mech = limit(speed_mech_rad_s, -max, max);
+        self.seq.set_target_mech(&self.cfg, speed_mech_rad_s);
         Ok(())
     }
 
@@ -467,7 +440,7 @@ impl Foc {
     /// tick.
     pub fn clear_fault(&mut self) -> Option<FaultInfo> {
         let f = self.fault.take();
-        if self.state == State::Fault {
+        if self.seq.state() == State::Fault {
             self.go_idle();
         }
         f
@@ -475,7 +448,7 @@ impl Foc {
 
     /// Changes the mode; only while idle.
     pub fn set_mode(&mut self, mode: Mode) -> Result<(), CommandError> {
-        if self.state != State::Idle {
+        if self.seq.state() != State::Idle {
             return Err(CommandError::NotIdle);
         }
         self.cfg.mode = mode;
@@ -492,7 +465,7 @@ impl Foc {
         };
         let sample_ok = self.check_currents(input, i_ab, c_abs);
         self.protect(input);
-        if matches!(self.state, State::Idle | State::Fault) {
+        if matches!(self.seq.state(), State::Idle | State::Fault) {
             return self.safe_output();
         }
 
@@ -523,8 +496,25 @@ impl Foc {
             }
         };
 
-        let Some(plan) = self.sequence(&est, observer_ok, input.sensor) else {
-            return self.safe_output();
+        let inputs = Inputs {
+            estimate: &est,
+            observer_ok,
+            sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
+        };
+        let (cfg, observer) = (&self.cfg, &mut self.observer);
+        let plan = match self.seq.step(cfg, inputs, &mut |seed| {
+            reseed_observer(observer, cfg, seed)
+        }) {
+            Ok(plan) => plan,
+            Err(Stop::Off) => return self.safe_output(),
+            Err(Stop::Idle) => {
+                self.go_idle();
+                return self.safe_output();
+            }
+            Err(Stop::Trip(fault, value)) => {
+                self.trip(fault, value);
+                return self.safe_output();
+            }
         };
         // Stuck channel: a sampled phase current that repeats bit for bit while the current
         // vector turns (module docs). The common path is two comparisons.
@@ -592,7 +582,7 @@ impl Foc {
         TickOutput {
             duties,
             pwm_enabled: true,
-            state: self.state,
+            state: self.seq.state(),
             fault: None,
             telemetry: Telemetry {
                 i_dq,
@@ -601,7 +591,7 @@ impl Foc {
                 u_ab: applied,
                 theta_rad: frame.theta,
                 omega_rad_s: frame.omega,
-                speed_ref_mech_rad_s: self.seq.speed_ref_mech,
+                speed_ref_mech_rad_s: self.seq.speed_ref_mech(),
                 estimate: est,
                 observer_ok,
                 sample_ok,
@@ -654,14 +644,7 @@ impl Foc {
         if at_most(n2, u_max * u_max) {
             (u, false)
         } else {
-            let k = u_max / sqrt(n2);
-            (
-                Dq {
-                    d: u.d * k,
-                    q: u.q * k,
-                },
-                true,
-            )
+            (u * (u_max / sqrt(n2)), true)
         }
     }
 
@@ -768,7 +751,7 @@ impl Foc {
     /// first fault found.
     fn protect(&mut self, input: &TickInput) {
         // Fast path: comparisons that are false for NaN cover finiteness too.
-        let running = !matches!(self.state, State::Idle | State::Fault);
+        let running = !matches!(self.seq.state(), State::Idle | State::Fault);
         let u_dc = input.u_dc_v;
         let u_min = if running {
             self.cfg.u_dc_min_v
@@ -813,54 +796,33 @@ impl Foc {
     }
 
     /// Latches `fault` (if none is latched yet) and turns the PWM off.
-    pub(crate) fn trip(&mut self, fault: Fault, value: f32) {
+    fn trip(&mut self, fault: Fault, value: f32) {
         if self.fault.is_none() {
             self.fault = Some(FaultInfo {
                 fault,
-                state: self.state,
+                state: self.seq.state(),
                 value,
                 tick: self.tick_count,
             });
         }
-        self.state = State::Fault;
+        self.seq.fault();
         self.reset_loops();
     }
 
     /// PWM off, `Idle`.
-    pub(crate) fn go_idle(&mut self) {
-        self.state = State::Idle;
-        self.seq.stop_requested = false;
+    fn go_idle(&mut self) {
+        self.seq.idle();
         self.reset_loops();
     }
 
-    /// Integrators and voltage history to zero.
+    /// Current integrators and voltage history to zero (the speed loop: the sequencer).
     fn reset_loops(&mut self) {
         self.pi_d.reset();
         self.pi_q.reset();
-        self.speed_pi.reset();
         self.u_hist = [AlphaBeta::default(); 2];
         self.u_dq_last = Dq::default();
         self.stuck_angle = [0.0; 2];
         self.stuck_ticks = [0; 2];
-    }
-
-    /// Replaces the observer's estimate by `theta` (rad el.), `omega` (rad/s el.) with angle
-    /// standard deviation `sigma_theta` (rad); the currents keep their estimate. Resets the
-    /// health history.
-    pub(crate) fn reseed_observer(&mut self, theta: f32, omega: f32, sigma_theta: f32) {
-        let x = self.observer.state();
-        let si = 0.1 * self.cfg.motor.characteristic_current_a();
-        let sw = 0.5 * self.handover + 0.3 * omega.abs();
-        let x = Vector4::new(x[0], x[1], omega, wrap(theta));
-        let p = Matrix4::from_diagonal(&Vector4::new(
-            si * si,
-            si * si,
-            sw * sw,
-            sigma_theta * sigma_theta,
-        ));
-        // Refused only for non-finite values, which these are not; nothing changes then.
-        let _ = self.observer.reset(x, p);
-        self.health.reset(omega);
     }
 
     /// Output of `Idle` and `Fault`: PWM off, duties 0.5.
@@ -868,7 +830,7 @@ impl Foc {
         TickOutput {
             duties: SAFE_DUTIES,
             pwm_enabled: false,
-            state: self.state,
+            state: self.seq.state(),
             fault: self.fault(),
             telemetry: Telemetry {
                 i_dq: Dq::default(),

@@ -22,7 +22,7 @@
 
 use core::fmt;
 
-use crate::startup::State;
+use crate::state::State;
 
 /// Why the controller stopped (latched until cleared).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

@@ -2,9 +2,10 @@
 //!
 //! The controller itself never touches hardware and never reads a clock: the board samples,
 //! calls [`Foc::tick`] once per PWM period and writes the result. Implement
-//! [`CurrentSense`] on the ADC side and [`Inverter`] on the timer side (the simulator
-//! implements the same traits on its plant), then call [`run_period`] from the interrupt
-//! that fires when the current samples of the period are ready:
+//! [`CurrentSense`] on the ADC side and [`Inverter`] on the timer side, then call
+//! [`run_period`] from the interrupt that fires when the current samples of the period are
+//! ready. (The simulator `pmsm-sim` does not go through these traits: its adapter builds the
+//! [`TickInput`] from its plant and calls [`Foc::tick`] directly, which is all they do.)
 //!
 //! ```
 //! use foc::hal::{run_period_on, CurrentSense, Inverter};
@@ -89,12 +90,30 @@ pub fn run_period<S: CurrentSense, I: Inverter>(
     sense: &mut S,
     inverter: &mut I,
 ) -> TickOutput {
-    let input = TickInput {
+    let out = foc.tick(&sample(sense));
+    write(inverter, &out);
+    out
+}
+
+/// [`run_period`] for one value that implements both traits.
+pub fn run_period_on<B: CurrentSense + Inverter>(foc: &mut Foc, board: &mut B) -> TickOutput {
+    let out = foc.tick(&sample(board));
+    write(board, &out);
+    out
+}
+
+/// The measurements of this period as the controller's input.
+fn sample<S: CurrentSense>(sense: &mut S) -> TickInput {
+    TickInput {
         currents: sense.currents(),
         u_dc_v: sense.bus_voltage_v(),
         sensor: sense.rotor_sensor(),
-    };
-    let out = foc.tick(&input);
+    }
+}
+
+/// Writes a tick's outputs: disabled before the duties are written when they turn off, the
+/// duties first when they turn on.
+fn write<I: Inverter>(inverter: &mut I, out: &TickOutput) {
     if out.pwm_enabled {
         inverter.set_duties(out.duties);
         inverter.enable(true);
@@ -102,23 +121,4 @@ pub fn run_period<S: CurrentSense, I: Inverter>(
         inverter.enable(false);
         inverter.set_duties(out.duties);
     }
-    out
-}
-
-/// [`run_period`] for one value that implements both traits.
-pub fn run_period_on<B: CurrentSense + Inverter>(foc: &mut Foc, board: &mut B) -> TickOutput {
-    let input = TickInput {
-        currents: board.currents(),
-        u_dc_v: board.bus_voltage_v(),
-        sensor: board.rotor_sensor(),
-    };
-    let out = foc.tick(&input);
-    if out.pwm_enabled {
-        board.set_duties(out.duties);
-        board.enable(true);
-    } else {
-        board.enable(false);
-        board.set_duties(out.duties);
-    }
-    out
 }

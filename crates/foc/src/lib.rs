@@ -12,6 +12,7 @@ pub mod health;
 pub mod identify;
 pub mod pi;
 pub mod startup;
+mod state;
 pub mod svpwm;
 pub mod transforms;
 pub mod trig;
@@ -37,3 +38,6 @@ pub use transforms::{Abc, AlphaBeta, Dq};
 
 /// Re-export of the observer crate (motor parameters, observer configuration, estimate).
 pub use ekf_core;
+/// Re-export of the vector library of the two-axis frames ([`AlphaBeta`], [`Dq`] convert to
+/// and from `glam::Vec2`).
+pub use glam;

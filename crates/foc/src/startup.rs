@@ -66,36 +66,28 @@
 //! `acquire_timeout_s` at speed (or [`Fault::Stall`] if the observer sees the rotor not
 //! turning). More than `max_reacquire` re-acquisitions without `acquire_timeout_s` of closed
 //! loop in between trip [`Fault::ObserverLost`].
+//!
+//! # Interface
+//!
+//! The sequencer (crate-private `Sequencer`) owns the state, the speed loop and the
+//! [`health`](crate::health) monitor, and nothing else: it never touches the observer, the
+//! current loops or the bridge. Each tick the controller passes it `Inputs` (the observer's
+//! estimate and whether its step succeeded, the sensor reading) with the configuration, and
+//! gets back a `Decision`: drive with a `Plan` (control frame and current references), turn
+//! the PWM off (idle, or a fault to latch), and whether to re-seed the observer.
 
 use core::f32::consts::{FRAC_PI_4, PI};
 
 use ekf_core::Estimate;
 
-use crate::config::{Mode, ObserverLossPolicy};
-use crate::controller::{Foc, Plan, RotorSensor};
+use crate::config::{FocConfig, Mode, ObserverLossPolicy};
 use crate::fault::Fault;
-use crate::health::Reference;
-use crate::pi::limit;
+use crate::health::{HealthMonitor, HealthReport, Reference, ticks};
+use crate::pi::{Pi, limit};
 use crate::transforms::Dq;
 use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
 
-/// Controller state.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum State {
-    /// PWM off, waiting for [`Foc::start`].
-    #[default]
-    Idle,
-    /// Rotor alignment (sensorless start).
-    Align,
-    /// Open-loop current-controlled ramp (I/f).
-    OpenLoop,
-    /// Observer frame, d current of the ramp fading out.
-    Handover,
-    /// Speed and current loops on the observer's (or the sensor's) angle.
-    ClosedLoop,
-    /// A fault is latched; PWM off.
-    Fault,
-}
+pub use crate::state::State;
 
 /// A control frame: angle (rad el.), speed (rad/s el.), and whether the back-EMF lies on its
 /// q axis (feed-forward on).
@@ -106,53 +98,107 @@ pub(crate) struct Frame {
     pub emf: bool,
 }
 
-/// Sequencer variables.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub(crate) struct Sequencer {
-    /// Speed command, rad/s mech.
-    pub target_mech: f32,
-    pub stop_requested: bool,
-    /// Slewed speed reference, rad/s mech.
-    pub speed_ref_mech: f32,
-    /// Output of the speed loop, A.
-    pub i_q_ref: f32,
-    /// The speed loop is at its current limit.
-    pub saturated: bool,
-    /// Ticks since the last speed-loop run.
-    pub div: u16,
-    /// I/f current-vector angle, rad el.
-    pub gamma: f32,
-    /// I/f speed, rad/s el.
-    pub omega_ol: f32,
-    /// I/f current magnitude, A.
-    pub amp: f32,
-    /// Sign of the last non-zero I/f speed (0 before the first).
-    pub ol_dir: f32,
-    /// Ticks in alignment or in the blend.
-    pub timer: u32,
-    /// Ticks at the hand-over speed without a hand-over.
-    pub at_speed: u32,
-    /// Ticks in closed loop.
-    pub cl_ticks: u32,
-    /// Re-acquisitions in a row.
-    pub attempts: u8,
-    /// d current of the ramp's vector at the hand-over, A.
-    pub i_d0: f32,
-    /// Stall counter of sensored mode.
-    pub stall_count: u32,
-    /// First tick of sensored closed loop.
-    pub fresh: bool,
+/// How the current references and the frame are set for this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Plan {
+    /// Control frame of this tick.
+    pub frame: Frame,
+    /// Current references in that frame, A.
+    pub i_ref: Dq,
+    /// The frame the current loops were in until this tick, when it changed.
+    pub reframe_from: Option<Frame>,
 }
 
-impl Sequencer {
-    /// Fresh start; keeps the speed command.
-    pub fn begin(&mut self) {
-        *self = Self {
-            target_mech: self.target_mech,
-            fresh: true,
-            ..Self::default()
-        };
-    }
+/// What the sequencer needs from the controller for one tick.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Inputs<'a> {
+    /// The observer's estimate after this tick's step (or prediction).
+    pub estimate: &'a Estimate<f32>,
+    /// Whether the observer accepted this tick's step.
+    pub observer_ok: bool,
+    /// Rotor sensor reading, electrical angle (rad) and speed (rad/s), when supplied.
+    pub sensor: Option<(f32, f32)>,
+}
+
+/// Why the PWM is off this tick (the sequencer's answer when there is no plan).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Stop {
+    /// Already idle or faulted: nothing to do.
+    Off,
+    /// The stop is complete: go to `Idle`.
+    Idle,
+    /// Latch this fault with the offending value.
+    Trip(Fault, f32),
+}
+
+/// A new seed for the observer's angle and speed (its currents keep their estimate).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Seed {
+    /// Electrical angle, rad (not wrapped).
+    pub theta: f32,
+    /// Electrical speed, rad/s.
+    pub omega: f32,
+    /// Standard deviation of the angle, rad.
+    pub sigma_theta: f32,
+}
+
+/// Sequencer variables (reset at every start).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Vars {
+    /// Speed command, rad/s mech.
+    target_mech: f32,
+    stop_requested: bool,
+    /// Slewed speed reference, rad/s mech.
+    speed_ref_mech: f32,
+    /// Output of the speed loop, A.
+    i_q_ref: f32,
+    /// The speed loop is at its current limit.
+    saturated: bool,
+    /// Ticks since the last speed-loop run.
+    div: u16,
+    /// I/f current-vector angle, rad el.
+    gamma: f32,
+    /// I/f speed, rad/s el.
+    omega_ol: f32,
+    /// I/f current magnitude, A.
+    amp: f32,
+    /// Sign of the last non-zero I/f speed (0 before the first).
+    ol_dir: f32,
+    /// Ticks in alignment or in the blend.
+    timer: u32,
+    /// Ticks at the hand-over speed without a hand-over.
+    at_speed: u32,
+    /// Ticks in closed loop.
+    cl_ticks: u32,
+    /// Re-acquisitions in a row.
+    attempts: u8,
+    /// d current of the ramp's vector at the hand-over, A.
+    i_d0: f32,
+    /// Stall counter of sensored mode.
+    stall_count: u32,
+    /// First tick of sensored closed loop.
+    fresh: bool,
+}
+
+/// The state machine (module docs): state, speed loop, health monitor.
+#[derive(Clone, Debug)]
+pub(crate) struct Sequencer {
+    // Constants derived from the configuration.
+    pole_pairs: f32,
+    inv_pole_pairs: f32,
+    handover: f32,
+    exit_speed: f32,
+    align_ticks: u32,
+    blend_ticks: u32,
+    acquire_ticks: u32,
+    stall_ticks: u32,
+    // Parts.
+    health: HealthMonitor,
+    speed_pi: Pi,
+    // State.
+    state: State,
+    report: HealthReport,
+    v: Vars,
 }
 
 /// `x` moved toward `target` by at most `step`.
@@ -170,46 +216,176 @@ fn sign(x: f32) -> f32 {
     }
 }
 
-impl Foc {
-    /// Runs the state machine for this tick; the plan for the current loops, or `None` when
-    /// the PWM must be off (idle or fault).
-    pub(crate) fn sequence(
+fn observer_frame(est: &Estimate<f32>) -> Frame {
+    Frame {
+        theta: est.theta_rad,
+        omega: est.omega_e_rad_s,
+        emf: true,
+    }
+}
+
+impl Sequencer {
+    /// An idle sequencer for a validated configuration.
+    pub fn new(cfg: &FocConfig) -> Self {
+        let ts = cfg.ts_s;
+        let pole_pairs = cfg.motor.pole_pairs as f32;
+        let handover = cfg.startup.handover_speed_rad_s;
+        let exit_speed = cfg.startup.exit_speed_ratio * handover;
+        let speed_ts = ts * f32::from(cfg.speed_divider);
+        Self {
+            pole_pairs,
+            inv_pole_pairs: 1.0 / pole_pairs,
+            handover,
+            exit_speed,
+            align_ticks: ticks(cfg.startup.align_time_s, ts),
+            blend_ticks: ticks(cfg.startup.blend_time_s, ts),
+            acquire_ticks: ticks(cfg.startup.acquire_timeout_s, ts),
+            stall_ticks: ticks(cfg.health.stall_time_s, ts),
+            health: HealthMonitor::new(
+                &cfg.health,
+                ts,
+                handover,
+                exit_speed,
+                cfg.motor.psi_f_wb,
+            ),
+            speed_pi: Pi::new(cfg.speed_pi_gains(), speed_ts),
+            state: State::Idle,
+            report: HealthReport::default(),
+            v: Vars::default(),
+        }
+    }
+
+    /// Current state.
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    /// The health monitor's findings of the last tick (sensorless; default otherwise).
+    pub fn report(&self) -> HealthReport {
+        self.report
+    }
+
+    /// The speed command, rad/s mech.
+    pub fn target_mech(&self) -> f32 {
+        self.v.target_mech
+    }
+
+    /// The slewed speed reference, rad/s mech.
+    pub fn speed_ref_mech(&self) -> f32 {
+        self.v.speed_ref_mech
+    }
+
+    /// Sets the speed command (rad/s mech., finite), clamped to the maximum speed.
+    pub fn set_target_mech(&mut self, cfg: &FocConfig, speed_mech: f32) {
+        let max = cfg.max_speed_rad_s * self.inv_pole_pairs;
+        self.v.target_mech = limit(speed_mech, -max, max);
+    }
+
+    /// Cancels a pending stop; from `Idle` starts the drive (sensorless: align or I/f, the
+    /// observer re-seeded through `reseed` when I/f starts at once; sensored: closed loop).
+    /// The controller resets the observer and its loops first.
+    pub fn start(&mut self, cfg: &FocConfig, reseed: &mut impl FnMut(Seed)) {
+        self.v.stop_requested = false;
+        if self.state != State::Idle {
+            return;
+        }
+        self.speed_pi.reset();
+        self.health.reset(0.0);
+        self.v = Vars {
+            target_mech: self.v.target_mech,
+            fresh: true,
+            ..Vars::default()
+        };
+        self.state = match cfg.mode {
+            Mode::Sensored => State::ClosedLoop,
+            Mode::Sensorless if cfg.startup.align_time_s > 0.0 => State::Align,
+            Mode::Sensorless => {
+                self.enter_open_loop_from_rest(cfg, PI, reseed);
+                State::OpenLoop
+            }
+        };
+    }
+
+    /// Asks for a controlled stop (the speed reference ramps to zero).
+    pub fn request_stop(&mut self) {
+        self.v.stop_requested = true;
+    }
+
+    /// PWM off in `Idle`: a pending stop is done, the speed loop reset.
+    pub fn idle(&mut self) {
+        self.state = State::Idle;
+        self.v.stop_requested = false;
+        self.speed_pi.reset();
+    }
+
+    /// PWM off in `Fault`, the speed loop reset.
+    pub fn fault(&mut self) {
+        self.state = State::Fault;
+        self.speed_pi.reset();
+    }
+
+    /// Runs the state machine for one tick (module docs): the plan for the current loops, or
+    /// why the PWM is off. When the
+    /// observer must be re-seeded it calls `reseed` (at most twice a tick; the last seed
+    /// counts), before it returns.
+    #[inline(always)]
+    pub fn step(
         &mut self,
-        est: &Estimate<f32>,
-        observer_ok: bool,
-        sensor: Option<RotorSensor>,
-    ) -> Option<Plan> {
-        match self.cfg.mode {
-            Mode::Sensored => self.sequence_sensored(sensor),
-            Mode::Sensorless => self.sequence_sensorless(est, observer_ok),
+        cfg: &FocConfig,
+        input: Inputs<'_>,
+        reseed: &mut impl FnMut(Seed),
+    ) -> Result<Plan, Stop> {
+        match cfg.mode {
+            Mode::Sensored => self.sensored(cfg, input.sensor),
+            Mode::Sensorless => self.sensorless(cfg, input.estimate, input.observer_ok, reseed),
         }
     }
 
     fn target_e(&self) -> f32 {
-        if self.seq.stop_requested {
+        if self.v.stop_requested {
             0.0
         } else {
-            self.seq.target_mech * self.pole_pairs
+            self.v.target_mech * self.pole_pairs
         }
     }
 
-    fn observer_frame(est: &Estimate<f32>) -> Frame {
-        Frame {
-            theta: est.theta_rad,
-            omega: est.omega_e_rad_s,
-            emf: true,
-        }
+    /// Has the observer re-seeded at `theta`, `omega` (angle standard deviation
+    /// `sigma_theta`) and resets the health history. Rare: out of line.
+    #[cold]
+    #[inline(never)]
+    fn reseed_observer(
+        &mut self,
+        theta: f32,
+        omega: f32,
+        sigma_theta: f32,
+        reseed: &mut impl FnMut(Seed),
+    ) {
+        reseed(Seed {
+            theta,
+            omega,
+            sigma_theta,
+        });
+        self.health.reset(omega);
     }
 
-    fn sequence_sensorless(&mut self, est: &Estimate<f32>, ok: bool) -> Option<Plan> {
+    // Inlined into the tick, as before the sequencer was its own type: a call returning the
+    // decision through memory costs about 80 instructions per tick on the Cortex-M4F.
+    #[inline(always)]
+    fn sensorless(
+        &mut self,
+        cfg: &FocConfig,
+        est: &Estimate<f32>,
+        ok: bool,
+        reseed: &mut impl FnMut(Seed),
+    ) -> Result<Plan, Stop> {
         let reference = match self.state {
             State::OpenLoop => Reference::OpenLoop {
-                gamma: self.seq.gamma,
-                omega: self.seq.omega_ol,
+                gamma: self.v.gamma,
+                omega: self.v.omega_ol,
             },
             State::Handover | State::ClosedLoop => Reference::ClosedLoop {
-                speed_ref: self.seq.speed_ref_mech * self.pole_pairs,
-                saturated: self.seq.saturated,
+                speed_ref: self.v.speed_ref_mech * self.pole_pairs,
+                saturated: self.v.saturated,
             },
             _ => Reference::None,
         };
@@ -219,108 +395,101 @@ impl Foc {
 
         match self.state {
             State::Align => {
-                self.seq.timer = self.seq.timer.saturating_add(1);
-                if self.seq.timer > self.align_ticks {
-                    self.enter_open_loop_from_rest(FRAC_PI_4);
+                self.v.timer = self.v.timer.saturating_add(1);
+                if self.v.timer > self.align_ticks {
+                    self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
                 }
             }
             State::OpenLoop => {
                 let target = self.target_e();
-                let w_ol = self.seq.omega_ol;
+                let w_ol = self.v.omega_ol;
                 let h = self.handover;
                 let at_speed = target.abs() >= h && w_ol * target > 0.0 && w_ol.abs() >= h * 0.999;
                 if report.lost.is_some() {
                     // Only the theta+pi lock is reported as a loss under I/f.
-                    if !self.reacquire_in_open_loop() {
-                        return None;
+                    if !self.reacquire_in_open_loop(cfg, reseed) {
+                        return Err(Stop::Trip(Fault::ObserverLost, est.omega_e_rad_s));
                     }
                 } else if at_speed && report.ready {
                     reframe = Some(Frame {
-                        theta: self.seq.gamma,
+                        theta: self.v.gamma,
                         omega: w_ol,
                         emf: false,
                     });
-                    self.enter_handover(est);
+                    self.enter_handover(cfg, est);
                 } else if at_speed {
-                    self.seq.at_speed = self.seq.at_speed.saturating_add(1);
-                    if self.seq.at_speed >= self.acquire_ticks {
-                        self.seq.at_speed = 0;
+                    self.v.at_speed = self.v.at_speed.saturating_add(1);
+                    if self.v.at_speed >= self.acquire_ticks {
+                        self.v.at_speed = 0;
                         // The averaged estimate: a noisy sample must not decide a stall.
                         let w_avg = report.omega_avg_rad_s;
                         if w_avg.abs() < 0.25 * w_ol.abs() {
-                            self.trip(Fault::Stall, w_avg);
-                            return None;
+                            return Err(Stop::Trip(Fault::Stall, w_avg));
                         }
-                        if !self.reacquire_in_open_loop() {
-                            return None;
+                        if !self.reacquire_in_open_loop(cfg, reseed) {
+                            return Err(Stop::Trip(Fault::ObserverLost, est.omega_e_rad_s));
                         }
                     }
                 } else {
-                    self.seq.at_speed = 0;
+                    self.v.at_speed = 0;
                 }
-                if self.state == State::OpenLoop
-                    && self.seq.stop_requested
-                    && self.seq.omega_ol == 0.0
+                if self.state == State::OpenLoop && self.v.stop_requested && self.v.omega_ol == 0.0
                 {
-                    self.go_idle();
-                    return None;
+                    return Err(Stop::Idle);
                 }
             }
             State::Handover | State::ClosedLoop => {
                 if report.stall {
-                    self.trip(Fault::Stall, est.omega_e_rad_s);
-                    return None;
+                    return Err(Stop::Trip(Fault::Stall, est.omega_e_rad_s));
                 }
                 if report.lost.is_some() {
-                    match self.cfg.health.policy {
+                    match cfg.health.policy {
                         ObserverLossPolicy::Trip => {
-                            self.trip(Fault::ObserverLost, est.omega_e_rad_s);
-                            return None;
+                            return Err(Stop::Trip(Fault::ObserverLost, est.omega_e_rad_s));
                         }
                         ObserverLossPolicy::FallBackAndReacquire => {
-                            self.seq.attempts = self.seq.attempts.saturating_add(1);
-                            if self.seq.attempts > self.cfg.health.max_reacquire {
-                                self.trip(Fault::ObserverLost, est.omega_e_rad_s);
-                                return None;
+                            self.v.attempts = self.v.attempts.saturating_add(1);
+                            if self.v.attempts > cfg.health.max_reacquire {
+                                return Err(Stop::Trip(Fault::ObserverLost, est.omega_e_rad_s));
                             }
-                            reframe = Some(Self::observer_frame(est));
-                            self.enter_open_loop_from_closed(est, true);
+                            reframe = Some(observer_frame(est));
+                            self.enter_open_loop_from_closed(cfg, est, true, reseed);
                         }
                     }
                 } else {
-                    self.speed_loop(est.omega_e_rad_s * self.inv_pole_pairs);
+                    self.speed_loop(cfg, est.omega_e_rad_s * self.inv_pole_pairs);
                     if self.state == State::Handover {
-                        self.seq.timer = self.seq.timer.saturating_add(1);
-                        if self.seq.timer >= self.blend_ticks {
+                        self.v.timer = self.v.timer.saturating_add(1);
+                        if self.v.timer >= self.blend_ticks {
                             self.state = State::ClosedLoop;
                         }
                     } else {
-                        self.seq.cl_ticks = self.seq.cl_ticks.saturating_add(1);
-                        if self.seq.cl_ticks >= self.acquire_ticks {
-                            self.seq.attempts = 0;
+                        self.v.cl_ticks = self.v.cl_ticks.saturating_add(1);
+                        if self.v.cl_ticks >= self.acquire_ticks {
+                            self.v.attempts = 0;
                         }
                     }
-                    if (self.seq.speed_ref_mech * self.pole_pairs).abs() < self.exit_speed {
-                        reframe = Some(Self::observer_frame(est));
-                        self.enter_open_loop_from_closed(est, false);
+                    if (self.v.speed_ref_mech * self.pole_pairs).abs() < self.exit_speed {
+                        reframe = Some(observer_frame(est));
+                        self.enter_open_loop_from_closed(cfg, est, false, reseed);
                     }
                 }
             }
-            State::Idle | State::Fault => return None,
+            State::Idle | State::Fault => return Err(Stop::Off),
         }
 
         let plan = match self.state {
             State::Align => {
                 let half = (self.align_ticks / 2).max(1);
-                let ramp = min2(self.seq.timer as f32 / half as f32, 1.0);
+                let ramp = min2(self.v.timer as f32 / half as f32, 1.0);
                 Plan {
                     frame: Frame {
-                        theta: self.cfg.startup.align_angle_rad,
+                        theta: cfg.startup.align_angle_rad,
                         omega: 0.0,
                         emf: false,
                     },
                     i_ref: Dq {
-                        d: self.cfg.startup.align_current_a * ramp,
+                        d: cfg.startup.align_current_a * ramp,
                         q: 0.0,
                     },
                     reframe_from: None,
@@ -328,15 +497,15 @@ impl Foc {
             }
             State::OpenLoop => {
                 let frame = Frame {
-                    theta: self.seq.gamma,
-                    omega: self.seq.omega_ol,
+                    theta: self.v.gamma,
+                    omega: self.v.omega_ol,
                     emf: false,
                 };
-                self.advance_ramp();
+                self.advance_ramp(cfg, reseed);
                 Plan {
                     frame,
                     i_ref: Dq {
-                        d: self.seq.amp,
+                        d: self.v.amp,
                         q: 0.0,
                     },
                     reframe_from: reframe,
@@ -344,53 +513,50 @@ impl Foc {
             }
             State::Handover | State::ClosedLoop => {
                 let fade = if self.state == State::Handover {
-                    1.0 - self.seq.timer as f32 / self.blend_ticks as f32
+                    1.0 - self.v.timer as f32 / self.blend_ticks as f32
                 } else {
                     0.0
                 };
                 Plan {
-                    frame: Self::observer_frame(est),
+                    frame: observer_frame(est),
                     i_ref: Dq {
-                        d: self.seq.i_d0 * fade,
-                        q: self.seq.i_q_ref,
+                        d: self.v.i_d0 * fade,
+                        q: self.v.i_q_ref,
                     },
                     reframe_from: reframe,
                 }
             }
-            State::Idle | State::Fault => return None,
+            State::Idle | State::Fault => return Err(Stop::Off),
         };
-        Some(plan)
+        Ok(plan)
     }
 
-    fn sequence_sensored(&mut self, sensor: Option<RotorSensor>) -> Option<Plan> {
-        let Some(s) = sensor else {
-            self.trip(Fault::NonFiniteInput, f32::NAN);
-            return None;
+    #[inline(always)]
+    fn sensored(&mut self, cfg: &FocConfig, sensor: Option<(f32, f32)>) -> Result<Plan, Stop> {
+        let Some((theta, w)) = sensor else {
+            return Err(Stop::Trip(Fault::NonFiniteInput, f32::NAN));
         };
-        let theta = wrap(s.theta_e_rad);
-        let w = s.omega_e_rad_s;
-        if self.seq.fresh {
-            self.seq.fresh = false;
-            self.seq.speed_ref_mech = w * self.inv_pole_pairs;
-            self.seq.i_q_ref = 0.0;
+        let theta = wrap(theta);
+        if self.v.fresh {
+            self.v.fresh = false;
+            self.v.speed_ref_mech = w * self.inv_pole_pairs;
+            self.v.i_q_ref = 0.0;
             self.speed_pi.reset();
         }
-        self.speed_loop(w * self.inv_pole_pairs);
+        self.speed_loop(cfg, w * self.inv_pole_pairs);
         let slow = w.abs() < 0.1 * self.handover;
-        self.seq.stall_count = if self.seq.saturated && slow {
-            self.seq.stall_count.saturating_add(1)
+        self.v.stall_count = if self.v.saturated && slow {
+            self.v.stall_count.saturating_add(1)
         } else {
             0
         };
-        if self.seq.stall_count >= self.stall_ticks {
-            self.trip(Fault::Stall, w);
-            return None;
+        if self.v.stall_count >= self.stall_ticks {
+            return Err(Stop::Trip(Fault::Stall, w));
         }
-        if self.seq.stop_requested && self.seq.speed_ref_mech == 0.0 && slow {
-            self.go_idle();
-            return None;
+        if self.v.stop_requested && self.v.speed_ref_mech == 0.0 && slow {
+            return Err(Stop::Idle);
         }
-        Some(Plan {
+        Ok(Plan {
             frame: Frame {
                 theta,
                 omega: w,
@@ -398,7 +564,7 @@ impl Foc {
             },
             i_ref: Dq {
                 d: 0.0,
-                q: self.seq.i_q_ref,
+                q: self.v.i_q_ref,
             },
             reframe_from: None,
         })
@@ -407,93 +573,103 @@ impl Foc {
     /// The speed loop, every `speed_divider` ticks: slews the reference toward the command
     /// and runs the PI on the measured mechanical speed; the output is the q current
     /// reference, limited to `+-current_limit_a`.
-    fn speed_loop(&mut self, omega_mech: f32) {
-        self.seq.div = self.seq.div.saturating_add(1);
-        if self.seq.div < self.cfg.speed_divider {
+    fn speed_loop(&mut self, cfg: &FocConfig, omega_mech: f32) {
+        self.v.div = self.v.div.saturating_add(1);
+        if self.v.div < cfg.speed_divider {
             return;
         }
-        self.seq.div = 0;
-        let max = self.cfg.max_speed_rad_s * self.inv_pole_pairs;
-        let target = if self.seq.stop_requested {
+        self.v.div = 0;
+        let max = cfg.max_speed_rad_s * self.inv_pole_pairs;
+        let target = if self.v.stop_requested {
             0.0
         } else {
-            limit(self.seq.target_mech, -max, max)
+            limit(self.v.target_mech, -max, max)
         };
         // Sensorless, below the hand-over speed the reference moves at the I/f acceleration,
         // so that the rotor reaches the exit speed with a torque the I/f vector continues
         // smoothly.
-        let slow = (self.seq.speed_ref_mech * self.pole_pairs).abs() <= self.handover;
-        let rate = if slow && self.cfg.mode == Mode::Sensorless {
-            self.cfg.startup.accel_rad_s2
+        let slow = (self.v.speed_ref_mech * self.pole_pairs).abs() <= self.handover;
+        let rate = if slow && cfg.mode == Mode::Sensorless {
+            cfg.startup.accel_rad_s2
         } else {
-            self.cfg.speed_slew_rad_s2
+            cfg.speed_slew_rad_s2
         };
-        let step = rate * self.inv_pole_pairs * self.cfg.ts_s * f32::from(self.cfg.speed_divider);
-        self.seq.speed_ref_mech = slew(self.seq.speed_ref_mech, target, step);
-        let lim = self.cfg.current_limit_a;
+        let step = rate * self.inv_pole_pairs * cfg.ts_s * f32::from(cfg.speed_divider);
+        self.v.speed_ref_mech = slew(self.v.speed_ref_mech, target, step);
+        let lim = cfg.current_limit_a;
         let iq = self
             .speed_pi
-            .step(self.seq.speed_ref_mech - omega_mech, 0.0, -lim, lim);
-        self.seq.i_q_ref = iq;
-        self.seq.saturated = iq.abs() >= 0.999 * lim;
+            .step(self.v.speed_ref_mech - omega_mech, 0.0, -lim, lim);
+        self.v.i_q_ref = iq;
+        self.v.saturated = iq.abs() >= 0.999 * lim;
     }
 
     /// One I/f period: the current-vector angle integrates the ramp speed, which moves
-    /// toward its target; re-seeds the observer when the speed crosses zero.
-    fn advance_ramp(&mut self) {
-        let ts = self.cfg.ts_s;
+    /// toward its target; re-seeds the observer when the speed crosses zero. Every I/f tick:
+    /// inlined.
+    #[inline(always)]
+    fn advance_ramp(&mut self, cfg: &FocConfig, reseed: &mut impl FnMut(Seed)) {
+        let ts = cfg.ts_s;
         let h = self.handover;
         let target = limit(self.target_e(), -h, h);
-        self.seq.speed_ref_mech = self.seq.omega_ol * self.inv_pole_pairs;
-        self.seq.gamma = wrap(self.seq.gamma + self.seq.omega_ol * ts);
-        let w = slew(
-            self.seq.omega_ol,
-            target,
-            self.cfg.startup.accel_rad_s2 * ts,
-        );
+        self.v.speed_ref_mech = self.v.omega_ol * self.inv_pole_pairs;
+        self.v.gamma = wrap(self.v.gamma + self.v.omega_ol * ts);
+        let w = slew(self.v.omega_ol, target, cfg.startup.accel_rad_s2 * ts);
         if w != 0.0 {
             let dir = sign(w);
-            if self.seq.ol_dir != 0.0 && dir != self.seq.ol_dir {
-                self.reseed_observer(self.seq.gamma, w, FRAC_PI_4);
-                self.seq.at_speed = 0;
+            if self.v.ol_dir != 0.0 && dir != self.v.ol_dir {
+                self.reseed_observer(self.v.gamma, w, FRAC_PI_4, reseed);
+                self.v.at_speed = 0;
             }
-            self.seq.ol_dir = dir;
+            self.v.ol_dir = dir;
         }
-        self.seq.omega_ol = w;
+        self.v.omega_ol = w;
     }
 
     /// I/f from standstill at the alignment angle; the observer seeded there with angle
     /// standard deviation `sigma_theta`.
-    pub(crate) fn enter_open_loop_from_rest(&mut self, sigma_theta: f32) {
-        let angle = wrap(self.cfg.startup.align_angle_rad);
-        self.seq.gamma = angle;
-        self.seq.omega_ol = 0.0;
-        self.seq.ol_dir = 0.0;
-        self.seq.amp = self.cfg.startup.if_current_a;
-        self.seq.at_speed = 0;
-        self.reseed_observer(angle, 0.0, sigma_theta.min(PI));
+    fn enter_open_loop_from_rest(
+        &mut self,
+        cfg: &FocConfig,
+        sigma_theta: f32,
+        reseed: &mut impl FnMut(Seed),
+    ) {
+        let angle = wrap(cfg.startup.align_angle_rad);
+        self.v.gamma = angle;
+        self.v.omega_ol = 0.0;
+        self.v.ol_dir = 0.0;
+        self.v.amp = cfg.startup.if_current_a;
+        self.v.at_speed = 0;
+        self.reseed_observer(angle, 0.0, sigma_theta.min(PI), reseed);
         self.state = State::OpenLoop;
     }
 
     /// Back to I/f from the observer's frame: the current vector of magnitude `I_f` whose q
     /// component equals the last `i_q` reference, at the observer's speed (or, when
-    /// `reseed`, at the commanded speed with the observer re-seeded at the new vector).
-    fn enter_open_loop_from_closed(&mut self, est: &Estimate<f32>, reseed: bool) {
-        let amp = self.cfg.startup.if_current_a;
-        let iq = limit(self.seq.i_q_ref, -0.95 * amp, 0.95 * amp);
+    /// `fall_back`, at the commanded speed with the observer re-seeded at the new vector).
+    #[inline(never)]
+    fn enter_open_loop_from_closed(
+        &mut self,
+        cfg: &FocConfig,
+        est: &Estimate<f32>,
+        fall_back: bool,
+        reseed: &mut impl FnMut(Seed),
+    ) {
+        let amp = cfg.startup.if_current_a;
+        let iq = limit(self.v.i_q_ref, -0.95 * amp, 0.95 * amp);
         let id = sqrt(amp * amp - iq * iq);
-        self.seq.gamma = wrap(est.theta_rad + atan2(iq, id));
-        self.seq.omega_ol = if reseed {
-            self.seq.speed_ref_mech * self.pole_pairs
+        self.v.gamma = wrap(est.theta_rad + atan2(iq, id));
+        self.v.omega_ol = if fall_back {
+            self.v.speed_ref_mech * self.pole_pairs
         } else {
             est.omega_e_rad_s
         };
-        self.seq.ol_dir = sign(self.seq.omega_ol);
-        self.seq.amp = amp;
-        self.seq.at_speed = 0;
-        self.seq.saturated = false;
-        if reseed {
-            self.reseed_observer(self.seq.gamma, self.seq.omega_ol, FRAC_PI_4);
+        self.v.ol_dir = sign(self.v.omega_ol);
+        self.v.amp = amp;
+        self.v.at_speed = 0;
+        self.v.saturated = false;
+        if fall_back {
+            self.reseed_observer(self.v.gamma, self.v.omega_ol, FRAC_PI_4, reseed);
         } else {
             self.health.reset(est.omega_e_rad_s);
         }
@@ -501,36 +677,36 @@ impl Foc {
     }
 
     /// A re-acquisition under I/f: the observer re-seeded at the current vector; `false`
-    /// (and [`Fault::ObserverLost`] tripped) when the attempts are used up.
-    fn reacquire_in_open_loop(&mut self) -> bool {
-        self.seq.attempts = self.seq.attempts.saturating_add(1);
-        if self.seq.attempts > self.cfg.health.max_reacquire {
-            self.trip(Fault::ObserverLost, self.observer.estimate().omega_e_rad_s);
+    /// (trip [`Fault::ObserverLost`]) when the attempts are used up. Rare: out of line.
+    #[inline(never)]
+    fn reacquire_in_open_loop(&mut self, cfg: &FocConfig, reseed: &mut impl FnMut(Seed)) -> bool {
+        self.v.attempts = self.v.attempts.saturating_add(1);
+        if self.v.attempts > cfg.health.max_reacquire {
             return false;
         }
-        self.reseed_observer(self.seq.gamma, self.seq.omega_ol, FRAC_PI_4);
-        self.seq.at_speed = 0;
+        self.reseed_observer(self.v.gamma, self.v.omega_ol, FRAC_PI_4, reseed);
+        self.v.at_speed = 0;
         true
     }
 
     /// I/f -> observer frame with the same current vector (module docs).
-    fn enter_handover(&mut self, est: &Estimate<f32>) {
-        let (s, c) = sin_cos(wrap(self.seq.gamma - est.theta_rad));
+    fn enter_handover(&mut self, cfg: &FocConfig, est: &Estimate<f32>) {
+        let (s, c) = sin_cos(wrap(self.v.gamma - est.theta_rad));
         let i0 = Dq {
-            d: self.seq.amp,
+            d: self.v.amp,
             q: 0.0,
         }
         .rotate(s, c);
-        let lim = self.cfg.current_limit_a;
+        let lim = cfg.current_limit_a;
         let iq0 = limit(i0.q, -lim, lim);
-        self.seq.i_d0 = i0.d;
-        self.seq.i_q_ref = iq0;
-        self.seq.timer = 0;
-        self.seq.div = 0;
-        self.seq.cl_ticks = 0;
-        self.seq.saturated = false;
-        self.seq.speed_ref_mech = self.seq.omega_ol * self.inv_pole_pairs;
-        let err = self.seq.speed_ref_mech - est.omega_e_rad_s * self.inv_pole_pairs;
+        self.v.i_d0 = i0.d;
+        self.v.i_q_ref = iq0;
+        self.v.timer = 0;
+        self.v.div = 0;
+        self.v.cl_ticks = 0;
+        self.v.saturated = false;
+        self.v.speed_ref_mech = self.v.omega_ol * self.inv_pole_pairs;
+        let err = self.v.speed_ref_mech - est.omega_e_rad_s * self.inv_pole_pairs;
         self.speed_pi.preset_output(iq0, err, 0.0);
         self.state = State::Handover;
     }

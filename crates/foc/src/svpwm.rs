@@ -22,12 +22,7 @@
 //! misleads the estimate (with dead-time compensation, the voltage of the duties net of the
 //! compensation: [`crate::deadtime`]).
 
-use crate::transforms::AlphaBeta;
-
-/// `1 / sqrt(3)`.
-const FRAC_1_SQRT_3: f32 = 0.577_350_26;
-/// `sqrt(3)`.
-const SQRT_3: f32 = 1.732_050_8;
+use crate::transforms::{AlphaBeta, FRAC_1_SQRT_3, SQRT_3};
 
 /// Duties of the safe state: all phases at 50 %, zero line-to-line voltage.
 pub const SAFE_DUTIES: [f32; 3] = [0.5, 0.5, 0.5];

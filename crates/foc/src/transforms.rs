@@ -11,15 +11,25 @@
 //! electrical. The `*_angle` variants compute the sine and cosine with [`crate::trig::sin_cos`]
 //! (error below 2.4e-7); the plain ones take them from the caller so that one evaluation serves
 //! several transforms.
+//!
+//! The two-axis frames keep their named components (`alpha`, `beta`; `d`, `q`) and do their
+//! arithmetic as [`glam::Vec2`] (rotations are complex products, [`Vec2::rotate`]); they
+//! convert to and from `Vec2` with `From`. Only the operations that compile to the same
+//! single-precision instructions on the Cortex-M4F are used (no `length`, `normalize` or
+//! `from_angle`, which go through software `libm`; `clippy.toml` refuses them).
 
 use core::ops::{Add, Mul, Sub};
 
+use glam::Vec2;
+
 use crate::trig::sin_cos;
 
-/// `1 / sqrt(3)`.
-const FRAC_1_SQRT_3: f32 = 0.577_350_26;
+/// `1 / sqrt(3)` (Clarke; the linear range of SVPWM, `u_dc / sqrt(3)`).
+pub(crate) const FRAC_1_SQRT_3: f32 = 0.577_350_26;
 /// `sqrt(3) / 2`.
-const SQRT_3_2: f32 = 0.866_025_4;
+pub(crate) const SQRT_3_2: f32 = 0.866_025_4;
+/// `sqrt(3)` (the f32 nearest, like the two above).
+pub(crate) const SQRT_3: f32 = 2.0 * SQRT_3_2;
 
 /// Three phase quantities (currents in A or voltages in V).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -89,12 +99,11 @@ impl AlphaBeta {
         }
     }
 
-    /// Park transform with the sine and cosine of the electrical angle.
+    /// Park transform with the sine and cosine of the electrical angle: the vector rotated
+    /// by `-th`.
+    #[inline]
     pub fn to_dq(self, sin_th: f32, cos_th: f32) -> Dq {
-        Dq {
-            d: self.alpha * cos_th + self.beta * sin_th,
-            q: -self.alpha * sin_th + self.beta * cos_th,
-        }
+        Vec2::from(self).rotate(Vec2::new(cos_th, -sin_th)).into()
     }
 
     /// Park transform at the electrical angle `theta_rad`.
@@ -104,8 +113,9 @@ impl AlphaBeta {
     }
 
     /// Squared length `alpha^2 + beta^2`.
+    #[inline]
     pub fn norm_squared(self) -> f32 {
-        self.alpha * self.alpha + self.beta * self.beta
+        Vec2::from(self).length_squared()
     }
 
     /// Whether both components are finite.
@@ -115,12 +125,11 @@ impl AlphaBeta {
 }
 
 impl Dq {
-    /// Inverse Park transform with the sine and cosine of the electrical angle.
+    /// Inverse Park transform with the sine and cosine of the electrical angle: the vector
+    /// rotated by `th`.
+    #[inline]
     pub fn to_alpha_beta(self, sin_th: f32, cos_th: f32) -> AlphaBeta {
-        AlphaBeta {
-            alpha: self.d * cos_th - self.q * sin_th,
-            beta: self.d * sin_th + self.q * cos_th,
-        }
+        Vec2::from(self).rotate(Vec2::new(cos_th, sin_th)).into()
     }
 
     /// Inverse Park transform at the electrical angle `theta_rad`.
@@ -132,16 +141,17 @@ impl Dq {
     /// The same vector seen from a frame turned by `-delta` (i.e. the components rotated by
     /// `+delta`, given as `sin delta`, `cos delta`): moving a dq quantity from a frame at angle
     /// `th_a` to one at `th_b` is `rotate(sin(th_a - th_b), cos(th_a - th_b))`.
+    #[inline]
     pub fn rotate(self, sin_delta: f32, cos_delta: f32) -> Dq {
-        Dq {
-            d: self.d * cos_delta - self.q * sin_delta,
-            q: self.d * sin_delta + self.q * cos_delta,
-        }
+        Vec2::from(self)
+            .rotate(Vec2::new(cos_delta, sin_delta))
+            .into()
     }
 
     /// Squared length `d^2 + q^2`.
+    #[inline]
     pub fn norm_squared(self) -> f32 {
-        self.d * self.d + self.q * self.q
+        Vec2::from(self).length_squared()
     }
 
     /// Whether both components are finite.
@@ -150,25 +160,79 @@ impl Dq {
     }
 }
 
-macro_rules! vector_ops {
-    ($t:ident { $($f:ident),+ }) => {
+impl Add for Abc {
+    type Output = Abc;
+    fn add(self, o: Abc) -> Abc {
+        Abc {
+            a: self.a + o.a,
+            b: self.b + o.b,
+            c: self.c + o.c,
+        }
+    }
+}
+
+impl Sub for Abc {
+    type Output = Abc;
+    fn sub(self, o: Abc) -> Abc {
+        Abc {
+            a: self.a - o.a,
+            b: self.b - o.b,
+            c: self.c - o.c,
+        }
+    }
+}
+
+impl Mul<f32> for Abc {
+    type Output = Abc;
+    fn mul(self, k: f32) -> Abc {
+        Abc {
+            a: self.a * k,
+            b: self.b * k,
+            c: self.c * k,
+        }
+    }
+}
+
+/// `From` both ways with [`glam::Vec2`] and the vector operations through it.
+macro_rules! two_axis {
+    ($t:ident { $x:ident, $y:ident }) => {
+        impl From<$t> for Vec2 {
+            #[inline]
+            fn from(v: $t) -> Vec2 {
+                Vec2::new(v.$x, v.$y)
+            }
+        }
+        impl From<Vec2> for $t {
+            #[inline]
+            fn from(v: Vec2) -> $t {
+                $t { $x: v.x, $y: v.y }
+            }
+        }
         impl Add for $t {
             type Output = $t;
-            fn add(self, o: $t) -> $t { $t { $($f: self.$f + o.$f),+ } }
+            #[inline]
+            fn add(self, o: $t) -> $t {
+                (Vec2::from(self) + Vec2::from(o)).into()
+            }
         }
         impl Sub for $t {
             type Output = $t;
-            fn sub(self, o: $t) -> $t { $t { $($f: self.$f - o.$f),+ } }
+            #[inline]
+            fn sub(self, o: $t) -> $t {
+                (Vec2::from(self) - Vec2::from(o)).into()
+            }
         }
         impl Mul<f32> for $t {
             type Output = $t;
-            fn mul(self, k: f32) -> $t { $t { $($f: self.$f * k),+ } }
+            #[inline]
+            fn mul(self, k: f32) -> $t {
+                (Vec2::from(self) * k).into()
+            }
         }
     };
 }
-vector_ops!(Abc { a, b, c });
-vector_ops!(AlphaBeta { alpha, beta });
-vector_ops!(Dq { d, q });
+two_axis!(AlphaBeta { alpha, beta });
+two_axis!(Dq { d, q });
 
 #[cfg(test)]
 mod tests {

@@ -53,6 +53,22 @@ fn corrupted_input(rig: &mut Rig, phase: usize, value: f32) -> TickInput {
     inp
 }
 
+/// Ticks with phase `phase` reading `value` (`corrupted_input`) for at most `ticks` ticks,
+/// the drive running until then: the tick (from 1) of the first fault and the fault, with the
+/// PWM off; `None` if nothing tripped.
+fn first_trip(rig: &mut Rig, ticks: usize, phase: usize, value: f32) -> Option<(usize, Fault)> {
+    for k in 1..=ticks {
+        let inp = corrupted_input(rig, phase, value);
+        let out = rig.step_with(&inp);
+        if let Some(fault) = out.fault {
+            assert!(!out.pwm_enabled && out.duties == [0.5; 3]);
+            return Some((k, fault));
+        }
+        assert_driving(&out);
+    }
+    None
+}
+
 /// Injects a single bad sample every 20 ms (ten times, cycling through the phases given) and
 /// returns the largest angle error seen from the first glitch on, deg el.
 fn ride_through(value: f32, phases: &[usize]) -> f64 {
@@ -165,19 +181,8 @@ fn a_persistent_wild_reading_trips_over_current() {
     let mut rig = running_rig();
     let s = rig.foc.config().samples;
     let limit = s.missing_trip_ticks + s.over_current_trip_ticks;
-    let mut tripped = None;
-    for k in 1..=limit {
-        let inp = corrupted_input(&mut rig, 0, 10.0 * RATED_A);
-        let out = rig.step_with(&inp);
-        if out.fault.is_some() {
-            assert!(!out.pwm_enabled && out.duties == [0.5; 3]);
-            tripped = Some((k, out.fault));
-            break;
-        }
-        assert_driving(&out);
-    }
-    let (k, fault) = tripped.expect("no trip");
-    assert_eq!(fault, Some(Fault::OverCurrent));
+    let (k, fault) = first_trip(&mut rig, usize::from(limit), 0, 10.0 * RATED_A).expect("no trip");
+    assert_eq!(fault, Fault::OverCurrent);
     assert!(k >= 3, "tripped at tick {k}");
     println!("persistent 14.3 A reading: over-current trip at tick {k}");
 }
@@ -281,19 +286,9 @@ fn a_stuck_channel_trips_within_a_quarter_turn() {
         // Quarter electrical period at 400 rad/s el., 20 kHz: 78.5 ticks.
         let w = f64::from(rig.foc.observer().estimate().omega_e_rad_s).abs();
         let quarter = (std::f64::consts::FRAC_PI_2 / w / rig.ts).ceil() as usize;
-        let mut tripped = None;
-        for k in 1..=2 * quarter {
-            let inp = corrupted_input(&mut rig, phase, frozen);
-            let out = rig.step_with(&inp);
-            if out.fault.is_some() {
-                assert!(!out.pwm_enabled && out.duties == [0.5; 3]);
-                tripped = Some((k, out.fault));
-                break;
-            }
-            assert_driving(&out);
-        }
-        let (k, fault) = tripped.expect("stuck channel not detected");
-        assert_eq!(fault, Some(Fault::CurrentSensor), "phase {phase}");
+        let (k, fault) =
+            first_trip(&mut rig, 2 * quarter, phase, frozen).expect("stuck channel not detected");
+        assert_eq!(fault, Fault::CurrentSensor, "phase {phase}");
         // The frame's angle is accumulated: its speed moves a little as the frozen reading
         // misleads the loops, so the trip comes within 3/4 to 3/2 of a quarter period.
         assert!(

@@ -23,6 +23,20 @@ fn rig() -> Rig {
     rig
 }
 
+/// Starts `rig` at `speed` rad/s mech. and runs it into closed loop (within 1.5 s).
+fn start_closed_loop(rig: &mut Rig, speed: f32) {
+    rig.foc.set_speed_ref_mech_rad_s(speed).unwrap();
+    rig.foc.start().unwrap();
+    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+}
+
+/// [`rig`] started at `speed` rad/s mech., in closed loop.
+fn closed_loop_at(speed: f32) -> Rig {
+    let mut rig = rig();
+    start_closed_loop(&mut rig, speed);
+    rig
+}
+
 #[test]
 fn idle_align_openloop_handover_closedloop_stop_idle() {
     let mut rig = rig();
@@ -77,10 +91,7 @@ fn start_without_alignment_goes_straight_to_open_loop() {
 
 #[test]
 fn reversal_through_zero_speed() {
-    let mut rig = rig();
-    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    let mut rig = closed_loop_at(100.0);
     rig.run(0.2, |_, _| {});
     rig.foc.set_speed_ref_mech_rad_s(-100.0).unwrap();
     let seen = visit(&mut rig, 2.5);
@@ -102,10 +113,7 @@ fn reversal_through_zero_speed() {
 
 #[test]
 fn low_speed_command_stays_in_open_loop_and_returns_up() {
-    let mut rig = rig();
-    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    let mut rig = closed_loop_at(100.0);
     // Below the exit speed (0.7 * 84.6 / 4 = 14.8 rad/s mech): back to I/f, held there.
     rig.foc.set_speed_ref_mech_rad_s(8.0).unwrap();
     let seen = visit(&mut rig, 1.0);
@@ -121,10 +129,7 @@ fn low_speed_command_stays_in_open_loop_and_returns_up() {
 
 #[test]
 fn fault_clear_restart() {
-    let mut rig = rig();
-    rig.foc.set_speed_ref_mech_rad_s(80.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    let mut rig = closed_loop_at(80.0);
     // Bus over-voltage for one sample.
     rig.u_dc = 400.0;
     let out = rig.step();
@@ -164,10 +169,7 @@ fn fault_clear_restart() {
 
 #[test]
 fn observer_loss_falls_back_and_reacquires() {
-    let mut rig = rig();
-    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    let mut rig = closed_loop_at(100.0);
     rig.run(0.2, |_, _| {});
     // A burst of current-sensor noise 12x the observer's R: the NIS flags the loss.
     rig.noise_a = 0.5;
@@ -187,9 +189,7 @@ fn observer_loss_trips_with_trip_policy() {
     cfg.health.policy = ObserverLossPolicy::Trip;
     let mut rig = Rig::new(&cfg, Plant::servo(), 300.0);
     rig.noise_a = 0.04;
-    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    start_closed_loop(&mut rig, 100.0);
     rig.noise_a = 0.5;
     assert!(rig.run_until(State::Fault, 0.1).is_some());
     let info = rig.foc.fault_info().unwrap();
@@ -201,10 +201,7 @@ fn observer_loss_trips_with_trip_policy() {
 
 #[test]
 fn persistent_loss_exhausts_reacquisitions() {
-    let mut rig = rig();
-    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    let mut rig = closed_loop_at(100.0);
     rig.noise_a = 0.5;
     assert!(rig.run_until(State::Fault, 8.0).is_some());
     assert_eq!(rig.foc.fault(), Some(Fault::ObserverLost));
@@ -280,9 +277,7 @@ fn no_delay_configuration_runs_a_delay_free_plant() {
     let mut rig = Rig::new(&cfg, Plant::servo(), 300.0);
     assert!(!rig.delay);
     rig.noise_a = 0.04;
-    rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
-    rig.foc.start().unwrap();
-    assert!(rig.run_until(State::ClosedLoop, 1.5).is_some());
+    start_closed_loop(&mut rig, 100.0);
     let mut worst: f64 = 0.0;
     rig.run(0.3, |r, o| worst = worst.max(r.angle_error_deg(o).abs()));
     assert!(worst < 2.0, "angle error {worst} deg");
