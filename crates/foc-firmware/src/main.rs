@@ -22,7 +22,8 @@
 //!     -kernel target/thumbv7em-none-eabihf/release/foc-firmware
 //! ```
 //!
-//! Measured functions: `ekf_step` (`PmsmObserver::step`, default config: lag-free, Joseph),
+//! Measured functions: `ekf_step` (`PmsmObserver::step`, default config: lag-free, Joseph,
+//! online parameter tracking), `ekf_step_untracked` (the same without the tracking),
 //! `ekf_step_standard` (standard symmetrized covariance update), `ekf_step_euler` (forward
 //! Euler), `ekf_step_seed` (`ObserverConfig::seed`), `ekf_predict` and `ekf_correct` (the two
 //! halves of the default step) and `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
@@ -111,6 +112,18 @@ fn run() -> Result<(), &'static str> {
         Variant {
             name: "ekf_step",
             cfg: default,
+            max_angle_err_deg: 1.0,
+            max_speed_err: 0.005,
+            checked: true,
+        },
+        Variant {
+            // The default without online parameter tracking: the tracking's cost is the
+            // difference to `ekf_step`.
+            name: "ekf_step_untracked",
+            cfg: ObserverConfig {
+                parameter_tracking: None,
+                ..default
+            },
             max_angle_err_deg: 1.0,
             max_speed_err: 0.005,
             checked: true,
