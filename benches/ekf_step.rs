@@ -1,5 +1,6 @@
-//! Host time per observer step (predict + correct), f32 and f64, default (lag-free, Joseph) and
-//! seed (forward Euler, standard form) configurations.
+//! Host time per observer step (predict + correct), f32 and f64, default (lag-free, Joseph,
+//! online parameter tracking), the default without tracking, and seed (forward Euler,
+//! standard form) configurations.
 //!
 //! Run: `cargo bench -p benches --bench ekf_step`. Target (issue 2): <= 30 ns per step in f64.
 use std::hint::black_box;
@@ -45,6 +46,15 @@ fn ekf_step(c: &mut Criterion) {
         c,
         "step f64 default",
         ObserverConfig::new(MotorParams::<f64>::servo(), ts),
+        &d64,
+    );
+    bench_cfg(
+        c,
+        "step f64 default untracked",
+        ObserverConfig {
+            parameter_tracking: None,
+            ..ObserverConfig::new(MotorParams::<f64>::servo(), ts)
+        },
         &d64,
     );
     bench_cfg(
