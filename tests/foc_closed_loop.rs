@@ -230,23 +230,25 @@ fn sensorless_default_job_with_dead_time() {
 
 /// The default with foc's dead-time compensation turned off (`[controller.foc] dead_time_s =
 /// 0`): foc's observer is fed the voltage it commanded, and the dead-time voltage, which lies
-/// along the current, is missing from what the motor gets. The observer reads its q part as
-/// back-EMF, so its speed estimate is biased by about `dU / psi_f` and the speed loop holds
-/// the motor that much **below** the reference.
+/// along the current, is missing from what the motor gets. Without online parameter tracking
+/// the observer read its q part as back-EMF: its speed estimate was biased by about
+/// `dU / psi_f` and the speed loop held the motor 17.7 rpm below the reference at 2000 rpm
+/// (-21.6 rpm at -1000 rpm under load; angle 1.78 deg RMS, +1.18 mean). The tracked flux now
+/// lumps that voltage with the EMF (the q axis is all it shows), so the speed holds:
 ///
 /// | quantity | measured | asserted |
 /// |---|---|---|
 /// | hand-over / closed loop | 0.3346 / 0.3546 s | closed loop < 0.5 s |
-/// | speed error 2000 rpm, no load: mean / max | -17.7 / 18.7 rpm | in (-25, -10) / < 30 |
-/// | rated load step: dip | 127.6 rpm | < 180 |
-/// | speed error 2000 rpm, 1.5 N m: mean / max | -17.6 / 18.6 rpm | < 25 / < 30 |
-/// | speed error -1000 rpm, 1.5 N m: mean / max | -21.6 / 22.3 rpm | in (-30, -10) / < 35 |
-/// | foc observer after hand-over: RMS / max / mean | 1.78 / 9.83 / +1.18 deg el. | < 3 / < 15 / < 2 |
+/// | speed error 2000 rpm, no load: mean / max | +0.13 / 1.22 rpm | within 1 / < 3 |
+/// | rated load step: dip | 109.5 rpm | < 180 |
+/// | speed error 2000 rpm, 1.5 N m: mean / max | +0.09 / 0.91 rpm | within 1 / < 3 |
+/// | speed error -1000 rpm, 1.5 N m: mean / max | +0.04 / 1.12 rpm | within 1 / < 3 |
+/// | foc observer after hand-over: RMS / max / mean | 1.43 / 9.24 / +0.42 deg el. | < 2 / < 12 / < 0.7 |
 /// | peak current | 2.65 A | < 4.5 A |
 ///
-/// The 9.8 deg maximum is at the second hand-over (after the reversal, where the I/f ramp
-/// runs at low speed and the dead-time voltage is large next to the back-EMF). These are
-/// the numbers of the default before foc compensated dead time.
+/// The 9.2 deg maximum is at the second hand-over (after the reversal, where the I/f ramp
+/// runs at low speed and the dead-time voltage is large next to the back-EMF; the tracking is
+/// frozen there).
 #[test]
 fn sensorless_default_job_without_compensation() {
     let mut sc = preset("default");
@@ -256,15 +258,13 @@ fn sensorless_default_job_without_compensation() {
     sc.name = "default, compensation off".into();
     let j = run(&sc);
     assert_job_done(&j, 0.5, 4.5);
-    assert_speed("2000 rpm", j.rated, 25.0, 30.0);
+    assert_speed("2000 rpm", j.rated, 1.0, 3.0);
     assert!(j.dip_rpm < 180.0, "dip {} rpm", j.dip_rpm);
-    assert_speed("2000 rpm loaded", j.loaded, 25.0, 30.0);
-    assert_speed("-1000 rpm loaded", j.reversed, 30.0, 35.0);
-    // Below the reference, not just off it: the sign of the dead-time bias.
-    assert!(j.rated.0 < -10.0 && j.reversed.0 < -10.0, "{j:#?}");
+    assert_speed("2000 rpm loaded", j.loaded, 1.0, 3.0);
+    assert_speed("-1000 rpm loaded", j.reversed, 1.0, 3.0);
     let (rms, max, mean, window) = j.angle;
     assert!(window > 1.3, "after-hand-over window {window} s");
-    assert!(rms < 3.0 && max < 15.0 && mean.abs() < 2.0, "{:?}", j.angle);
+    assert!(rms < 2.0 && max < 12.0 && mean.abs() < 0.7, "{:?}", j.angle);
 }
 
 /// `Scenario::foc_config` passes the inverter's dead time to foc; `[controller.foc]` overrides
