@@ -78,53 +78,7 @@ pub struct ControllerInput {
     pub rotor: Option<RotorFeedback>,
 }
 
-/// What a controller reports about itself, for the log.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControllerTelemetry {
-    /// Name of the controller's state (e.g. `"sensored"`, `"align"`, `"closed_loop"`).
-    pub state: &'static str,
-    /// Angle the controller used for its Park transform, rad.
-    pub theta_e_rad: f64,
-    /// Electrical speed the controller used, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Measured dq currents in the controller's frame, A.
-    pub i_dq_a: [f64; 2],
-    /// dq current references, A.
-    pub i_dq_ref_a: [f64; 2],
-    /// dq voltage reference after limiting, V.
-    pub u_dq_ref_v: [f64; 2],
-    /// Stationary voltage reference sent to the modulator, V.
-    pub u_ab_ref_v: [f64; 2],
-    /// Whether the voltage vector was limited this period.
-    pub voltage_limited: bool,
-    /// Whether the speed and current loops run on a rotor angle (sensor or a trusted
-    /// observer) this period: always for the sensored controller; for `foc` in the states
-    /// `handover` and `closed_loop` (not during alignment or the open-loop I/f ramp).
-    pub closed_loop: bool,
-    /// The controller's own (slewed) mechanical speed reference, rpm, when it has one.
-    pub speed_ref_rpm: Option<f64>,
-    /// The latched fault, if any (e.g. `"over_current"`, `"observer_lost"`).
-    pub fault: Option<&'static str>,
-    /// The estimate of the controller's own observer (for `foc`: its `f32` EKF), if any. The
-    /// simulator scores it against the truth like its own observers.
-    pub estimate: Option<ControllerEstimate>,
-}
-
-/// The rotor estimate of an observer inside the controller (e.g. `foc`'s `f32` EKF), after
-/// this period's correction: the estimate of `th(t_k)`, `w_e(t_k)`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControllerEstimate {
-    /// Electrical angle, rad.
-    pub theta_e_rad: f64,
-    /// Electrical speed, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Diagonal of its covariance (`i_a, i_b, w_e, th`).
-    pub p_diag: [f64; 4],
-    /// Normalized innovation squared of the last correction.
-    pub nis: f64,
-    /// Whether it reports its angle as trusted (`Status::Tracking`).
-    pub tracking: bool,
-}
+pub use crate::record::{ControllerEstimate, ControllerTelemetry};
 
 /// What a controller commands in period `k`.
 #[derive(Clone, Copy, Debug, PartialEq)]

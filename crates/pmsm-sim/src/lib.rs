@@ -13,6 +13,7 @@ pub mod metrics;
 pub mod plant;
 pub mod plot;
 pub mod profile;
+pub mod record;
 pub mod report;
 pub mod scenario;
 pub mod sensors;

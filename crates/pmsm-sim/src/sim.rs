@@ -35,13 +35,11 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use ekf_core::{EkfError, Estimate, PmsmObserver, Status, wrap_angle};
-use serde::Serialize;
+use ekf_core::{EkfError, PmsmObserver};
 
 use crate::SimError;
 use crate::controller::{
-    ControllerEstimate, ControllerInput, ControllerTelemetry, DriveController, RotorFeedback,
-    SensoredController,
+    ControllerEstimate, ControllerInput, DriveController, RotorFeedback, SensoredController,
 };
 use crate::faults::{self, FaultInjector};
 use crate::foc_drive::FocDrive;
@@ -52,133 +50,7 @@ use crate::profile::load_torque_nm;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use crate::sensors::CurrentSensor;
 
-/// The true state at `t_k` (for scoring and the log; a sensorless controller never sees it).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Truth {
-    /// Electrical angle, rad, in `[-pi, pi)`.
-    pub theta_e_rad: f64,
-    /// Electrical speed, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Mechanical speed, rpm.
-    pub speed_rpm: f64,
-    /// Stator currents `[alpha, beta]`, A.
-    pub i_ab_a: [f64; 2],
-    /// Stator currents `[d, q]` in the true rotor frame, A.
-    pub i_dq_a: [f64; 2],
-    /// Electromagnetic torque, N m.
-    pub torque_nm: f64,
-    /// Load torque held over `[t_k, t_k+1)`, N m.
-    pub load_torque_nm: f64,
-}
-
-/// What the sensors delivered at `t_k`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Measured {
-    /// Measured phase currents `[a, b, c]` (`c = -a - b`), A.
-    pub i_abc_a: [f64; 3],
-    /// Their Clarke transform, A.
-    pub i_ab_a: [f64; 2],
-    /// Measured DC-bus voltage, V.
-    pub u_dc_v: f64,
-}
-
-/// One observer's output for one sample, with its errors against the truth.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ObserverSample {
-    /// Estimated electrical angle, rad.
-    pub theta_e_rad: f64,
-    /// Estimated electrical speed, rad/s.
-    pub omega_e_rad_s: f64,
-    /// `wrap(th_hat - th)`, electrical degrees.
-    pub angle_error_deg: f64,
-    /// `w_hat - w_e`, electrical rad/s.
-    pub speed_error_rad_s: f64,
-    /// Diagonal of the state covariance `P` (`i_a, i_b, w_e, th`): A^2, A^2, (rad/s)^2, rad^2.
-    pub p_diag: [f64; 4],
-    /// Normalized innovation squared of the correction.
-    pub nis: f64,
-    /// Whether the observer reports [`Status::Tracking`].
-    pub tracking: bool,
-}
-
-impl ObserverSample {
-    /// The sample of a controller's own observer ([`ControllerEstimate`]) against the truth.
-    pub fn from_controller(e: &ControllerEstimate, truth: &Truth) -> Self {
-        Self {
-            theta_e_rad: e.theta_e_rad,
-            omega_e_rad_s: e.omega_e_rad_s,
-            angle_error_deg: wrap_angle(e.theta_e_rad - truth.theta_e_rad).to_degrees(),
-            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
-            p_diag: e.p_diag,
-            nis: e.nis,
-            tracking: e.tracking,
-        }
-    }
-
-    fn new(e: &Estimate<f64>, p_diag: [f64; 4], truth: &Truth) -> Self {
-        Self {
-            theta_e_rad: e.theta_rad,
-            omega_e_rad_s: e.omega_e_rad_s,
-            angle_error_deg: wrap_angle(e.theta_rad - truth.theta_e_rad).to_degrees(),
-            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
-            p_diag,
-            nis: e.nis,
-            tracking: e.status == Status::Tracking,
-        }
-    }
-}
-
-/// The controller's side of a sample.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControlRecord {
-    /// Mechanical speed reference, rpm.
-    pub speed_ref_rpm: f64,
-    /// Duties the controller computed in this period.
-    pub duties: [f64; 3],
-    /// The controller's own report.
-    pub telemetry: ControllerTelemetry,
-}
-
-/// The inverter's side of a sample.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct InverterRecord {
-    /// Whether the bridge switches over `[t_k, t_k+1)` (`false`: all switches open; the
-    /// voltages below are then 0).
-    pub pwm_enabled: bool,
-    /// Duties applied over `[t_k, t_k+1)` (the previous period's, with the delay on).
-    pub duties: [f64; 3],
-    /// Stator voltage actually applied over `[t_k, t_k+1)`, dead time included, V.
-    pub u_ab_v: [f64; 2],
-    /// The ideal voltage of those duties on the bus the controller measured: the observer's
-    /// input at sample `k + 1`, V.
-    pub u_ab_commanded_v: [f64; 2],
-    /// Bus voltage over the period, V.
-    pub u_dc_v: f64,
-}
-
-/// Everything recorded for period `k` (at `t_k`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Sample {
-    /// Period index.
-    pub k: u64,
-    /// `t_k = k Ts`, s.
-    pub t_s: f64,
-    /// True state.
-    pub truth: Truth,
-    /// Sensor outputs.
-    pub measured: Measured,
-    /// The project's default observer (`ObserverConfig::new`, lag-free).
-    pub observer: ObserverSample,
-    /// The seed's filter (`ObserverConfig::seed`), when the scenario runs it.
-    pub seed_filter: Option<ObserverSample>,
-    /// The controller's own observer (for `foc`: its `f32` EKF, the one that closes the
-    /// loop), scored the same way; `None` for a controller without one.
-    pub controller_observer: Option<ObserverSample>,
-    /// Controller.
-    pub control: ControlRecord,
-    /// Inverter.
-    pub inverter: InverterRecord,
-}
+pub use crate::record::{ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth};
 
 /// The recorded run.
 #[derive(Clone, Debug, Default, PartialEq)]
