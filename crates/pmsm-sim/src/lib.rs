@@ -10,6 +10,7 @@ pub mod foc_drive;
 pub mod inverter;
 pub mod mcap_log;
 pub mod metrics;
+pub mod observer;
 pub mod plant;
 pub mod plot;
 pub mod profile;

@@ -30,9 +30,12 @@
 //!    `Option<Message>` (absent when `None`). Never renumber or reuse a number: logs written
 //!    before still decode (a field they lack reads as its proto3 default: 0, `false`, `""`,
 //!    `[]`, or `null`).
-//! 2. Fill it where the record is made (`sim.rs`, or [`ObserverSample::new`] /
-//!    [`ObserverSample::from_controller`] for an observer's field); the compiler names every
-//!    struct literal that lacks it.
+//! 2. Fill it where the record is made: `sim.rs` for the run's fields; for an observer's
+//!    field (e.g. a tracked parameter), add it to [`ControllerEstimate`] as well (what every
+//!    observer returns, [`crate::observer::ObserverEstimate`], and what a controller reports
+//!    of its own), set it in the [`crate::observer::Observer`] impls and in `foc_drive.rs`, and
+//!    copy it in [`ObserverSample::from_controller`]. The compiler names every struct literal
+//!    that lacks it.
 //! 3. Regenerate the checked-in schema files:
 //!    `PMSM_SIM_BLESS=1 cargo test -p pmsm-sim --lib schema` (then review the diff of
 //!    `src/schemas/`).
@@ -43,10 +46,10 @@
 //! # Module graph
 //!
 //! This module is at the bottom of the simulator: it depends on `ekf-core` only (for
-//! [`ObserverSample::new`]); the run loop, the metrics, the log, the plot and the suites
+//! `wrap_angle`); the run loop, the metrics, the log, the plot and the suites
 //! depend on it.
 
-use ekf_core::{Estimate, Status, wrap_angle};
+use ekf_core::wrap_angle;
 use serde::Serialize;
 
 // ---------------------------------------------------------------------------------------------
@@ -688,19 +691,6 @@ impl ObserverSample {
             p_diag: e.p_diag,
             nis: e.nis,
             tracking: e.tracking,
-        }
-    }
-
-    /// The sample of an `ekf-core` estimate (with its covariance diagonal) against the truth.
-    pub fn new(e: &Estimate<f64>, p_diag: [f64; 4], truth: &Truth) -> Self {
-        Self {
-            theta_e_rad: e.theta_rad,
-            omega_e_rad_s: e.omega_e_rad_s,
-            angle_error_deg: wrap_angle(e.theta_rad - truth.theta_e_rad).to_degrees(),
-            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
-            p_diag,
-            nis: e.nis,
-            tracking: e.status == Status::Tracking,
         }
     }
 }

@@ -12,8 +12,9 @@
 //!    e.g. `foc` after its dead-time compensation), the voltage the controller expects those
 //!    duties to realize. The actual dead-time distortion is **not** in it (a real controller
 //!    does not know it), so uncompensated dead time shows up as observer error, as on a bench. The estimate is compared
-//!    with the true `th(t_k)`, `w_e(t_k)`. Extra observers ([`SideObserver`],
-//!    [`run_with_side_observers`]) step right after, on the same inputs.
+//!    with the true `th(t_k)`, `w_e(t_k)`. The run's observers (the default EKF and the seed's
+//!    filter) and any extra ones ([`SideObserver`], [`run_with_side_observers`]: the suite's)
+//!    are all [`Observer`]s and step on the same inputs, in that order.
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
 //!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
 //!    of its own observer (`foc`'s `f32` EKF, which has stepped with its own record of the
@@ -38,13 +39,12 @@ use std::time::Instant;
 use ekf_core::{EkfError, PmsmObserver};
 
 use crate::SimError;
-use crate::controller::{
-    ControllerEstimate, ControllerInput, DriveController, RotorFeedback, SensoredController,
-};
-use crate::faults::{self, FaultInjector};
+use crate::controller::{ControllerInput, DriveController, RotorFeedback, SensoredController};
+use crate::faults::FaultInjector;
 use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
 use crate::metrics::{MetricsAccumulator, RunMetrics};
+use crate::observer::{Observer, ObserverEstimate};
 use crate::plant::{Plant, PlantState};
 use crate::profile::load_torque_nm;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
@@ -237,20 +237,16 @@ pub fn run_with_controller(
     run_with_side_observers(scenario, controller, opts, &mut [])
 }
 
-/// The estimate a [`SideObserver`] returns: angle, speed, and what it can tell of its
-/// uncertainty (zeros and `tracking = true` when it has no covariance).
-pub type SideEstimate = ControllerEstimate;
+/// The estimate a [`SideObserver`] returns (the [`Observer`] trait's).
+pub type SideEstimate = ObserverEstimate;
 
-/// An extra observer stepped alongside the built-in ones, on exactly their inputs (the
-/// scenario suite compares observers this way). In period `k`, [`step`](Self::step) comes
-/// right after the built-in observers' steps, before the controller ticks and before the
-/// truth is known to anyone; [`record`](Self::record) comes once the period's [`Sample`] is
-/// complete, with this observer's estimate scored against the truth.
-pub trait SideObserver {
-    /// One step with the timing of `PmsmObserver::step`: `u_prev` the voltage held over the
-    /// previous period as the controller knows it, `i_ab_a` the currents measured now.
-    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<SideEstimate, EkfError>;
-
+/// An extra [`Observer`] stepped alongside the run's own ones, on exactly their inputs, that
+/// sees its scored estimates (the scenario suite compares observers this way). In period
+/// `k`, [`Observer::step`] comes right after the run's observers' steps, before the
+/// controller ticks and before the truth is known to anyone; [`record`](Self::record) comes
+/// once the period's [`Sample`] is complete, with this observer's estimate scored against the
+/// truth.
+pub trait SideObserver: Observer {
     /// The completed sample of the period, and this observer's scored estimate (its error
     /// when the step failed; the run goes on).
     fn record(&mut self, sample: &Sample, own: Result<ObserverSample, EkfError>);
@@ -281,10 +277,12 @@ pub fn run_with_side_observers(
     let mut inverter = Inverter::new(scenario.inverter);
     let mut sensor = CurrentSensor::new(scenario.sensors, scenario.seed);
     // Injected faults (`[[faults]]`; none: not built, the loop unchanged).
-    let mut faults = FaultInjector::new(scenario);
-    let mut observer = PmsmObserver::new(&scenario.observer_config())?;
-    let mut seed_filter = if scenario.observer.seed_filter {
-        Some(PmsmObserver::new(&scenario.seed_filter_config())?)
+    let mut faults = FaultInjector::new(&scenario.faults, &scenario.fault_context());
+    // The run's own observers: the default EKF (its failure ends the run) and the seed's
+    // filter (a comparison only: dropped when it fails).
+    let mut observer: Box<dyn Observer> = Box::new(PmsmObserver::new(&scenario.observer_config())?);
+    let mut seed_filter: Option<Box<dyn Observer>> = if scenario.observer.seed_filter {
+        Some(Box::new(PmsmObserver::new(&scenario.seed_filter_config())?))
     } else {
         None
     };
@@ -329,7 +327,7 @@ pub fn run_with_side_observers(
             None => (sensor.measure(i_abc_true), inverter.u_dc_at(t)),
         };
 
-        let est = match faults::observe(&mut observer, u_prev, meas.i_ab_a) {
+        let est = match observer.step(u_prev, meas.i_ab_a) {
             Ok(e) => e,
             Err(error) => {
                 end = RunEnd::ObserverFailed {
@@ -340,13 +338,9 @@ pub fn run_with_side_observers(
                 break;
             }
         };
-        let p = observer.covariance();
         // The seed filter is only a comparison: if it fails, it is dropped, not the run.
-        let seed_est = match seed_filter
-            .as_mut()
-            .map(|f| faults::observe(f, u_prev, meas.i_ab_a))
-        {
-            Some(Ok(e)) => seed_filter.as_ref().map(|f| (e, f.covariance())),
+        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, meas.i_ab_a)) {
+            Some(Ok(e)) => Some(e),
             Some(Err(error)) => {
                 seed_filter = None;
                 seed_filter_failure = Some(FilterFailure { k: kk, error });
@@ -413,8 +407,8 @@ pub fn run_with_side_observers(
                 i_ab_a: meas.i_ab_a,
                 u_dc_v: u_dc,
             },
-            observer: ObserverSample::new(&est, diag(&p), &truth),
-            seed_filter: seed_est.map(|(e, p)| ObserverSample::new(&e, diag(&p), &truth)),
+            observer: ObserverSample::from_controller(&est, &truth),
+            seed_filter: seed_est.map(|e| ObserverSample::from_controller(&e, &truth)),
             controller_observer: out
                 .telemetry
                 .estimate
@@ -506,10 +500,4 @@ pub fn run_with_side_observers(
         seed_filter_failure,
         wall_time_s,
     })
-}
-
-/// Diagonal of a 4 x 4 covariance.
-#[inline]
-fn diag(p: &ekf_core::nalgebra::Matrix4<f64>) -> [f64; 4] {
-    [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]]
 }

@@ -62,25 +62,25 @@
 
 use std::time::Instant;
 
-use ekf_core::{
-    EkfError, FluxObserver, FluxObserverConfig, ObserverConfig, PmsmObserver, Status, nalgebra,
-};
+use ekf_core::{EkfError, FluxObserver, FluxObserverConfig, ObserverConfig, PmsmObserver};
 use serde::Serialize;
 
 use crate::SimError;
 use crate::foc_drive::FocDrive;
 use crate::inverter::InverterConfig;
+use crate::metrics::Sums;
+use crate::observer::{Observer, ObserverEstimate};
 use crate::plant::MotorModel;
 use crate::profile::{LoadTerm, Profile};
+use crate::record::{ObserverSample, Sample};
 use crate::scenario::{
     ControllerKind, ControllerSettings, FocSettings, InitialState, ObserverSettings, RPM_PER_RAD_S,
     Scenario,
 };
 use crate::sensors::SensorConfig;
-use crate::sim::{ObserverSample, Sample, SideEstimate, SideObserver, run_with_side_observers};
+use crate::sim::{SideObserver, run_with_side_observers};
 
-/// `|e_th|` below which an observer counts as converged, electrical degrees.
-pub const CONVERGED_DEG: f64 = 5.0;
+pub use crate::metrics::CONVERGED_DEG;
 /// The rotor's electrical angle at `t = 0`, rad (the observers start at 0: 115 deg off).
 pub const INITIAL_ANGLE_RAD: f64 = 2.0;
 /// Fan load at rated speed, fraction of the rated torque (quadratic in speed: 4 % at 50 %,
@@ -505,41 +505,10 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
     }
 }
 
-/// The estimator behind a [`Scored`] observer.
-enum Estimator {
-    Ekf(Box<PmsmObserver<f64>>),
-    Flux(FluxObserver<f64>),
-}
-
-/// Running sums over a window.
-#[derive(Clone, Copy, Debug, Default)]
-struct Sums {
-    n: usize,
-    failures: usize,
-    sum_e: f64,
-    sum_e2: f64,
-    max_e: f64,
-    sum_w2: f64,
-    max_w: f64,
-}
-
-impl Sums {
-    fn add(&mut self, s: &ObserverSample) {
-        let e = s.angle_error_deg;
-        let w = s.speed_error_rad_s;
-        self.n += 1;
-        self.sum_e += e;
-        self.sum_e2 += e * e;
-        self.max_e = self.max_e.max(e.abs());
-        self.sum_w2 += w * w;
-        self.max_w = self.max_w.max(w.abs());
-    }
-}
-
 /// An observer stepped alongside the run, scoring itself per window.
 struct Scored {
     kind: ObserverKind,
-    est: Estimator,
+    est: Box<dyn Observer>,
     plan: Plan,
     windows: Vec<Sums>,
     step: Sums,
@@ -554,15 +523,15 @@ impl Scored {
     fn new(kind: ObserverKind, scenario: &Scenario, plan: Plan) -> Result<Self, SimError> {
         let params = scenario.observer_params();
         let ts = scenario.ts_s();
-        let est = match kind {
-            ObserverKind::SeedEkf => Estimator::Ekf(Box::new(PmsmObserver::new(
-                &ObserverConfig::seed(params, ts),
-            )?)),
-            ObserverKind::DefaultEkf => Estimator::Ekf(Box::new(PmsmObserver::new(
-                &ObserverConfig::new(params, ts),
-            )?)),
+        let est: Box<dyn Observer> = match kind {
+            ObserverKind::SeedEkf => {
+                Box::new(PmsmObserver::new(&ObserverConfig::seed(params, ts))?)
+            }
+            ObserverKind::DefaultEkf => {
+                Box::new(PmsmObserver::new(&ObserverConfig::new(params, ts))?)
+            }
             ObserverKind::FluxBaseline => {
-                Estimator::Flux(FluxObserver::new(&FluxObserverConfig::new(params, ts))?)
+                Box::new(FluxObserver::new(&FluxObserverConfig::new(params, ts))?)
             }
         };
         Ok(Self {
@@ -578,33 +547,13 @@ impl Scored {
     }
 }
 
-impl SideObserver for Scored {
-    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<SideEstimate, EkfError> {
-        match &mut self.est {
-            Estimator::Ekf(o) => {
-                let e = o.step(u_prev, i_ab_a)?;
-                let p: nalgebra::Matrix4<f64> = o.covariance();
-                Ok(SideEstimate {
-                    theta_e_rad: e.theta_rad,
-                    omega_e_rad_s: e.omega_e_rad_s,
-                    p_diag: [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]],
-                    nis: e.nis,
-                    tracking: e.status == Status::Tracking,
-                })
-            }
-            Estimator::Flux(o) => {
-                let e = o.step(u_prev, i_ab_a)?;
-                Ok(SideEstimate {
-                    theta_e_rad: e.theta_rad,
-                    omega_e_rad_s: e.omega_e_rad_s,
-                    p_diag: [0.0; 4],
-                    nis: 0.0,
-                    tracking: true,
-                })
-            }
-        }
+impl Observer for Scored {
+    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<ObserverEstimate, EkfError> {
+        self.est.step(u_prev, i_ab_a)
     }
+}
 
+impl SideObserver for Scored {
     fn record(&mut self, sample: &Sample, own: Result<ObserverSample, EkfError>) {
         let t = sample.t_s;
         let own = own.ok();
@@ -624,15 +573,15 @@ impl SideObserver for Scored {
         for (sums, w) in self.windows.iter_mut().zip(&self.plan.windows) {
             if in_window(w.3, w.4) {
                 match &own {
-                    Some(s) => sums.add(s),
-                    None => sums.failures += 1,
+                    Some(s) => sums.add_sample(s),
+                    None => sums.add_failure(),
                 }
             }
         }
         if in_window(self.plan.step_s, self.plan.step_end_s) {
             match &own {
-                Some(s) => self.step.add(s),
-                None => self.step.failures += 1,
+                Some(s) => self.step.add_sample(s),
+                None => self.step.add_failure(),
             }
         }
     }

@@ -9,9 +9,11 @@
 //!
 //! SVPWM by min-max zero-sequence injection: the phase references get the common offset
 //! `-(max + min) / 2`, which centres them in the carrier and gives the same switching
-//! pattern as the classic sector-based SVPWM. Duties are `d_x = 1/2 + v_x / u_dc`. The linear
-//! range is the inscribed circle `|u| <= u_dc / sqrt(3)`; beyond it the duties are clamped to
-//! `[0, 1]` and the vector is distorted (reported as saturated).
+//! pattern as the classic sector-based SVPWM. Duties are `d_x = 1/2 + v_x / u_dc`. Every
+//! vector inside the hexagon of the six active vectors (vertices at `|u| = 2/3 u_dc`) is
+//! realized exactly; the inscribed circle `|u| <= u_dc / sqrt(3)` is the largest *rotating*
+//! vector realized without distortion (the limit the controllers use). Outside the hexagon the
+//! duties are clamped to `[0, 1]` and the vector is distorted (reported as saturated).
 
 /// `sqrt(3) / 2`.
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
@@ -119,6 +121,12 @@ mod tests {
         let th = core::f64::consts::FRAC_PI_3;
         let d = svpwm([0.5 * u * th.cos(), 0.5 * u * th.sin()], udc);
         assert!((d.d[0] - d.d[1]).abs() < 1e-12 && d.d[2] < 0.5);
+        // Between the circle and the hexagon (a vertex direction, 0.99 x 2/3 u_dc): still
+        // realized exactly, not saturated.
+        let v = [0.99 * 2.0 / 3.0 * udc, 0.0];
+        let d = svpwm(v, udc);
+        assert!(!d.saturated && v[0] > u);
+        assert!(close(&duties_to_voltage(d.d, udc), &v, 1e-12));
         // Far outside the hexagon: clamped and flagged.
         let s = svpwm([2.0 * udc, 0.0], udc);
         assert!(s.saturated && s.d.iter().all(|x| (0.0..=1.0).contains(x)));

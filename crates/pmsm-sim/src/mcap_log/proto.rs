@@ -366,6 +366,16 @@ mod tests {
     use super::*;
     use crate::record::{ControllerEstimate, ObserverSample, PERIOD_MAX_FIXED};
 
+    /// `s` with every optional part absent (`None`).
+    fn bare(mut s: Sample) -> Sample {
+        s.seed_filter = None;
+        s.controller_observer = None;
+        s.control.telemetry.speed_ref_rpm = None;
+        s.control.telemetry.fault = None;
+        s.control.telemetry.estimate = None;
+        s
+    }
+
     /// A sample with every optional part present and distinct values everywhere.
     fn full_sample() -> Sample {
         let mut s = Sample::default();
@@ -432,12 +442,7 @@ mod tests {
     #[test]
     fn protobuf_decodes_to_the_json_encoding() {
         let full = full_sample();
-        let mut bare = full;
-        bare.seed_filter = None;
-        bare.controller_observer = None;
-        bare.control.telemetry.speed_ref_rpm = None;
-        bare.control.telemetry.fault = None;
-        bare.control.telemetry.estimate = None;
+        let mut bare = bare(full);
         bare.control.telemetry.state = "";
         let mut enc = PeriodEncoder::new();
         for s in [full, bare, Sample::default()] {
@@ -500,12 +505,7 @@ mod tests {
         let old_full: &[u8] = include_bytes!("../../tests/data/period-full-0.1.0.pb");
         let old_bare: &[u8] = include_bytes!("../../tests/data/period-bare-0.1.0.pb");
         let full = full_sample();
-        let mut bare = full;
-        bare.seed_filter = None;
-        bare.controller_observer = None;
-        bare.control.telemetry.speed_ref_rpm = None;
-        bare.control.telemetry.fault = None;
-        bare.control.telemetry.estimate = None;
+        let bare = bare(full);
         let mut enc = PeriodEncoder::new();
         for (s, old) in [(full, old_full), (bare, old_bare)] {
             assert_eq!(enc.encode(&s), old);
@@ -587,12 +587,7 @@ mod tests {
             }
         }
         let full = full_sample();
-        let mut bare = full;
-        bare.seed_filter = None;
-        bare.controller_observer = None;
-        bare.control.telemetry.speed_ref_rpm = None;
-        bare.control.telemetry.fault = None;
-        bare.control.telemetry.estimate = None;
+        let bare = bare(full);
         let full = serde_json::to_value(full).unwrap_or_else(|e| panic!("{e}"));
         let bare = serde_json::to_value(bare).unwrap_or_else(|e| panic!("{e}"));
         walk(&json_schema(), &full, &bare, "");
