@@ -385,16 +385,12 @@ pub fn run_with_side_observers(
             applied.u_ab_commanded_v = [0.0; 2];
         }
 
-        let (s, c) = plant.sin_cos();
         let truth = Truth {
             theta_e_rad: state.theta_e_rad,
             omega_e_rad_s: omega_e,
             speed_rpm: state.omega_mech_rad_s * RPM_PER_RAD_S,
-            i_ab_a: [
-                state.i_d_a * c - state.i_q_a * s,
-                state.i_d_a * s + state.i_q_a * c,
-            ],
-            i_dq_a: [state.i_d_a, state.i_q_a],
+            i_ab_a: plant.i_ab_a(),
+            i_dq_a: plant.i_dq_a().to_array(),
             torque_nm: plant.torque_nm(),
             load_torque_nm: load,
         };

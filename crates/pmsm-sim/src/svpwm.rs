@@ -7,6 +7,9 @@
 //! u_a = u_alpha,  u_b = -u_alpha / 2 + sqrt(3)/2 u_beta,  u_c = -u_alpha / 2 - sqrt(3)/2 u_beta
 //! ```
 //!
+//! Park transform with the rotor direction `rot = (cos th, sin th)` ([`park`],
+//! [`inverse_park`]): a rotation by `-th` and by `+th` of a 2-D vector ([`DVec2`]).
+//!
 //! SVPWM by min-max zero-sequence injection: the phase references get the common offset
 //! `-(max + min) / 2`, which centres them in the carrier and gives the same switching
 //! pattern as the classic sector-based SVPWM. Duties are `d_x = 1/2 + v_x / u_dc`. Every
@@ -14,6 +17,8 @@
 //! realized exactly; the inscribed circle `|u| <= u_dc / sqrt(3)` is the largest *rotating*
 //! vector realized without distortion (the limit the controllers use). Outside the hexagon the
 //! duties are clamped to `[0, 1]` and the vector is distorted (reported as saturated).
+
+use glam::DVec2;
 
 /// `sqrt(3) / 2`.
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
@@ -35,6 +40,20 @@ pub fn inverse_clarke(ab: [f64; 2]) -> [f64; 3] {
     let h = -0.5 * ab[0];
     let s = SQRT3_2 * ab[1];
     [ab[0], h + s, h - s]
+}
+
+/// Park transform: the stationary vector `ab` in the frame whose d axis points along
+/// `rot = (cos th, sin th)`: `d = a cos th + b sin th`, `q = -a sin th + b cos th`.
+#[inline]
+pub fn park(ab: DVec2, rot: DVec2) -> DVec2 {
+    DVec2::new(rot.x, -rot.y).rotate(ab)
+}
+
+/// Inverse Park transform: the frame vector `dq` in the stationary frame,
+/// `a = d cos th - q sin th`, `b = d sin th + q cos th`.
+#[inline]
+pub fn inverse_park(dq: DVec2, rot: DVec2) -> DVec2 {
+    rot.rotate(dq)
 }
 
 /// Duties of one period from SVPWM.
@@ -92,6 +111,26 @@ mod tests {
         assert!(close(&clarke([3.0, 3.0, 3.0]), &[0.0, 0.0], 1e-15));
         let ab = [0.3, -1.7];
         assert!(close(&clarke(inverse_clarke(ab)), &ab, 1e-15));
+    }
+
+    #[test]
+    fn park_known_answers() {
+        let th = 0.7_f64;
+        let rot = DVec2::new(th.cos(), th.sin());
+        let ab = DVec2::new(1.5, -0.25);
+        let dq = park(ab, rot);
+        let want = [
+            1.5 * th.cos() - 0.25 * th.sin(),
+            -1.5 * th.sin() - 0.25 * th.cos(),
+        ];
+        assert!(close(&dq.to_array(), &want, 1e-15));
+        assert!(close(
+            &inverse_park(dq, rot).to_array(),
+            &ab.to_array(),
+            1e-15
+        ));
+        // The d axis along the rotor: a vector at angle th has no q part.
+        assert!(park(rot * 2.0, rot).y.abs() < 1e-15);
     }
 
     #[test]
