@@ -244,7 +244,19 @@ impl FaultSpec {
 
     /// Start time, s.
     pub fn start_s(&self) -> f64 {
-        match *self {
+        let mut spec = *self;
+        *spec.start_mut()
+    }
+
+    /// The same fault starting at `t_s`.
+    pub fn at(mut self, t: f64) -> Self {
+        *self.start_mut() = t;
+        self
+    }
+
+    /// The start time of every kind.
+    fn start_mut(&mut self) -> &mut f64 {
+        match self {
             FaultSpec::OffsetDrift { t_s, .. }
             | FaultSpec::GainStep { t_s, .. }
             | FaultSpec::Stuck { t_s, .. }
@@ -257,24 +269,6 @@ impl FaultSpec {
             | FaultSpec::LockedRotor { t_s, .. }
             | FaultSpec::Overload { t_s, .. } => t_s,
         }
-    }
-
-    /// The same fault starting at `t_s`.
-    pub fn at(mut self, t: f64) -> Self {
-        match &mut self {
-            FaultSpec::OffsetDrift { t_s, .. }
-            | FaultSpec::GainStep { t_s, .. }
-            | FaultSpec::Stuck { t_s, .. }
-            | FaultSpec::Dropout { t_s, .. }
-            | FaultSpec::NoiseBurst { t_s, .. }
-            | FaultSpec::Glitch { t_s, .. }
-            | FaultSpec::BusSag { t_s, .. }
-            | FaultSpec::PhaseOpen { t_s, .. }
-            | FaultSpec::ParamDrift { t_s, .. }
-            | FaultSpec::LockedRotor { t_s, .. }
-            | FaultSpec::Overload { t_s, .. } => *t_s = t,
-        }
-        self
     }
 
     /// `duration_s` as given (`None` for a glitch).
