@@ -27,7 +27,7 @@
 //! ([`FaultInjector::extra_load_nm`]), the plant before and after its step
 //! ([`FaultInjector::before_step`], [`FaultInjector::after_step`]). Without faults it is not
 //! built and the loop is unchanged. The simulator's own observers (which only ride along) only
-//! predict over a missing sample ([`observe`]).
+//! predict over a missing sample (their [`Observer`](crate::observer::Observer) impl).
 
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
