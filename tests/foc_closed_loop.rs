@@ -63,7 +63,6 @@ fn run(sc: &Scenario) -> Job {
     let rated_e = sc.rated_speed_e_rad_s();
     let mut states: Vec<&'static str> = vec![];
     let (mut t_handover, mut t_closed_loop, mut fault) = (None, None, None);
-    let (mut sum2, mut sum, mut max, mut n) = (0.0, 0.0, 0.0_f64, 0usize);
     let mut peak_a = 0.0_f64;
     for x in s {
         let tel = &x.control.telemetry;
@@ -80,18 +79,21 @@ fn run(sc: &Scenario) -> Job {
             fault = Some((f, x.t_s));
         }
         if tel.closed_loop && x.truth.omega_e_rad_s.abs() >= 0.05 * rated_e {
-            let e = x
-                .controller_observer
-                .unwrap_or_else(|| panic!("no foc observer"))
-                .angle_error_deg;
-            sum2 += e * e;
-            sum += e;
-            max = max.max(e.abs());
-            n += 1;
+            assert!(x.controller_observer.is_some(), "no foc observer");
         }
         peak_a = peak_a.max(x.truth.i_ab_a[0].hypot(x.truth.i_ab_a[1]));
     }
-    let nf = n.max(1) as f64;
+    // The simulator's own score of foc's observer over the closed-loop window (the periods
+    // on its angle, `|w_e| >= 5 %` of rated): the scorer of every metric.
+    let cl = out.metrics.controller_observer_closed_loop;
+    let angle = cl.map_or((f64::NAN, 0.0, f64::NAN, 0.0), |m| {
+        (
+            m.angle_error_rms_deg,
+            m.angle_error_max_deg,
+            m.angle_error_mean_deg,
+            m.window_s,
+        )
+    });
     let window = |t0: f64, t1: f64| speed_error(s, t0, t1);
     let dip_rpm = s
         .iter()
@@ -107,7 +109,7 @@ fn run(sc: &Scenario) -> Job {
         loaded: window(1.05, 1.2),
         reversed: window(1.8, 2.0),
         dip_rpm,
-        angle: ((sum2 / nf).sqrt(), max, sum / nf, n as f64 * sc.ts_s()),
+        angle,
         peak_a,
     };
     println!("{}: {job:#?}", sc.name);

@@ -240,6 +240,11 @@ impl<T: Float> FluxObserver<T> {
         })
     }
 
+    /// The `(psi_f, Rs)` it uses (the configured ones: it tracks neither), Wb and ohm.
+    pub fn parameters(&self) -> (T, T) {
+        (T::one() / self.inv_psi, self.rs)
+    }
+
     /// One sample: `u_prev = [u_a, u_b]` (V) held over the previous period, `i = [i_a, i_b]`
     /// (A) sampled now (module docs give the update).
     ///

@@ -44,10 +44,11 @@
 
 use core::f64::consts::PI;
 
+use glam::DVec2;
 use serde::Serialize;
 
 use crate::plant::MotorModel;
-use crate::svpwm::{INV_SQRT3, svpwm};
+use crate::svpwm::{INV_SQRT3, inverse_park, park, svpwm};
 
 /// The true rotor position and speed, given only to sensored controllers.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -78,63 +79,7 @@ pub struct ControllerInput {
     pub rotor: Option<RotorFeedback>,
 }
 
-/// What a controller reports about itself, for the log.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControllerTelemetry {
-    /// Name of the controller's state (e.g. `"sensored"`, `"align"`, `"closed_loop"`).
-    pub state: &'static str,
-    /// Angle the controller used for its Park transform, rad.
-    pub theta_e_rad: f64,
-    /// Electrical speed the controller used, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Measured dq currents in the controller's frame, A.
-    pub i_dq_a: [f64; 2],
-    /// dq current references, A.
-    pub i_dq_ref_a: [f64; 2],
-    /// dq voltage reference after limiting, V.
-    pub u_dq_ref_v: [f64; 2],
-    /// Stationary voltage reference sent to the modulator, V.
-    pub u_ab_ref_v: [f64; 2],
-    /// Whether the voltage vector was limited this period.
-    pub voltage_limited: bool,
-    /// Whether the speed and current loops run on a rotor angle (sensor or a trusted
-    /// observer) this period: always for the sensored controller; for `foc` in the states
-    /// `handover` and `closed_loop` (not during alignment or the open-loop I/f ramp).
-    pub closed_loop: bool,
-    /// The controller's own (slewed) mechanical speed reference, rpm, when it has one.
-    pub speed_ref_rpm: Option<f64>,
-    /// The latched fault, if any (e.g. `"over_current"`, `"observer_lost"`).
-    pub fault: Option<&'static str>,
-    /// The estimate of the controller's own observer (for `foc`: its `f32` EKF), if any. The
-    /// simulator scores it against the truth like its own observers.
-    pub estimate: Option<ControllerEstimate>,
-}
-
-/// The rotor estimate of an observer inside the controller (e.g. `foc`'s `f32` EKF), after
-/// this period's correction: the estimate of `th(t_k)`, `w_e(t_k)`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControllerEstimate {
-    /// Electrical angle, rad.
-    pub theta_e_rad: f64,
-    /// Electrical speed, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Diagonal of its covariance (`i_a, i_b, w_e, th`).
-    pub p_diag: [f64; 4],
-    /// Normalized innovation squared of the last correction.
-    pub nis: f64,
-    /// Whether it reports its angle as trusted (`Status::Tracking`).
-    pub tracking: bool,
-    /// Tracked flux linkage, Wb (the configured one for an observer without tracking).
-    pub psi_f_wb: f64,
-    /// Its standard deviation, Wb (0 when not tracked).
-    pub psi_f_sigma_wb: f64,
-    /// Stator resistance in use, ohm (tracked, or the configured one).
-    pub rs_ohm: f64,
-    /// Its standard deviation, ohm (0 when not tracked).
-    pub rs_sigma_ohm: f64,
-    /// Winding temperature derived from `rs_ohm`, deg C (`NaN` when not known).
-    pub winding_temperature_c: f64,
-}
+pub use crate::record::{ControllerEstimate, ControllerTelemetry};
 
 /// What a controller commands in period `k`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -216,7 +161,7 @@ pub struct SensoredController {
     /// Speed integrator, A.
     int_speed: f64,
     /// Current integrators `[d, q]`, V.
-    int_dq: [f64; 2],
+    int_dq: DVec2,
     /// Angle advance factor: 0.5 or 1.5 periods.
     advance: f64,
 }
@@ -229,7 +174,7 @@ impl SensoredController {
             cfg,
             motor,
             int_speed: 0.0,
-            int_dq: [0.0; 2],
+            int_dq: DVec2::ZERO,
             advance: if cfg.delay_compensation { 1.5 } else { 0.5 },
         }
     }
@@ -273,32 +218,26 @@ impl DriveController for SensoredController {
             self.int_speed = cand.clamp(-i_max, i_max);
         }
         let iq_ref = (cfg.kp_speed_a_s_rad * e_w + self.int_speed).clamp(-i_max, i_max);
-        let i_ref = [0.0, iq_ref];
+        let i_ref = DVec2::new(0.0, iq_ref);
 
-        // Current loops.
+        // Current loops. `rot` is the rotor direction `(cos th, sin th)`: Park is a rotation
+        // by `-th`, the inverse Park by `+th`.
         let (s, c) = rotor.theta_e_rad.sin_cos();
-        let [ia, ib] = input.i_ab_a;
-        let i_dq = [ia * c + ib * s, -ia * s + ib * c];
+        let rot = DVec2::new(c, s);
+        let i_dq = park(DVec2::from(input.i_ab_a), rot);
         let we = m.p() * rotor.omega_mech_rad_s;
-        let e = [i_ref[0] - i_dq[0], i_ref[1] - i_dq[1]];
-        let cand = [
-            self.int_dq[0] + cfg.ki_current_v_as * ts * e[0],
-            self.int_dq[1] + cfg.ki_current_v_as * ts * e[1],
-        ];
-        let ff = [
-            -we * m.lq_h * i_dq[1],
-            we * m.ld_h * i_dq[0] + we * m.psi_f_wb,
-        ];
-        let unsat = [
-            cfg.kp_current_v_a * e[0] + cand[0] + ff[0],
-            cfg.kp_current_v_a * e[1] + cand[1] + ff[1],
-        ];
+        let e = i_ref - i_dq;
+        let cand = self.int_dq + cfg.ki_current_v_as * ts * e;
+        let ff = DVec2::new(
+            -we * m.lq_h * i_dq.y,
+            we * m.ld_h * i_dq.x + we * m.psi_f_wb,
+        );
+        let unsat = cfg.kp_current_v_a * e + cand + ff;
         let u_lim = input.u_dc_v * INV_SQRT3;
-        let mag = (unsat[0] * unsat[0] + unsat[1] * unsat[1]).sqrt();
+        let mag = unsat.length();
         let limited = mag > u_lim;
         let u_dq = if limited {
-            let k = u_lim / mag;
-            [unsat[0] * k, unsat[1] * k]
+            unsat * (u_lim / mag)
         } else {
             unsat
         };
@@ -311,8 +250,8 @@ impl DriveController for SensoredController {
 
         // Inverse Park at the angle at the centre of the period the voltage will act in.
         let (sd, cd) = small_sin_cos(self.advance * we * ts);
-        let (s, c) = (s * cd + c * sd, c * cd - s * sd);
-        let u_ab = [u_dq[0] * c - u_dq[1] * s, u_dq[0] * s + u_dq[1] * c];
+        let rot = rot.rotate(DVec2::new(cd, sd));
+        let u_ab = inverse_park(u_dq, rot).to_array();
         let duties = svpwm(u_ab, input.u_dc_v).d;
         ControllerOutput {
             expected_u_ab_v: None,
@@ -322,9 +261,9 @@ impl DriveController for SensoredController {
                 state: "sensored",
                 theta_e_rad: rotor.theta_e_rad,
                 omega_e_rad_s: we,
-                i_dq_a: i_dq,
-                i_dq_ref_a: i_ref,
-                u_dq_ref_v: u_dq,
+                i_dq_a: i_dq.to_array(),
+                i_dq_ref_a: i_ref.to_array(),
+                u_dq_ref_v: u_dq.to_array(),
                 u_ab_ref_v: u_ab,
                 voltage_limited: limited,
                 closed_loop: true,

@@ -27,9 +27,8 @@
 //! ([`FaultInjector::extra_load_nm`]), the plant before and after its step
 //! ([`FaultInjector::before_step`], [`FaultInjector::after_step`]). Without faults it is not
 //! built and the loop is unchanged. The simulator's own observers (which only ride along) only
-//! predict over a missing sample ([`observe`]).
+//! predict over a missing sample (their [`Observer`](crate::observer::Observer) impl).
 
-use ekf_core::{EkfError, Estimate, PmsmObserver};
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, StandardNormal};
@@ -37,7 +36,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
 use crate::plant::Plant;
-use crate::scenario::Scenario;
 use crate::sensors::{ChannelFaults, CurrentSample, CurrentSensor};
 
 /// A current-sensor channel.
@@ -250,7 +248,19 @@ impl FaultSpec {
 
     /// Start time, s.
     pub fn start_s(&self) -> f64 {
-        match *self {
+        let mut spec = *self;
+        *spec.start_mut()
+    }
+
+    /// The same fault starting at `t_s`.
+    pub fn at(mut self, t: f64) -> Self {
+        *self.start_mut() = t;
+        self
+    }
+
+    /// The start time of every kind.
+    fn start_mut(&mut self) -> &mut f64 {
+        match self {
             FaultSpec::OffsetDrift { t_s, .. }
             | FaultSpec::GainStep { t_s, .. }
             | FaultSpec::Stuck { t_s, .. }
@@ -263,24 +273,6 @@ impl FaultSpec {
             | FaultSpec::LockedRotor { t_s, .. }
             | FaultSpec::Overload { t_s, .. } => t_s,
         }
-    }
-
-    /// The same fault starting at `t_s`.
-    pub fn at(mut self, t: f64) -> Self {
-        match &mut self {
-            FaultSpec::OffsetDrift { t_s, .. }
-            | FaultSpec::GainStep { t_s, .. }
-            | FaultSpec::Stuck { t_s, .. }
-            | FaultSpec::Dropout { t_s, .. }
-            | FaultSpec::NoiseBurst { t_s, .. }
-            | FaultSpec::Glitch { t_s, .. }
-            | FaultSpec::BusSag { t_s, .. }
-            | FaultSpec::PhaseOpen { t_s, .. }
-            | FaultSpec::ParamDrift { t_s, .. }
-            | FaultSpec::LockedRotor { t_s, .. }
-            | FaultSpec::Overload { t_s, .. } => *t_s = t,
-        }
-        self
     }
 
     /// `duration_s` as given (`None` for a glitch).
@@ -300,21 +292,21 @@ impl FaultSpec {
         }
     }
 
-    /// Checks the values for `scenario` (start within the run, positive durations, the
-    /// kind's parameters); errors name `field.<name>`.
-    pub fn validate(&self, field: &str, scenario: &Scenario) -> Result<(), FieldError> {
+    /// Checks the values for a run (start within the run, positive durations, the kind's
+    /// parameters); errors name `field.<name>`.
+    pub fn validate(&self, field: &str, run: &RunContext) -> Result<(), FieldError> {
         let err =
             |name: &str, problem: String| Err(FieldError::new(format!("{field}.{name}"), problem));
         let t = self.start_s();
         if !(t.is_finite() && t >= 0.0) {
             return err("t_s", format!("must be finite and >= 0, is {t}"));
         }
-        if t >= scenario.duration_s {
+        if t >= run.duration_s {
             return err(
                 "t_s",
                 format!(
                     "{t} s is not before the end of the run ({} s)",
-                    scenario.duration_s
+                    run.duration_s
                 ),
             );
         }
@@ -438,6 +430,24 @@ impl Armed {
     }
 }
 
+/// What faults are checked and armed against: the few figures of the run they need, not the
+/// whole scenario ([`crate::scenario::Scenario::fault_context`] makes it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunContext {
+    /// Simulated duration, s (a fault must start before it).
+    pub duration_s: f64,
+    /// PWM period, s.
+    pub ts_s: f64,
+    /// Random seed of the run (the glitches' generator is seeded from it).
+    pub seed: u64,
+    /// Rated current of the motor, A (the glitches' scale).
+    pub rated_current_a: f64,
+    /// The plant's stator resistance, ohm (drift starts from it).
+    pub rs_ohm: f64,
+    /// The plant's flux linkage, Wb (drift starts from it).
+    pub psi_f_wb: f64,
+}
+
 /// The scenario's faults during a run (module docs).
 #[derive(Clone, Debug)]
 pub struct FaultInjector {
@@ -453,15 +463,14 @@ pub struct FaultInjector {
 }
 
 impl FaultInjector {
-    /// The injector of a scenario's `[[faults]]`; `None` when it has none.
-    pub fn new(scenario: &Scenario) -> Option<Self> {
-        if scenario.faults.is_empty() {
+    /// The injector of a scenario's `[[faults]]` for a run; `None` when there are none.
+    pub fn new(specs: &[FaultSpec], run: &RunContext) -> Option<Self> {
+        if specs.is_empty() {
             return None;
         }
-        let ts = scenario.ts_s();
+        let ts = run.ts_s;
         let periods = |t: f64| (t / ts).round().max(0.0) as u64;
-        let faults = scenario
-            .faults
+        let faults = specs
             .iter()
             .map(|&spec| {
                 let k0 = periods(spec.start_s());
@@ -488,16 +497,15 @@ impl FaultInjector {
                 }
             })
             .collect();
-        let m = &scenario.motor;
         Some(Self {
             faults,
             ts_s: ts,
-            rated_current_a: scenario.rated_torque_nm / m.torque_constant_nm_a(),
-            rs_ohm: m.rs_ohm,
-            psi_f_wb: m.psi_f_wb,
-            drift_set: (m.rs_ohm, m.psi_f_wb),
+            rated_current_a: run.rated_current_a,
+            rs_ohm: run.rs_ohm,
+            psi_f_wb: run.psi_f_wb,
+            drift_set: (run.rs_ohm, run.psi_f_wb),
             last_reading: [0.0; 2],
-            rng: Xoshiro256PlusPlus::seed_from_u64(scenario.seed ^ 0x6661_756c_7473),
+            rng: Xoshiro256PlusPlus::seed_from_u64(run.seed ^ 0x6661_756c_7473),
         })
     }
 
@@ -640,24 +648,10 @@ impl FaultInjector {
     }
 }
 
-/// One step of an observer that only rides along: predict and correct, or only predict
-/// over a missing (non-finite) current sample.
-pub fn observe(
-    observer: &mut PmsmObserver<f64>,
-    u_prev: [f64; 2],
-    i_ab_a: [f64; 2],
-) -> Result<Estimate<f64>, EkfError> {
-    if i_ab_a[0].is_finite() && i_ab_a[1].is_finite() {
-        observer.step(u_prev, i_ab_a)
-    } else {
-        observer.predict(u_prev)?;
-        Ok(observer.estimate())
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scenario::Scenario;
 
     fn with_faults(toml: &str) -> Result<Scenario, crate::SimError> {
         let text = format!(
@@ -788,7 +782,8 @@ channel = "a"
 "#,
         )
         .unwrap_or_else(|e| panic!("{e}"));
-        let mut inj = FaultInjector::new(&sc).unwrap_or_else(|| panic!("no injector"));
+        let mut inj = FaultInjector::new(&sc.faults, &sc.fault_context())
+            .unwrap_or_else(|| panic!("no injector"));
         let mut sensor = CurrentSensor::new(crate::sensors::SensorConfig::default(), 1);
         let i = |k: u64| {
             let a = (k as f64 * 0.01).sin();

@@ -42,8 +42,8 @@ use crate::controller::{
 };
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
 
-/// `1 / sqrt(3)`.
-const INV_SQRT3: f32 = 0.577_350_26;
+/// `1 / sqrt(3)` in `f32` (the same bits as the literal `0.577_350_26`).
+const INV_SQRT3: f32 = crate::svpwm::INV_SQRT3 as f32;
 
 /// The `foc` controller as a [`DriveController`] (module docs).
 #[derive(Clone, Debug)]

@@ -232,7 +232,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
     );
     let mut inverter = Inverter::new(sc.inverter);
     let mut sensor = CurrentSensor::new(sc.sensors, sc.seed);
-    let mut faults = FaultInjector::new(&sc);
+    let mut faults = FaultInjector::new(&sc.faults, &sc.fault_context());
     let mut log = match &opts.mcap {
         Some(p) => Some(McapLog::create(p, &sc, LogOptions::default())?),
         None => None,

@@ -16,6 +16,7 @@ use pmsm_sim::plot::PlotSink;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
 use pmsm_sim::suite::{SuiteOptions, run_suite};
+use pmsm_sim::tune::{LoggedRun, RShape, TuneError, TuneOptions, tune_logged_run};
 use pmsm_sim::{SimError, report};
 
 /// Desktop simulator of a sensorless PMSM drive: plant, inverter, sensors, controller and the
@@ -113,7 +114,7 @@ enum Command {
     },
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
-    Tune(pmsm_sim::tune::TuneArgs),
+    Tune(TuneArgs),
 }
 
 #[derive(Args, Debug, Clone)]
@@ -730,4 +731,76 @@ fn suite(opts: SuiteOptions, out: &Path) -> Result<ExitCode, SimError> {
     std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
     println!("\noutputs: {} {}", md_path.display(), json_path.display());
     Ok(ExitCode::SUCCESS)
+}
+
+/// Arguments of `pmsm-sim tune` (the command line's subcommand).
+#[derive(Args, Debug, Clone)]
+struct TuneArgs {
+    /// MCAP log written by `pmsm-sim run` (protobuf or JSON period channel).
+    file: std::path::PathBuf,
+    /// Convergence window not scored, s (default: min(20 % of the run, 0.1 s)).
+    #[arg(long)]
+    skip_s: Option<f64>,
+    /// Fit one sigma for R (isotropic) instead of alpha, beta and their correlation.
+    #[arg(long)]
+    isotropic: bool,
+    /// Filter runs the search may use.
+    #[arg(long, default_value_t = 5000)]
+    max_evals: usize,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+impl TuneArgs {
+    /// Runs the subcommand: the report on stdout, errors on stderr.
+    fn run(&self) -> std::process::ExitCode {
+        match self.report() {
+            Ok(text) => {
+                print!("{text}");
+                std::process::ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("pmsm-sim: error: {e}");
+                std::process::ExitCode::FAILURE
+            }
+        }
+    }
+
+    fn report(&self) -> Result<String, TuneError> {
+        let run = LoggedRun::read(&self.file)?;
+        let skip = match self.skip_s {
+            None => None,
+            Some(t) if t.is_finite() && t >= 0.0 => {
+                Some((t / run.scenario.ts_s()).round() as usize)
+            }
+            Some(t) => {
+                return Err(TuneError::Option {
+                    name: "--skip-s",
+                    problem: format!("must be finite and >= 0, got {t}"),
+                });
+            }
+        };
+        let opts = TuneOptions {
+            skip,
+            r_shape: if self.isotropic {
+                RShape::Isotropic
+            } else {
+                RShape::Full
+            },
+            max_evaluations: self.max_evals,
+            ..TuneOptions::default()
+        };
+        let rep = tune_logged_run(&run, &opts)?;
+        if self.json {
+            serde_json::to_string_pretty(&rep)
+                .map(|j| format!("{j}\n"))
+                .map_err(|e| TuneError::Option {
+                    name: "--json",
+                    problem: e.to_string(),
+                })
+        } else {
+            Ok(rep.render(&self.file.display().to_string()))
+        }
+    }
 }

@@ -12,10 +12,11 @@
 //!
 //! The per-period channel is protobuf by default: message encoding `protobuf`, schema encoding
 //! `protobuf` with a `FileDescriptorSet` ([`proto::file_descriptor_set`]; the `.proto` text is
-//! `src/schemas/period.proto`), encoded by hand ([`proto::PeriodEncoder`], about 60 ns and
-//! 900 bytes per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
-//! [`PERIOD_SCHEMA`] (same field names, about 40 times slower to write). The other channels are
-//! JSON (`jsonschema`): one message each.
+//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 700 bytes
+//! per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
+//! [`proto::json_schema`] (same field names, about 40 times slower to write). All three come
+//! from the one description of the record in [`crate::record`] (how to add a field: there).
+//! The other channels are JSON (`jsonschema`): one message each.
 //!
 //! Log and publish times are the simulated time `k Ts` in nanoseconds. A metadata record
 //! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks of 1 MiB, not
@@ -44,11 +45,9 @@ pub mod proto;
 
 use crate::SimError;
 use crate::metrics::RunMetrics;
+use crate::record::Sample;
 use crate::scenario::Scenario;
-use crate::sim::{Sample, SampleSink};
-
-/// JSON schema of the `/pmsm_sim/period` messages in the JSON encoding.
-pub const PERIOD_SCHEMA: &str = include_str!("schemas/period.schema.json");
+use crate::sim::SampleSink;
 
 /// Topic of the per-period messages.
 pub const TOPIC_PERIOD: &str = "/pmsm_sim/period";
@@ -92,7 +91,8 @@ pub enum LogEncoding {
     /// Protobuf ([`proto`]): the default, about 60 ns per message.
     #[default]
     Protobuf,
-    /// JSON with the JSON schema [`PERIOD_SCHEMA`] (the same fields; about 2.6 us per message).
+    /// JSON with the JSON schema [`proto::json_schema`] (the same fields; about 2.6 us per
+    /// message).
     Json,
 }
 
@@ -175,14 +175,9 @@ impl McapLog {
                 add(name, "protobuf", &descriptor, TOPIC_PERIOD, "protobuf")?
             }
             LogEncoding::Json => {
-                let schema = PERIOD_SCHEMA.as_bytes();
-                add(
-                    "pmsm_sim.Period",
-                    "jsonschema",
-                    schema,
-                    TOPIC_PERIOD,
-                    "json",
-                )?
+                let schema = proto::json_schema().to_string();
+                let name = proto::PERIOD_MESSAGE;
+                add(name, "jsonschema", schema.as_bytes(), TOPIC_PERIOD, "json")?
             }
         };
         let mut add_json =
@@ -306,65 +301,5 @@ impl SampleSink for McapLog {
             }
             LogEncoding::Json => self.write_json(ch, t_ns, sample),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every key of a serialized sample is in the schema, and every key of the schema is in
-    /// a serialized sample (with every optional part present).
-    #[test]
-    fn schema_matches_the_sample() {
-        let schema: serde_json::Value = match serde_json::from_str(PERIOD_SCHEMA) {
-            Ok(v) => v,
-            Err(e) => panic!("schema is not JSON: {e}"),
-        };
-        let mut s = Sample::default();
-        s.seed_filter = Some(s.observer);
-        s.controller_observer = Some(s.observer);
-        let t = &mut s.control.telemetry;
-        t.speed_ref_rpm = Some(0.0);
-        t.fault = Some("stall");
-        t.estimate = Some(crate::controller::ControllerEstimate::default());
-        let sample = match serde_json::to_value(s) {
-            Ok(v) => v,
-            Err(e) => panic!("{e}"),
-        };
-        fn walk(schema: &serde_json::Value, value: &serde_json::Value, path: &str) {
-            let schema = if let Some(any) = schema.get("anyOf") {
-                &any[0]
-            } else {
-                schema
-            };
-            if let Some(obj) = value.as_object() {
-                let props = schema["properties"]
-                    .as_object()
-                    .unwrap_or_else(|| panic!("{path}: no properties in the schema"));
-                let mut a: Vec<_> = obj.keys().collect();
-                let mut b: Vec<_> = props.keys().collect();
-                a.sort();
-                b.sort();
-                assert_eq!(a, b, "{path}");
-                for (k, v) in obj {
-                    walk(&props[k], v, &format!("{path}.{k}"));
-                }
-            } else if value.is_array() {
-                assert_eq!(schema["type"], "array", "{path}");
-            } else if value.is_boolean() {
-                assert_eq!(schema["type"], "boolean", "{path}");
-            } else if value.is_string() {
-                assert_eq!(schema["type"], "string", "{path}");
-            } else if value.is_u64() {
-                assert!(
-                    schema["type"] == "integer" || schema["type"] == "number",
-                    "{path}"
-                );
-            } else {
-                assert_eq!(schema["type"], "number", "{path}");
-            }
-        }
-        walk(&schema, &sample, "");
     }
 }

@@ -32,8 +32,8 @@
 
 use serde::Serialize;
 
+use crate::record::{ObserverSample, Sample, Truth};
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
-use crate::sim::{ObserverSample, Sample, Truth};
 
 /// `|e_th|` below which the observer counts as converged, electrical degrees.
 pub const CONVERGED_DEG: f64 = 5.0;
@@ -83,20 +83,25 @@ pub struct ObserverMetrics {
 }
 
 /// Running sums over a set of samples.
+/// Running sums of an observer's errors over a window: the one accumulator behind every
+/// score of the simulator (these metrics, the suite's rows).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct Sums {
-    n: usize,
-    sum_e: f64,
-    sum_e2: f64,
-    max_e: f64,
-    sum_w2: f64,
-    max_w: f64,
-    tracking: usize,
-    sum_nis: f64,
+pub(crate) struct Sums {
+    pub(crate) n: usize,
+    /// Periods in the window without an estimate (the observer's step failed).
+    pub(crate) failures: usize,
+    pub(crate) sum_e: f64,
+    pub(crate) sum_e2: f64,
+    pub(crate) max_e: f64,
+    pub(crate) sum_w2: f64,
+    pub(crate) max_w: f64,
+    pub(crate) tracking: usize,
+    pub(crate) sum_nis: f64,
 }
 
 impl Sums {
-    fn add(&mut self, e: f64, ew: f64, tracking: bool, nis: f64) {
+    #[inline]
+    pub(crate) fn add(&mut self, e: f64, ew: f64, tracking: bool, nis: f64) {
         self.n += 1;
         self.sum_e += e;
         self.sum_e2 += e * e;
@@ -105,6 +110,18 @@ impl Sums {
         self.max_w = self.max_w.max(ew.abs());
         self.tracking += usize::from(tracking);
         self.sum_nis += nis;
+    }
+
+    /// Adds an observer's scored sample.
+    #[inline]
+    pub(crate) fn add_sample(&mut self, s: &ObserverSample) {
+        self.add(s.angle_error_deg, s.speed_error_rad_s, s.tracking, s.nis);
+    }
+
+    /// Adds a period without an estimate.
+    #[inline]
+    pub(crate) fn add_failure(&mut self) {
+        self.failures += 1;
     }
 }
 
@@ -546,7 +563,7 @@ pub fn rpm(omega_mech_rad_s: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::Sample;
+    use crate::record::Sample;
 
     fn sample(t: f64, th_err_deg: f64, w: f64, w_hat: f64) -> Sample {
         let mut s = Sample {

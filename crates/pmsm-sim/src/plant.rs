@@ -52,9 +52,11 @@
 use core::f64::consts::{PI, TAU};
 
 use ekf_core::{MotorParams, wrap_angle};
+use glam::DVec2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
+use crate::svpwm::{inverse_park, park};
 
 /// Mechanical and electrical parameters of a PMSM (SI units).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -305,9 +307,9 @@ impl Plant {
         let [ia, ib] = self.i_ab_a();
         let along = ia * ex + ib * ey;
         let (ia, ib) = (ia - along * ex, ib - along * ey);
-        let (s, c) = self.sc;
-        self.state.i_d_a = ia * c + ib * s;
-        self.state.i_q_a = -ia * s + ib * c;
+        let dq = park(DVec2::new(ia, ib), self.rot());
+        self.state.i_d_a = dq.x;
+        self.state.i_q_a = dq.y;
     }
 
     /// The motor.
@@ -330,11 +332,20 @@ impl Plant {
         self.sc
     }
 
+    /// The rotor direction `(cos th, sin th)` of the present electrical angle.
+    pub fn rot(&self) -> DVec2 {
+        let (s, c) = self.sc;
+        DVec2::new(c, s)
+    }
+
+    /// Stator currents in the rotor frame `(i_d, i_q)`, A.
+    pub fn i_dq_a(&self) -> DVec2 {
+        DVec2::new(self.state.i_d_a, self.state.i_q_a)
+    }
+
     /// Stator currents in the stationary frame `[i_alpha, i_beta]`, A.
     pub fn i_ab_a(&self) -> [f64; 2] {
-        let (s, c) = self.sc;
-        let (id, iq) = (self.state.i_d_a, self.state.i_q_a);
-        [id * c - iq * s, id * s + iq * c]
+        inverse_park(self.i_dq_a(), self.rot()).to_array()
     }
 
     /// Phase currents `[i_a, i_b, i_c]`, A (inverse amplitude-invariant Clarke).
@@ -387,10 +398,7 @@ impl Plant {
         let (ad, aq) = (m.rs_ohm / m.ld_h, m.rs_ohm / m.lq_h);
         let (ld, lq, psi) = (m.ld_h, m.lq_h, m.psi_f_wb);
         // Voltage in the frame at t_k: (u_a + j u_b) e^{-j th_k}.
-        let uth = (
-            u_ab_v[0] * c0 + u_ab_v[1] * s0,
-            -u_ab_v[0] * s0 + u_ab_v[1] * c0,
-        );
+        let uth: (f64, f64) = park(DVec2::from(u_ab_v), DVec2::new(c0, s0)).into();
         // Constant particular solution.
         let det = ad * aq + w * w;
         let xc = (-w * w * psi / (ld * det), -ad * w * psi / (lq * det));
@@ -528,8 +536,7 @@ impl Plant {
             let [id, iq, wm, th] = *x;
             let we = m.p() * wm;
             let (sn, cs) = th.sin_cos();
-            let ud = u_ab_v[0] * cs + u_ab_v[1] * sn;
-            let uq = -u_ab_v[0] * sn + u_ab_v[1] * cs;
+            let DVec2 { x: ud, y: uq } = park(DVec2::from(u_ab_v), DVec2::new(cs, sn));
             let te = m.torque_nm(id, iq);
             let fr = if wm > 0.0 {
                 m.coulomb_nm
@@ -622,7 +629,7 @@ mod tests {
             let th = plant.state().theta_e_rad + 0.3;
             let (s, c) = th.sin_cos();
             let ud = -0.2 * uq;
-            let u = [ud * c - uq * s, ud * s + uq * c];
+            let u = inverse_park(DVec2::new(ud, uq), DVec2::new(c, s)).to_array();
             let tl = if k >= periods / 2 { load } else { 0.0 };
             if substeps == 0 {
                 plant.step(u, tl, ts);

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 use crate::SimError;
 use crate::controller::{ControllerConfig, hz_to_rad_s};
 use crate::error::FieldError;
-use crate::faults::FaultSpec;
+use crate::faults::{FaultSpec, RunContext};
 use crate::inverter::InverterConfig;
 use crate::plant::MotorModel;
 use crate::profile::{LoadTerm, Profile};
@@ -315,6 +315,18 @@ impl Scenario {
         self.inverter.ts_s
     }
 
+    /// What the injected faults are checked and armed against.
+    pub fn fault_context(&self) -> RunContext {
+        RunContext {
+            duration_s: self.duration_s,
+            ts_s: self.ts_s(),
+            seed: self.seed,
+            rated_current_a: self.rated_torque_nm / self.motor.torque_constant_nm_a(),
+            rs_ohm: self.motor.rs_ohm,
+            psi_f_wb: self.motor.psi_f_wb,
+        }
+    }
+
     /// Rated mechanical speed, rad/s.
     pub fn rated_speed_mech_rad_s(&self) -> f64 {
         self.rated_speed_rpm / RPM_PER_RAD_S
@@ -590,7 +602,7 @@ impl Scenario {
             term.validate(&format!("load[{i}]"))?;
         }
         for (i, fault) in self.faults.iter().enumerate() {
-            fault.validate(&format!("faults[{i}]"), self)?;
+            fault.validate(&format!("faults[{i}]"), &self.fault_context())?;
         }
         if c.kind.is_foc() {
             self.foc_config()?;

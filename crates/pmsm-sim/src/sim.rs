@@ -12,8 +12,9 @@
 //!    e.g. `foc` after its dead-time compensation), the voltage the controller expects those
 //!    duties to realize. The actual dead-time distortion is **not** in it (a real controller
 //!    does not know it), so uncompensated dead time shows up as observer error, as on a bench. The estimate is compared
-//!    with the true `th(t_k)`, `w_e(t_k)`. Extra observers ([`SideObserver`],
-//!    [`run_with_side_observers`]) step right after, on the same inputs.
+//!    with the true `th(t_k)`, `w_e(t_k)`. The run's observers (the default EKF and the seed's
+//!    filter) and any extra ones ([`SideObserver`], [`run_with_side_observers`]: the suite's)
+//!    are all [`Observer`]s and step on the same inputs, in that order.
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
 //!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
 //!    of its own observer (`foc`'s `f32` EKF, which has stepped with its own record of the
@@ -35,174 +36,21 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use ekf_core::{EkfError, Estimate, PmsmObserver, Status, wrap_angle};
-use serde::Serialize;
+use ekf_core::{EkfError, PmsmObserver};
 
 use crate::SimError;
-use crate::controller::{
-    ControllerEstimate, ControllerInput, ControllerTelemetry, DriveController, RotorFeedback,
-    SensoredController,
-};
-use crate::faults::{self, FaultInjector};
+use crate::controller::{ControllerInput, DriveController, RotorFeedback, SensoredController};
+use crate::faults::FaultInjector;
 use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
 use crate::metrics::{MetricsAccumulator, RunMetrics};
+use crate::observer::{Observer, ObserverEstimate};
 use crate::plant::{Plant, PlantState};
 use crate::profile::load_torque_nm;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use crate::sensors::CurrentSensor;
 
-/// The true state at `t_k` (for scoring and the log; a sensorless controller never sees it).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Truth {
-    /// Electrical angle, rad, in `[-pi, pi)`.
-    pub theta_e_rad: f64,
-    /// Electrical speed, rad/s.
-    pub omega_e_rad_s: f64,
-    /// Mechanical speed, rpm.
-    pub speed_rpm: f64,
-    /// Stator currents `[alpha, beta]`, A.
-    pub i_ab_a: [f64; 2],
-    /// Stator currents `[d, q]` in the true rotor frame, A.
-    pub i_dq_a: [f64; 2],
-    /// Electromagnetic torque, N m.
-    pub torque_nm: f64,
-    /// Load torque held over `[t_k, t_k+1)`, N m.
-    pub load_torque_nm: f64,
-    /// The plant's flux linkage now (drifts with temperature, module `faults`), Wb.
-    pub psi_f_wb: f64,
-    /// The plant's stator resistance now, ohm.
-    pub rs_ohm: f64,
-}
-
-/// What the sensors delivered at `t_k`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Measured {
-    /// Measured phase currents `[a, b, c]` (`c = -a - b`), A.
-    pub i_abc_a: [f64; 3],
-    /// Their Clarke transform, A.
-    pub i_ab_a: [f64; 2],
-    /// Measured DC-bus voltage, V.
-    pub u_dc_v: f64,
-}
-
-/// One observer's output for one sample, with its errors against the truth.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ObserverSample {
-    /// Estimated electrical angle, rad.
-    pub theta_e_rad: f64,
-    /// Estimated electrical speed, rad/s.
-    pub omega_e_rad_s: f64,
-    /// `wrap(th_hat - th)`, electrical degrees.
-    pub angle_error_deg: f64,
-    /// `w_hat - w_e`, electrical rad/s.
-    pub speed_error_rad_s: f64,
-    /// Diagonal of the state covariance `P` (`i_a, i_b, w_e, th`): A^2, A^2, (rad/s)^2, rad^2.
-    pub p_diag: [f64; 4],
-    /// Normalized innovation squared of the correction.
-    pub nis: f64,
-    /// Whether the observer reports [`Status::Tracking`].
-    pub tracking: bool,
-    /// Tracked flux linkage, Wb (the configured one for an observer without tracking).
-    pub psi_f_wb: f64,
-    /// Its standard deviation, Wb (0 when not tracked).
-    pub psi_f_sigma_wb: f64,
-    /// Stator resistance in use, ohm (tracked, or the configured one).
-    pub rs_ohm: f64,
-    /// Its standard deviation, ohm (0 when not tracked).
-    pub rs_sigma_ohm: f64,
-    /// Winding temperature derived from `rs_ohm`, deg C (`NaN` when not known).
-    pub winding_temperature_c: f64,
-}
-
-impl ObserverSample {
-    /// The sample of a controller's own observer ([`ControllerEstimate`]) against the truth.
-    pub fn from_controller(e: &ControllerEstimate, truth: &Truth) -> Self {
-        Self {
-            theta_e_rad: e.theta_e_rad,
-            omega_e_rad_s: e.omega_e_rad_s,
-            angle_error_deg: wrap_angle(e.theta_e_rad - truth.theta_e_rad).to_degrees(),
-            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
-            p_diag: e.p_diag,
-            nis: e.nis,
-            tracking: e.tracking,
-            psi_f_wb: e.psi_f_wb,
-            psi_f_sigma_wb: e.psi_f_sigma_wb,
-            rs_ohm: e.rs_ohm,
-            rs_sigma_ohm: e.rs_sigma_ohm,
-            winding_temperature_c: e.winding_temperature_c,
-        }
-    }
-
-    fn new(e: &Estimate<f64>, p_diag: [f64; 4], truth: &Truth) -> Self {
-        Self {
-            theta_e_rad: e.theta_rad,
-            omega_e_rad_s: e.omega_e_rad_s,
-            angle_error_deg: wrap_angle(e.theta_rad - truth.theta_e_rad).to_degrees(),
-            speed_error_rad_s: e.omega_e_rad_s - truth.omega_e_rad_s,
-            p_diag,
-            nis: e.nis,
-            tracking: e.status == Status::Tracking,
-            psi_f_wb: e.psi_f_wb,
-            psi_f_sigma_wb: e.psi_f_sigma_wb,
-            rs_ohm: e.rs_ohm,
-            rs_sigma_ohm: e.rs_sigma_ohm,
-            winding_temperature_c: e.winding_temperature_c,
-        }
-    }
-}
-
-/// The controller's side of a sample.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct ControlRecord {
-    /// Mechanical speed reference, rpm.
-    pub speed_ref_rpm: f64,
-    /// Duties the controller computed in this period.
-    pub duties: [f64; 3],
-    /// The controller's own report.
-    pub telemetry: ControllerTelemetry,
-}
-
-/// The inverter's side of a sample.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct InverterRecord {
-    /// Whether the bridge switches over `[t_k, t_k+1)` (`false`: all switches open; the
-    /// voltages below are then 0).
-    pub pwm_enabled: bool,
-    /// Duties applied over `[t_k, t_k+1)` (the previous period's, with the delay on).
-    pub duties: [f64; 3],
-    /// Stator voltage actually applied over `[t_k, t_k+1)`, dead time included, V.
-    pub u_ab_v: [f64; 2],
-    /// The ideal voltage of those duties on the bus the controller measured: the observer's
-    /// input at sample `k + 1`, V.
-    pub u_ab_commanded_v: [f64; 2],
-    /// Bus voltage over the period, V.
-    pub u_dc_v: f64,
-}
-
-/// Everything recorded for period `k` (at `t_k`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
-pub struct Sample {
-    /// Period index.
-    pub k: u64,
-    /// `t_k = k Ts`, s.
-    pub t_s: f64,
-    /// True state.
-    pub truth: Truth,
-    /// Sensor outputs.
-    pub measured: Measured,
-    /// The project's default observer (`ObserverConfig::new`, lag-free).
-    pub observer: ObserverSample,
-    /// The seed's filter (`ObserverConfig::seed`), when the scenario runs it.
-    pub seed_filter: Option<ObserverSample>,
-    /// The controller's own observer (for `foc`: its `f32` EKF, the one that closes the
-    /// loop), scored the same way; `None` for a controller without one.
-    pub controller_observer: Option<ObserverSample>,
-    /// Controller.
-    pub control: ControlRecord,
-    /// Inverter.
-    pub inverter: InverterRecord,
-}
+pub use crate::record::{ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth};
 
 /// The recorded run.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -389,20 +237,16 @@ pub fn run_with_controller(
     run_with_side_observers(scenario, controller, opts, &mut [])
 }
 
-/// The estimate a [`SideObserver`] returns: angle, speed, and what it can tell of its
-/// uncertainty (zeros and `tracking = true` when it has no covariance).
-pub type SideEstimate = ControllerEstimate;
+/// The estimate a [`SideObserver`] returns (the [`Observer`] trait's).
+pub type SideEstimate = ObserverEstimate;
 
-/// An extra observer stepped alongside the built-in ones, on exactly their inputs (the
-/// scenario suite compares observers this way). In period `k`, [`step`](Self::step) comes
-/// right after the built-in observers' steps, before the controller ticks and before the
-/// truth is known to anyone; [`record`](Self::record) comes once the period's [`Sample`] is
-/// complete, with this observer's estimate scored against the truth.
-pub trait SideObserver {
-    /// One step with the timing of `PmsmObserver::step`: `u_prev` the voltage held over the
-    /// previous period as the controller knows it, `i_ab_a` the currents measured now.
-    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<SideEstimate, EkfError>;
-
+/// An extra [`Observer`] stepped alongside the run's own ones, on exactly their inputs, that
+/// sees its scored estimates (the scenario suite compares observers this way). In period
+/// `k`, [`Observer::step`] comes right after the run's observers' steps, before the
+/// controller ticks and before the truth is known to anyone; [`record`](Self::record) comes
+/// once the period's [`Sample`] is complete, with this observer's estimate scored against the
+/// truth.
+pub trait SideObserver: Observer {
     /// The completed sample of the period, and this observer's scored estimate (its error
     /// when the step failed; the run goes on).
     fn record(&mut self, sample: &Sample, own: Result<ObserverSample, EkfError>);
@@ -433,10 +277,12 @@ pub fn run_with_side_observers(
     let mut inverter = Inverter::new(scenario.inverter);
     let mut sensor = CurrentSensor::new(scenario.sensors, scenario.seed);
     // Injected faults (`[[faults]]`; none: not built, the loop unchanged).
-    let mut faults = FaultInjector::new(scenario);
-    let mut observer = PmsmObserver::new(&scenario.observer_config())?;
-    let mut seed_filter = if scenario.observer.seed_filter {
-        Some(PmsmObserver::new(&scenario.seed_filter_config())?)
+    let mut faults = FaultInjector::new(&scenario.faults, &scenario.fault_context());
+    // The run's own observers: the default EKF (its failure ends the run) and the seed's
+    // filter (a comparison only: dropped when it fails).
+    let mut observer: Box<dyn Observer> = Box::new(PmsmObserver::new(&scenario.observer_config())?);
+    let mut seed_filter: Option<Box<dyn Observer>> = if scenario.observer.seed_filter {
+        Some(Box::new(PmsmObserver::new(&scenario.seed_filter_config())?))
     } else {
         None
     };
@@ -481,7 +327,7 @@ pub fn run_with_side_observers(
             None => (sensor.measure(i_abc_true), inverter.u_dc_at(t)),
         };
 
-        let est = match faults::observe(&mut observer, u_prev, meas.i_ab_a) {
+        let est = match observer.step(u_prev, meas.i_ab_a) {
             Ok(e) => e,
             Err(error) => {
                 end = RunEnd::ObserverFailed {
@@ -492,13 +338,9 @@ pub fn run_with_side_observers(
                 break;
             }
         };
-        let p = observer.covariance();
         // The seed filter is only a comparison: if it fails, it is dropped, not the run.
-        let seed_est = match seed_filter
-            .as_mut()
-            .map(|f| faults::observe(f, u_prev, meas.i_ab_a))
-        {
-            Some(Ok(e)) => seed_filter.as_ref().map(|f| (e, f.covariance())),
+        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, meas.i_ab_a)) {
+            Some(Ok(e)) => Some(e),
             Some(Err(error)) => {
                 seed_filter = None;
                 seed_filter_failure = Some(FilterFailure { k: kk, error });
@@ -543,16 +385,12 @@ pub fn run_with_side_observers(
             applied.u_ab_commanded_v = [0.0; 2];
         }
 
-        let (s, c) = plant.sin_cos();
         let truth = Truth {
             theta_e_rad: state.theta_e_rad,
             omega_e_rad_s: omega_e,
             speed_rpm: state.omega_mech_rad_s * RPM_PER_RAD_S,
-            i_ab_a: [
-                state.i_d_a * c - state.i_q_a * s,
-                state.i_d_a * s + state.i_q_a * c,
-            ],
-            i_dq_a: [state.i_d_a, state.i_q_a],
+            i_ab_a: plant.i_ab_a(),
+            i_dq_a: plant.i_dq_a().to_array(),
             torque_nm: plant.torque_nm(),
             load_torque_nm: load,
             psi_f_wb: plant.motor().psi_f_wb,
@@ -567,8 +405,8 @@ pub fn run_with_side_observers(
                 i_ab_a: meas.i_ab_a,
                 u_dc_v: u_dc,
             },
-            observer: ObserverSample::new(&est, diag(&p), &truth),
-            seed_filter: seed_est.map(|(e, p)| ObserverSample::new(&e, diag(&p), &truth)),
+            observer: ObserverSample::from_controller(&est, &truth),
+            seed_filter: seed_est.map(|e| ObserverSample::from_controller(&e, &truth)),
             controller_observer: out
                 .telemetry
                 .estimate
@@ -660,10 +498,4 @@ pub fn run_with_side_observers(
         seed_filter_failure,
         wall_time_s,
     })
-}
-
-/// Diagonal of a 4 x 4 covariance.
-#[inline]
-fn diag(p: &ekf_core::nalgebra::Matrix4<f64>) -> [f64; 4] {
-    [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]]
 }

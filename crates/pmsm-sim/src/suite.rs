@@ -62,25 +62,25 @@
 
 use std::time::Instant;
 
-use ekf_core::{
-    EkfError, FluxObserver, FluxObserverConfig, ObserverConfig, PmsmObserver, Status, nalgebra,
-};
+use ekf_core::{EkfError, FluxObserver, FluxObserverConfig, ObserverConfig, PmsmObserver};
 use serde::Serialize;
 
 use crate::SimError;
 use crate::foc_drive::FocDrive;
 use crate::inverter::InverterConfig;
+use crate::metrics::Sums;
+use crate::observer::{Observer, ObserverEstimate};
 use crate::plant::MotorModel;
 use crate::profile::{LoadTerm, Profile};
+use crate::record::{ObserverSample, Sample};
 use crate::scenario::{
     ControllerKind, ControllerSettings, FocSettings, InitialState, ObserverSettings, RPM_PER_RAD_S,
     Scenario,
 };
 use crate::sensors::SensorConfig;
-use crate::sim::{ObserverSample, Sample, SideEstimate, SideObserver, run_with_side_observers};
+use crate::sim::{SideObserver, run_with_side_observers};
 
-/// `|e_th|` below which an observer counts as converged, electrical degrees.
-pub const CONVERGED_DEG: f64 = 5.0;
+pub use crate::metrics::CONVERGED_DEG;
 /// The rotor's electrical angle at `t = 0`, rad (the observers start at 0: 115 deg off).
 pub const INITIAL_ANGLE_RAD: f64 = 2.0;
 /// Fan load at rated speed, fraction of the rated torque (quadratic in speed: 4 % at 50 %,
@@ -622,48 +622,16 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
     }
 }
 
-/// The estimator behind a [`Scored`] observer.
-enum Estimator {
-    Ekf(Box<PmsmObserver<f64>>),
-    Flux(FluxObserver<f64>),
-}
-
-/// Running sums over a window.
-#[derive(Clone, Copy, Debug, Default)]
-struct Sums {
-    n: usize,
-    failures: usize,
-    sum_e: f64,
-    sum_e2: f64,
-    max_e: f64,
-    sum_w2: f64,
-    max_w: f64,
-    /// Sums of the tracked `psi_f` and `Rs` (EKF).
-    sum_psi: f64,
-    sum_rs: f64,
-}
-
-impl Sums {
-    fn add(&mut self, s: &ObserverSample) {
-        let e = s.angle_error_deg;
-        let w = s.speed_error_rad_s;
-        self.n += 1;
-        self.sum_e += e;
-        self.sum_e2 += e * e;
-        self.max_e = self.max_e.max(e.abs());
-        self.sum_w2 += w * w;
-        self.max_w = self.max_w.max(w.abs());
-    }
-}
-
 /// An observer stepped alongside the run, scoring itself per window.
 struct Scored {
     kind: ObserverKind,
     /// The mismatch case told, if any (index in [`MISMATCHES`]).
     told: Option<usize>,
-    est: Estimator,
+    est: Box<dyn Observer>,
     /// Tracked `(psi_f, Rs)` of the last step (the told ones for the baseline).
     params: (f64, f64),
+    /// Per window: sums of the tracked `psi_f` and `Rs` over its samples.
+    param_sums: Vec<[f64; 2]>,
     plan: Plan,
     windows: Vec<Sums>,
     step: Sums,
@@ -688,15 +656,15 @@ impl Scored {
             params.ls_h *= m.ls;
         }
         let ts = scenario.ts_s();
-        let est = match kind {
-            ObserverKind::SeedEkf => Estimator::Ekf(Box::new(PmsmObserver::new(
-                &ObserverConfig::seed(params, ts),
-            )?)),
-            ObserverKind::DefaultEkf => Estimator::Ekf(Box::new(PmsmObserver::new(
-                &ObserverConfig::new(params, ts),
-            )?)),
+        let est: Box<dyn Observer> = match kind {
+            ObserverKind::SeedEkf => {
+                Box::new(PmsmObserver::new(&ObserverConfig::seed(params, ts))?)
+            }
+            ObserverKind::DefaultEkf => {
+                Box::new(PmsmObserver::new(&ObserverConfig::new(params, ts))?)
+            }
             ObserverKind::FluxBaseline => {
-                Estimator::Flux(FluxObserver::new(&FluxObserverConfig::new(params, ts))?)
+                Box::new(FluxObserver::new(&FluxObserverConfig::new(params, ts))?)
             }
         };
         Ok(Self {
@@ -704,6 +672,7 @@ impl Scored {
             told,
             est,
             params: (params.psi_f_wb, params.rs_ohm),
+            param_sums: vec![[0.0; 2]; plan.windows.len()],
             windows: vec![Sums::default(); plan.windows.len()],
             plan,
             step: Sums::default(),
@@ -714,44 +683,15 @@ impl Scored {
     }
 }
 
-impl SideObserver for Scored {
-    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<SideEstimate, EkfError> {
-        match &mut self.est {
-            Estimator::Ekf(o) => {
-                let e = o.step(u_prev, i_ab_a)?;
-                self.params = (e.psi_f_wb, e.rs_ohm);
-                let p: nalgebra::Matrix4<f64> = o.covariance();
-                Ok(SideEstimate {
-                    theta_e_rad: e.theta_rad,
-                    omega_e_rad_s: e.omega_e_rad_s,
-                    p_diag: [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]],
-                    nis: e.nis,
-                    tracking: e.status == Status::Tracking,
-                    psi_f_wb: e.psi_f_wb,
-                    psi_f_sigma_wb: e.psi_f_sigma_wb,
-                    rs_ohm: e.rs_ohm,
-                    rs_sigma_ohm: e.rs_sigma_ohm,
-                    winding_temperature_c: e.winding_temperature_c,
-                })
-            }
-            Estimator::Flux(o) => {
-                let e = o.step(u_prev, i_ab_a)?;
-                Ok(SideEstimate {
-                    theta_e_rad: e.theta_rad,
-                    omega_e_rad_s: e.omega_e_rad_s,
-                    p_diag: [0.0; 4],
-                    nis: 0.0,
-                    tracking: true,
-                    psi_f_wb: self.params.0,
-                    psi_f_sigma_wb: 0.0,
-                    rs_ohm: self.params.1,
-                    rs_sigma_ohm: 0.0,
-                    winding_temperature_c: f64::NAN,
-                })
-            }
-        }
+impl Observer for Scored {
+    fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<ObserverEstimate, EkfError> {
+        let e = self.est.step(u_prev, i_ab_a)?;
+        self.params = (e.psi_f_wb, e.rs_ohm);
+        Ok(e)
     }
+}
 
+impl SideObserver for Scored {
     fn record(&mut self, sample: &Sample, own: Result<ObserverSample, EkfError>) {
         let t = sample.t_s;
         let own = own.ok();
@@ -768,22 +708,27 @@ impl SideObserver for Scored {
             }
         }
         let in_window = |t0: f64, t1: f64| t >= t0 && t < t1;
-        for (sums, w) in self.windows.iter_mut().zip(&self.plan.windows) {
+        for ((sums, w), ps) in self
+            .windows
+            .iter_mut()
+            .zip(&self.plan.windows)
+            .zip(self.param_sums.iter_mut())
+        {
             if in_window(w.3, w.4) {
                 match &own {
                     Some(s) => {
-                        sums.add(s);
-                        sums.sum_psi += self.params.0;
-                        sums.sum_rs += self.params.1;
+                        sums.add_sample(s);
+                        ps[0] += self.params.0;
+                        ps[1] += self.params.1;
                     }
-                    None => sums.failures += 1,
+                    None => sums.add_failure(),
                 }
             }
         }
         if in_window(self.plan.step_s, self.plan.step_end_s) {
             match &own {
-                Some(s) => self.step.add(s),
-                None => self.step.failures += 1,
+                Some(s) => self.step.add_sample(s),
+                None => self.step.add_failure(),
             }
         }
     }
@@ -885,7 +830,7 @@ pub fn run_suite(opts: &SuiteOptions) -> Result<SuiteReport, SimError> {
         });
         for s in scored.iter().filter(|s| s.told.is_some()) {
             let case = MISMATCHES[s.told.unwrap_or(0)].name;
-            for (sums, w) in s.windows.iter().zip(&plan.windows) {
+            for ((sums, w), ps) in s.windows.iter().zip(&plan.windows).zip(&s.param_sums) {
                 let n = sums.n as f64;
                 let ekf = s.kind == ObserverKind::DefaultEkf;
                 mismatch.push(MismatchRow {
@@ -898,8 +843,8 @@ pub fn run_suite(opts: &SuiteOptions) -> Result<SuiteReport, SimError> {
                     angle_rms_deg: (sums.sum_e2 / n).sqrt(),
                     angle_max_deg: sums.max_e,
                     angle_mean_deg: sums.sum_e / n,
-                    psi_f_error_pct: ekf.then(|| 100.0 * (sums.sum_psi / n / truth.0 - 1.0)),
-                    rs_error_pct: 100.0 * (sums.sum_rs / n / truth.1 - 1.0),
+                    psi_f_error_pct: ekf.then(|| 100.0 * (ps[0] / n / truth.0 - 1.0)),
+                    rs_error_pct: 100.0 * (ps[1] / n / truth.1 - 1.0),
                 });
             }
         }

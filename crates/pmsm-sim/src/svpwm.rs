@@ -7,11 +7,18 @@
 //! u_a = u_alpha,  u_b = -u_alpha / 2 + sqrt(3)/2 u_beta,  u_c = -u_alpha / 2 - sqrt(3)/2 u_beta
 //! ```
 //!
+//! Park transform with the rotor direction `rot = (cos th, sin th)` ([`park`],
+//! [`inverse_park`]): a rotation by `-th` and by `+th` of a 2-D vector ([`DVec2`]).
+//!
 //! SVPWM by min-max zero-sequence injection: the phase references get the common offset
 //! `-(max + min) / 2`, which centres them in the carrier and gives the same switching
-//! pattern as the classic sector-based SVPWM. Duties are `d_x = 1/2 + v_x / u_dc`. The linear
-//! range is the inscribed circle `|u| <= u_dc / sqrt(3)`; beyond it the duties are clamped to
-//! `[0, 1]` and the vector is distorted (reported as saturated).
+//! pattern as the classic sector-based SVPWM. Duties are `d_x = 1/2 + v_x / u_dc`. Every
+//! vector inside the hexagon of the six active vectors (vertices at `|u| = 2/3 u_dc`) is
+//! realized exactly; the inscribed circle `|u| <= u_dc / sqrt(3)` is the largest *rotating*
+//! vector realized without distortion (the limit the controllers use). Outside the hexagon the
+//! duties are clamped to `[0, 1]` and the vector is distorted (reported as saturated).
+
+use glam::DVec2;
 
 /// `sqrt(3) / 2`.
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
@@ -33,6 +40,20 @@ pub fn inverse_clarke(ab: [f64; 2]) -> [f64; 3] {
     let h = -0.5 * ab[0];
     let s = SQRT3_2 * ab[1];
     [ab[0], h + s, h - s]
+}
+
+/// Park transform: the stationary vector `ab` in the frame whose d axis points along
+/// `rot = (cos th, sin th)`: `d = a cos th + b sin th`, `q = -a sin th + b cos th`.
+#[inline]
+pub fn park(ab: DVec2, rot: DVec2) -> DVec2 {
+    DVec2::new(rot.x, -rot.y).rotate(ab)
+}
+
+/// Inverse Park transform: the frame vector `dq` in the stationary frame,
+/// `a = d cos th - q sin th`, `b = d sin th + q cos th`.
+#[inline]
+pub fn inverse_park(dq: DVec2, rot: DVec2) -> DVec2 {
+    rot.rotate(dq)
 }
 
 /// Duties of one period from SVPWM.
@@ -93,6 +114,26 @@ mod tests {
     }
 
     #[test]
+    fn park_known_answers() {
+        let th = 0.7_f64;
+        let rot = DVec2::new(th.cos(), th.sin());
+        let ab = DVec2::new(1.5, -0.25);
+        let dq = park(ab, rot);
+        let want = [
+            1.5 * th.cos() - 0.25 * th.sin(),
+            -1.5 * th.sin() - 0.25 * th.cos(),
+        ];
+        assert!(close(&dq.to_array(), &want, 1e-15));
+        assert!(close(
+            &inverse_park(dq, rot).to_array(),
+            &ab.to_array(),
+            1e-15
+        ));
+        // The d axis along the rotor: a vector at angle th has no q part.
+        assert!(park(rot * 2.0, rot).y.abs() < 1e-15);
+    }
+
+    #[test]
     fn svpwm_sectors_known_answers() {
         let udc = 100.0;
         // Zero vector: all 50 %.
@@ -119,6 +160,12 @@ mod tests {
         let th = core::f64::consts::FRAC_PI_3;
         let d = svpwm([0.5 * u * th.cos(), 0.5 * u * th.sin()], udc);
         assert!((d.d[0] - d.d[1]).abs() < 1e-12 && d.d[2] < 0.5);
+        // Between the circle and the hexagon (a vertex direction, 0.99 x 2/3 u_dc): still
+        // realized exactly, not saturated.
+        let v = [0.99 * 2.0 / 3.0 * udc, 0.0];
+        let d = svpwm(v, udc);
+        assert!(!d.saturated && v[0] > u);
+        assert!(close(&duties_to_voltage(d.d, udc), &v, 1e-12));
         // Far outside the hexagon: clamped and flagged.
         let s = svpwm([2.0 * udc, 0.0], udc);
         assert!(s.saturated && s.d.iter().all(|x| (0.0..=1.0).contains(x)));
