@@ -19,7 +19,7 @@
 //! | [`IdentifyStep::Resistance`] | `Rs`, inverter voltage error | DC current along the aligned d axis at 50 % and 100 % of the test current: `Rs = dU / dI`; the dead-time voltage (the same at both levels, the phase currents keep their signs) cancels and is reported as `U1 - Rs I1` |
 //! | [`IdentifyStep::InductanceD`] | `Ld` | the DC voltage held, plus a sinusoidal voltage along d; the current's response at the injection frequency, demodulated over whole periods, fitted to the exact zero-order-hold model of the RL circuit with the computation delay, `i[k+1] = a i[k] + b u[k-d]`: `L = Ts (1 - a) / (b (-ln a))` |
 //! | [`IdentifyStep::InductanceQ`] | `Lq` | the same along q (the DC d current holds the rotor); at two frequencies `w` and `w/2`, so that the rotor's small oscillation (an apparent `-K/w^2` in `L`) is extrapolated away: `Lq = (4 L(w) - L(w/2)) / 3` |
-//! | [`IdentifyStep::Spin`] | `psi_f` | I/f: the test current along a frame that turns with a jerk-limited ramp to `spin_speed_rad_s`; at constant speed the mean frame voltage gives the active-flux EMF `E = u - (Rs + j w Lq) i` (dead-time voltage removed), `|E| = w (psi_f + (Ld - Lq) i_d)`, its angle the load angle and so `i_d` |
+//! | [`IdentifyStep::Spin`] | `psi_f` | I/f: the test current along a frame that turns with a jerk-limited ramp to `spin_speed_rad_s`; at constant speed the mean frame voltage gives the active-flux EMF `E = u - (Rs + j w Lq) i` (dead-time voltage removed), `|E| = w (psi_f + (Ld - Lq) i_d)`, its angle the load angle and so `i_d`; `w` is the rotor's mean speed over the window, the frame's minus the drift of the load angle (the rotor swings about the frame) |
 //! | [`IdentifyStep::Inertia`] | `J` (optional) | the frame accelerates to 1.4 x the spin speed and back at the same rate; every tick gives the rotor angle (frame minus load angle) and the torque (from the load angle and the current); a least-squares fit of the rotor's trajectory to `J theta'' = T - B theta' - T_c`, integrated twice, with the initial angle and speed and the friction as nuisance parameters, gives `J`. The I/f frame holds the rotor like a spring; with little friction the rotor swings about it for seconds (7 Hz on the 2.2 kW motor), and the fit models that swing instead of averaging it (friction is fitted but not reported) |
 //!
 //! The standstill steps take about 0.8 s with the default durations, the spin about 1.2 s
@@ -800,6 +800,9 @@ pub struct Identifier {
     sums: Sums,
     sums2: Sums,
     quarter: [Sums; 4],
+    /// Sums of the load angle over the first and the last [`Identifier::drift_ticks`] of
+    /// the flux window, rad.
+    g_ends: [f32; 2],
     // Probe.
     probe_u: f32,
     probe_m: u32,
@@ -863,6 +866,7 @@ impl Identifier {
             sums: Sums::default(),
             sums2: Sums::default(),
             quarter: [Sums::default(); 4],
+            g_ends: [0.0; 2],
             probe_u: 0.0,
             probe_m: 1,
             probe_axis: 0,
@@ -1537,6 +1541,7 @@ impl Identifier {
             (IdentifyStep::Spin, 1) if self.n >= ticks(self.cfg.spin_settle_time_s, ts) => {
                 self.next_phase();
                 self.quarter = [Sums::default(); 4];
+                self.g_ends = [0.0; 2];
             }
             (IdentifyStep::Spin, 1) => {}
             (IdentifyStep::Spin, _) => {
@@ -1544,6 +1549,12 @@ impl Identifier {
                 let qi = ((k * 4) / len).min(3) as usize;
                 if let Some(s) = self.quarter.get_mut(qi) {
                     s.add([e.0, e.1, i_d, i_q]);
+                }
+                let m = Self::drift_ticks(len);
+                if k < m {
+                    self.g_ends[0] += Self::load_angle(e);
+                } else if k >= len - m {
+                    self.g_ends[1] += Self::load_angle(e);
                 }
                 if self.n >= len {
                     self.flux_result()?;
@@ -1603,6 +1614,12 @@ impl Identifier {
         Ok(Some(u))
     }
 
+    /// Ticks at each end of the flux window over which the load angle is averaged for the
+    /// rotor's mean speed: 1/64 of the window, at least 1 and at most a quarter.
+    fn drift_ticks(len: u32) -> u32 {
+        (len / 64).clamp(1, (len / 4).max(1))
+    }
+
     fn flux_result(&mut self) -> Result<(), IdentifyError> {
         let mut all = Sums::default();
         for q in &self.quarter {
@@ -1635,7 +1652,16 @@ impl Identifier {
             }
         }
         let i_r = Self::rotor_current((m[2], m[3]), g);
-        let psi = e_mag / w - (self.ld - self.lq) * i_r.0;
+        // The rotor swings about the frame (lightly damped): over the window it turns by the
+        // frame's angle minus the change of the load angle, so its mean speed is not the
+        // frame's. The EMF is proportional to the rotor's speed: divide by that mean (load
+        // angle from the first and the last 1/64 of the window, their centres `len - m`
+        // ticks apart).
+        let len = ticks(self.cfg.spin_measure_time_s, self.cfg.ts_s);
+        let m = Self::drift_ticks(len);
+        let drift = (self.g_ends[1] - self.g_ends[0]) / m as f32;
+        let w_rotor = w - drift / ((len - m) as f32 * self.cfg.ts_s);
+        let psi = e_mag / w_rotor - (self.ld - self.lq) * i_r.0;
         if !(psi.is_finite() && psi > 1e-5 && psi < 50.0) {
             return Err(IdentifyError::Implausible {
                 quantity: Quantity::FluxLinkage,
