@@ -90,7 +90,7 @@ elif [ "$status" != 0 ]; then
     echo "FAIL: the firmware exited with status $status"
     fail=1
 fi
-for name in ekf_step; do
+for name in ekf_step foc_tick identify_tick; do
     if ! grep -Eq "^cortex-m4 $name: [0-9]+ instructions/call$" "$log"; then
         echo "FAIL: no 'cortex-m4 $name: <N> instructions/call' line"
         fail=1

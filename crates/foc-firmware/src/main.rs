@@ -9,9 +9,9 @@
 //! cortex-m4 <name>: <N> instructions/call
 //! ```
 //!
-//! (`N` is the median over the calls; a detail line gives mean, min and max). It exits through
-//! semihosting with status 0 when every check passed and 1 otherwise (also on a panic or a hard
-//! fault).
+//! (`N` is the median over the calls, except for `identify_tick`, the worst; a detail line
+//! gives mean, min and max). It exits through semihosting with status 0 when every check
+//! passed and 1 otherwise (also on a panic or a hard fault).
 //!
 //! Build and run (`scripts/qemu-firmware.sh` does both and checks the output):
 //!
@@ -29,11 +29,14 @@
 //! halves of the default step) and `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
 //! `ekf_core::trig`), and `foc_tick` (the full controller tick in sensorless closed loop, with
 //! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states; see
-//! [`drive`]). To add one, call [`meter::Clock::measure`] with its name.
+//! [`drive`]), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
+//! sequence; its line gives the **worst** tick, `identify_tick_median` the median; see
+//! [`identify`]). To add one, call [`meter::Clock::measure`] with its name.
 #![no_std]
 #![no_main]
 
 mod drive;
+mod identify;
 mod meter;
 mod synth;
 
@@ -192,6 +195,9 @@ fn run() -> Result<(), &'static str> {
 
     // The full controller tick (foc), sensorless closed loop on an on-target plant.
     drive::run(&clock)?;
+
+    // The self-commissioning sequence (foc::identify): its worst tick.
+    identify::run(&clock)?;
 
     if ok {
         Ok(())

@@ -213,3 +213,75 @@ impl Tally {
         s
     }
 }
+
+/// Instruction counts of any number of calls (a [`Tally`] keeps at most [`MAX_CALLS`]): the
+/// worst, the mean and the exact median, from a histogram with one bin per instruction up to
+/// [`Histogram::BINS`] (a call above it counts in the last bin; the worst is kept exactly).
+pub struct Histogram {
+    bins: [u32; Histogram::BINS],
+    calls: u32,
+    total: u64,
+    min: u32,
+    max: u32,
+    /// Which call was the worst (0-based).
+    worst_call: u32,
+}
+
+impl Histogram {
+    /// Bins: counts `0 ..= BINS - 1` instructions.
+    pub const BINS: usize = 8192;
+
+    /// An empty histogram.
+    pub fn new() -> Self {
+        Self {
+            bins: [0; Self::BINS],
+            calls: 0,
+            total: 0,
+            min: u32::MAX,
+            max: 0,
+            worst_call: 0,
+        }
+    }
+
+    /// Records one call.
+    pub fn push(&mut self, instructions: u32) {
+        let bin = (instructions as usize).min(Self::BINS - 1);
+        if let Some(b) = self.bins.get_mut(bin) {
+            *b += 1;
+        }
+        if instructions > self.max || self.calls == 0 {
+            self.worst_call = self.calls;
+        }
+        self.calls += 1;
+        self.total += u64::from(instructions);
+        self.min = self.min.min(instructions);
+        self.max = self.max.max(instructions);
+    }
+
+    /// Which call (0-based) was the worst.
+    pub fn worst_call(&self) -> u32 {
+        self.worst_call
+    }
+
+    /// Statistics of the recorded calls (the median as [`Tally::summary`]'s: the lower
+    /// middle value).
+    pub fn summary(&self) -> Summary {
+        let rank = self.calls.saturating_sub(1) / 2;
+        let mut seen = 0u32;
+        let mut median = 0u32;
+        for (i, &n) in self.bins.iter().enumerate() {
+            seen += n;
+            if n > 0 && seen > rank {
+                median = i as u32;
+                break;
+            }
+        }
+        Summary {
+            calls: self.calls as usize,
+            median,
+            total: self.total,
+            min: if self.calls == 0 { 0 } else { self.min },
+            max: self.max,
+        }
+    }
+}

@@ -19,8 +19,8 @@
 //! | [`IdentifyStep::Resistance`] | `Rs`, inverter voltage error | DC current along the aligned d axis at 50 % and 100 % of the test current: `Rs = dU / dI`; the dead-time voltage (the same at both levels, the phase currents keep their signs) cancels and is reported as `U1 - Rs I1` |
 //! | [`IdentifyStep::InductanceD`] | `Ld` | the DC voltage held, plus a sinusoidal voltage along d; the current's response at the injection frequency, demodulated over whole periods, fitted to the exact zero-order-hold model of the RL circuit with the computation delay, `i[k+1] = a i[k] + b u[k-d]`: `L = Ts (1 - a) / (b (-ln a))` |
 //! | [`IdentifyStep::InductanceQ`] | `Lq` | the same along q (the DC d current holds the rotor); at two frequencies `w` and `w/2`, so that the rotor's small oscillation (an apparent `-K/w^2` in `L`) is extrapolated away: `Lq = (4 L(w) - L(w/2)) / 3` |
-//! | [`IdentifyStep::Spin`] | `psi_f` | I/f: the test current along a frame that turns with a jerk-limited ramp to `spin_speed_rad_s`; at constant speed the mean frame voltage gives the active-flux EMF `E = u - (Rs + j w Lq) i` (dead-time voltage removed), `|E| = w (psi_f + (Ld - Lq) i_d)`, its angle the load angle and so `i_d` |
-//! | [`IdentifyStep::Inertia`] | `J` (optional) | the frame accelerates to 1.4 x the spin speed and back at the same rate; the torque (from the load angle) up minus down is `2 J a` whatever the friction (friction itself, a load angle of a fraction of a degree, is below what the EMF angle resolves, and not reported) |
+//! | [`IdentifyStep::Spin`] | `psi_f` | I/f: the test current along a frame that turns with a jerk-limited ramp to `spin_speed_rad_s`; at constant speed the mean frame voltage gives the active-flux EMF `E = u - (Rs + j w Lq) i` (dead-time voltage removed), `|E| = w (psi_f + (Ld - Lq) i_d)`, its angle the load angle and so `i_d`; `w` is the rotor's mean speed over the window, the frame's minus the drift of the load angle (the rotor swings about the frame) |
+//! | [`IdentifyStep::Inertia`] | `J` (optional) | the frame accelerates to 1.4 x the spin speed and back at the same rate; every tick gives the rotor angle (frame minus load angle) and the torque (from the load angle and the current); a least-squares fit of the rotor's trajectory to `J theta'' = T - B theta' - T_c`, integrated twice, with the initial angle and speed and the friction as nuisance parameters, gives `J`. The I/f frame holds the rotor like a spring; with little friction the rotor swings about it for seconds (7 Hz on the 2.2 kW motor), and the fit models that swing instead of averaging it (friction is fitted but not reported) |
 //!
 //! The standstill steps take about 0.8 s with the default durations, the spin about 1.2 s
 //! (1.7 s with the inertia).
@@ -89,7 +89,7 @@ pub struct IdentifyConfig {
     pub spin_settle_time_s: f32,
     /// Averaging window at the spin speed, s.
     pub spin_measure_time_s: f32,
-    /// Measure the inertia and friction after `psi_f` (needs the spin).
+    /// Measure the inertia after `psi_f` (needs the spin).
     pub measure_inertia: bool,
     /// Pole pairs (for the mechanical quantities), >= 1.
     pub pole_pairs: u32,
@@ -589,12 +589,165 @@ impl Move {
             0.0
         }
     }
+}
 
-    /// Whether tick `n` is in the middle 60 % of the constant-acceleration part.
-    fn in_steady(&self, n: u32) -> bool {
-        let a = self.nj + self.nc / 5;
-        let b = self.nj + self.nc - self.nc / 5;
-        n >= a && n < b
+/// Linear least squares with `N` regressors, updated one row at a time by Givens rotations
+/// (the square-root information form: the triangular `R` and `z = Q^T y` of the QR
+/// factorization of the rows so far; Golub & Van Loan, "Matrix Computations", sec. 5.1.8 and
+/// 6.5.3). The normal equations are never formed, so `f32` holds the accuracy of a fit over
+/// thousands of rows whose columns are close to dependent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Lsq<const N: usize> {
+    /// `N x N` upper triangular factor.
+    r: [[f32; N]; N],
+    /// `Q^T y`, `N`.
+    z: [f32; N],
+}
+
+impl<const N: usize> Lsq<N> {
+    fn new() -> Self {
+        Self {
+            r: [[0.0; N]; N],
+            z: [0.0; N],
+        }
+    }
+
+    /// Adds the row `x . beta = y`.
+    fn add(&mut self, mut x: [f32; N], mut y: f32) {
+        for (i, (row, zi)) in self.r.iter_mut().zip(self.z.iter_mut()).enumerate() {
+            let xi = x.get(i).copied().unwrap_or(0.0);
+            if xi == 0.0 {
+                continue;
+            }
+            let rii = row.get(i).copied().unwrap_or(0.0);
+            let h = sqrt(rii * rii + xi * xi);
+            let (c, s) = (rii / h, xi / h);
+            for (rj, xj) in row.iter_mut().zip(x.iter_mut()).skip(i) {
+                let (a, b) = (*rj, *xj);
+                *rj = c * a + s * b;
+                *xj = c * b - s * a;
+            }
+            let (a, b) = (*zi, y);
+            *zi = c * a + s * b;
+            y = c * b - s * a;
+        }
+    }
+
+    /// `beta` minimizing `|X beta - y|` (back substitution), `None` when `R` is singular: a
+    /// diagonal element below `1e-5` of the largest (a column that is, to `f32` rounding, a
+    /// combination of the ones before it).
+    fn solve(&self) -> Option<[f32; N]> {
+        let tol = 1e-5
+            * self
+                .r
+                .iter()
+                .enumerate()
+                .map(|(i, row)| row.get(i).map_or(0.0, |d| d.abs()))
+                .fold(0.0f32, f32::max);
+        let mut beta = [0.0f32; N];
+        for i in (0..N).rev() {
+            let row = self.r.get(i)?;
+            let mut acc = *self.z.get(i)?;
+            for (rj, bj) in row.iter().zip(beta.iter()).skip(i + 1) {
+                acc -= rj * bj;
+            }
+            let d = *row.get(i)?;
+            let b = acc / d;
+            if !(d.abs() > tol && b.is_finite()) {
+                return None;
+            }
+            *beta.get_mut(i)? = b;
+        }
+        Some(beta)
+    }
+}
+
+/// The inertia from the rotor's trajectory during the speed move (module docs, step
+/// [`IdentifyStep::Inertia`]).
+///
+/// The rotor's mechanical angle is the frame's minus the load angle, `theta = (phi - g) / p`,
+/// and obeys `J theta'' = T - B theta' - T_c` with the torque `T` from the load angle and
+/// the current. Integrated twice from the start of the move:
+///
+/// `y(t) = c0 + c1 s + c2 s^2 + S(t) / J - (B / J) Y(t)`,
+///
+/// with `y = theta - w0 t / p` (the angle beyond the initial frame speed `w0`), `s = t / T`
+/// (`T` the window), `S` the double integral of `T`, `Y` the integral of `y`, and `c0`, `c1`,
+/// `c2` the unknown initial angle, speed and constant friction (`T_c` and `B w0`). Fitted by
+/// least squares over every tick of the move, the lightly damped oscillation of the rotor
+/// about the I/f frame is part of the model, not an error to be averaged away (as it would be
+/// by averaging the torque over segments shorter than its period). The load-angle noise
+/// enters only `y` (the fitted variable) and, integrated, `S` and `Y`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct InertiaFit {
+    /// Frame speed at the start, rad/s electrical.
+    w0: f32,
+    /// Ticks in the window.
+    len: u32,
+    /// Ticks so far.
+    k: u32,
+    ts: f32,
+    /// `1 / p`.
+    inv_p: f32,
+    /// Scale of `S`: `1 / (T_max T^2)`.
+    s_scale: f32,
+    /// Frame angle beyond `w0 t`, rad electrical.
+    dphi: f32,
+    /// Integral of the torque, N m s.
+    torque_int: f32,
+    /// Double integral of the torque, N m s^2.
+    torque_int2: f32,
+    /// Sum of `y` (rad).
+    y_sum: f32,
+    lsq: Lsq<5>,
+}
+
+impl InertiaFit {
+    /// A fit over `len` ticks from the frame speed `w0`; `torque_max` scales the torque
+    /// integral (the fit does not depend on it, its conditioning does).
+    fn new(w0: f32, len: u32, pole_pairs: u32, ts: f32, torque_max: f32) -> Self {
+        let t = len.max(1) as f32 * ts;
+        let s_scale = 1.0 / (torque_max * t * t);
+        Self {
+            w0,
+            len: len.max(1),
+            k: 0,
+            ts,
+            inv_p: 1.0 / pole_pairs.max(1) as f32,
+            s_scale: if s_scale.is_finite() { s_scale } else { 1.0 },
+            dphi: 0.0,
+            torque_int: 0.0,
+            torque_int2: 0.0,
+            y_sum: 0.0,
+            lsq: Lsq::new(),
+        }
+    }
+
+    /// One tick: load angle `g` (rad), torque (N m), and the frame speed of this tick minus
+    /// `w0` (rad/s electrical; the frame turns by it after the tick).
+    fn push(&mut self, g: f32, torque: f32, dw: f32) {
+        let y = (self.dphi - g) * self.inv_p;
+        let s = self.k as f32 / self.len as f32;
+        let x = [
+            1.0,
+            s,
+            s * s,
+            self.torque_int2 * self.s_scale,
+            self.y_sum / self.len as f32,
+        ];
+        self.lsq.add(x, y);
+        self.k += 1;
+        self.dphi += dw * self.ts;
+        self.torque_int2 += self.torque_int * self.ts;
+        self.torque_int += torque * self.ts;
+        self.y_sum += y;
+    }
+
+    /// `J`, kg m^2 (`None` when the fit is singular).
+    fn inertia(&self) -> Option<f32> {
+        let beta = self.lsq.solve()?;
+        let b = *beta.get(3)?;
+        Some(1.0 / (b * self.s_scale))
     }
 }
 
@@ -647,6 +800,9 @@ pub struct Identifier {
     sums: Sums,
     sums2: Sums,
     quarter: [Sums; 4],
+    /// Sums of the load angle over the first and the last [`Identifier::drift_ticks`] of
+    /// the flux window, rad.
+    g_ends: [f32; 2],
     // Probe.
     probe_u: f32,
     probe_m: u32,
@@ -673,7 +829,7 @@ pub struct Identifier {
     j: Option<f32>,
     u_hold: f32,
     hf_u: f32,
-    torque_up: f32,
+    fit: InertiaFit,
     mv: Move,
     u_lim: f32,
 }
@@ -710,6 +866,7 @@ impl Identifier {
             sums: Sums::default(),
             sums2: Sums::default(),
             quarter: [Sums::default(); 4],
+            g_ends: [0.0; 2],
             probe_u: 0.0,
             probe_m: 1,
             probe_axis: 0,
@@ -733,7 +890,7 @@ impl Identifier {
             j: None,
             u_hold: 0.0,
             hf_u: 0.0,
-            torque_up: 0.0,
+            fit: InertiaFit::new(0.0, 1, 1, cfg.ts_s, 1.0),
             mv: Move::default(),
             u_lim: 0.0,
         })
@@ -1384,6 +1541,7 @@ impl Identifier {
             (IdentifyStep::Spin, 1) if self.n >= ticks(self.cfg.spin_settle_time_s, ts) => {
                 self.next_phase();
                 self.quarter = [Sums::default(); 4];
+                self.g_ends = [0.0; 2];
             }
             (IdentifyStep::Spin, 1) => {}
             (IdentifyStep::Spin, _) => {
@@ -1392,29 +1550,41 @@ impl Identifier {
                 if let Some(s) = self.quarter.get_mut(qi) {
                     s.add([e.0, e.1, i_d, i_q]);
                 }
+                let m = Self::drift_ticks(len);
+                if k < m {
+                    self.g_ends[0] += Self::load_angle(e);
+                } else if k >= len - m {
+                    self.g_ends[1] += Self::load_angle(e);
+                }
                 if self.n >= len {
                     self.flux_result()?;
                     if self.cfg.measure_inertia {
                         self.enter(IdentifyStep::Inertia);
                         let w0 = self.cfg.spin_speed_rad_s;
                         self.mv = Move::new(0.4 * w0, self.cfg.spin_accel_rad_s2, ts);
+                        let torque_max = 1.5
+                            * self.cfg.pole_pairs as f32
+                            * self.psi.unwrap_or(0.0)
+                            * self.cfg.spin_current_a;
+                        self.fit = InertiaFit::new(
+                            w0,
+                            2 * self.mv.len(),
+                            self.cfg.pole_pairs,
+                            ts,
+                            torque_max,
+                        );
                     } else {
                         done = true;
                     }
                 }
             }
             (IdentifyStep::Inertia, ph) => {
-                let s = if ph == 0 {
-                    &mut self.sums
-                } else {
-                    &mut self.sums2
-                };
-                if self.mv.in_steady(k) {
-                    s.add([e.0, e.1, i_d, i_q]);
-                }
+                let g = Self::load_angle(e);
+                let torque =
+                    self.torque(self.psi.unwrap_or(0.0), Self::rotor_current((i_d, i_q), g));
+                self.fit.push(g, torque, w - self.fit.w0);
                 if k + 1 >= self.mv.len() {
                     if ph == 0 {
-                        self.torque_up = self.segment_torque(self.sums.mean());
                         self.mv = Move::new(
                             -0.4 * self.cfg.spin_speed_rad_s,
                             self.cfg.spin_accel_rad_s2,
@@ -1422,9 +1592,7 @@ impl Identifier {
                         );
                         self.next_phase();
                     } else {
-                        let t_down = self.segment_torque(self.sums2.mean());
-                        let alpha_m = self.mv.accel.abs() / self.cfg.pole_pairs as f32;
-                        let j = (self.torque_up - t_down) / (2.0 * alpha_m);
+                        let j = self.fit.inertia().unwrap_or(f32::NAN);
                         if !(j.is_finite() && j > 0.0 && j < 1e4) {
                             return Err(IdentifyError::Implausible {
                                 quantity: Quantity::Inertia,
@@ -1446,10 +1614,10 @@ impl Identifier {
         Ok(Some(u))
     }
 
-    fn segment_torque(&self, m: [f32; 4]) -> f32 {
-        let g = Self::load_angle((m[0], m[1]));
-        let i_r = Self::rotor_current((m[2], m[3]), g);
-        self.torque(self.psi.unwrap_or(0.0), i_r)
+    /// Ticks at each end of the flux window over which the load angle is averaged for the
+    /// rotor's mean speed: 1/64 of the window, at least 1 and at most a quarter.
+    fn drift_ticks(len: u32) -> u32 {
+        (len / 64).clamp(1, (len / 4).max(1))
     }
 
     fn flux_result(&mut self) -> Result<(), IdentifyError> {
@@ -1484,7 +1652,16 @@ impl Identifier {
             }
         }
         let i_r = Self::rotor_current((m[2], m[3]), g);
-        let psi = e_mag / w - (self.ld - self.lq) * i_r.0;
+        // The rotor swings about the frame (lightly damped): over the window it turns by the
+        // frame's angle minus the change of the load angle, so its mean speed is not the
+        // frame's. The EMF is proportional to the rotor's speed: divide by that mean (load
+        // angle from the first and the last 1/64 of the window, their centres `len - m`
+        // ticks apart).
+        let len = ticks(self.cfg.spin_measure_time_s, self.cfg.ts_s);
+        let m = Self::drift_ticks(len);
+        let drift = (self.g_ends[1] - self.g_ends[0]) / m as f32;
+        let w_rotor = w - drift / ((len - m) as f32 * self.cfg.ts_s);
+        let psi = e_mag / w_rotor - (self.ld - self.lq) * i_r.0;
         if !(psi.is_finite() && psi > 1e-5 && psi < 50.0) {
             return Err(IdentifyError::Implausible {
                 quantity: Quantity::FluxLinkage,
@@ -1537,6 +1714,41 @@ mod tests {
             );
         }
         assert!(ln(0.0).is_nan() && ln(-1.0).is_nan() && ln(f32::NAN).is_nan());
+    }
+
+    /// Givens least squares: recovers a model of nearly dependent columns (the inertia fit's
+    /// shape: 1, s, s^2 and a cubic) exactly from clean data, and the least-squares solution
+    /// (zero mean residual) from noisy data; a rank-deficient fit is `None`.
+    #[test]
+    fn givens_least_squares() {
+        let beta = [0.3f32, -1.2, 0.7, 2.5];
+        let row = |k: u32| {
+            let s = k as f32 / 4000.0;
+            [1.0, s, s * s, s * s * s]
+        };
+        let dot = |x: [f32; 4]| x.iter().zip(beta).map(|(a, b)| a * b).sum::<f32>();
+        let mut fit = Lsq::<4>::new();
+        for k in 0..4000 {
+            fit.add(row(k), dot(row(k)));
+        }
+        let got = fit.solve().unwrap_or_else(|| panic!("singular"));
+        for (g, b) in got.iter().zip(beta) {
+            assert!((g - b).abs() < 2e-3 * b.abs(), "{got:?}");
+        }
+        // Alternating +-0.01 on y: the cubic coefficient moves by far less than the noise.
+        let mut fit = Lsq::<4>::new();
+        for k in 0..4000 {
+            let n = if k % 2 == 0 { 0.01 } else { -0.01 };
+            fit.add(row(k), dot(row(k)) + n);
+        }
+        let got = fit.solve().unwrap_or_else(|| panic!("singular"));
+        assert!((got[3] - beta[3]).abs() < 0.01, "{got:?}");
+        // Two equal columns: singular.
+        let mut fit = Lsq::<2>::new();
+        for k in 0..10 {
+            fit.add([1.0, 1.0], k as f32);
+        }
+        assert_eq!(fit.solve(), None);
     }
 
     #[test]
