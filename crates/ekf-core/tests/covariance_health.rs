@@ -8,27 +8,12 @@
 //! - Self-reset: a covariance forced bad through `reset` (huge, negative diagonal) is caught
 //!   by the next step, which resets the observer to its documented state and reports it.
 mod common;
-use common::reference_motors;
+use common::{Rng, reference_motors};
 use core::f64::consts::PI;
 use ekf_core::nalgebra::{Cholesky, Matrix4, Matrix5, Vector4};
 use ekf_core::{MotorParams, ObserverConfig, ObserverCounters, PmsmObserver, default_p0};
 
 const TS: f64 = 1e-4;
-
-/// xorshift64* with Box-Muller (as tests/common, repeated here to keep this file standalone).
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn gauss(&mut self) -> f64 {
-        let (a, b) = (self.uniform(), self.uniform());
-        (-2.0 * a.ln()).sqrt() * (2.0 * PI * b).cos()
-    }
-}
 
 fn motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
     reference_motors()
@@ -56,7 +41,7 @@ fn run(motor: MotorParams<f64>, rated: f64, noise: f64, steps: u64, seed: u64) -
     let mut obs = PmsmObserver::new(&cfg).expect("valid");
     let (rs, ls, psi) = (motor.rs_ohm, motor.ls_h, motor.psi_f_wb);
     let ic = psi / ls;
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = Rng::new(seed);
     let (mut ia, mut ib, mut th) = (0.0f64, 0.0f64, 0.3f64);
     let mut u_prev = [0.0f32; 2];
     let sub = 4;
