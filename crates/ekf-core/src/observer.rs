@@ -99,7 +99,7 @@
 mod config;
 pub(crate) mod model;
 mod safeguards;
-mod tracking;
+pub mod tracking;
 
 pub use config::{ObserverConfig, default_p0};
 pub use model::{Discretization, PmsmModel};

@@ -25,7 +25,7 @@ pub struct ObserverConfig<T: Float> {
     pub p0: Matrix4<T>,
     /// Covariance update method of the correction.
     pub covariance_update: CovarianceUpdate,
-    /// The status reads [`Status::Uncertain`] while the angle's standard deviation
+    /// The status reads [`Status::Uncertain`](super::Status::Uncertain) while the angle's standard deviation
     /// `sqrt(P[3][3])` exceeds this limit, radians. The innovation gate and the branch check
     /// act only while the angle's variance is below this limit ("tracking").
     pub angle_sigma_limit_rad: T,
