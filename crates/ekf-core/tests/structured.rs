@@ -9,21 +9,23 @@ use ekf_core::{
 };
 
 fn trace() -> Trace {
-    let motor = MotorParams::servo();
     // Accelerating rotor with a current step: exercises every entry of P.
-    let speed = |t: f64| 200.0 + 8000.0 * t;
+    servo_trace(MotorParams::servo(), &|t: f64| 200.0 + 8000.0 * t)
+}
+
+/// 3000 samples of `motor` at the electrical speed `speed(t)`, with a current step at 0.1 s.
+fn servo_trace(motor: MotorParams<f64>, speed: &dyn Fn(f64) -> f64) -> Trace {
     let iq = |t: f64| if t < 0.1 { 1.0 } else { 4.0 };
-    let sc = Scenario {
+    simulate(&Scenario {
         motor,
         ts: 1e-4,
         n: 3000,
-        speed: &speed,
+        speed,
         iq_ref: &iq,
         th0: 1.0,
         noise_a: 0.05,
         seed: 5,
-    };
-    simulate(&sc)
+    })
 }
 
 /// Largest difference over the run, relative to the largest magnitude, of state and covariance.
@@ -302,16 +304,5 @@ fn trace_with_flux(psi_scale: f64) -> Trace {
         psi_f_wb: base.psi_f_wb * psi_scale,
         ..base
     };
-    let speed = |_t: f64| 800.0;
-    let iq = |t: f64| if t < 0.1 { 1.0 } else { 4.0 };
-    simulate(&Scenario {
-        motor,
-        ts: 1e-4,
-        n: 3000,
-        speed: &speed,
-        iq_ref: &iq,
-        th0: 1.0,
-        noise_a: 0.05,
-        seed: 5,
-    })
+    servo_trace(motor, &|_t: f64| 800.0)
 }
