@@ -111,14 +111,20 @@ fn sample<S: CurrentSense>(sense: &mut S) -> TickInput {
     }
 }
 
-/// Writes a tick's outputs: disabled before the duties are written when they turn off, the
-/// duties first when they turn on.
+/// Writes a tick's outputs.
 fn write<I: Inverter>(inverter: &mut I, out: &TickOutput) {
-    if out.pwm_enabled {
-        inverter.set_duties(out.duties);
+    write_bridge(inverter, out.duties, out.pwm_enabled);
+}
+
+/// Writes duties and the enable: disabled before the duties are written when they turn off,
+/// the duties first when they turn on (the controller's and the identification's periods).
+#[inline]
+pub(crate) fn write_bridge<I: Inverter>(inverter: &mut I, duties: [f32; 3], pwm_enabled: bool) {
+    if pwm_enabled {
+        inverter.set_duties(duties);
         inverter.enable(true);
     } else {
         inverter.enable(false);
-        inverter.set_duties(out.duties);
+        inverter.set_duties(duties);
     }
 }

@@ -41,7 +41,7 @@ use ekf_core::MotorParams;
 
 use crate::config::ComputationDelay;
 use crate::controller::{PhaseCurrents, TickInput};
-use crate::hal::{CurrentSense, Inverter};
+use crate::hal::{CurrentSense, Inverter, write_bridge};
 use crate::pi::{Pi, PiGains};
 use crate::svpwm::{SAFE_DUTIES, svpwm};
 use crate::transforms::AlphaBeta;
@@ -1687,13 +1687,7 @@ pub fn identify_period<S: CurrentSense, I: Inverter>(
         sensor: None,
     };
     let out = id.tick(&input);
-    if out.pwm_enabled {
-        inverter.set_duties(out.duties);
-        inverter.enable(true);
-    } else {
-        inverter.enable(false);
-        inverter.set_duties(out.duties);
-    }
+    write_bridge(inverter, out.duties, out.pwm_enabled);
     out
 }
 
