@@ -95,7 +95,8 @@ fn run<T: Float + Into<f64>>(
 ) -> Vec<([f64; 4], [f64; 4], f64)> {
     let motor = MotorParams {
         rs_ohm: conv(fx.rs),
-        ls_h: conv(fx.ls),
+        ld_h: conv(fx.ls),
+        lq_h: conv(fx.ls),
         psi_f_wb: conv(fx.psi),
         pole_pairs: fx.pole_pairs,
     };

@@ -58,6 +58,7 @@ class SimulationError(PyfocError):
 @final
 class Motor:
     """Motor parameters: Rs (ohm), Ls (H), psi_f (Wb), pole pairs; ld/lq default to ls.
+    For an interior PMSM give ld and lq (ls may then be None and reads back as their mean).
     Immutable."""
 
     @property
@@ -72,8 +73,18 @@ class Motor:
     def ld(self) -> float: ...
     @property
     def lq(self) -> float: ...
+    @property
+    def kind(self) -> Literal["surface", "interior", "inverse_salient"]:
+        """Saliency: "inverse_salient" (lq < ld) is accepted; check ld and lq are not swapped."""
     def __new__(
-        cls, rs: float, ls: float, psi_f: float, pole_pairs: int, *, ld: float | None = None, lq: float | None = None
+        cls,
+        rs: float,
+        ls: float | None,
+        psi_f: float,
+        pole_pairs: int,
+        *,
+        ld: float | None = None,
+        lq: float | None = None,
     ) -> Motor: ...
 
 class RunOutput(TypedDict):

@@ -7,8 +7,12 @@ use core::fmt;
 pub enum Param {
     /// Stator resistance `rs_ohm`.
     Rs,
-    /// Stator inductance `ls_h`.
-    Ls,
+    /// d-axis inductance `ld_h`.
+    Ld,
+    /// q-axis inductance `lq_h`.
+    Lq,
+    /// Saliency ratio `lq_h / ld_h` (within `MIN_SALIENCY_RATIO..=MAX_SALIENCY_RATIO`).
+    Saliency,
     /// Magnet flux linkage `psi_f_wb`.
     PsiF,
     /// Sample time `ts_s`.
@@ -112,7 +116,9 @@ impl fmt::Display for Param {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
             Param::Rs => "rs_ohm",
-            Param::Ls => "ls_h",
+            Param::Ld => "ld_h",
+            Param::Lq => "lq_h",
+            Param::Saliency => "lq_h / ld_h",
             Param::PsiF => "psi_f_wb",
             Param::Ts => "ts_s",
             Param::AngleSigmaLimit => "angle_sigma_limit_rad",

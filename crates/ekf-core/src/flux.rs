@@ -192,8 +192,13 @@ pub struct FluxEstimate<T> {
 pub struct FluxObserver<T: Float> {
     ts: T,
     rs: T,
+    /// `Lq` (the active-flux inductance; `Ls` of a surface motor), H.
     ls: T,
     psi2: T,
+    /// `psi_f`, Wb.
+    psi: T,
+    /// `Ld - Lq`, H (0 for a surface motor).
+    dl: T,
     inv_psi: T,
     /// `gamma / 2 = g / (2 psi_f^2)`.
     gamma_half: T,
@@ -223,8 +228,10 @@ impl<T: Float> FluxObserver<T> {
         Ok(Self {
             ts: cfg.ts_s,
             rs: m.rs_ohm,
-            ls: m.ls_h,
+            ls: m.lq_h,
             psi2,
+            psi: m.psi_f_wb,
+            dl: m.ld_h - m.lq_h,
             inv_psi: T::one() / m.psi_f_wb,
             gamma_half: cfg.observer_gain_rad_s / (two * psi2),
             kp: two * bw,
@@ -271,7 +278,20 @@ impl<T: Float> FluxObserver<T> {
         };
         let e0a = self.x[0] - self.ls * i_eta[0];
         let e0b = self.x[1] - self.ls * i_eta[1];
-        let err = self.psi2 - (e0a * e0a + e0b * e0b);
+        let n2 = e0a * e0a + e0b * e0b;
+        let err = if self.dl == T::zero() {
+            self.psi2 - n2
+        } else {
+            // Active flux: the circle's radius is psi_f + (Ld - Lq) i_d, with i_d the current
+            // along the previous active-flux direction.
+            let id = if n2 > T::zero() {
+                (i_eta[0] * e0a + i_eta[1] * e0b) / n2.sqrt()
+            } else {
+                T::zero()
+            };
+            let psi_a = self.psi + self.dl * id;
+            psi_a * psi_a - n2
+        };
         let g = self.gamma_half * err;
         let xa = self.x[0] + ts * (u_prev[0] - self.rs * i_r[0] + g * e0a);
         let xb = self.x[1] + ts * (u_prev[1] - self.rs * i_r[1] + g * e0b);

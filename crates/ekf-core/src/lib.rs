@@ -17,7 +17,7 @@ pub use angle::wrap_angle;
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
 pub use error::{ConfigError, Matrix, Param};
 pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, FluxTiming};
-pub use motor::MotorParams;
+pub use motor::{MAX_SALIENCY_RATIO, MIN_SALIENCY_RATIO, MotorKind, MotorParams};
 pub use noise::NoiseCovariances;
 pub use observer::{
     BranchCheck, CovarianceHealth, Discretization, Estimate, InnovationGate, ObserverConfig,

@@ -7,13 +7,33 @@ use crate::{ConfigError, Float, Param, to_t};
 pub struct MotorParams<T> {
     /// Stator resistance per phase, ohm.
     pub rs_ohm: T,
-    /// Stator inductance per phase (Ld = Lq), henry.
-    pub ls_h: T,
+    /// d-axis (magnet axis) inductance per phase, henry.
+    pub ld_h: T,
+    /// q-axis inductance per phase, henry (`ld_h` for a surface PMSM).
+    pub lq_h: T,
     /// Permanent-magnet flux linkage, weber (V s / rad electrical).
     pub psi_f_wb: T,
     /// Number of pole pairs; electrical speed = pole_pairs x mechanical speed.
     pub pole_pairs: u32,
 }
+
+/// What [`MotorParams::kind`] reports of the rotor's saliency.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotorKind {
+    /// `Ld == Lq`: surface-mounted magnets, no reluctance torque.
+    Surface,
+    /// `Lq > Ld`: interior magnets (the usual IPMSM); MTPA drives a negative `i_d`.
+    Interior,
+    /// `Lq < Ld`: inversely salient (rare; e.g. some flux-intensifying designs). Accepted, but
+    /// callers should report it: a datasheet with `Ld` and `Lq` swapped looks the same.
+    InverseSalient,
+}
+
+/// Smallest accepted `Lq / Ld` ([`MotorParams::validate`]).
+pub const MIN_SALIENCY_RATIO: f64 = 0.25;
+/// Largest accepted `Lq / Ld` ([`MotorParams::validate`]); real IPMSMs are below about 4
+/// (synchronous-reluctance-like rotors reach 5-8).
+pub const MAX_SALIENCY_RATIO: f64 = 8.0;
 
 impl<T: Float> MotorParams<T> {
     /// Servo motor, the textbook default of `design.md` section 6 (Rs 2.875, Ls 8.5 mH,
@@ -32,31 +52,87 @@ impl<T: Float> MotorParams<T> {
         Self::from_f64(0.12, 0.15e-3, 0.006, 7)
     }
 
-    /// Parameters from `f64` values.
+    /// Industrial interior PMSM, 2.2 kW class (Rs 3.6, Ld 30 mH, Lq 42 mH, Lq/Ld 1.4,
+    /// psi_f 0.50 Wb, 3 pole pairs; README's reference-motor table).
+    pub fn industrial_ipm() -> Self {
+        Self::salient_from_f64(3.6, 30e-3, 42e-3, 0.50, 3)
+    }
+
+    /// Strongly salient traction-class interior PMSM, 48 V (Rs 8 mohm, Ld 50 uH, Lq 150 uH,
+    /// Lq/Ld 3, psi_f 12 mWb, 4 pole pairs; README's reference-motor table).
+    pub fn traction_ipm() -> Self {
+        Self::salient_from_f64(0.008, 50e-6, 150e-6, 0.012, 4)
+    }
+
+    /// Surface-PMSM parameters from `f64` values (`Ld = Lq = ls_h`).
     pub fn from_f64(rs_ohm: f64, ls_h: f64, psi_f_wb: f64, pole_pairs: u32) -> Self {
+        Self::salient_from_f64(rs_ohm, ls_h, ls_h, psi_f_wb, pole_pairs)
+    }
+
+    /// Parameters of a salient (or surface, `ld_h == lq_h`) PMSM from `f64` values.
+    pub fn salient_from_f64(
+        rs_ohm: f64,
+        ld_h: f64,
+        lq_h: f64,
+        psi_f_wb: f64,
+        pole_pairs: u32,
+    ) -> Self {
         Self {
             rs_ohm: to_t(rs_ohm),
-            ls_h: to_t(ls_h),
+            ld_h: to_t(ld_h),
+            lq_h: to_t(lq_h),
             psi_f_wb: to_t(psi_f_wb),
             pole_pairs,
         }
     }
 
-    /// Checks that Rs, Ls and psi_f are finite and positive and that there is a pole pair.
+    /// Checks that Rs, Ld, Lq and psi_f are finite and positive, that `Lq / Ld` is within
+    /// [`MIN_SALIENCY_RATIO`]..=[`MAX_SALIENCY_RATIO`] and that there is a pole pair.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive(self.rs_ohm, Param::Rs)?;
-        positive(self.ls_h, Param::Ls)?;
+        positive(self.ld_h, Param::Ld)?;
+        positive(self.lq_h, Param::Lq)?;
         positive(self.psi_f_wb, Param::PsiF)?;
+        let ratio = self.lq_h / self.ld_h;
+        if !(ratio >= to_t(MIN_SALIENCY_RATIO) && ratio <= to_t(MAX_SALIENCY_RATIO)) {
+            return Err(ConfigError::OutOfRange(Param::Saliency));
+        }
         if self.pole_pairs == 0 {
             return Err(ConfigError::ZeroPolePairs);
         }
         Ok(())
     }
 
-    /// Characteristic (short-circuit) current `psi_f / Ls`, ampere: the current scale in which
-    /// the back-EMF's effect on the current per sample is simply `w_e Ts` (see [`crate::noise`]).
+    /// Surface, interior or inversely salient (exact comparison of `Ld` and `Lq`).
+    pub fn kind(&self) -> MotorKind {
+        if self.lq_h > self.ld_h {
+            MotorKind::Interior
+        } else if self.lq_h < self.ld_h {
+            MotorKind::InverseSalient
+        } else {
+            MotorKind::Surface
+        }
+    }
+
+    /// `Ld != Lq`.
+    pub fn is_salient(&self) -> bool {
+        self.ld_h != self.lq_h
+    }
+
+    /// Characteristic (short-circuit) current `psi_f / Lq`, ampere: the current scale in which
+    /// the back-EMF's effect on the current per sample is simply `w_e Ts` (see [`crate::noise`];
+    /// `Lq` is the inductance of the observer's active-flux model, `Ls` of a surface motor).
     pub fn characteristic_current_a(&self) -> T {
-        self.psi_f_wb / self.ls_h
+        self.psi_f_wb / self.lq_h
+    }
+
+    /// Electromagnetic torque, N m, at rotor-frame currents `(i_d, i_q)`:
+    /// `1.5 p (psi_f i_q + (Ld - Lq) i_d i_q)` (magnet plus reluctance torque).
+    pub fn torque_nm(&self, i_d: T, i_q: T) -> T {
+        to_t::<T>(1.5)
+            * to_t::<T>(f64::from(self.pole_pairs))
+            * i_q
+            * (self.psi_f_wb + (self.ld_h - self.lq_h) * i_d)
     }
 }
 

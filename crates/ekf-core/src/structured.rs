@@ -112,7 +112,7 @@ pub(crate) fn predict<T: Float>(
     u: [T; 2],
 ) -> (Vector4<T>, Sym4<T>, TransitionTerms<T>) {
     let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
-    let t = disc.transition_terms(th, w);
+    let t = disc.transition_terms(ia, ib, th, w);
     let d = disc.decay;
     let g = disc.input_gain;
     let ts = disc.ts;

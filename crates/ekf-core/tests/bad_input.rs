@@ -35,7 +35,7 @@ fn default_and_seed_configurations_are_valid() {
 fn motor_parameters_and_ts() {
     let cases: [(Setter, Param); 4] = [
         (|c, v| c.motor.rs_ohm = v, Param::Rs),
-        (|c, v| c.motor.ls_h = v, Param::Ls),
+        (|c, v| c.motor.lq_h = v, Param::Lq),
         (|c, v| c.motor.psi_f_wb = v, Param::PsiF),
         (|c, v| c.ts_s = v, Param::Ts),
     ];
@@ -58,8 +58,8 @@ fn motor_parameters_and_ts() {
     cfg.angle_sigma_limit_rad = 0.0;
     refused(cfg, ConfigError::NotPositive(Param::AngleSigmaLimit));
     assert_eq!(
-        ConfigError::NotPositive(Param::Ls).to_string(),
-        "ls_h must be positive"
+        ConfigError::NotPositive(Param::Lq).to_string(),
+        "lq_h must be positive"
     );
 }
 

@@ -35,11 +35,11 @@ struct Outcome {
 /// Checks `P` for symmetry and positive definiteness (Cholesky, in f64) every 16 steps.
 fn run(motor: MotorParams<f64>, rated: f64, noise: f64, steps: u64, seed: u64) -> Outcome {
     let cfg = ObserverConfig::new(
-        MotorParams::<f32>::from_f64(motor.rs_ohm, motor.ls_h, motor.psi_f_wb, motor.pole_pairs),
+        MotorParams::<f32>::from_f64(motor.rs_ohm, motor.lq_h, motor.psi_f_wb, motor.pole_pairs),
         TS as f32,
     );
     let mut obs = PmsmObserver::new(&cfg).expect("valid");
-    let (rs, ls, psi) = (motor.rs_ohm, motor.ls_h, motor.psi_f_wb);
+    let (rs, ls, psi) = (motor.rs_ohm, motor.lq_h, motor.psi_f_wb);
     let ic = psi / ls;
     let mut rng = Rng::new(seed);
     let (mut ia, mut ib, mut th) = (0.0f64, 0.0f64, 0.3f64);

@@ -74,7 +74,7 @@ fn converges_from_an_unknown_start_and_holds_the_angle() {
         for frac in [0.1, 0.5, 1.0] {
             let w = frac * rated;
             let speed = move |_t: f64| w;
-            let iq_a = 0.05 * motor.psi_f_wb / motor.ls_h;
+            let iq_a = 0.05 * motor.psi_f_wb / motor.lq_h;
             let iq = move |_t: f64| iq_a;
             let sc = Scenario {
                 motor,
@@ -99,7 +99,7 @@ fn converges_from_an_unknown_start_and_holds_the_angle() {
                 / 4000.0)
                 .sqrt();
             let cfg32 = FluxObserverConfig::<f32>::new(
-                MotorParams::from_f64(motor.rs_ohm, motor.ls_h, motor.psi_f_wb, motor.pole_pairs),
+                MotorParams::from_f64(motor.rs_ohm, motor.lq_h, motor.psi_f_wb, motor.pole_pairs),
                 ts as f32,
             );
             let est32 = run_flux(&cfg32, &tr, |v| v as f32);
@@ -144,8 +144,8 @@ fn converges_from_an_unknown_start_and_holds_the_angle() {
 fn firmware_timing_bias_under_load_and_its_compensation() {
     let ts = 1e-4;
     let motor = MotorParams::<f64>::servo();
-    let iq_a = 0.1 * motor.psi_f_wb / motor.ls_h;
-    let predicted_deg = (0.1 * motor.ls_h * iq_a / motor.psi_f_wb).to_degrees();
+    let iq_a = 0.1 * motor.psi_f_wb / motor.lq_h;
+    let predicted_deg = (0.1 * motor.lq_h * iq_a / motor.psi_f_wb).to_degrees();
     for w_ts in [0.02, 0.1, 0.25] {
         let w = w_ts / ts;
         let speed = move |_t: f64| w;

@@ -135,7 +135,8 @@ fn config<T: Float>(p: &Params) -> ObserverConfig<T> {
     let t = |v: f64| T::from_subset(&v);
     let motor = MotorParams {
         rs_ohm: t(p.motor.0),
-        ls_h: t(p.motor.1),
+        ld_h: t(p.motor.1),
+        lq_h: t(p.motor.1),
         psi_f_wb: t(p.motor.2),
         pole_pairs: p.motor.3,
     };

@@ -81,7 +81,7 @@ proptest! {
         joseph in any::<bool>(),
         seed in any::<u64>(),
     ) {
-        let motor = MotorParams { rs_ohm: rs, ls_h: ls, psi_f_wb: psi, pole_pairs };
+        let motor = MotorParams { rs_ohm: rs, ld_h: ls, lq_h: ls, psi_f_wb: psi, pole_pairs };
         let disc = if lag_free { Discretization::LagFree } else { Discretization::ForwardEuler };
         let update = if joseph { CovarianceUpdate::Joseph } else { CovarianceUpdate::StandardSymmetrized };
         run(motor, ts, disc, update, seed);

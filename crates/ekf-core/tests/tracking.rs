@@ -17,7 +17,8 @@ fn told(m: MotorParams<f64>, psi: f64, rs: f64, ls: f64) -> MotorParams<f64> {
     MotorParams {
         psi_f_wb: m.psi_f_wb * psi,
         rs_ohm: m.rs_ohm * rs,
-        ls_h: m.ls_h * ls,
+        ld_h: m.ld_h * ls,
+        lq_h: m.lq_h * ls,
         ..m
     }
 }
@@ -171,8 +172,8 @@ fn exact_plant_run(
         let m = &plant_motor;
         let (s, c) = x[3].sin_cos();
         let (id, iq) = (x[0] * c + x[1] * s, -x[0] * s + x[1] * c);
-        let kp = 0.3 * m.ls_h / TS;
-        let ud = -w * m.ls_h * iq_ref - kp * id;
+        let kp = 0.3 * m.lq_h / TS;
+        let ud = -w * m.lq_h * iq_ref - kp * id;
         let uq = m.rs_ohm * iq_ref + w * m.psi_f_wb + kp * (iq_ref - iq);
         let (sm, cm) = (x[3] + 0.5 * w * TS).sin_cos();
         let u = [ud * cm - uq * sm, ud * sm + uq * cm];
@@ -190,7 +191,7 @@ fn exact_plant_run(
 fn no_drift_over_ten_million_steps() {
     let motor = MotorParams::<f64>::servo();
     let cfg = ObserverConfig::new(
-        MotorParams::<f32>::from_f64(motor.rs_ohm, motor.ls_h, motor.psi_f_wb, motor.pole_pairs),
+        MotorParams::<f32>::from_f64(motor.rs_ohm, motor.lq_h, motor.psi_f_wb, motor.pole_pairs),
         TS as f32,
     );
     let mut obs = PmsmObserver::new(&cfg).expect("valid");

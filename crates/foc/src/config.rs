@@ -381,7 +381,7 @@ impl FocConfig {
     /// Current-loop gains: `current_gains`, or `Kp = Ls bw` (V/A), `Ki = Rs bw` (V/(A s)).
     pub fn current_pi_gains(&self) -> PiGains {
         self.current_gains.unwrap_or(PiGains {
-            kp: self.motor.ls_h * self.current_bw_rad_s,
+            kp: self.motor.lq_h * self.current_bw_rad_s,
             ki: self.motor.rs_ohm * self.current_bw_rad_s,
         })
     }
@@ -399,7 +399,7 @@ impl FocConfig {
     pub fn max_current_step(&self) -> f32 {
         self.samples.max_step_a.unwrap_or(
             (self.u_dc_max_v + self.motor.rs_ohm * self.over_current_a) * self.ts_s
-                / self.motor.ls_h
+                / self.motor.lq_h
                 + 0.1 * self.over_current_a,
         )
     }

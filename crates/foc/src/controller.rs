@@ -721,7 +721,7 @@ impl Foc {
     /// `Rs i` on the measured currents would cancel the winding's own damping of the rotor's
     /// swing under I/f (a restart then failed to hand over in `tests/state_machine.rs`).
     fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
-        let wl = frame.omega * self.cfg.motor.ls_h;
+        let wl = frame.omega * self.cfg.motor.lq_h;
         let emf = if frame.emf {
             frame.omega * self.observer.parameters().0
         } else {

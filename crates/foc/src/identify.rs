@@ -469,6 +469,10 @@ impl fmt::Display for IdentifyFailure {
 
 impl core::error::Error for IdentifyFailure {}
 
+/// Relative difference of `Ld` and `Lq` below which [`Identified::motor_params`] reads the
+/// motor as a surface PMSM (measured spread on surface motors is a few per cent).
+pub const SURFACE_TOLERANCE: f32 = 0.1;
+
 /// What the identification found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Identified {
@@ -499,11 +503,25 @@ impl Identified {
         0.5 * (self.ld_h + self.lq_h)
     }
 
-    /// The observer's motor parameters (`Ls = (Ld + Lq) / 2`), when `psi_f` was measured.
+    /// `Ld` and `Lq` differ by more than [`SURFACE_TOLERANCE`] of their mean: an interior
+    /// (or inversely salient) motor.
+    pub fn is_salient(&self) -> bool {
+        (self.lq_h - self.ld_h).abs() > SURFACE_TOLERANCE * self.ls_mean_h()
+    }
+
+    /// The observer's motor parameters, when `psi_f` was measured: `Ld`, `Lq` as measured
+    /// for a salient motor ([`is_salient`](Self::is_salient)), else both `(Ld + Lq) / 2`
+    /// (a surface motor; the difference is measurement noise).
     pub fn motor_params(&self, pole_pairs: u32) -> Option<MotorParams<f32>> {
+        let (ld_h, lq_h) = if self.is_salient() {
+            (self.ld_h, self.lq_h)
+        } else {
+            (self.ls_mean_h(), self.ls_mean_h())
+        };
         self.psi_f_wb.map(|psi| MotorParams {
             rs_ohm: self.rs_ohm,
-            ls_h: self.ls_mean_h(),
+            ld_h,
+            lq_h,
             psi_f_wb: psi,
             pole_pairs,
         })

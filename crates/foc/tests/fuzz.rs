@@ -239,7 +239,7 @@ fn param() -> impl Strategy<Value = Option<f32>> {
 fn set_field(cfg: &mut FocConfig, k: usize, v: f32, absolute: bool) {
     let f: &mut f32 = match k % 24 {
         0 => &mut cfg.motor.rs_ohm,
-        1 => &mut cfg.motor.ls_h,
+        1 => &mut cfg.motor.lq_h,
         2 => &mut cfg.motor.psi_f_wb,
         3 => &mut cfg.ts_s,
         4 => &mut cfg.angle_advance_periods,
@@ -260,7 +260,7 @@ fn set_field(cfg: &mut FocConfig, k: usize, v: f32, absolute: bool) {
         19 => &mut cfg.health.window_s,
         20 => &mut cfg.health.nis_limit,
         21 => &mut cfg.observer.ts_s,
-        22 => &mut cfg.observer.motor.ls_h,
+        22 => &mut cfg.observer.motor.lq_h,
         _ => &mut cfg.observer.angle_sigma_limit_rad,
     };
     *f = if absolute { v } else { *f * v };

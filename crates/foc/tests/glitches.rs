@@ -247,7 +247,7 @@ fn sample_check_settings_are_validated() {
     assert_eq!(c.validate(), Ok(()));
     // The derived step limit: (u_dc_max + Rs I_oc) Ts / Ls + 0.1 I_oc.
     let want = (base.u_dc_max_v + base.motor.rs_ohm * base.over_current_a) * base.ts_s
-        / base.motor.ls_h
+        / base.motor.lq_h
         + 0.1 * base.over_current_a;
     assert!((base.max_current_step() - want).abs() < 1e-5);
 }

@@ -143,7 +143,7 @@ fn defaults_start_and_reverse_the_reference_motors() {
         let cfg = FocConfig::new(m, ts, udc).with_inertia(j as f32);
         let plant = Plant {
             rs: f64::from(m.rs_ohm),
-            ls: f64::from(m.ls_h),
+            ls: f64::from(m.lq_h),
             psi: f64::from(m.psi_f_wb),
             p: f64::from(m.pole_pairs),
             j,

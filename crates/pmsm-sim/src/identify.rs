@@ -426,7 +426,8 @@ pub fn with_identified(scenario: &Scenario, report: &IdentifyReport) -> Result<S
     let mut sc = scenario.clone();
     sc.controller.kind = ControllerKind::Foc;
     sc.observer.rs_ohm = Some(v.rs_ohm);
-    sc.observer.ls_h = Some(0.5 * (v.ld_h + v.lq_h));
+    sc.observer.ld_h = Some(v.ld_h);
+    sc.observer.lq_h = Some(v.lq_h);
     sc.observer.psi_f_wb = v.psi_f_wb;
     let mut f = sc.controller.foc.unwrap_or_default();
     if let Some(j) = v.j_kg_m2 {

@@ -147,8 +147,13 @@ pub struct ObserverSettings {
     pub seed_filter: bool,
     /// The observer's stator resistance (default: the motor's), ohm.
     pub rs_ohm: Option<f64>,
-    /// The observer's inductance (default: the motor's `(Ld + Lq) / 2`), H.
+    /// The observer's inductance, both axes (a surface model; default: the motor's `Ld`
+    /// and `Lq`), H. `ld_h` / `lq_h` override it per axis.
     pub ls_h: Option<f64>,
+    /// The observer's d-axis inductance (default: `ls_h`, else the motor's), H.
+    pub ld_h: Option<f64>,
+    /// The observer's q-axis inductance (default: `ls_h`, else the motor's), H.
+    pub lq_h: Option<f64>,
     /// The observer's flux linkage (default: the motor's), Wb.
     pub psi_f_wb: Option<f64>,
     /// Status `Uncertain` above this angle standard deviation (default 0.2), rad.
@@ -161,6 +166,8 @@ impl Default for ObserverSettings {
             seed_filter: true,
             rs_ohm: None,
             ls_h: None,
+            ld_h: None,
+            lq_h: None,
             psi_f_wb: None,
             angle_sigma_limit_rad: None,
         }
@@ -374,8 +381,13 @@ impl Scenario {
         let c = &self.controller;
         let s = c.foc.unwrap_or_default();
         let p = self.observer_params();
-        let motor =
-            ekf_core::MotorParams::<f32>::from_f64(p.rs_ohm, p.ls_h, p.psi_f_wb, p.pole_pairs);
+        let motor = ekf_core::MotorParams::<f32>::salient_from_f64(
+            p.rs_ohm,
+            p.ld_h,
+            p.lq_h,
+            p.psi_f_wb,
+            p.pole_pairs,
+        );
         let pp = f64::from(p.pole_pairs);
         let rpm_to_e = |rpm: f64| (rpm / RPM_PER_RAD_S * pp) as f32;
         let ts = self.inverter.ts_s as f32;
@@ -470,9 +482,10 @@ impl Scenario {
     pub fn observer_params(&self) -> ekf_core::MotorParams<f64> {
         let o = &self.observer;
         let m = &self.motor;
-        ekf_core::MotorParams::from_f64(
+        ekf_core::MotorParams::salient_from_f64(
             o.rs_ohm.unwrap_or(m.rs_ohm),
-            o.ls_h.unwrap_or(m.ls_mean_h()),
+            o.ld_h.or(o.ls_h).unwrap_or(m.ld_h),
+            o.lq_h.or(o.ls_h).unwrap_or(m.lq_h),
             o.psi_f_wb.unwrap_or(m.psi_f_wb),
             m.pole_pairs,
         )
@@ -566,6 +579,8 @@ impl Scenario {
         for (name, v) in [
             ("observer.rs_ohm", o.rs_ohm),
             ("observer.ls_h", o.ls_h),
+            ("observer.ld_h", o.ld_h),
+            ("observer.lq_h", o.lq_h),
             ("observer.psi_f_wb", o.psi_f_wb),
             ("observer.angle_sigma_limit_rad", o.angle_sigma_limit_rad),
         ] {

@@ -653,7 +653,8 @@ impl Scored {
         if let Some(m) = told.map(|i| MISMATCHES[i]) {
             params.psi_f_wb *= m.psi_f;
             params.rs_ohm *= m.rs;
-            params.ls_h *= m.ls;
+            params.ld_h *= m.ls;
+            params.lq_h *= m.ls;
         }
         let ts = scenario.ts_s();
         let est: Box<dyn Observer> = match kind {

@@ -184,7 +184,7 @@ fn mismatch_rows() {
                     .expect("baseline row");
                 let what = format!("{m:?} {} {}", case.name, ekf.condition);
                 if case.is_ls() {
-                    let physical = ((case.ls - 1.0).abs() * told.ls_h * iq / told.psi_f_wb)
+                    let physical = ((case.ls - 1.0).abs() * told.lq_h * iq / told.psi_f_wb)
                         .atan()
                         .to_degrees();
                     if ekf.condition.contains("rated load") {

@@ -10,8 +10,8 @@
 
 use ekf_core::nalgebra::{Matrix2, Matrix4, Vector4};
 use ekf_core::{
-    CovarianceUpdate, Discretization, EkfError, Estimate, Float, MotorParams, ObserverConfig,
-    PmsmObserver, RsTracking, Status,
+    CovarianceUpdate, Discretization, EkfError, Estimate, Float, MotorKind, MotorParams,
+    ObserverConfig, PmsmObserver, RsTracking, Status,
 };
 use std::sync::{Mutex, PoisonError};
 
@@ -112,6 +112,9 @@ impl RowStatus {
 }
 
 /// Motor parameters (SI): `Motor(rs, ls, psi_f, pole_pairs, *, ld=None, lq=None)`.
+///
+/// `ls` is the inductance of a surface PMSM (`Ld = Lq = ls`); `ld` / `lq` override it per
+/// axis for an interior PMSM (`ls` may then be `None`, and reads back as `(ld + lq) / 2`).
 #[pyclass(frozen, skip_from_py_object, module = "pyfoc")]
 #[derive(Clone, Copy)]
 struct Motor {
@@ -135,7 +138,7 @@ impl Motor {
     #[pyo3(signature = (rs, ls, psi_f, pole_pairs, *, ld = None, lq = None))]
     fn new(
         rs: f64,
-        ls: f64,
+        ls: Option<f64>,
         psi_f: f64,
         pole_pairs: i64,
         ld: Option<f64>,
@@ -144,25 +147,43 @@ impl Motor {
         let pole_pairs = u32::try_from(pole_pairs).map_err(|_| {
             ConfigError::new_err(format!("pole_pairs must be >= 1, got {pole_pairs}"))
         })?;
+        let (ld, lq) = match (ld.or(ls), lq.or(ls)) {
+            (Some(ld), Some(lq)) => (ld, lq),
+            _ => {
+                return Err(ConfigError::new_err(
+                    "give ls (surface PMSM) or both ld and lq (interior PMSM)",
+                ));
+            }
+        };
         let m = Self {
             rs,
-            ls,
+            ls: ls.unwrap_or(0.5 * (ld + lq)),
             psi_f,
             pole_pairs,
-            ld: ld.unwrap_or(ls),
-            lq: lq.unwrap_or(ls),
+            ld,
+            lq,
         };
+        if !(m.ls.is_finite() && m.ls > 0.0) {
+            return Err(ConfigError::new_err(format!(
+                "ls must be positive and finite, got {}",
+                m.ls
+            )));
+        }
         m.params::<f64>()
             .validate()
             .map_err(|e| ConfigError::new_err(e.to_string()))?;
-        for (name, v) in [("ld", m.ld), ("lq", m.lq)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(ConfigError::new_err(format!(
-                    "{name} must be positive and finite, got {v}"
-                )));
-            }
-        }
         Ok(m)
+    }
+
+    /// `"surface"`, `"interior"` (Lq > Ld) or `"inverse_salient"` (Lq < Ld: accepted, but
+    /// check that Ld and Lq are not swapped).
+    #[getter]
+    fn kind(&self) -> &'static str {
+        match self.params::<f64>().kind() {
+            MotorKind::Surface => "surface",
+            MotorKind::Interior => "interior",
+            MotorKind::InverseSalient => "inverse_salient",
+        }
     }
 
     fn __repr__(&self) -> String {
@@ -175,7 +196,7 @@ impl Motor {
 
 impl Motor {
     fn params<T: Float>(&self) -> MotorParams<T> {
-        MotorParams::from_f64(self.rs, self.ls, self.psi_f, self.pole_pairs)
+        MotorParams::salient_from_f64(self.rs, self.ld, self.lq, self.psi_f, self.pole_pairs)
     }
 }
 
@@ -409,12 +430,6 @@ impl Ekf {
         covariance_update: &str,
         tracking: &str,
     ) -> PyResult<Self> {
-        if motor.ld != motor.lq {
-            return Err(ConfigError::new_err(format!(
-                "the observer models a surface PMSM (ld == lq); got ld={} lq={}",
-                motor.ld, motor.lq
-            )));
-        }
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
             "forward_euler" => Discretization::ForwardEuler,

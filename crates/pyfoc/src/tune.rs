@@ -105,12 +105,6 @@ pub(crate) fn tune_qr<'py>(
     min_speed: Option<f64>,
     bound_decades: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if motor.ld != motor.lq {
-        return Err(ConfigError::new_err(format!(
-            "the observer models a surface PMSM (ld == lq); got ld={} lq={}",
-            motor.ld, motor.lq
-        )));
-    }
     let opts = options(
         skip,
         r_shape,

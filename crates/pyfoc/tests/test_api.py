@@ -47,8 +47,15 @@ def test_motor_and_ekf_construction_errors():
         pyfoc.Ekf(m, ts=1e-4, q=np.eye(3))
     with pytest.raises(ValueError, match="x0"):
         pyfoc.Ekf(m, ts=1e-4, x0=[1.0, 2.0])
-    with pytest.raises(pyfoc.ConfigError, match="surface"):
-        pyfoc.Ekf(pyfoc.Motor(**SERVO, ld=8e-3, lq=9e-3), ts=1e-4)
+    # Absurd saliency is refused; an inversely salient motor is accepted and reported.
+    with pytest.raises(pyfoc.ConfigError, match="lq_h / ld_h"):
+        pyfoc.Motor(**SERVO, ld=1e-3, lq=20e-3)
+    with pytest.raises(pyfoc.ConfigError, match="ld and lq"):
+        pyfoc.Motor(2.875, None, 0.175, 4, ld=8e-3)
+    assert pyfoc.Motor(**SERVO, ld=9e-3, lq=8e-3).kind == "inverse_salient"
+    ipm = pyfoc.Motor(3.6, None, 0.5, 3, ld=30e-3, lq=42e-3)
+    assert ipm.kind == "interior" and ipm.ls == pytest.approx(36e-3)
+    assert pyfoc.Motor(**SERVO).kind == "surface"
 
 
 def test_run_shapes_and_dtypes_are_checked():

@@ -96,7 +96,7 @@ impl<T: Float> ObserverConfig<T> {
         check_psd(&self.p0, Matrix::P0)?;
         // Forward Euler's current pole `1 - Rs Ts / Ls` must lie inside the unit circle.
         if self.discretization == Discretization::ForwardEuler
-            && self.motor.rs_ohm * self.ts_s >= to_t::<T>(2.0) * self.motor.ls_h
+            && self.motor.rs_ohm * self.ts_s >= to_t::<T>(2.0) * self.motor.lq_h
         {
             return Err(ConfigError::TooLargeForTs(Param::Rs));
         }

@@ -18,7 +18,7 @@ pub enum Discretization {
     LagFree,
 }
 
-/// The constants of one discrete step: `Ts`, `a = Rs / Ls`, `c = psi_f / Ls`, the current
+/// The constants of one discrete step: `Ts`, `a = Rs / Lq`, `c = psi_f / Lq`, the current
 /// decay and the input gain. Fixed for the configured parameters ([`PmsmModel::discrete`]),
 /// or recomputed each step from the tracked `psi_f` and `Rs` ([`PmsmModel::discrete_at`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,8 +29,12 @@ pub(crate) struct Discrete<T> {
     pub a: T,
     /// `c = psi_f / Ls`, A/rad.
     pub c: T,
-    /// `1 / Ls`, 1/H.
+    /// `1 / Lq`, 1/H (`1 / Ls` of a surface motor).
     pub inv_ls: T,
+    /// Saliency of the active-flux model, `(Ld - Lq) / Lq` (0 for a surface motor).
+    pub saliency: T,
+    /// `Ld != Lq`: the EMF scale `c` gains `saliency * i_d` each step.
+    pub salient: bool,
     /// Current decay per sample: `alpha = exp(-a Ts)` (lag-free) or `1 - a Ts` (Euler).
     pub decay: T,
     /// `1 - decay`, computed without cancellation.
@@ -79,9 +83,9 @@ impl<T: Float> PmsmModel<T> {
     pub fn new(cfg: &ObserverConfig<T>) -> Self {
         let m = &cfg.motor;
         let ts = cfg.ts_s;
-        let a = m.rs_ohm / m.ls_h;
+        let a = m.rs_ohm / m.lq_h;
         let (decay, input_gain) = match cfg.discretization {
-            Discretization::ForwardEuler => (T::one() - a * ts, ts / m.ls_h),
+            Discretization::ForwardEuler => (T::one() - a * ts, ts / m.lq_h),
             Discretization::LagFree => {
                 // 1 - exp(-a Ts) without cancellation.
                 let one_minus_alpha = -(-a * ts).exp_m1();
@@ -93,8 +97,10 @@ impl<T: Float> PmsmModel<T> {
                 discretization: cfg.discretization,
                 ts,
                 a,
-                c: m.psi_f_wb / m.ls_h,
-                inv_ls: T::one() / m.ls_h,
+                c: m.psi_f_wb / m.lq_h,
+                inv_ls: T::one() / m.lq_h,
+                saliency: (m.ld_h - m.lq_h) / m.lq_h,
+                salient: m.is_salient(),
                 decay,
                 one_minus_decay: T::one() - decay,
                 input_gain,
@@ -189,28 +195,45 @@ impl<T: Float> PmsmModel<T> {
         }
     }
 
-    /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
+    /// The back-EMF term of the step from `(i_a, i_b, th, w)` and its derivatives (module
+    /// docs).
     #[inline(always)]
-    pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
-        self.disc.transition_terms(th, w)
+    pub(crate) fn transition_terms(&self, ia: T, ib: T, th: T, w: T) -> TransitionTerms<T> {
+        self.disc.transition_terms(ia, ib, th, w)
     }
 }
 
 impl<T: Float> Discrete<T> {
-    /// The back-EMF term of the step from `(th, w)` and its derivatives (module docs).
+    /// The back-EMF term of the step from the posterior `(i_a, i_b, th, w)` and its
+    /// derivatives (module docs; the currents matter only for a salient motor).
     #[inline(always)]
-    pub(crate) fn transition_terms(&self, th: T, w: T) -> TransitionTerms<T> {
+    pub(crate) fn transition_terms(&self, ia: T, ib: T, th: T, w: T) -> TransitionTerms<T> {
         let (s, co) = th.sin_cos_angle();
         let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
-        let c = self.c;
         // EMF term c w (-j e^{j th}) G, and its derivatives.
         let ua = s * m_re + co * m_im;
         let ub = s * m_im - co * m_re;
+        let (c, c_th) = if self.salient {
+            // Active flux psi_f + (Ld - Lq) i_d over Lq; d i_d / d th = i_q.
+            let k = self.saliency;
+            (self.c + k * (ia * co + ib * s), k * (ib * co - ia * s))
+        } else {
+            (self.c, T::zero())
+        };
+        let (ea, eb) = (c * ua, c * ub);
+        let (ea_th, eb_th) = if self.salient {
+            (
+                c * (co * m_re - s * m_im) + c_th * ua,
+                c * (co * m_im + s * m_re) + c_th * ub,
+            )
+        } else {
+            (c * (co * m_re - s * m_im), c * (co * m_im + s * m_re))
+        };
         TransitionTerms {
-            ea: c * ua,
-            eb: c * ub,
-            ea_th: c * (co * m_re - s * m_im),
-            eb_th: c * (co * m_im + s * m_re),
+            ea,
+            eb,
+            ea_th,
+            eb_th,
             ea_w: c * (s * mp_re + co * mp_im),
             eb_w: c * (s * mp_im - co * mp_re),
             ea_psi: self.inv_ls * ua,
@@ -267,7 +290,7 @@ impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
             eb_w,
             eb_th,
             ..
-        } = self.transition_terms(th, w);
+        } = self.transition_terms(ia, ib, th, w);
         let d = &self.disc;
         let xn = Vector4::new(
             d.decay * ia + d.input_gain * u[0] + ea,

@@ -80,7 +80,7 @@ pub struct Scenario<'a> {
 /// the mid-period angle. It only has to make the currents plausible.
 pub fn simulate(sc: &Scenario) -> Trace {
     let m = &sc.motor;
-    let (rs, ls, psi) = (m.rs_ohm, m.ls_h, m.psi_f_wb);
+    let (rs, ls, psi) = (m.rs_ohm, m.lq_h, m.psi_f_wb);
     let sub = 40;
     let h = sc.ts / sub as f64;
     let mut rng = Rng::new(sc.seed);
