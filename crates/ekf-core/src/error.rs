@@ -41,6 +41,8 @@ pub enum Param {
     HealthCurrentFactor,
     /// Speed bound of the covariance health check, `CovarianceHealth::max_w_ts_rad`.
     HealthMaxSpeed,
+    /// Divergence level of the covariance health check, `CovarianceHealth::divergence_nis`.
+    HealthDivergenceNis,
     /// Initial standard deviation of the tracked flux, `ParameterTracking::psi_f_sigma0`.
     TrackingPsiSigma,
     /// Initial standard deviation of the tracked resistance, `ParameterTracking::rs_sigma0`.
@@ -133,6 +135,7 @@ impl fmt::Display for Param {
             Param::HealthTraceFactor => "covariance_health.trace_factor",
             Param::HealthCurrentFactor => "covariance_health.current_factor",
             Param::HealthMaxSpeed => "covariance_health.max_w_ts_rad",
+            Param::HealthDivergenceNis => "covariance_health.divergence_nis",
             Param::TrackingPsiSigma => "parameter_tracking.psi_f_sigma0",
             Param::TrackingRsSigma => "parameter_tracking.rs_sigma0",
             Param::TrackingPsiWalk => "parameter_tracking.psi_f_walk_per_sqrt_s",

@@ -1,4 +1,5 @@
-//! The seed's PMSM observer: an EKF on the alpha-beta model of a surface-mounted PMSM.
+//! The seed's PMSM observer: an EKF on the alpha-beta model of a surface-mounted PMSM, and of
+//! an interior one through the active flux (section below).
 //!
 //! State `x = [i_a, i_b, w_e, theta]` (A, A, rad/s electrical, rad electrical), input
 //! `u = [u_a, u_b]` (V), measurement `z = [i_a, i_b]` (A), `H = [I2 0]`.
@@ -52,6 +53,57 @@
 //! (`d/dth` rotates the EMF term by 90 deg; `d/dw` uses `d(w G)/dw = G + w G'`,
 //! `G' = j (Ts e^{j w Ts} - G) / (a + j w)`).
 //!
+//! # Interior (salient) motors: the active-flux model
+//!
+//! With `Ld != Lq` ([`MotorParams::kind`](crate::MotorParams::kind)) the stator equations in the
+//! alpha-beta frame have an angle-dependent inductance matrix. Of the two usual ways to write
+//! an observer model for them, the **active flux** (Boldea 2008) is used here, not the
+//! extended EMF (Chen 2003): it keeps the state, the input and, above all, the structure of the
+//! surface model (a diagonal current block in `Phi`, the same 10-entry covariance schedule, the
+//! same lag-free discretization and safeguards), so `Ld == Lq` *is* the surface observer and a
+//! salient step costs a few tens of instructions more, not a new filter. The extended EMF
+//! would need the EMF's magnitude, which changes with the load and the current's derivative,
+//! as a state or a fast parameter.
+//!
+//! The active flux `psi_a = psi_f + (Ld - Lq) i_d` along the rotor's d axis turns the machine
+//! into a non-salient one of inductance `Lq`:
+//!
+//! ```text
+//! Lq di/dt = u - Rs i - j w psi_a e^{j th} - (d psi_a/dt) e^{j th}        (i = i_a + j i_b)
+//! ```
+//!
+//! **Step.** The surface step above with `Ls -> Lq` and `c = psi_a / Lq`, where
+//! `i_d = i_a cos th + i_b sin th` comes from the posterior at the start of the period. In
+//! steady state `psi_a` is constant and the step is exact (no lag, no bias: measured below 0.03
+//! deg on both interior reference motors at `w_e Ts` from 0.02 to 0.3, `tests/salient.rs`). The
+//! last term, `(Ld - Lq) di_d/dt`, matters only while `i_d` moves (MTPA load steps): the model
+//! lets `i_d` respond through `Lq`, the motor through `Ld`, so to first order the motor's
+//! change of `i_d` over the period is `Lq / Ld` times the model's. The step adds
+//!
+//! ```text
+//! (Lq / Ld - 1) (i_d- - i_d) e^{j (th + w Ts)}       (i_d- the model's predicted d current)
+//! ```
+//!
+//! which is zero in steady state (so it cannot bias) and keeps load steps clean (measured on
+//! the traction motor, 30 % -> 100 % load step: 0.15 deg peak with it, 25 deg without). It
+//! applies once the filter has **locked** (angle tracked and the innovations settled, the
+//! gate's running NIS at or below its settled level) and while the angle stays tracked;
+//! during the initial convergence the d axis is unknown, and the correction would triple
+//! (traction motor: `Lq / Ld = 3`) the model's d-axis response along a wrong axis (measured:
+//! 10-15 of the 144 cells of the interior convergence grid failed with it always on).
+//!
+//! **Jacobian.** `Phi` keeps the block structure `[[A, J], [0, B]]`; for a salient motor the
+//! current block `A` is a full 2 x 2 (`decay I` plus the active flux's `d psi_a / d i =
+//! (Ld - Lq) (cos th, sin th)` and the correction's dependence on the currents), and `J`
+//! carries both terms' derivatives in `w` and `th` (`d psi_a / d th = (Ld - Lq) i_q`). The
+//! covariance schedule then has a salient variant (a dozen more products). Leaving these terms
+//! out (tried first) changes the gain, not the fixed point, but the convergence grid failed
+//! cells with the correction on. The generic [`PmsmModel`] carries the same terms, so the
+//! structured update still equals the generic `Ekf` (`tests/structured.rs`).
+//!
+//! **Tracking.** The tracked parameter is the magnet flux `psi_f`; `psi_a` follows from it and
+//! `i_d` each step (`d psi_a / d psi_f = 1`: the flux's Jacobian column is the surface one).
+//!
 //! # Safeguards (on in [`ObserverConfig::new`], off in [`ObserverConfig::seed`])
 //!
 //! After the correction of every step, in this order; each is an `Option` field of
@@ -95,6 +147,14 @@
 //! at the [`MAX_REFUSALS`]-th (3rd) such refusal in a row, the reset replaces the error (so the
 //! filter is never stuck on a state it cannot step from, e.g. an `S` singular to rounding in
 //! `f32`). Refusals of non-finite input are the caller's and do not count.
+//!
+//! **Divergence** (part of the covariance health). A filter can settle where its covariance
+//! claims to know the angle while its innovations say the model cannot explain the data:
+//! measured on the traction IPM at rated load (`Lq i_q` 1.6 x `psi_f`), a start 120 deg off
+//! ended 135 deg off, at 1.5 x the true speed, with `NIS` about 30 000 every sample. When the
+//! `NIS` exceeds `divergence_nis` (100: a chi-square(2) tail of `e^-50`) in
+//! `divergence_samples` (200) tracked steps in a row, the observer resets itself as above. On
+//! the surface reference motors it never fires in the suite.
 
 mod config;
 pub(crate) mod model;
@@ -201,6 +261,9 @@ pub struct PmsmObserver<T: Float> {
     /// Configured `(psi_f, Rs, reference temperature)`, reported when tracking is off.
     nominal: (T, T, T),
     angle_var_limit: T,
+    /// Salient motors: the filter has locked (angle tracked with settled innovations) and
+    /// keeps the angle tracked since; the d-axis transient correction applies (module docs).
+    locked: bool,
     branch: Option<BranchState<T>>,
     gate: Option<GateState<T>>,
     health: Option<HealthState<T>>,
@@ -247,6 +310,7 @@ impl<T: Float> PmsmObserver<T> {
                     .map_or(to_t(20.0), |t| t.reference_temperature_c),
             ),
             angle_var_limit: cfg.angle_sigma_limit_rad * cfg.angle_sigma_limit_rad,
+            locked: false,
             branch: cfg.branch_check.map(|b| BranchState {
                 threshold: b.threshold_rad,
                 min_speed2: b.min_speed_rad_s * b.min_speed_rad_s,
@@ -269,6 +333,9 @@ impl<T: Float> PmsmObserver<T> {
                 current_bound: h.current_factor * cfg.motor.characteristic_current_a(),
                 speed_bound: h.max_w_ts_rad / cfg.ts_s,
                 p0,
+                divergence_nis: h.divergence_nis,
+                divergence_samples: h.divergence_samples,
+                inconsistent: 0,
             }),
             tracker,
             slow,
@@ -318,18 +385,43 @@ impl<T: Float> PmsmObserver<T> {
             (Some(tr), Some(slow)) if TRACK => {
                 let k = &slow.k;
                 let mut tr = *tr;
-                let active =
-                    tr.should_track(k, self.p.p33 <= self.angle_var_limit, self.x[2], self.p.p22);
+                let tracked = self.p.p33 <= self.angle_var_limit;
+                let trusted = self.locked;
+                let active = tr.should_track(k, tracked, self.x[2], self.p.p22);
                 let disc = self.model.discrete_at(tr.psi, tr.rs);
-                let (xm, mut pm, t) = structured::predict(&disc, q, &self.x, &self.p, u_prev);
+                let (xm, mut pm, t) =
+                    structured::predict(&disc, q, &self.x, &self.p, u_prev, trusted);
                 let tm = tr.predict(k, &disc, &t, &self.x, &mut pm, active);
                 (xm, pm, Some(tm))
             }
             _ => {
-                let (xm, pm, _) =
-                    structured::predict(self.model.discrete(), q, &self.x, &self.p, u_prev);
+                let trusted = self.locked;
+                let (xm, pm, _) = structured::predict(
+                    self.model.discrete(),
+                    q,
+                    &self.x,
+                    &self.p,
+                    u_prev,
+                    trusted,
+                );
                 (xm, pm, None)
             }
+        }
+    }
+
+    /// Salient motors: updates the lock (module docs) after a committed correction. Locked
+    /// when the angle is tracked and the innovations are consistent (the gate's running mean of
+    /// the NIS at or below its settled level; always, without a gate); stays locked while the
+    /// angle stays tracked.
+    #[inline(always)]
+    fn update_lock(&mut self) {
+        if self.model.discrete().salient {
+            let tracked = self.p.p33 <= self.angle_var_limit;
+            let settled = self
+                .gate
+                .as_ref()
+                .is_none_or(|g| g.nis_mean <= g.settled_nis);
+            self.locked = tracked && (self.locked || settled);
         }
     }
 
@@ -452,6 +544,18 @@ impl<T: Float> PmsmObserver<T> {
                 gate_accepted_high(g, &mut self.counters, verdict);
             }
         }
+        self.update_lock();
+        let diverged = match &mut self.health {
+            Some(h) if tracking && c.nis > h.divergence_nis => {
+                h.inconsistent = h.inconsistent.saturating_add(1);
+                h.divergence_samples != 0 && h.inconsistent >= h.divergence_samples
+            }
+            Some(h) => {
+                h.inconsistent = 0;
+                false
+            }
+            None => false,
+        };
         if let Some(b) = &mut self.branch {
             let w = x[2];
             let w2 = w * w;
@@ -469,7 +573,7 @@ impl<T: Float> PmsmObserver<T> {
                 b.sum = T::zero();
             }
         }
-        if self.unhealthy(&self.x, &self.p) {
+        if diverged || self.unhealthy(&self.x, &self.p) {
             self.self_reset(Some(i));
         }
         Ok(self.estimate())
@@ -522,6 +626,7 @@ impl<T: Float> PmsmObserver<T> {
             return;
         };
         b.sum = T::zero();
+        self.locked = false;
         self.x[2] = -self.x[2];
         self.x[3] = wrap_angle(self.x[3] + T::pi());
         self.p = self.p.flip_speed();
@@ -610,6 +715,10 @@ impl<T: Float> PmsmObserver<T> {
 
     /// Clears the gate's and the branch check's running state.
     fn restart_safeguards(&mut self) {
+        self.locked = false;
+        if let Some(h) = &mut self.health {
+            h.inconsistent = 0;
+        }
         if let Some(g) = &mut self.gate {
             g.consecutive = 0;
             g.open = false;

@@ -102,7 +102,8 @@ impl<T: Float> Sym4<T> {
 
 /// Structured prediction: `(x-, P-)` from the posterior `(x, P)` and the input held over the
 /// period, with the step's constants `disc` and the process noise `q`; also the EMF terms
-/// (the Jacobian's blocks). Values are not checked here.
+/// (the Jacobian's blocks). `trusted`: the angle is tracked, so a salient motor's d-axis
+/// transient correction applies (observer module docs). Values are not checked here.
 #[inline(always)]
 pub(crate) fn predict<T: Float>(
     disc: &Discrete<T>,
@@ -110,18 +111,22 @@ pub(crate) fn predict<T: Float>(
     x: &Vector4<T>,
     p: &Sym4<T>,
     u: [T; 2],
+    trusted: bool,
 ) -> (Vector4<T>, Sym4<T>, TransitionTerms<T>) {
     let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
-    let t = disc.transition_terms(ia, ib, th, w);
+    let t = disc.transition_terms(ia, ib, th, w, u, trusted);
     let d = disc.decay;
     let g = disc.input_gain;
     let ts = disc.ts;
     let xn = Vector4::new(
-        d * ia + g * u[0] + t.ea,
-        d * ib + g * u[1] + t.eb,
+        d * ia + g * u[0] + t.ea + t.da,
+        d * ib + g * u[1] + t.eb + t.db,
         w,
         wrap_angle(th + ts * w),
     );
+    if disc.salient {
+        return (xn, predict_cov_salient(&t, ts, q, p), t);
+    }
     let (a1, a2, b1, b2) = (t.ea_w, t.ea_th, t.eb_w, t.eb_th);
     let Sym4 {
         p00,
@@ -163,6 +168,57 @@ pub(crate) fn predict<T: Float>(
         p33: mc10 * ts + ts * p23 + p33 + q[(3, 3)],
     };
     (xn, pn, t)
+}
+
+/// `P- = Phi P Phi^T + Q` for a salient motor, whose current block of `Phi` is a full 2 x 2
+/// (`a00..a11` of the terms) instead of `decay I`; otherwise the schedule of [`predict`].
+#[inline(always)]
+fn predict_cov_salient<T: Float>(
+    t: &TransitionTerms<T>,
+    ts: T,
+    q: &Matrix4<T>,
+    p: &Sym4<T>,
+) -> Sym4<T> {
+    let (a00, a01, a10, a11) = (t.a00, t.a01, t.a10, t.a11);
+    let (j00, j01, j10, j11) = (t.ea_w, t.ea_th, t.eb_w, t.eb_th);
+    let Sym4 {
+        p00,
+        p01,
+        p02,
+        p03,
+        p11,
+        p12,
+        p13,
+        p22,
+        p23,
+        p33,
+    } = *p;
+    // T = A Pix + J Pxx
+    let t00 = a00 * p02 + a01 * p12 + j00 * p22 + j01 * p23;
+    let t01 = a00 * p03 + a01 * p13 + j00 * p23 + j01 * p33;
+    let t10 = a10 * p02 + a11 * p12 + j10 * p22 + j11 * p23;
+    let t11 = a10 * p03 + a11 * p13 + j10 * p23 + j11 * p33;
+    // U = A Pii + J Pix^T
+    let u00 = a00 * p00 + a01 * p01 + j00 * p02 + j01 * p03;
+    let u01 = a00 * p01 + a01 * p11 + j00 * p12 + j01 * p13;
+    let u10 = a10 * p00 + a11 * p01 + j10 * p02 + j11 * p03;
+    let u11 = a10 * p01 + a11 * p11 + j10 * p12 + j11 * p13;
+    let half: T = to_t(0.5);
+    let n01 = u00 * a10 + u01 * a11 + t00 * j10 + t01 * j11;
+    let n10 = u10 * a00 + u11 * a01 + t10 * j00 + t11 * j01;
+    let mc10 = ts * p22 + p23;
+    Sym4 {
+        p00: u00 * a00 + u01 * a01 + t00 * j00 + t01 * j01 + q[(0, 0)],
+        p01: (n01 + n10) * half + q[(0, 1)],
+        p02: t00 + q[(0, 2)],
+        p03: t00 * ts + t01 + q[(0, 3)],
+        p11: u10 * a10 + u11 * a11 + t10 * j10 + t11 * j11 + q[(1, 1)],
+        p12: t10 + q[(1, 2)],
+        p13: t10 * ts + t11 + q[(1, 3)],
+        p22: p22 + q[(2, 2)],
+        p23: p22 * ts + p23 + q[(2, 3)],
+        p33: mc10 * ts + ts * p23 + p33 + q[(3, 3)],
+    }
 }
 
 /// `true` when the sum of the values is finite: false for any NaN or infinity (they

@@ -19,8 +19,23 @@ const N: usize = 1000;
 const DEADLINE: usize = 500;
 const LOCK_DEG: f64 = 5.0;
 
-fn motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
+/// A motor of the grid: name, motor, rated electrical speed (rad/s), sensor noise (A), q
+/// current as a fraction of the characteristic current `psi_f / Lq`.
+type GridMotor = (&'static str, MotorParams<f64>, f64, f64, f64);
+
+fn surface_motors() -> Vec<GridMotor> {
     reference_motors()
+        .into_iter()
+        .map(|(n, m, r, s)| (n, m, r, s, 0.1))
+        .collect()
+}
+
+/// The interior motors at their rated q current (MTPA d current in the plant).
+fn interior_grid_motors() -> Vec<GridMotor> {
+    interior_motors()
+        .into_iter()
+        .map(|(n, m, r, iq, s)| (n, m, r, s, iq / m.characteristic_current_a()))
+        .collect()
 }
 
 const SPEED_FRACTIONS: [f64; 6] = [-1.0, -0.5, -0.1, 0.1, 0.5, 1.0];
@@ -70,11 +85,15 @@ fn run_cell(mut cfg: ObserverConfig<f64>, tr: &Trace, err0_deg: f64) -> Cell {
 
 /// Runs the grid for one configuration maker; prints it; returns (cells, failures, flips that
 /// left the speed estimate with the wrong sign).
-fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (usize, usize, u32) {
+fn grid(
+    name: &str,
+    motors: &[GridMotor],
+    make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>,
+) -> (usize, usize, u32) {
     let angles = angle_grid_deg();
     let (mut cells, mut failures, mut wrong) = (0, 0, 0);
     println!("\n=== {name}: time to lock (ms) or FAIL; '*' = branch flip(s) ===");
-    for (mname, motor, rated, noise) in motors() {
+    for &(mname, motor, rated, noise, iq_frac) in motors {
         let ic = motor.characteristic_current_a();
         println!("{mname} (rated {rated:.0} rad/s el.)");
         print!("{:>8}", "err0\\w");
@@ -88,7 +107,7 @@ fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (
             .map(|(j, &f)| {
                 let w = f * rated;
                 let speed = move |_t: f64| w;
-                let iq = move |_t: f64| 0.1 * ic;
+                let iq = move |_t: f64| iq_frac * ic;
                 simulate(&Scenario {
                     motor,
                     ts: TS,
@@ -125,8 +144,13 @@ fn grid(name: &str, make: fn(MotorParams<f64>, f64) -> ObserverConfig<f64>) -> (
 
 #[test]
 fn default_locks_from_any_angle_and_seed_does_not() {
-    let (cells, fail_default, wrong) = grid("ObserverConfig::new (default)", ObserverConfig::new);
-    let (_, fail_seed, _) = grid("ObserverConfig::seed", ObserverConfig::seed);
+    let motors = surface_motors();
+    let (cells, fail_default, wrong) = grid(
+        "ObserverConfig::new (default)",
+        &motors,
+        ObserverConfig::new,
+    );
+    let (_, fail_seed, _) = grid("ObserverConfig::seed", &motors, ObserverConfig::seed);
     assert_eq!(
         fail_default, 0,
         "default: {fail_default} of {cells} cells fail"
@@ -134,6 +158,26 @@ fn default_locks_from_any_angle_and_seed_does_not() {
     assert_eq!(wrong, 0, "default: flips to the wrong branch");
     // The seed's filter has no branch check: some cells settle on the theta + pi branch.
     assert!(fail_seed > 0, "the seed was expected to fail some cells");
+}
+
+/// The interior motors (active-flux model) at rated q current with the MTPA d current: the
+/// default passes every cell of the grid within 50 ms too (issue 13's goal; measured: all
+/// 144 cells lock within 20 ms). At this load (the traction motor's `Lq i_q` exceeds
+/// `psi_f`) the convergence transients sometimes trip the branch check the wrong way
+/// (measured 5 of 144 cells); the check then undoes it within the same run (every cell still
+/// locks), so those flips are bounded here rather than forbidden.
+#[test]
+fn interior_motors_lock_from_any_angle() {
+    let (cells, fail, wrong) = grid(
+        "ObserverConfig::new, interior motors at rated current",
+        &interior_grid_motors(),
+        ObserverConfig::new,
+    );
+    assert_eq!(fail, 0, "interior: {fail} of {cells} cells fail");
+    assert!(
+        wrong as usize * 20 <= cells,
+        "interior: {wrong} flips to the wrong branch in {cells} cells (bound 5 %)"
+    );
 }
 
 /// Runs the default observer started on the truth over a speed profile; returns the branch
@@ -183,7 +227,7 @@ fn run_profile(
 /// and a rotor rocking around standstill (where the back-EMF is unobservable).
 #[test]
 fn no_false_flips() {
-    for (mname, motor, rated, noise) in motors() {
+    for (mname, motor, rated, noise) in reference_motors() {
         let mut report = Vec::new();
         for f in SPEED_FRACTIONS {
             let w = f * rated;

@@ -78,6 +78,9 @@ fn call(u: f64, i: f64) -> impl Strategy<Value = Call> {
 #[derive(Clone, Debug)]
 struct Params {
     motor: (f64, f64, f64, u32),
+    /// `Lq / Ld`: 1 (surface) half of the time, else any ratio (mostly 0.1..10, so some are
+    /// refused as absurd).
+    saliency: f64,
     ts: f64,
     q: [f64; 4],
     r: [f64; 2],
@@ -106,6 +109,11 @@ fn params() -> impl Strategy<Value = Params> {
         ),
         (param(0.2), 0u8..3),
         (any::<bool>(), any::<bool>(), prop::bool::weighted(0.2)),
+        prop_oneof![
+            4 => Just(1.0),
+            3 => (-1.0f64..1.0).prop_map(|e| 10f64.powf(e)),
+            1 => param(1.5),
+        ],
     )
         .prop_map(
             |(
@@ -115,9 +123,11 @@ fn params() -> impl Strategy<Value = Params> {
                 (p0, x0),
                 (sigma_limit, tracking),
                 (lag_free, joseph, seed_noise),
+                saliency,
             )| Params {
                 tracking,
                 motor,
+                saliency,
                 ts,
                 q,
                 r,
@@ -136,7 +146,7 @@ fn config<T: Float>(p: &Params) -> ObserverConfig<T> {
     let motor = MotorParams {
         rs_ohm: t(p.motor.0),
         ld_h: t(p.motor.1),
-        lq_h: t(p.motor.1),
+        lq_h: t(p.motor.1 * p.saliency),
         psi_f_wb: t(p.motor.2),
         pole_pairs: p.motor.3,
     };
@@ -333,12 +343,14 @@ fn fuzz_inputs<T: Float>(name: &str, cases: u32) {
         MotorParams::<T>::servo(),
         MotorParams::industrial_2k2(),
         MotorParams::small_fast(),
+        MotorParams::industrial_ipm(),
+        MotorParams::traction_ipm(),
     ];
     harness::fuzz(
         name,
         cases,
         (
-            0usize..3,
+            0usize..5,
             any::<bool>(),
             prop::collection::vec(call(100.0, 10.0), 1..256),
         ),

@@ -120,6 +120,7 @@ impl<T: Float> ObserverConfig<T> {
             positive(h.trace_factor, Param::HealthTraceFactor)?;
             positive(h.current_factor, Param::HealthCurrentFactor)?;
             positive(h.max_w_ts_rad, Param::HealthMaxSpeed)?;
+            positive(h.divergence_nis, Param::HealthDivergenceNis)?;
             // P0 is finite and positive semi-definite here, so its trace is finite and >= 0.
             if self.p0.trace() <= T::zero() {
                 return Err(ConfigError::ZeroInitialCovarianceTrace);

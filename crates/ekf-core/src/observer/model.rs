@@ -35,6 +35,8 @@ pub(crate) struct Discrete<T> {
     pub saliency: T,
     /// `Ld != Lq`: the EMF scale `c` gains `saliency * i_d` each step.
     pub salient: bool,
+    /// `Lq / Ld - 1`: the d-axis transient correction's gain (0 for a surface motor).
+    pub kd: T,
     /// Current decay per sample: `alpha = exp(-a Ts)` (lag-free) or `1 - a Ts` (Euler).
     pub decay: T,
     /// `1 - decay`, computed without cancellation.
@@ -73,6 +75,16 @@ pub(crate) struct TransitionTerms<T> {
     /// `d i_a- / d psi_f`, `d i_b- / d psi_f` (the EMF term per weber).
     pub ea_psi: T,
     pub eb_psi: T,
+    /// The d-axis transient correction of a salient motor (module docs; 0 for a surface
+    /// motor), added to `i_a-`, `i_b-`.
+    pub da: T,
+    pub db: T,
+    /// The current block of `Phi` of a salient motor, `d i- / d i` (row-major; the surface
+    /// block is `decay I`): the active flux's and the correction's dependence on the currents.
+    pub a00: T,
+    pub a01: T,
+    pub a10: T,
+    pub a11: T,
     /// `sin th`, `cos th` of the start-of-period angle.
     pub sin_th: T,
     pub cos_th: T,
@@ -101,6 +113,7 @@ impl<T: Float> PmsmModel<T> {
                 inv_ls: T::one() / m.lq_h,
                 saliency: (m.ld_h - m.lq_h) / m.lq_h,
                 salient: m.is_salient(),
+                kd: m.lq_h / m.ld_h - T::one(),
                 decay,
                 one_minus_decay: T::one() - decay,
                 input_gain,
@@ -195,19 +208,35 @@ impl<T: Float> PmsmModel<T> {
         }
     }
 
-    /// The back-EMF term of the step from `(i_a, i_b, th, w)` and its derivatives (module
-    /// docs).
+    /// The back-EMF term of the step from `(i_a, i_b, th, w)` and the input `u`, and its
+    /// derivatives (module docs).
     #[inline(always)]
-    pub(crate) fn transition_terms(&self, ia: T, ib: T, th: T, w: T) -> TransitionTerms<T> {
-        self.disc.transition_terms(ia, ib, th, w)
+    pub(crate) fn transition_terms(
+        &self,
+        ia: T,
+        ib: T,
+        th: T,
+        w: T,
+        u: [T; 2],
+    ) -> TransitionTerms<T> {
+        self.disc.transition_terms(ia, ib, th, w, u, true)
     }
 }
 
 impl<T: Float> Discrete<T> {
-    /// The back-EMF term of the step from the posterior `(i_a, i_b, th, w)` and its
-    /// derivatives (module docs; the currents matter only for a salient motor).
+    /// The back-EMF term of the step from the posterior `(i_a, i_b, th, w)` and the input
+    /// `u`, and its derivatives (module docs; the currents and the input matter only for a
+    /// salient motor, whose d-axis transient correction applies when `transient`).
     #[inline(always)]
-    pub(crate) fn transition_terms(&self, ia: T, ib: T, th: T, w: T) -> TransitionTerms<T> {
+    pub(crate) fn transition_terms(
+        &self,
+        ia: T,
+        ib: T,
+        th: T,
+        w: T,
+        u: [T; 2],
+        transient: bool,
+    ) -> TransitionTerms<T> {
         let (s, co) = th.sin_cos_angle();
         let (_, (m_re, m_im), (mp_re, mp_im)) = self.emf_gain(w);
         // EMF term c w (-j e^{j th}) G, and its derivatives.
@@ -220,27 +249,86 @@ impl<T: Float> Discrete<T> {
         } else {
             (self.c, T::zero())
         };
-        let (ea, eb) = (c * ua, c * ub);
-        let (ea_th, eb_th) = if self.salient {
-            (
-                c * (co * m_re - s * m_im) + c_th * ua,
-                c * (co * m_im + s * m_re) + c_th * ub,
-            )
-        } else {
-            (c * (co * m_re - s * m_im), c * (co * m_im + s * m_re))
-        };
-        TransitionTerms {
-            ea,
-            eb,
-            ea_th,
-            eb_th,
+        let mut t = TransitionTerms {
+            ea: c * ua,
+            eb: c * ub,
+            ea_th: c * (co * m_re - s * m_im) + c_th * ua,
+            eb_th: c * (co * m_im + s * m_re) + c_th * ub,
+            da: T::zero(),
+            db: T::zero(),
             ea_w: c * (s * mp_re + co * mp_im),
             eb_w: c * (s * mp_im - co * mp_re),
             ea_psi: self.inv_ls * ua,
             eb_psi: self.inv_ls * ub,
+            a00: self.decay,
+            a01: T::zero(),
+            a10: T::zero(),
+            a11: self.decay,
             sin_th: s,
             cos_th: co,
+        };
+        if self.salient {
+            // d c / d i = saliency (cos th, sin th).
+            let (kc, ks) = (self.saliency * co, self.saliency * s);
+            t.a00 += ua * kc;
+            t.a01 = ua * ks;
+            t.a10 = ub * kc;
+            t.a11 += ub * ks;
+            if transient {
+                self.d_transient(&mut t, ia, ib, w, u);
+            }
         }
+        t
+    }
+
+    /// The d-axis transient correction of a salient motor (module docs): the active-flux
+    /// model lets `i_d` respond through `Lq`, the motor through `Ld`. To first order the
+    /// motor's change of `i_d` over the period is `Lq / Ld` times the model's, so the step adds
+    /// `(Lq / Ld - 1) (i_d- - i_d)` along the end-of-period d axis, with `i_d-` the model's
+    /// prediction. In steady state the model is exact and its `i_d- = i_d`: no bias. Its
+    /// derivatives in `th`, `w` and `psi_f` join the EMF's (the columns of `Phi` keep their
+    /// structure); those in the currents are left out.
+    #[inline(always)]
+    fn d_transient(&self, t: &mut TransitionTerms<T>, ia: T, ib: T, w: T, u: [T; 2]) {
+        let (s, co) = (t.sin_th, t.cos_th);
+        let ts = self.ts;
+        // Rotation by w Ts: the end-of-period d axis e1 = (c1, s1).
+        let (sw, cw) = match self.discretization {
+            Discretization::ForwardEuler => sin_cos_small(w * ts),
+            Discretization::LagFree => {
+                let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
+                let two = T::one() + T::one();
+                (two * sh * ch, T::one() - two * sh * sh)
+            }
+        };
+        let (s1, c1) = (s * cw + co * sw, co * cw - s * sw);
+        // The model's prediction m and the change of i_d it predicts.
+        let ma = self.decay * ia + self.input_gain * u[0] + t.ea;
+        let mb = self.decay * ib + self.input_gain * u[1] + t.eb;
+        let did = (ma * c1 + mb * s1) - (ia * co + ib * s);
+        // d e / d th = j e, d e1 / d w = Ts j e1.
+        let mq1 = mb * c1 - ma * s1;
+        let did_th = t.ea_th * c1 + t.eb_th * s1 + mq1 - (ib * co - ia * s);
+        let did_w = t.ea_w * c1 + t.eb_w * s1 + ts * mq1;
+        let did_psi = t.ea_psi * c1 + t.eb_psi * s1;
+        // d did / d i: the block so far projected on e1, less e0.
+        let did_ia = t.a00 * c1 + t.a10 * s1 - co;
+        let did_ib = t.a01 * c1 + t.a11 * s1 - s;
+        let k = self.kd;
+        let (kc, ks) = (k * c1, k * s1);
+        let kdid = k * did;
+        t.da = kdid * c1;
+        t.db = kdid * s1;
+        t.ea_th += did_th * kc - kdid * s1;
+        t.eb_th += did_th * ks + kdid * c1;
+        t.ea_w += did_w * kc - kdid * ts * s1;
+        t.eb_w += did_w * ks + kdid * ts * c1;
+        t.ea_psi += did_psi * kc;
+        t.eb_psi += did_psi * ks;
+        t.a00 += did_ia * kc;
+        t.a01 += did_ib * kc;
+        t.a10 += did_ia * ks;
+        t.a11 += did_ib * ks;
     }
 
     /// `(G, w G, d(w G)/dw)` of the lag-free step as `(re, im)` pairs (module docs).
@@ -289,12 +377,18 @@ impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
             ea_th,
             eb_w,
             eb_th,
+            da,
+            db,
+            a00,
+            a01,
+            a10,
+            a11,
             ..
-        } = self.transition_terms(ia, ib, th, w);
+        } = self.transition_terms(ia, ib, th, w, [u[0], u[1]]);
         let d = &self.disc;
         let xn = Vector4::new(
-            d.decay * ia + d.input_gain * u[0] + ea,
-            d.decay * ib + d.input_gain * u[1] + eb,
+            d.decay * ia + d.input_gain * u[0] + ea + da,
+            d.decay * ib + d.input_gain * u[1] + eb + db,
             w,
             th + d.ts * w,
         );
@@ -302,8 +396,8 @@ impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
         let o = T::one();
         #[rustfmt::skip]
         let phi = Matrix4::new(
-            d.decay, z,       ea_w, ea_th,
-            z,       d.decay, eb_w, eb_th,
+            a00,     a01,     ea_w, ea_th,
+            a10,     a11,     eb_w, eb_th,
             z,       z,       o,    z,
             z,       z,       d.ts, o,
         );

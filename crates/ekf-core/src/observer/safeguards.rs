@@ -109,15 +109,24 @@ pub struct CovarianceHealth<T> {
     pub current_factor: T,
     /// Bound on `|w_e| Ts`, rad per sample (`pi`: the Nyquist limit of the sampled model).
     pub max_w_ts_rad: T,
+    /// Divergence: a step's `NIS` above `divergence_nis` ...
+    pub divergence_nis: T,
+    /// ... in every one of this many steps in a row while the angle is tracked means the
+    /// filter has settled on a state its model cannot explain (its covariance says it knows
+    /// the angle, its innovations say otherwise); it resets itself. 0: off.
+    pub divergence_samples: u32,
 }
 
 impl<T: Float> Default for CovarianceHealth<T> {
-    /// `trace_factor = 100`, `current_factor = 100`, `max_w_ts_rad = pi`.
+    /// `trace_factor = 100`, `current_factor = 100`, `max_w_ts_rad = pi`,
+    /// `divergence_nis = 100` (a chi-square(2) tail of `e^-50`), `divergence_samples = 200`.
     fn default() -> Self {
         Self {
             trace_factor: to_t(100.0),
             current_factor: to_t(100.0),
             max_w_ts_rad: T::pi(),
+            divergence_nis: to_t(100.0),
+            divergence_samples: 200,
         }
     }
 }
@@ -174,6 +183,10 @@ pub(super) struct HealthState<T> {
     /// Bound on `|w_e|`, rad/s.
     pub(super) speed_bound: T,
     pub(super) p0: Sym4<T>,
+    pub(super) divergence_nis: T,
+    pub(super) divergence_samples: u32,
+    /// Tracked steps in a row with `NIS > divergence_nis`.
+    pub(super) inconsistent: u32,
 }
 
 /// The gate's decision on one sample.

@@ -479,9 +479,15 @@ impl<T: Float> Tracker<T> {
         let c = self.c_pp;
         let xo = &self.x;
         // X- = Phi4 X + Gamma c.
+        let (x0, x1) = if disc.salient {
+            // Full current block of a salient motor.
+            (t.a00 * xo[0] + t.a01 * xo[1], t.a10 * xo[0] + t.a11 * xo[1])
+        } else {
+            (d * xo[0], d * xo[1])
+        };
         let xm = [
-            d * xo[0] + t.ea_w * xo[2] + t.ea_th * xo[3] + g0 * c,
-            d * xo[1] + t.eb_w * xo[2] + t.eb_th * xo[3] + g1 * c,
+            x0 + t.ea_w * xo[2] + t.ea_th * xo[3] + g0 * c,
+            x1 + t.eb_w * xo[2] + t.eb_th * xo[3] + g1 * c,
             xo[2],
             disc.ts * xo[2] + xo[3],
         ];

@@ -75,10 +75,25 @@ pub struct Scenario<'a> {
     pub seed: u64,
 }
 
+/// The MTPA d-axis current for a current magnitude `i` (A) of a motor with `Lq > Ld`
+/// (`design.md` section 7); 0 for a surface or inversely salient motor.
+pub fn mtpa_id(m: &MotorParams<f64>, i: f64) -> f64 {
+    let dl = m.lq_h - m.ld_h;
+    if dl <= 0.0 {
+        return 0.0;
+    }
+    let psi = m.psi_f_wb;
+    (psi - (psi * psi + 8.0 * dl * dl * i * i).sqrt()) / (4.0 * dl)
+}
+
 /// Runs the plant. The voltage is an ideal dead-beat-ish dq controller that knows the true
 /// angle: steady-state feed-forward plus a proportional term on the current error, rotated at
-/// the mid-period angle. It only has to make the currents plausible.
+/// the mid-period angle. It only has to make the currents plausible. A salient motor
+/// (`Ld != Lq`) is integrated in the rotor frame ([`simulate_salient`]).
 pub fn simulate(sc: &Scenario) -> Trace {
+    if sc.motor.is_salient() {
+        return simulate_salient(sc);
+    }
     let m = &sc.motor;
     let (rs, ls, psi) = (m.rs_ohm, m.lq_h, m.psi_f_wb);
     let sub = 40;
@@ -144,6 +159,105 @@ pub fn simulate(sc: &Scenario) -> Trace {
         }
     }
     tr
+}
+
+/// The salient plant: the rotor-frame equations (`design.md` section 7)
+///
+/// ```text
+/// Ld di_d/dt = u_d - Rs i_d + w Lq i_q,    Lq di_q/dt = u_q - Rs i_q - w (Ld i_d + psi_f)
+/// ```
+///
+/// integrated with RK4 over 40 substeps per period, the alpha-beta voltage held over each
+/// period (so `u_dq` turns with the rotor within the period). The d-axis reference is the
+/// MTPA current for `|i_q ref|` ([`mtpa_id`]).
+pub fn simulate_salient(sc: &Scenario) -> Trace {
+    let m = &sc.motor;
+    let (rs, ld, lq, psi) = (m.rs_ohm, m.ld_h, m.lq_h, m.psi_f_wb);
+    let sub = 40;
+    let h = sc.ts / sub as f64;
+    let mut rng = Rng::new(sc.seed);
+    let (mut id, mut iq, mut th) = (0.0f64, 0.0f64, sc.th0);
+    let mut tr = Trace {
+        ts: sc.ts,
+        u: Vec::with_capacity(sc.n),
+        i_meas: Vec::with_capacity(sc.n),
+        th: Vec::with_capacity(sc.n),
+        w: Vec::with_capacity(sc.n),
+    };
+    let deriv = |t: f64, id: f64, iq: f64, th: f64, ua: f64, ub: f64| {
+        let w = (sc.speed)(t);
+        let (s, c) = th.sin_cos();
+        let (ud, uq) = (ua * c + ub * s, -ua * s + ub * c);
+        (
+            (ud - rs * id + w * lq * iq) / ld,
+            (uq - rs * iq - w * (ld * id + psi)) / lq,
+            w,
+        )
+    };
+    for k in 0..sc.n {
+        let t = k as f64 * sc.ts;
+        let w = (sc.speed)(t);
+        let (s, c) = th.sin_cos();
+        let (ia, ib) = (id * c - iq * s, id * s + iq * c);
+        tr.th.push(wrap_angle(th));
+        tr.w.push(w);
+        tr.i_meas
+            .push([ia + sc.noise_a * rng.gauss(), ib + sc.noise_a * rng.gauss()]);
+        let iq_ref = (sc.iq_ref)(t);
+        let id_ref = mtpa_id(m, iq_ref.abs());
+        let (kd, kq) = (0.3 * ld / sc.ts, 0.3 * lq / sc.ts);
+        let ud = rs * id_ref - w * lq * iq_ref + kd * (id_ref - id);
+        let uq = rs * iq_ref + w * (ld * id_ref + psi) + kq * (iq_ref - iq);
+        let (sm, cm) = (th + 0.5 * w * sc.ts).sin_cos();
+        let (ua, ub) = (ud * cm - uq * sm, ud * sm + uq * cm);
+        tr.u.push([ua, ub]);
+        for j in 0..sub {
+            let t0 = t + j as f64 * h;
+            let k1 = deriv(t0, id, iq, th, ua, ub);
+            let k2 = deriv(
+                t0 + h / 2.0,
+                id + h / 2.0 * k1.0,
+                iq + h / 2.0 * k1.1,
+                th + h / 2.0 * k1.2,
+                ua,
+                ub,
+            );
+            let k3 = deriv(
+                t0 + h / 2.0,
+                id + h / 2.0 * k2.0,
+                iq + h / 2.0 * k2.1,
+                th + h / 2.0 * k2.2,
+                ua,
+                ub,
+            );
+            let k4 = deriv(t0 + h, id + h * k3.0, iq + h * k3.1, th + h * k3.2, ua, ub);
+            id += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+            iq += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+            th += h / 6.0 * (k1.2 + 2.0 * k2.2 + 2.0 * k3.2 + k4.2);
+        }
+    }
+    tr
+}
+
+/// The two interior reference motors as the tests use them: name, motor, rated electrical
+/// speed (rad/s), rated q current (A), current-sensor noise standard deviation (A).
+pub fn interior_motors() -> [(&'static str, MotorParams<f64>, f64, f64, f64); 2] {
+    [
+        (
+            "industrial IPM",
+            MotorParams::industrial_ipm(),
+            1500.0 / 60.0 * 2.0 * PI * 3.0,
+            6.7,
+            0.02,
+        ),
+        (
+            "traction IPM",
+            MotorParams::traction_ipm(),
+            3000.0 / 60.0 * 2.0 * PI * 4.0,
+            125.0,
+            0.3,
+        ),
+    ]
 }
 
 /// Runs an observer over a trace with the project's timing: row k predicts with `u[k-1]`
