@@ -152,7 +152,7 @@
 //! claims to know the angle while its innovations say the model cannot explain the data:
 //! measured on the traction IPM at rated load (`Lq i_q` 1.6 x `psi_f`), a start 120 deg off
 //! ended 135 deg off, at 1.5 x the true speed, with `NIS` about 30 000 every sample. When the
-//! `NIS` exceeds `divergence_nis` (100: a chi-square(2) tail of `e^-50`) in
+//! `NIS` exceeds `divergence_nis` (1000: a chi-square(2) tail of `e^-500`) in
 //! `divergence_samples` (200) tracked steps in a row, the observer resets itself as above. On
 //! the surface reference motors it never fires in the suite.
 

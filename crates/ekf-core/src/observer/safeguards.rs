@@ -119,13 +119,13 @@ pub struct CovarianceHealth<T> {
 
 impl<T: Float> Default for CovarianceHealth<T> {
     /// `trace_factor = 100`, `current_factor = 100`, `max_w_ts_rad = pi`,
-    /// `divergence_nis = 100` (a chi-square(2) tail of `e^-50`), `divergence_samples = 200`.
+    /// `divergence_nis = 1000` (a chi-square(2) tail of `e^-500`), `divergence_samples = 200`.
     fn default() -> Self {
         Self {
             trace_factor: to_t(100.0),
             current_factor: to_t(100.0),
             max_w_ts_rad: T::pi(),
-            divergence_nis: to_t(100.0),
+            divergence_nis: to_t(1000.0),
             divergence_samples: 200,
         }
     }
