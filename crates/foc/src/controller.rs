@@ -94,7 +94,8 @@
 //! The speed loop's output is a torque command, `i_T = T* / k_t` (module [`crate::mtpa`]).
 //! A surface motor without field weakening takes it as the q reference unchanged (the plan's
 //! references go to the loops as they are, the surface behaviour before salient motors).
-//! Otherwise (`shape_refs`): `i_d = i_d,plan + mtpa_id(i_q,last) + i_fw`, limited to
+//! Otherwise (`shape_refs`): `i_d = i_d,plan + i_d,mtpa + i_fw` (`i_d,mtpa`: one step of
+//! the MTPA iteration for `i_T` from the last tick's MTPA point), limited to
 //! `[-max_negative_id, current_limit_a]`; `i_q = psi_f i_T / (psi_f + (Ld - Lq) i_d)`;
 //! `|i_q| <= sqrt(current_limit_a^2 - i_d^2)` (the current circle, q cut first). After the
 //! current loops the field-weakening integrator (module [`crate::fieldweak`]) updates `i_fw`
@@ -291,7 +292,7 @@ pub struct Foc {
     fw_on: bool,
     /// Largest negative d current, A.
     max_neg_id: f32,
-    /// The last shaped q reference (warm start of the MTPA iteration), A.
+    /// The q current of the last MTPA point (warm start of the MTPA iteration), A.
     iq_last: f32,
     /// The last shaped d reference without the field-weakening correction, A.
     id_base: f32,
@@ -611,17 +612,23 @@ impl Foc {
             let e = i_ref - i_dq;
             let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
             let uq_free = self.pi_q.unlimited(e.q, ff.q);
-            let demand_sq = u_d * u_d + uq_free * uq_free;
-            let limited = demand_sq > u_max * u_max;
-            if fw_active {
-                self.fw.update(demand_sq, u_max, frame.omega, self.id_base);
-            }
+            let limited = u_d * u_d + uq_free * uq_free > u_max * u_max;
             let q_max = if limited {
                 sqrt(u_max * u_max - u_d * u_d)
             } else {
                 u_max
             };
             let u_q = self.pi_q.step(e.q, ff.q, -q_max, q_max);
+            if fw_active {
+                // The loops' steady-state voltage: integrators plus feed-forward, without the
+                // proportional parts' transients (module `fieldweak`).
+                let v = Dq {
+                    d: self.pi_d.integrator() + ff.d,
+                    q: self.pi_q.integrator() + ff.q,
+                };
+                self.fw
+                    .update(v.norm_squared(), u_max, frame.omega, self.id_base);
+            }
             (Dq { d: u_d, q: u_q }, limited)
         } else {
             self.held_voltage(plan.reframe_from, frame, u_max)
@@ -671,14 +678,19 @@ impl Foc {
 
     /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the
     /// torque command as a surface-equivalent current, `r.d` a hand-over's fading d
-    /// current): d from MTPA (one fixed-point step from the last q reference) plus the
+    /// current): d from MTPA (one fixed-point step from the last MTPA point) plus the
     /// field-weakening correction, limited to `[-max_negative_id, current_limit_a]`; q from
     /// the torque with that d; then the current circle, cutting q first.
     #[inline(never)]
     fn shape_refs(&mut self, r: Dq) -> Dq {
         let lim = self.cfg.current_limit_a;
+        // The MTPA point of the torque command alone (one fixed-point step from the last
+        // one): field weakening and the current circle stay out of the iteration, which
+        // they would turn into an oscillation.
         let id_base = if self.mtpa_on {
-            r.d + self.mtpa.id_for_iq(self.iq_last)
+            let m = self.mtpa.step(r.q, self.iq_last, 0.0);
+            self.iq_last = m.q;
+            r.d + m.d
         } else {
             r.d
         };
@@ -696,7 +708,6 @@ impl Foc {
             let m = sqrt(q_max_sq);
             crate::pi::limit(q, -m, m)
         };
-        self.iq_last = q;
         Dq { d, q }
     }
 

@@ -3,9 +3,10 @@
 //!
 //! # Law
 //!
-//! Each tick in closed loop, after the current loops, with `|u|` the magnitude of the voltage
-//! they asked for **before** the voltage limit (`sqrt(u_d^2 + u_q,free^2)`), `u_max =
-//! max_modulation u_dc / sqrt(3)` and `k = voltage_margin`:
+//! Each tick in closed loop, after the current loops, with `|u|` the magnitude of their
+//! steady-state voltage, integrators plus feed-forward (`u_I = I_dq + ff_dq`, the
+//! proportional parts left out), `u_max = max_modulation u_dc / sqrt(3)` and `k =
+//! voltage_margin`:
 //!
 //! ```text
 //! e      = k u_max - |u|                                    (V; negative: too little headroom)
@@ -16,6 +17,13 @@
 //! and the next tick's d reference is `i_d,base + i_fw` (`i_d,base`: the MTPA d current plus
 //! the fading d current of a hand-over). Why these choices:
 //!
+//! - **The loops' integrators plus feed-forward, not their whole output.** A current step
+//!   asks for a large voltage through the proportional gains for a few periods (a torque
+//!   step of a low-inductance motor asks for many times `u_max`); fed back, it wound the
+//!   field-weakening integrator down at standstill, and the current circle then starved the
+//!   q axis. The integrators carry what the motor needs in steady state (parameter errors
+//!   included); at the voltage limit the q integrator sits at its limit, so a real
+//!   shortage still shows.
 //! - **Voltage feedback, integral only.** At high speed the q voltage dominates,
 //!   `u_q ~ w (psi_f + Ld i_d)`, so `d|u| / d i_d ~ w Ld`: dividing the integrator gain by
 //!   `w Ld` makes the loop first order with crossover `bw` (`bandwidth_rad_s`) at every
@@ -82,7 +90,7 @@ impl FieldWeakening {
         self.i_fw
     }
 
-    /// One tick: `u_sq` the squared magnitude of the voltage the current loops asked for, V^2,
+    /// One tick: `u_sq` the squared magnitude of the current loops' steady-state voltage, V^2,
     /// `u_max` their voltage limit, V, `omega` the frame speed, rad/s, `id_base` the d
     /// reference without the correction, A. A NaN leaves the correction as it is.
     #[inline]
