@@ -542,3 +542,124 @@ fn bad_field_weakening_settings_are_refused() {
     c.field_weakening.voltage_margin = 0.0;
     assert!(c.validate().is_err());
 }
+
+/// Sensorless start-up, hand-over and reversal of both IPMSMs (the salient observer of
+/// ekf-core, MTPA on) from a rotor at rest at 1 rad, with a friction load.
+#[test]
+fn salient_motors_start_hand_over_and_reverse_sensorless() {
+    for d in drives() {
+        let mut cfg = FocConfig::new(d.m, d.ts, d.u_dc).with_delay(ComputationDelay::None);
+        let lim = rated_current(&d.m);
+        cfg.current_limit_a = lim;
+        cfg.over_current_a = 2.0 * lim;
+        cfg = cfg.with_inertia(d.j as f32);
+        let mut foc = Foc::new(&cfg).unwrap();
+        let mut plant = Plant::new(&d.m, d.j);
+        plant.x[3] = 1.0;
+        let w_b = base_speed_mech(&d);
+        let kt = 1.5 * d.m.pole_pairs as f64 * d.m.psi_f_wb as f64;
+        // Viscous friction: 10 % of k_t I_lim at base speed.
+        let b = 0.1 * kt * lim as f64 / w_b;
+        foc.set_speed_ref_mech_rad_s((0.5 * w_b) as f32).unwrap();
+        foc.start().unwrap();
+        let ts = d.ts as f64;
+        let mut states = vec![];
+        let (mut err_fwd, mut err_rev, mut n_fwd, mut n_rev) = (0.0, 0.0, 0, 0);
+        let mut worst_angle = 0.0f64;
+        let t_end = 4.0;
+        let n = (t_end / ts) as usize;
+        for k in 0..n {
+            let t = k as f64 * ts;
+            if (t - 2.0).abs() < 0.5 * ts {
+                foc.set_speed_ref_mech_rad_s((-0.3 * w_b) as f32).unwrap();
+            }
+            let [ia, ib] = plant.i_ab();
+            let out = foc.tick(&TickInput::alpha_beta(ia as f32, ib as f32, d.u_dc));
+            assert!(
+                out.fault.is_none(),
+                "{}: {:?} at {t}",
+                d.name,
+                foc.fault_info()
+            );
+            if states.last() != Some(&out.state) {
+                states.push(out.state);
+            }
+            let w = plant.x[2];
+            if (1.5..2.0).contains(&t) {
+                err_fwd += (w / (0.5 * w_b) - 1.0).abs();
+                n_fwd += 1;
+            }
+            if (3.5..4.0).contains(&t) {
+                err_rev += (w / (-0.3 * w_b) - 1.0).abs();
+                n_rev += 1;
+            }
+            if out.state == State::ClosedLoop && (1.5..2.0).contains(&t) {
+                let e = (out.telemetry.estimate.theta_rad as f64 - plant.x[3]
+                    + 3.0 * std::f64::consts::PI)
+                    .rem_euclid(std::f64::consts::TAU)
+                    - std::f64::consts::PI;
+                worst_angle = worst_angle.max(e.abs().to_degrees());
+            }
+            let u = duties_to_alpha_beta(out.duties, d.u_dc);
+            plant.step([u.alpha as f64, u.beta as f64], ts, b * w);
+        }
+        let (e1, e2) = (err_fwd / n_fwd as f64, err_rev / n_rev as f64);
+        println!(
+            "{}: states {states:?}; mean |speed error| {:.3} % at 0.5x base, {:.3} % after the reversal to -0.3x base; observer angle error in closed loop up to {worst_angle:.4} deg",
+            d.name,
+            100.0 * e1,
+            100.0 * e2
+        );
+        let visits = |s: State| states.iter().filter(|x| **x == s).count();
+        assert!(visits(State::Handover) >= 2, "{}: {states:?}", d.name);
+        assert_eq!(states.last(), Some(&State::ClosedLoop), "{}", d.name);
+        assert!(e1 < 0.01 && e2 < 0.01, "{}: {e1} {e2}", d.name);
+        assert!(worst_angle < 5.0, "{}: {worst_angle}", d.name);
+    }
+}
+
+/// Field weakening to twice base speed sensorless (start-up on the observer, then the same
+/// load as the sensored test), the observer's angle checked at 2x base.
+#[test]
+fn field_weakening_sensorless_to_twice_base_speed() {
+    for d in drives() {
+        let cfg = config(&d, Some(2.2)).with_mode(Mode::Sensorless);
+        let law = Mtpa::new(&d.m);
+        let kt = 1.5 * d.m.pole_pairs as f64 * d.m.psi_f_wb as f64;
+        let t_rated = kt * law.torque_current_at_magnitude(cfg.current_limit_a) as f64;
+        let w_b = base_speed_mech(&d);
+        // Constant power above base speed, rising linearly with speed below (no break-away
+        // torque for the I/f start).
+        let p_load = 0.25 * t_rated * 2.0 * w_b;
+        let load =
+            move |w: f64| p_load / w_b * (w / w_b).clamp(-1.0, 1.0) * (w_b / w.abs().max(w_b));
+        let mut foc = Foc::new(&cfg).unwrap();
+        let mut plant = Plant::new(&d.m, d.j);
+        foc.set_speed_ref_mech_rad_s((2.0 * w_b) as f32).unwrap();
+        foc.start().unwrap();
+        let rec = run(&mut foc, &mut plant, &d, 3.5, 0.3, &load);
+        let est = foc.observer().estimate();
+        // The estimate is of the last tick's sample time, one period before the plant's state.
+        let theta_k = plant.x[3] - plant.omega_e() * d.ts as f64;
+        let e = (est.theta_rad as f64 - theta_k + 3.0 * std::f64::consts::PI)
+            .rem_euclid(std::f64::consts::TAU)
+            - std::f64::consts::PI;
+        println!(
+            "{} sensorless at 2x base: speed/ref {:.5}, max |i|/limit {:.4}, max |u|/u_max {:.4}, \
+             mean {:.4}, i_dq_ref ({:.2}, {:.2}) A, final observer angle error {:.3} deg",
+            d.name,
+            rec.speed_ratio,
+            rec.max_i_ratio,
+            rec.max_u_ratio,
+            rec.mean_u_ratio,
+            rec.id_ref,
+            rec.iq_ref,
+            e.to_degrees()
+        );
+        assert_eq!(foc.state(), State::ClosedLoop);
+        assert!((rec.speed_ratio - 1.0).abs() < 0.01, "{}: {rec:?}", d.name);
+        assert!(rec.max_i_ratio <= 1.02, "{}: {rec:?}", d.name);
+        assert!(rec.max_u_ratio <= 1.0 + 1e-5, "{}: {rec:?}", d.name);
+        assert!(e.to_degrees().abs() < 0.5, "{}: {e}", d.name);
+    }
+}
