@@ -215,6 +215,7 @@ impl Plant {
 }
 
 /// A drive of the tests: motor, PWM period, bus voltage, inertia.
+#[derive(Clone, Copy)]
 struct Drive {
     name: &'static str,
     m: MotorParams<f32>,
@@ -547,8 +548,12 @@ fn bad_field_weakening_settings_are_refused() {
 /// ekf-core, MTPA on) from a rotor at rest at 1 rad, with a friction load.
 #[test]
 fn salient_motors_start_hand_over_and_reverse_sensorless() {
-    for d in drives() {
-        let mut cfg = FocConfig::new(d.m, d.ts, d.u_dc).with_delay(ComputationDelay::None);
+    for (d, delay) in drives()
+        .into_iter()
+        .flat_map(|d| [ComputationDelay::None, ComputationDelay::OnePeriod].map(|x| (d, x)))
+    {
+        let mut cfg = FocConfig::new(d.m, d.ts, d.u_dc).with_delay(delay);
+        let mut pending = [0.5f32; 3];
         let lim = rated_current(&d.m);
         cfg.current_limit_a = lim;
         cfg.over_current_a = 2.0 * lim;
@@ -600,12 +605,17 @@ fn salient_motors_start_hand_over_and_reverse_sensorless() {
                     - std::f64::consts::PI;
                 worst_angle = worst_angle.max(e.abs().to_degrees());
             }
-            let u = duties_to_alpha_beta(out.duties, d.u_dc);
+            // With the one-period delay the duties of tick k act over [t_k+1, t_k+2).
+            let duties = match delay {
+                ComputationDelay::None => out.duties,
+                ComputationDelay::OnePeriod => core::mem::replace(&mut pending, out.duties),
+            };
+            let u = duties_to_alpha_beta(duties, d.u_dc);
             plant.step([u.alpha as f64, u.beta as f64], ts, b * w);
         }
         let (e1, e2) = (err_fwd / n_fwd as f64, err_rev / n_rev as f64);
         println!(
-            "{}: states {states:?}; mean |speed error| {:.3} % at 0.5x base, {:.3} % after the reversal to -0.3x base; observer angle error in closed loop up to {worst_angle:.4} deg",
+            "{} ({delay:?}): states {states:?}; mean |speed error| {:.3} % at 0.5x base, {:.3} % after the reversal to -0.3x base; observer angle error in closed loop up to {worst_angle:.4} deg",
             d.name,
             100.0 * e1,
             100.0 * e2
