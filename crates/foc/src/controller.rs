@@ -94,13 +94,14 @@
 //! The speed loop's output is a torque command, `i_T = T* / k_t` (module [`crate::mtpa`]).
 //! A surface motor without field weakening takes it as the q reference unchanged (the plan's
 //! references go to the loops as they are, the surface behaviour before salient motors).
-//! Otherwise (`shape_refs`): `i_d = i_d,plan + i_d,mtpa + i_fw` (`i_d,mtpa`: one step of
+//! Otherwise (`shaped_refs`): `i_d = i_d,plan + i_d,mtpa + i_fw` (`i_d,mtpa`: one step of
 //! the MTPA iteration for `i_T` from the last tick's MTPA point), limited to
 //! `[-max_negative_id, current_limit_a]`; `i_q = psi_f i_T / (psi_f + (Ld - Lq) i_d)`;
-//! `|i_q| <= sqrt(current_limit_a^2 - i_d^2)` (the current circle, q cut first). After the
-//! current loops the field-weakening integrator (module [`crate::fieldweak`]) updates `i_fw`
-//! from the voltage they asked for. Under align and I/f the plan's references are used and
-//! `i_fw` is reset.
+//! `|i_q| <= sqrt(current_limit_a^2 - i_d^2)` (the current circle, q cut first). Before
+//! that the field-weakening integrator (module [`crate::fieldweak`]) updates `i_fw` from the
+//! loops' steady-state voltage (their integrators, as the last tick left them, plus this
+//! tick's feed-forward). Under align and I/f the plan's references are used and `i_fw` is
+//! reset. The surface path without field weakening costs one flag test.
 //!
 //! `w` is the speed of the control frame: the observer's (or sensor's) speed in closed
 //! loop, the ramp speed under I/f, where the back-EMF feed-forward is off (the rotor angle
@@ -584,20 +585,6 @@ impl Foc {
             }
         }
 
-        // Current references: the plan's, or (salient motor, field weakening) shaped in
-        // closed loop by MTPA, the torque conversion, field weakening and the current circle.
-        let (i_ref, fw_active) = if self.shaping {
-            if plan.frame.emf {
-                (self.shape_refs(plan.i_ref), self.fw_on)
-            } else {
-                self.fw.reset();
-                self.iq_last = 0.0;
-                (plan.i_ref, false)
-            }
-        } else {
-            (plan.i_ref, false)
-        };
-
         // Current loops in the control frame.
         let frame = plan.frame;
         let (s, c) = sin_cos(frame.theta);
@@ -608,6 +595,13 @@ impl Foc {
         }
         let u_dc = input.u_dc_v;
         let u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        // Current references: the plan's, or (salient motor, field weakening) shaped by
+        // MTPA, the torque conversion, field weakening and the current circle in closed loop.
+        let i_ref = if self.shaping {
+            self.shaped_refs(plan, ff, u_max, sample_ok)
+        } else {
+            plan.i_ref
+        };
         let (u_dq, limited) = if sample_ok {
             let e = i_ref - i_dq;
             let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
@@ -619,16 +613,6 @@ impl Foc {
                 u_max
             };
             let u_q = self.pi_q.step(e.q, ff.q, -q_max, q_max);
-            if fw_active {
-                // The loops' steady-state voltage: integrators plus feed-forward, without the
-                // proportional parts' transients (module `fieldweak`).
-                let v = Dq {
-                    d: self.pi_d.integrator() + ff.d,
-                    q: self.pi_q.integrator() + ff.q,
-                };
-                self.fw
-                    .update(v.norm_squared(), u_max, frame.omega, self.id_base);
-            }
             (Dq { d: u_d, q: u_q }, limited)
         } else {
             self.held_voltage(plan.reframe_from, frame, u_max)
@@ -681,8 +665,27 @@ impl Foc {
     /// current): d from MTPA (one fixed-point step from the last MTPA point) plus the
     /// field-weakening correction, limited to `[-max_negative_id, current_limit_a]`; q from
     /// the torque with that d; then the current circle, cutting q first.
+    ///
+    /// First the field-weakening integrator (module [`crate::fieldweak`]) takes the loops'
+    /// steady-state voltage, their integrators (as the last tick left them) plus this tick's
+    /// feed-forward `ff`, against `u_max` (only on an accepted sample). Out of the observer's
+    /// frame (align, I/f) the plan's references are returned and the correction is reset.
     #[inline(never)]
-    fn shape_refs(&mut self, r: Dq) -> Dq {
+    fn shaped_refs(&mut self, plan: Plan, ff: Dq, u_max: f32, sample_ok: bool) -> Dq {
+        if !plan.frame.emf {
+            self.fw.reset();
+            self.iq_last = 0.0;
+            return plan.i_ref;
+        }
+        if self.fw_on && sample_ok {
+            let v = Dq {
+                d: self.pi_d.integrator() + ff.d,
+                q: self.pi_q.integrator() + ff.q,
+            };
+            self.fw
+                .update(v.norm_squared(), u_max, plan.frame.omega, self.id_base);
+        }
+        let r = plan.i_ref;
         let lim = self.cfg.current_limit_a;
         // The MTPA point of the torque command alone (one fixed-point step from the last
         // one): field weakening and the current circle stay out of the iteration, which

@@ -498,7 +498,8 @@ fn bad_field_weakening_settings_are_refused() {
     let base =
         FocConfig::new(MotorParams::industrial_ipm(), 100e-6, 540.0).with_field_weakening(2.0);
     assert_eq!(base.validate(), Ok(()));
-    let cases: [(fn(&mut FocConfig), ConfigError); 8] = [
+    type Case = (fn(&mut FocConfig), ConfigError);
+    let cases: [Case; 8] = [
         (
             |c| c.field_weakening.voltage_margin = 0.3,
             ConfigError::OutOfRange(Field::FwVoltageMargin),
