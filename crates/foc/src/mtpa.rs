@@ -51,7 +51,7 @@
 //! speed loop's rate (every `speed_divider` ticks), so it converges within a few ticks.
 //! Every iterate lies on the MTPA curve, so the torque per ampere is optimal even before
 //! convergence; only the torque itself settles.
-//! [`currents_for_torque`] iterates to convergence from scratch (tests, tools).
+//! [`Mtpa::currents_for_torque`] iterates to convergence from scratch (tests, tools).
 
 use ekf_core::MotorParams;
 
