@@ -30,7 +30,9 @@
 //! halves of the default step) and `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
 //! `ekf_core::trig`), and `foc_tick` (the full controller tick in sensorless closed loop, with
 //! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states; see
-//! [`drive`]), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
+//! [`drive`]), `foc_tick_ipm` (the tick on an interior PMSM in closed loop with MTPA and
+//! field weakening engaged, at 1.5-2x base speed) and `foc_tick_ipm_mtpa` (the same motor
+//! below base speed), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
 //! sequence; its line gives the **worst** tick, `identify_tick_median` the median; see
 //! [`identify`]). To add one, call [`meter::Clock::measure`] with its name.
 #![no_std]
@@ -209,6 +211,8 @@ fn run() -> Result<(), &'static str> {
 
     // The full controller tick (foc), sensorless closed loop on an on-target plant.
     drive::run(&clock)?;
+    // The same for an interior PMSM with MTPA and field weakening.
+    drive::run_ipm(&clock)?;
 
     // The self-commissioning sequence (foc::identify): its worst tick.
     identify::run(&clock)?;

@@ -13,7 +13,7 @@
 //! | field | default | why |
 //! |---|---|---|
 //! | `current_bw_rad_s` | `0.1 pi / Ts` (a twentieth of the PWM frequency) | phase margin about 63 deg with the 1.5 `Ts` delay (computation + PWM hold) |
-//! | current PI | `Kp = Ls bw`, `Ki = Rs bw` | pole-zero cancellation: each decoupled axis becomes first order with bandwidth `bw` |
+//! | current PI | d: `Kp = Ld bw`, q: `Kp = Lq bw`; `Ki = Rs bw` | pole-zero cancellation: each decoupled axis becomes first order with bandwidth `bw` (per axis on a salient motor) |
 //! | `speed_bw_rad_s` | `current_bw / 30` | well inside the current loop and the observer's speed bandwidth |
 //! | `inertia_kg_m2` | `k_t / 1000` (an assumption: 1000 rad/s^2 mech. per ampere) | a guess within a factor of 6 of the three reference motors; set the real value |
 //! | speed PI | `Kp = bw J / k_t` (A per rad/s mech.), `Ki = Kp bw / 4` | crossover `bw` on the rigid body `J s`, PI zero two octaves below |
@@ -21,7 +21,12 @@
 //! | `current_limit_a` | `0.25 I_c` | servo 5.1 A, industrial 3.8 A, drone 10 A |
 //! | `over_current_a` | `2 current_limit_a` | above transient overshoot |
 //! | `u_dc_min_v`, `u_dc_max_v` | `0.6 U`, `1.25 U` | |
-//! | `max_speed_rad_s` | `0.95 U / (sqrt(3) psi_f)` | back-EMF below the linear voltage limit (no field weakening) |
+//! | `max_speed_rad_s` | `0.95 U / (sqrt(3) psi_f)` | back-EMF below the linear voltage limit (no field weakening; [`FocConfig::with_field_weakening`] raises it) |
+//! | `mtpa` | `true` | salient motors run on the MTPA curve (module [`mtpa`](crate::mtpa)); no effect on a surface motor |
+//! | `field_weakening.enabled` | `false` | off unless asked for: above base speed a trip leaves the back-EMF, which then exceeds the bus, to the bridge's diodes (an uncontrolled generator): a decision for the drive's designer |
+//! | `field_weakening.voltage_margin` | 0.95 | the loop holds `|u| = 0.95 u_max`: headroom for the current loops (module [`fieldweak`](crate::fieldweak)) |
+//! | `field_weakening.bandwidth_rad_s` | `current_bw / 10` | well inside the current loop, three times the speed loop's crossover |
+//! | `field_weakening.max_negative_id_a` | `None`: `min(current_limit_a, psi_f / Ld)` | beyond the characteristic current a negative d current weakens no further |
 //! | `speed_slew_rad_s2` | `0.5 p k_t current_limit / J` | half the acceleration the current limit gives (recomputed by [`FocConfig::with_inertia`]) |
 //! | `max_modulation` | `1.0` | the current loop uses the whole inscribed circle `u_dc / sqrt(3)` |
 //! | `dead_time_s` | `0` (compensation off) | a property of the bridge: set it to the gate driver's dead time |
@@ -230,6 +235,22 @@ impl SampleCheckConfig {
     }
 }
 
+/// Field weakening (module [`fieldweak`](crate::fieldweak) gives the law and the reasons).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FieldWeakeningConfig {
+    /// Whether the loop runs (closed loop only). Off by default.
+    pub enabled: bool,
+    /// The voltage magnitude the loop holds above base speed, as a fraction of the current
+    /// loop's limit `max_modulation u_dc / sqrt(3)`; in `[0.5, 1]`.
+    pub voltage_margin: f32,
+    /// Crossover of the loop, rad/s (the integrator gain is `bw / (Ld |w|)`); positive, at
+    /// most the current-loop bandwidth.
+    pub bandwidth_rad_s: f32,
+    /// Largest negative d current, A (a positive number, at most `current_limit_a`). `None`:
+    /// `min(current_limit_a, psi_f / Ld)` ([`FocConfig::max_negative_id`]).
+    pub max_negative_id_a: Option<f32>,
+}
+
 /// Everything the controller needs (module docs give the defaults).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FocConfig {
@@ -282,6 +303,12 @@ pub struct FocConfig {
     /// offset is proportional to the phase current). `None`: 2 % of `current_limit_a`, taken
     /// when the controller is built ([`dead_time_band`](Self::dead_time_band)).
     pub dead_time_band_a: Option<f32>,
+    /// Salient motors: d current from the MTPA law (module [`mtpa`](crate::mtpa)); `false`:
+    /// `i_d = 0` (the torque conversion still counts the reluctance torque). No effect on a
+    /// surface motor.
+    pub mtpa: bool,
+    /// Field weakening above base speed.
+    pub field_weakening: FieldWeakeningConfig,
     /// Start-up sequence.
     pub startup: StartupConfig,
     /// Observer health monitoring.
@@ -332,6 +359,13 @@ impl FocConfig {
             max_modulation: 1.0,
             dead_time_s: 0.0,
             dead_time_band_a: None,
+            mtpa: true,
+            field_weakening: FieldWeakeningConfig {
+                enabled: false,
+                voltage_margin: 0.95,
+                bandwidth_rad_s: 0.1 * current_bw_rad_s,
+                max_negative_id_a: None,
+            },
             startup: StartupConfig {
                 align_current_a: if_current_a,
                 align_time_s: 0.2,
@@ -378,12 +412,65 @@ impl FocConfig {
         torque_constant(&self.motor)
     }
 
-    /// Current-loop gains: `current_gains`, or `Kp = Ls bw` (V/A), `Ki = Rs bw` (V/(A s)).
+    /// q-axis current-loop gains: `current_gains`, or `Kp = Lq bw` (V/A), `Ki = Rs bw`
+    /// (V/(A s)). The d axis: [`current_pi_gains_d`](Self::current_pi_gains_d).
     pub fn current_pi_gains(&self) -> PiGains {
         self.current_gains.unwrap_or(PiGains {
             kp: self.motor.lq_h * self.current_bw_rad_s,
             ki: self.motor.rs_ohm * self.current_bw_rad_s,
         })
+    }
+
+    /// d-axis current-loop gains: `current_gains`, or `Kp = Ld bw` (V/A), `Ki = Rs bw`
+    /// (V/(A s)); the same as the q axis' on a surface motor.
+    pub fn current_pi_gains_d(&self) -> PiGains {
+        self.current_gains.unwrap_or(PiGains {
+            kp: self.motor.ld_h * self.current_bw_rad_s,
+            ki: self.motor.rs_ohm * self.current_bw_rad_s,
+        })
+    }
+
+    /// Turns field weakening on and multiplies `max_speed_rad_s` by `speed_ratio` (from the
+    /// default, the base speed `0.95 U / (sqrt(3) psi_f)`, to `speed_ratio` times it).
+    pub fn with_field_weakening(mut self, speed_ratio: f32) -> Self {
+        self.field_weakening.enabled = true;
+        self.max_speed_rad_s *= speed_ratio;
+        self
+    }
+
+    /// The largest negative d current of field weakening, A:
+    /// `field_weakening.max_negative_id_a`, or `min(current_limit_a, psi_f / Ld)`.
+    pub fn max_negative_id(&self) -> f32 {
+        self.field_weakening.max_negative_id_a.unwrap_or(min_f32(
+            self.current_limit_a,
+            self.motor.psi_f_wb / self.motor.ld_h,
+        ))
+    }
+
+    /// The speed loop's output limit: the torque command (surface-equivalent current `T /
+    /// k_t`, module [`mtpa`](crate::mtpa)) that `current_limit_a` makes on the MTPA curve (or
+    /// with `i_d = 0` when `mtpa` is off), A. `current_limit_a` itself for a surface motor.
+    pub fn torque_current_limit_a(&self) -> f32 {
+        if !self.motor.is_salient() {
+            return self.current_limit_a;
+        }
+        let m = crate::mtpa::Mtpa::new(&self.motor);
+        if self.mtpa {
+            m.torque_current_at_magnitude(self.current_limit_a)
+        } else {
+            self.current_limit_a
+        }
+    }
+
+    /// The torque command (surface-equivalent current, A) of the current vector `(i_d, i_q)`:
+    /// `(psi_f + (Ld - Lq) i_d) i_q / psi_f`; `i_q` itself for a surface motor.
+    pub fn torque_current_of(&self, i_d: f32, i_q: f32) -> f32 {
+        if self.motor.is_salient() {
+            crate::mtpa::Mtpa::new(&self.motor)
+                .torque_current(crate::transforms::Dq { d: i_d, q: i_q })
+        } else {
+            i_q
+        }
     }
 
     /// The linear band of the dead-time compensation's sign, A: `dead_time_band_a`, or 2 %
@@ -395,11 +482,11 @@ impl FocConfig {
 
     /// The largest plausible change of the current vector per period, A:
     /// `samples.max_step_a`, or `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1
-    /// over_current_a` ([`SampleCheckConfig`]).
+    /// over_current_a` ([`SampleCheckConfig`]; `Ls` the smaller of `Ld` and `Lq`).
     pub fn max_current_step(&self) -> f32 {
         self.samples.max_step_a.unwrap_or(
             (self.u_dc_max_v + self.motor.rs_ohm * self.over_current_a) * self.ts_s
-                / self.motor.lq_h
+                / min_f32(self.motor.ld_h, self.motor.lq_h)
                 + 0.1 * self.over_current_a,
         )
     }
@@ -427,7 +514,7 @@ impl FocConfig {
         positive(self.ts_s, F::Ts)?;
         in_range(self.angle_advance_periods, 0.0, 4.0, F::AngleAdvance)?;
         positive(self.current_bw_rad_s, F::CurrentBandwidth)?;
-        if !self.current_pi_gains().is_valid() {
+        if !(self.current_pi_gains().is_valid() && self.current_pi_gains_d().is_valid()) {
             return Err(ConfigError::OutOfRange(F::CurrentGains));
         }
         positive(self.speed_bw_rad_s, F::SpeedBandwidth)?;
@@ -461,6 +548,16 @@ impl FocConfig {
             return Err(ConfigError::OutOfRange(F::DeadTime));
         }
         positive(self.dead_time_band(), F::DeadTimeBand)?;
+        let fw = &self.field_weakening;
+        in_range(fw.voltage_margin, 0.5, 1.0, F::FwVoltageMargin)?;
+        positive(fw.bandwidth_rad_s, F::FwBandwidth)?;
+        if fw.bandwidth_rad_s > self.current_bw_rad_s {
+            return Err(ConfigError::OutOfRange(F::FwBandwidth));
+        }
+        positive(self.max_negative_id(), F::FwMaxNegativeId)?;
+        if self.max_negative_id() > self.current_limit_a {
+            return Err(ConfigError::OutOfRange(F::FwMaxNegativeId));
+        }
         let s = &self.startup;
         positive(s.align_current_a, F::AlignCurrent)?;
         if s.align_current_a > self.current_limit_a {
@@ -524,6 +621,11 @@ impl FocConfig {
         }
         Ok(())
     }
+}
+
+/// `min(a, b)` without `f32::min` (whose NaN handling hides a NaN in `a`).
+fn min_f32(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
 }
 
 fn torque_constant(motor: &MotorParams<f32>) -> f32 {
@@ -593,6 +695,12 @@ pub enum Field {
     MissingTripTicks,
     OverCurrentTripTicks,
     StuckAngle,
+    /// `field_weakening.voltage_margin`.
+    FwVoltageMargin,
+    /// `field_weakening.bandwidth_rad_s`.
+    FwBandwidth,
+    /// `field_weakening.max_negative_id_a` (or its default).
+    FwMaxNegativeId,
 }
 
 /// Why a [`FocConfig`] was refused.

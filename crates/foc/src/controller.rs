@@ -80,11 +80,28 @@
 //!
 //! ```text
 //! e   = i_dq_ref - i_dq
-//! u_d = PI_d(e_d) - w Ls i_q                      (cross-coupling decoupling, measured i)
-//! u_q = PI_q(e_q) + w Ls i_d + w psi_f            (decoupling, back-EMF feed-forward with the
+//! u_d = PI_d(e_d) - w Lq i_q                      (cross-coupling decoupling, measured i)
+//! u_q = PI_q(e_q) + w Ld i_d + w psi_f            (decoupling, back-EMF feed-forward with the
 //!                                                  observer's tracked psi_f)
 //! |u_dq| <= max_modulation * u_dc / sqrt(3), d axis first, q gets the rest
 //! ```
+//!
+//! PI gains per axis: `Kp = Ld bw` on d, `Lq bw` on q (pole-zero cancellation of each
+//! axis; one and the same on a surface motor).
+//!
+//! # Current references in closed loop
+//!
+//! The speed loop's output is a torque command, `i_T = T* / k_t` (module [`crate::mtpa`]).
+//! A surface motor without field weakening takes it as the q reference unchanged (the plan's
+//! references go to the loops as they are, the surface behaviour before salient motors).
+//! Otherwise (`shaped_refs`): `i_d = i_d,plan + i_d,mtpa + i_fw` (`i_d,mtpa`: one step of
+//! the MTPA iteration for `i_T` from the last tick's MTPA point), limited to
+//! `[-max_negative_id, current_limit_a]`; `i_q = psi_f i_T / (psi_f + (Ld - Lq) i_d)`;
+//! `|i_q| <= sqrt(current_limit_a^2 - i_d^2)` (the current circle, q cut first). Before
+//! that the field-weakening integrator (module [`crate::fieldweak`]) updates `i_fw` from the
+//! loops' steady-state voltage (their integrators, as the last tick left them, plus this
+//! tick's feed-forward). Under align and I/f the plan's references are used and `i_fw` is
+//! reset. The surface path without field weakening costs one flag test.
 //!
 //! `w` is the speed of the control frame: the observer's (or sensor's) speed in closed
 //! loop, the ramp speed under I/f, where the back-EMF feed-forward is off (the rotor angle
@@ -104,7 +121,9 @@ use ekf_core::{Estimate, PmsmObserver};
 use crate::config::{ComputationDelay, ConfigError, FocConfig, Mode};
 use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
+use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
+use crate::mtpa::Mtpa;
 use crate::pi::Pi;
 use crate::startup::{Frame, Inputs, Plan, Seed, Sequencer, State, Stop};
 use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
@@ -259,6 +278,25 @@ pub struct Foc {
     observer: PmsmObserver<f32>,
     pi_d: Pi,
     pi_q: Pi,
+    /// MTPA law and torque conversion (salient motors).
+    mtpa: Mtpa,
+    /// Field-weakening loop.
+    fw: FieldWeakening,
+    /// The closed-loop current references are shaped (salient motor or field weakening on):
+    /// otherwise the speed loop's output is the q reference as it is.
+    shaping: bool,
+    /// `Ld != Lq`: torque conversion with reluctance torque.
+    salient: bool,
+    /// Salient and `cfg.mtpa`.
+    mtpa_on: bool,
+    /// `cfg.field_weakening.enabled`.
+    fw_on: bool,
+    /// Largest negative d current, A.
+    max_neg_id: f32,
+    /// The q current of the last MTPA point (warm start of the MTPA iteration), A.
+    iq_last: f32,
+    /// The last shaped d reference without the field-weakening correction, A.
+    id_base: f32,
     /// The state machine with the speed loop and the health monitor.
     seq: Sequencer,
     // State.
@@ -330,8 +368,24 @@ impl Foc {
             advance_s: cfg.angle_advance_periods * ts,
             dead_time: DeadTimeCompensation::new(cfg.dead_time_s, ts, cfg.dead_time_band()),
             observer,
-            pi_d: Pi::new(cfg.current_pi_gains(), ts),
+            pi_d: Pi::new(cfg.current_pi_gains_d(), ts),
             pi_q: Pi::new(cfg.current_pi_gains(), ts),
+            mtpa: Mtpa::new(&cfg.motor),
+            fw: FieldWeakening::new(
+                cfg.field_weakening.voltage_margin,
+                cfg.field_weakening.bandwidth_rad_s,
+                ts,
+                cfg.motor.ld_h,
+                cfg.startup.handover_speed_rad_s,
+                cfg.max_negative_id(),
+            ),
+            shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled,
+            salient: cfg.motor.is_salient(),
+            mtpa_on: cfg.motor.is_salient() && cfg.mtpa,
+            fw_on: cfg.field_weakening.enabled,
+            max_neg_id: cfg.max_negative_id(),
+            iq_last: 0.0,
+            id_base: 0.0,
             seq: Sequencer::new(cfg),
             fault: None,
             tick_count: 0,
@@ -541,8 +595,15 @@ impl Foc {
         }
         let u_dc = input.u_dc_v;
         let u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        // Current references: the plan's, or (salient motor, field weakening) shaped by
+        // MTPA, the torque conversion, field weakening and the current circle in closed loop.
+        let i_ref = if self.shaping {
+            self.shaped_refs(plan, ff, u_max, sample_ok)
+        } else {
+            plan.i_ref
+        };
         let (u_dq, limited) = if sample_ok {
-            let e = plan.i_ref - i_dq;
+            let e = i_ref - i_dq;
             let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);
             let uq_free = self.pi_q.unlimited(e.q, ff.q);
             let limited = u_d * u_d + uq_free * uq_free > u_max * u_max;
@@ -568,7 +629,7 @@ impl Foc {
             // with the frame like the voltage: the reference, which the loops will have
             // reached (and which carries no sensor noise), or the measured vector while the
             // voltage limit keeps them off it.
-            let i = if limited { i_dq } else { plan.i_ref };
+            let i = if limited { i_dq } else { i_ref };
             let i_pred = i.to_alpha_beta(s2, c2).to_abc();
             let (d, _) = modulate_duties(u_ab, u_dc);
             let comp = self.dead_time.apply(d, i_pred);
@@ -586,7 +647,7 @@ impl Foc {
             fault: None,
             telemetry: Telemetry {
                 i_dq,
-                i_dq_ref: plan.i_ref,
+                i_dq_ref: i_ref,
                 u_dq,
                 u_ab: applied,
                 theta_rad: frame.theta,
@@ -597,6 +658,60 @@ impl Foc {
                 sample_ok,
             },
         }
+    }
+
+    /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the
+    /// torque command as a surface-equivalent current, `r.d` a hand-over's fading d
+    /// current): d from MTPA (one fixed-point step from the last MTPA point) plus the
+    /// field-weakening correction, limited to `[-max_negative_id, current_limit_a]`; q from
+    /// the torque with that d; then the current circle, cutting q first.
+    ///
+    /// First the field-weakening integrator (module [`crate::fieldweak`]) takes the loops'
+    /// steady-state voltage, their integrators (as the last tick left them) plus this tick's
+    /// feed-forward `ff`, against `u_max` (only on an accepted sample). Out of the observer's
+    /// frame (align, I/f) the plan's references are returned and the correction is reset.
+    #[inline(never)]
+    fn shaped_refs(&mut self, plan: Plan, ff: Dq, u_max: f32, sample_ok: bool) -> Dq {
+        if !plan.frame.emf {
+            self.fw.reset();
+            self.iq_last = 0.0;
+            return plan.i_ref;
+        }
+        if self.fw_on && sample_ok {
+            let v = Dq {
+                d: self.pi_d.integrator() + ff.d,
+                q: self.pi_q.integrator() + ff.q,
+            };
+            self.fw
+                .update(v.norm_squared(), u_max, plan.frame.omega, self.id_base);
+        }
+        let r = plan.i_ref;
+        let lim = self.cfg.current_limit_a;
+        // The MTPA point of the torque command alone (one fixed-point step from the last
+        // one): field weakening and the current circle stay out of the iteration, which
+        // they would turn into an oscillation.
+        let id_base = if self.mtpa_on {
+            let m = self.mtpa.step(r.q, self.iq_last, 0.0);
+            self.iq_last = m.q;
+            r.d + m.d
+        } else {
+            r.d
+        };
+        self.id_base = id_base;
+        let d = crate::pi::limit(id_base + self.fw.id(), -self.max_neg_id, lim);
+        let q = if self.salient {
+            self.mtpa.iq_for_torque(r.q, d)
+        } else {
+            r.q
+        };
+        let q_max_sq = lim * lim - d * d;
+        let q = if at_most(q * q, q_max_sq) {
+            q
+        } else {
+            let m = sqrt(q_max_sq);
+            crate::pi::limit(q, -m, m)
+        };
+        Dq { d, q }
     }
 
     /// A phase reading repeated: accumulates the angle the current vector turned meanwhile
@@ -715,21 +830,22 @@ impl Foc {
 
     /// Decoupling and back-EMF feed-forward in `frame` for the measured currents `i`, with
     /// the observer's tracked flux linkage (the configured one when its parameter tracking is
-    /// off): `u_d = -w Ls i_q`, `u_q = w Ls i_d + w psi_f`. The tracked flux is the one that,
+    /// off): `u_d = -w Lq i_q`, `u_q = w Ld i_d + w psi_f`. The tracked flux is the one that,
     /// with the `Rs` the observer uses, explains the q-axis voltage, so a warm motor's EMF is
     /// fed forward as it is. The resistive drop is left to the PI integrators: a term
     /// `Rs i` on the measured currents would cancel the winding's own damping of the rotor's
     /// swing under I/f (a restart then failed to hand over in `tests/state_machine.rs`).
     fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
-        let wl = frame.omega * self.cfg.motor.lq_h;
+        let wlq = frame.omega * self.cfg.motor.lq_h;
+        let wld = frame.omega * self.cfg.motor.ld_h;
         let emf = if frame.emf {
             frame.omega * self.observer.parameters().0
         } else {
             0.0
         };
         Dq {
-            d: -wl * i.q,
-            q: wl * i.d + emf,
+            d: -wlq * i.q,
+            q: wld * i.d + emf,
         }
     }
 
@@ -819,6 +935,9 @@ impl Foc {
     fn reset_loops(&mut self) {
         self.pi_d.reset();
         self.pi_q.reset();
+        self.fw.reset();
+        self.iq_last = 0.0;
+        self.id_base = 0.0;
         self.u_hist = [AlphaBeta::default(); 2];
         self.u_dq_last = Dq::default();
         self.stuck_angle = [0.0; 2];

@@ -7,9 +7,11 @@ pub mod config;
 pub mod controller;
 pub mod deadtime;
 pub mod fault;
+pub mod fieldweak;
 pub mod hal;
 pub mod health;
 pub mod identify;
+pub mod mtpa;
 pub mod pi;
 pub mod startup;
 mod state;
@@ -18,19 +20,21 @@ pub mod transforms;
 pub mod trig;
 
 pub use config::{
-    ComputationDelay, ConfigError, Field, FocConfig, HealthConfig, Mode, ObserverLossPolicy,
-    SampleCheckConfig, StartupConfig,
+    ComputationDelay, ConfigError, Field, FieldWeakeningConfig, FocConfig, HealthConfig, Mode,
+    ObserverLossPolicy, SampleCheckConfig, StartupConfig,
 };
 pub use controller::{
     CommandError, Foc, PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput,
 };
 pub use deadtime::DeadTimeCompensation;
 pub use fault::{Fault, FaultInfo};
+pub use fieldweak::FieldWeakening;
 pub use health::{HealthReport, LossReason};
 pub use identify::{
     Identified, Identifier, IdentifyConfig, IdentifyConfigError, IdentifyError, IdentifyFailure,
     IdentifyOutput, IdentifyStep, identify_period,
 };
+pub use mtpa::Mtpa;
 pub use pi::{Pi, PiGains};
 pub use startup::State;
 pub use svpwm::{Modulation, SAFE_DUTIES, duties_to_alpha_beta, svpwm};

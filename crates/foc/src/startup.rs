@@ -590,7 +590,9 @@ impl Sequencer {
         };
         let step = rate * self.inv_pole_pairs * cfg.ts_s * f32::from(cfg.speed_divider);
         self.v.speed_ref_mech = slew(self.v.speed_ref_mech, target, step);
-        let lim = cfg.current_limit_a;
+        // A torque command (surface-equivalent current, module `mtpa`): `current_limit_a`
+        // for a surface motor.
+        let lim = cfg.torque_current_limit_a();
         let iq = self
             .speed_pi
             .step(self.v.speed_ref_mech - omega_mech, 0.0, -lim, lim);
@@ -692,7 +694,8 @@ impl Sequencer {
         }
         .rotate(s, c);
         let lim = cfg.current_limit_a;
-        let iq0 = limit(i0.q, -lim, lim);
+        // The torque of the ramp's vector as a torque command (`i0.q` on a surface motor).
+        let iq0 = limit(cfg.torque_current_of(i0.d, i0.q), -lim, lim);
         self.v.i_d0 = i0.d;
         self.v.i_q_ref = iq0;
         self.v.timer = 0;

@@ -1,6 +1,7 @@
 //! Property tests: whatever the inputs and commands, the duties are finite and in [0, 1], a
 //! disabled or faulted output is the safe state, and nothing panics (with and without
-//! dead-time compensation); arbitrary parameters are refused or run safely.
+//! dead-time compensation); arbitrary parameters are refused or run safely. Surface and
+//! salient motors alike (`industrial_ipm` with MTPA and field weakening, `traction_ipm`).
 //! `FUZZ_SECONDS=N` runs each target for `N` seconds instead of a fixed number of cases
 //! (`ekf-core/tests/support/fuzz_harness.rs`).
 
@@ -106,10 +107,27 @@ fn cmd() -> impl Strategy<Value = Cmd> {
     ]
 }
 
+/// The motors fuzzed: surface, interior with field weakening, strongly salient.
+fn motor_config(k: usize) -> FocConfig {
+    match k % 3 {
+        0 => FocConfig::new(MotorParams::servo(), 50e-6, 300.0),
+        1 => FocConfig::new(MotorParams::industrial_ipm(), 50e-6, 300.0).with_field_weakening(2.0),
+        _ => FocConfig::new(MotorParams::traction_ipm(), 50e-6, 300.0),
+    }
+}
+
 fn run(mode: Mode, delay: foc::ComputationDelay, dead_time_s: f32, cmds: &[Cmd]) {
-    let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0)
-        .with_mode(mode)
-        .with_delay(delay);
+    run_motor(0, mode, delay, dead_time_s, cmds);
+}
+
+fn run_motor(
+    motor: usize,
+    mode: Mode,
+    delay: foc::ComputationDelay,
+    dead_time_s: f32,
+    cmds: &[Cmd],
+) {
+    let mut cfg = motor_config(motor).with_mode(mode).with_delay(delay);
     cfg.dead_time_s = dead_time_s;
     let mut foc = Foc::new(&cfg).unwrap();
     for c in cmds {
@@ -173,6 +191,22 @@ fn tick_sequences_stay_safe() {
                 1.5e-6,
                 &cmds,
             );
+            // Salient motors: MTPA, field weakening (interior), both modes.
+            let k = cmds.len();
+            run_motor(
+                1 + k % 2,
+                Mode::Sensorless,
+                foc::ComputationDelay::OnePeriod,
+                0.0,
+                &cmds,
+            );
+            run_motor(
+                2 - k % 2,
+                Mode::Sensored,
+                foc::ComputationDelay::None,
+                0.0,
+                &cmds,
+            );
             let (r, t) = (
                 RUNNING.load(Ordering::Relaxed),
                 TICKS.load(Ordering::Relaxed),
@@ -199,8 +233,8 @@ fn running_controller_with_arbitrary_bits() {
         ),
         |bits| {
             // Started, then fed raw bit patterns in every field; restarted after each fault.
-            // Dead-time compensation on.
-            let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+            // Dead-time compensation on; surface or salient motor.
+            let mut cfg = motor_config(bits.len());
             cfg.dead_time_s = 1e-6;
             let mut foc = Foc::new(&cfg).unwrap();
             foc.set_speed_ref_mech_rad_s(100.0).unwrap();
@@ -237,7 +271,7 @@ fn param() -> impl Strategy<Value = Option<f32>> {
 /// Sets field `k` (of the list below) of `cfg` to `v` times its default (or to `v` itself
 /// for bit patterns and special values, which come as `absolute`).
 fn set_field(cfg: &mut FocConfig, k: usize, v: f32, absolute: bool) {
-    let f: &mut f32 = match k % 24 {
+    let f: &mut f32 = match k % FIELDS {
         0 => &mut cfg.motor.rs_ohm,
         1 => &mut cfg.motor.lq_h,
         2 => &mut cfg.motor.psi_f_wb,
@@ -261,10 +295,18 @@ fn set_field(cfg: &mut FocConfig, k: usize, v: f32, absolute: bool) {
         20 => &mut cfg.health.nis_limit,
         21 => &mut cfg.observer.ts_s,
         22 => &mut cfg.observer.motor.lq_h,
+        23 => &mut cfg.motor.ld_h,
+        24 => &mut cfg.observer.motor.ld_h,
+        25 => &mut cfg.field_weakening.voltage_margin,
+        26 => &mut cfg.field_weakening.bandwidth_rad_s,
+        27 => cfg.field_weakening.max_negative_id_a.get_or_insert(1.0),
         _ => &mut cfg.observer.angle_sigma_limit_rad,
     };
     *f = if absolute { v } else { *f * v };
 }
+
+/// Number of fields `set_field` reaches.
+const FIELDS: usize = 29;
 
 static CONFIGS_OK: AtomicUsize = AtomicUsize::new(0);
 static CONFIGS_REFUSED: AtomicUsize = AtomicUsize::new(0);
@@ -275,12 +317,13 @@ fn arbitrary_parameters_are_refused_or_run_safely() {
         "parameters",
         1024,
         (
-            proptest::collection::vec((0usize..24, param(), any::<bool>()), 1..4),
+            proptest::collection::vec((0usize..FIELDS, param(), any::<bool>()), 1..4),
             any::<u32>().prop_map(|p| p % 64),
             proptest::collection::vec(input(), 1..200),
+            0usize..3,
         ),
-        |(fields, pole_pairs, inputs)| {
-            let mut cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0);
+        |(fields, pole_pairs, inputs, motor)| {
+            let mut cfg = motor_config(motor);
             cfg.dead_time_s = 0.5e-6;
             for (k, v, absolute) in fields {
                 match v {
