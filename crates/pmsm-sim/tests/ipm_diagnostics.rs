@@ -211,6 +211,8 @@ struct Windowed {
     est: Box<dyn Observer>,
     window: (f64, f64),
     sums: (f64, f64, usize),
+    /// `(sum of the true speed (rpm), largest |i| (A))` over the window.
+    truth: (f64, f64),
 }
 
 impl Observer for Windowed {
@@ -228,6 +230,9 @@ impl SideObserver for Windowed {
             self.sums.0 += s.angle_error_deg;
             self.sums.1 += s.angle_error_deg * s.angle_error_deg;
             self.sums.2 += 1;
+            self.truth.0 += sample.truth.speed_rpm;
+            let [i_d, i_q] = sample.truth.i_dq_a;
+            self.truth.1 = self.truth.1.max(i_d.hypot(i_q));
         }
     }
 }
@@ -252,6 +257,7 @@ fn the_salient_baselines_bias_at_rated_load_is_a_gain_dependent_second_equilibri
             est: Box::new(FluxObserver::new(&cfg).unwrap_or_else(|e| panic!("{e:?}"))),
             window,
             sums: (0.0, 0.0, 0),
+            truth: (0.0, 0.0),
         }
     };
     let mut firmware = flux(FluxTiming::Firmware, 1.0);
@@ -282,6 +288,15 @@ fn the_salient_baselines_bias_at_rated_load_is_a_gain_dependent_second_equilibri
         "traction_ipm 100 %, rated load (ideal sensing): salient baseline mean / RMS \
          {fm:+.2} / {fr:.2} deg firmware timing (the suite's), {cm:+.2} / {cr:.2} deg centred"
     );
+    // The window is the rated point: 3000 rpm, the MTPA current of 15 N m (148 A) plus
+    // friction and ripple.
+    let rpm = firmware.truth.0 / firmware.sums.2 as f64;
+    println!(
+        "  rated point: mean speed {rpm:.1} rpm, largest |i| {:.1} A",
+        firmware.truth.1
+    );
+    assert!((rpm - 3000.0).abs() < 3.0, "{rpm}");
+    assert!(firmware.truth.1 > 148.0 && firmware.truth.1 < 152.0);
     for (k, w) in &gains {
         let (m, r) = stats(w);
         println!("  centred, observer gain x {k}: mean / RMS {m:+.2} / {r:.2} deg");
