@@ -20,6 +20,7 @@
 //!
 //! ```text
 //! speed PI:   e_w = w_ref - w_mech;  i_q_ref = Kp_w e_w + I_w,  clamped to +-I_max;  i_d_ref = 0
+//!             (surface motor; MTPA split for an interior one, below)
 //! Park:       i_d =  i_a cos th + i_b sin th,   i_q = -i_a sin th + i_b cos th   (th = th[k])
 //! current PI: u_d = Kp (i_d_ref - i_d) + I_d - w_e Lq i_q                 (decoupling)
 //!             u_q = Kp (i_q_ref - i_q) + I_q + w_e Ld i_d + w_e psi_f     (decoupling, EMF FF)
@@ -40,7 +41,19 @@
 //!   `t_k + 1.5 Ts`. The inverse Park transform uses the angle at that centre so that the
 //!   mean applied vector lies where the dq controller meant it
 //!   ([`ControllerConfig::delay_compensation`]).
-//! - No field weakening (`i_d_ref = 0`): scenarios keep the back-EMF below the voltage limit.
+//! - **Interior motors** (`Lq > Ld`): the speed loop's output is the current magnitude `|i|`
+//!   (signed), split on the maximum-torque-per-ampere line, `i_d_ref = MTPA(|i|)`
+//!   ([`MotorModel::mtpa_i_d_a`]), `i_q_ref = sign sqrt(i^2 - i_d_ref^2)`; a surface motor gets
+//!   `i_d_ref = 0`, `i_q_ref = i` as above. The current limit bounds `|i|`.
+//! - **Dead-time compensation** (off unless [`ControllerConfig::dead_time_s`] is set; the
+//!   scenario suite sets it, scenarios leave it off): each phase's duty gains
+//!   `sat(i_x / band) t_dead / Ts`, `i_x` the phase current of the reference current at the
+//!   angle of the application interval, `sat` linear within a band of
+//!   [`DEAD_TIME_BAND_FRACTION`] of the current limit; the controller reports the voltage of
+//!   the duties net of the compensation (`ControllerOutput::expected_u_ab_v`), which the
+//!   observers are fed, as foc does.
+//! - No field weakening: scenarios keep the voltage below the limit (rated points below base
+//!   speed).
 
 use core::f64::consts::PI;
 
@@ -48,7 +61,7 @@ use glam::DVec2;
 use serde::Serialize;
 
 use crate::plant::MotorModel;
-use crate::svpwm::{INV_SQRT3, inverse_park, park, svpwm};
+use crate::svpwm::{INV_SQRT3, duties_to_voltage, inverse_clarke, inverse_park, park, svpwm};
 
 /// The true rotor position and speed, given only to sensored controllers.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -109,12 +122,17 @@ pub trait DriveController {
     fn tick(&mut self, input: &ControllerInput) -> ControllerOutput;
 }
 
+/// Linear band of the dead-time compensation's sign, fraction of the current limit (as foc's
+/// default, `dead_time_band_a`).
+pub const DEAD_TIME_BAND_FRACTION: f64 = 0.02;
+
 /// Tuning and limits of the sensored controller.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ControllerConfig {
     /// Control (PWM) period, s.
     pub ts_s: f64,
-    /// Current limit: the speed loop's `i_q` reference is clamped to `+-current_limit_a`, A.
+    /// Current limit: the speed loop's `i_q` reference (an interior motor's `|i|`) is clamped to
+    /// `+-current_limit_a`, A.
     pub current_limit_a: f64,
     /// Current loop proportional gain, V/A.
     pub kp_current_v_a: f64,
@@ -127,6 +145,9 @@ pub struct ControllerConfig {
     /// Advance the inverse Park angle by `1.5 w_e Ts` (one period of computation delay)
     /// instead of `0.5 w_e Ts`.
     pub delay_compensation: bool,
+    /// Dead time to compensate, s (0: none, the default of [`ControllerConfig::tuned`]; module
+    /// docs).
+    pub dead_time_s: f64,
 }
 
 impl ControllerConfig {
@@ -149,6 +170,7 @@ impl ControllerConfig {
             kp_speed_a_s_rad: kp_speed,
             ki_speed_a_rad: kp_speed * speed_bw_rad_s / 4.0,
             delay_compensation,
+            dead_time_s: 0.0,
         }
     }
 }
@@ -217,8 +239,17 @@ impl DriveController for SensoredController {
         if !pushes_further {
             self.int_speed = cand.clamp(-i_max, i_max);
         }
-        let iq_ref = (cfg.kp_speed_a_s_rad * e_w + self.int_speed).clamp(-i_max, i_max);
-        let i_ref = DVec2::new(0.0, iq_ref);
+        let i_cmd = (cfg.kp_speed_a_s_rad * e_w + self.int_speed).clamp(-i_max, i_max);
+        // Interior motor: the current magnitude split on the MTPA line (module docs).
+        let i_ref = if m.lq_h > m.ld_h {
+            let i_d = m.mtpa_i_d_a(i_cmd);
+            DVec2::new(
+                i_d,
+                (i_cmd * i_cmd - i_d * i_d).max(0.0).sqrt().copysign(i_cmd),
+            )
+        } else {
+            DVec2::new(0.0, i_cmd)
+        };
 
         // Current loops. `rot` is the rotor direction `(cos th, sin th)`: Park is a rotation
         // by `-th`, the inverse Park by `+th`.
@@ -252,9 +283,24 @@ impl DriveController for SensoredController {
         let (sd, cd) = small_sin_cos(self.advance * we * ts);
         let rot = rot.rotate(DVec2::new(cd, sd));
         let u_ab = inverse_park(u_dq, rot).to_array();
-        let duties = svpwm(u_ab, input.u_dc_v).d;
+        let mut duties = svpwm(u_ab, input.u_dc_v).d;
+        let mut expected_u_ab_v = None;
+        if cfg.dead_time_s > 0.0 {
+            // Dead-time compensation (module docs): each duty gains `sat(i_x / band) t_d / Ts`
+            // with the phase current of the reference at the application interval's angle; the
+            // observers are told the duties net of it (clamped as applied).
+            let band = (DEAD_TIME_BAND_FRACTION * i_max).max(f64::MIN_POSITIVE);
+            let i_abc = inverse_clarke(inverse_park(i_ref, rot).to_array());
+            let mut net = [0.0; 3];
+            for ((d, n), i) in duties.iter_mut().zip(net.iter_mut()).zip(i_abc) {
+                let comp = (i / band).clamp(-1.0, 1.0) * cfg.dead_time_s / ts;
+                *d = (*d + comp).clamp(0.0, 1.0);
+                *n = *d - comp;
+            }
+            expected_u_ab_v = Some(duties_to_voltage(net, input.u_dc_v));
+        }
         ControllerOutput {
-            expected_u_ab_v: None,
+            expected_u_ab_v,
             duties,
             pwm_enabled: true,
             telemetry: ControllerTelemetry {

@@ -15,7 +15,7 @@ use pmsm_sim::mcap_log::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::plot::PlotSink;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
-use pmsm_sim::suite::{SuiteOptions, run_suite};
+use pmsm_sim::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
 use pmsm_sim::tune::{LoggedRun, RShape, TuneError, TuneOptions, tune_logged_run};
 use pmsm_sim::{SimError, report};
 
@@ -66,10 +66,15 @@ enum Command {
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
     },
-    /// Run the scenario suite: the three reference motors at 10/50/100 % rated speed, a rated
-    /// load step and an unknown start; tables for the seed's filter, the flux + PLL baseline
-    /// and the default EKF (printed, and written as suite.md and suite.json).
+    /// Run the scenario suite: the reference motors (three surface, two interior) at
+    /// 10/50/100 % rated speed, a rated load step and an unknown start; tables for the seed's
+    /// filter, the flux + PLL baseline and the default EKF (printed, and written as suite.md
+    /// and suite.json).
     Suite {
+        /// Only this motor (repeatable): servo, industrial_2k2, small_fast, industrial_ipm,
+        /// traction_ipm. Default: all.
+        #[arg(long = "motor", value_parser = parse_suite_motor)]
+        motors: Vec<SuiteMotor>,
         /// Shortened windows (about half the simulated time).
         #[arg(long)]
         short: bool,
@@ -207,11 +212,12 @@ fn main() -> ExitCode {
             out,
         }) => bench(scenario.as_deref(), runs, &out),
         Some(Command::Suite {
+            motors,
             short,
             seed,
             ideal,
             out,
-        }) => suite(SuiteOptions { short, seed, ideal }, &out),
+        }) => suite(SuiteOptions { short, seed, ideal }, &motors, &out),
         Some(Command::Faults {
             out,
             t_fault,
@@ -716,11 +722,23 @@ fn components(sc: &Scenario, runs: usize) {
     }
 }
 
+/// A `--motor` name of `pmsm-sim suite`.
+fn parse_suite_motor(name: &str) -> Result<SuiteMotor, String> {
+    SuiteMotor::from_name(name).ok_or_else(|| {
+        let known: Vec<_> = SuiteMotor::ALL.iter().map(|m| m.name()).collect();
+        format!("unknown motor `{name}` (known: {})", known.join(", "))
+    })
+}
+
 /// `pmsm-sim suite`: runs the suite, prints the markdown tables, writes `suite.md` and
 /// `suite.json` to `out`. A goal or limit that fails is a result (in the tables), not an
 /// error: the exit code is 0 whenever the suite ran.
-fn suite(opts: SuiteOptions, out: &Path) -> Result<ExitCode, SimError> {
-    let report = run_suite(&opts)?;
+fn suite(opts: SuiteOptions, motors: &[SuiteMotor], out: &Path) -> Result<ExitCode, SimError> {
+    let report = if motors.is_empty() {
+        run_suite(&opts)?
+    } else {
+        run_suite_motors(&opts, motors)?
+    };
     let md = report.to_markdown();
     print!("{md}");
     std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;

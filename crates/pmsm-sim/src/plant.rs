@@ -129,6 +129,112 @@ impl MotorModel {
         }
     }
 
+    /// Industrial interior PMSM, 2.2 kW class (Rs 3.6 ohm, Ld 30 mH, Lq 42 mH, Lq/Ld 1.4,
+    /// psi_f 0.50 Wb, 3 pole pairs: `ekf_core::MotorParams::industrial_ipm`). Mechanics chosen
+    /// here: J 0.012 kg m^2 (rotor plus a coupled load), B 1e-3 N m s/rad (0.16 N m at
+    /// 1500 rpm, about 1 % of the rated torque). Rated (README's reference-motor table): 540 V
+    /// bus, 1500 rpm, 14 N m (2.2 kW) at 6.16 A on the MTPA line (`i_d` -0.87 A), 275 V of the
+    /// 312 V limit; base speed 1719 rpm at rated torque.
+    pub fn industrial_ipm() -> Self {
+        Self {
+            rs_ohm: 3.6,
+            ld_h: 30e-3,
+            lq_h: 42e-3,
+            psi_f_wb: 0.50,
+            pole_pairs: 3,
+            j_kg_m2: 0.012,
+            b_nm_s_rad: 1e-3,
+            coulomb_nm: 0.0,
+        }
+    }
+
+    /// Strongly salient traction-class interior PMSM, 48 V (Rs 8 mohm, Ld 50 uH, Lq 150 uH,
+    /// Lq/Ld 3, psi_f 12 mWb, 4 pole pairs: `ekf_core::MotorParams::traction_ipm`). Mechanics
+    /// chosen here: J 2e-3 kg m^2, B 3e-4 N m s/rad (0.09 N m at 3000 rpm, 0.6 % of the rated
+    /// torque). Rated (README's reference-motor table): 48 V bus, 20 kHz PWM, 3000 rpm,
+    /// 15 N m (4.7 kW) at 148 A peak on the MTPA line (`i_d` -79 A, reluctance torque 40 % of
+    /// the total), 26.7 V of the 27.7 V limit; base speed 3116 rpm at rated torque. With
+    /// `i_d = 0` the same torque takes 208 A and its base speed is 1931 rpm.
+    pub fn traction_ipm() -> Self {
+        Self {
+            rs_ohm: 0.008,
+            ld_h: 50e-6,
+            lq_h: 150e-6,
+            psi_f_wb: 0.012,
+            pole_pairs: 4,
+            j_kg_m2: 2e-3,
+            b_nm_s_rad: 3e-4,
+            coulomb_nm: 0.0,
+        }
+    }
+
+    /// The d-axis current of the maximum-torque-per-ampere law for a current magnitude
+    /// `|i| = i_a` (`design.md` section 7): `i_d = (psi_f - sqrt(psi_f^2 + 8 (Lq - Ld)^2 i^2))
+    /// / (4 (Lq - Ld))`, A; `0` for a surface motor (and for `Lq < Ld`, which this law does not
+    /// cover). Non-positive for `Lq > Ld`, and `|i_d| <= |i|`.
+    pub fn mtpa_i_d_a(&self, i_a: f64) -> f64 {
+        let dl = self.lq_h - self.ld_h;
+        if dl <= 0.0 {
+            return 0.0;
+        }
+        let psi = self.psi_f_wb;
+        // The same value as the textbook form, written without its cancellation at small i:
+        // (psi - r) / (4 dl) = -8 dl^2 i^2 / ((psi + r) 4 dl) = -2 dl i^2 / (psi + r).
+        let r = (psi * psi + 8.0 * dl * dl * i_a * i_a).sqrt();
+        -2.0 * dl * i_a * i_a / (psi + r)
+    }
+
+    /// The dq currents on the MTPA line for the torque `t_nm` (sign included), and their
+    /// magnitude: `(i_d, i_q, |i|)`, A, by bisection on `|i|` (`i_d = 0` for a surface motor).
+    pub fn mtpa_currents_for_torque(&self, t_nm: f64) -> (f64, f64, f64) {
+        let target = t_nm.abs();
+        let at = |i: f64| {
+            let id = self.mtpa_i_d_a(i);
+            let iq = (i * i - id * id).max(0.0).sqrt();
+            (id, iq)
+        };
+        let mut hi = target / self.torque_constant_nm_a();
+        let mut lo = 0.0;
+        // |i| at i_d = 0 gives at least the torque (MTPA only adds reluctance torque).
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            let (id, iq) = at(mid);
+            if self.torque_nm(id, iq) < target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let (id, iq) = at(hi);
+        (id, iq.copysign(t_nm), hi)
+    }
+
+    /// Magnitude of the steady-state stator voltage at the dq currents and electrical speed
+    /// `w_e`, V: `|(Rs i_d - w Lq i_q, Rs i_q + w (Ld i_d + psi_f))|`.
+    pub fn steady_voltage_v(&self, i_d_a: f64, i_q_a: f64, omega_e_rad_s: f64) -> f64 {
+        let w = omega_e_rad_s;
+        let u_d = self.rs_ohm * i_d_a - w * self.lq_h * i_q_a;
+        let u_q = self.rs_ohm * i_q_a + w * (self.ld_h * i_d_a + self.psi_f_wb);
+        u_d.hypot(u_q)
+    }
+
+    /// Base speed, mechanical rpm: the speed at which the steady voltage at the MTPA currents
+    /// of `t_nm` reaches the linear SVPWM limit `u_dc / sqrt 3` (bisection).
+    pub fn base_speed_rpm(&self, t_nm: f64, u_dc_v: f64) -> f64 {
+        let (id, iq, _) = self.mtpa_currents_for_torque(t_nm);
+        let u_max = u_dc_v / 3f64.sqrt();
+        let (mut lo, mut hi) = (0.0, 10.0 * u_max / self.psi_f_wb);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if self.steady_voltage_v(id, iq, mid) < u_max {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo / self.p() * 30.0 / PI
+    }
+
     /// The surface-motor inductance the observer's model uses: `(Ld + Lq) / 2`.
     pub fn ls_mean_h(&self) -> f64 {
         0.5 * (self.ld_h + self.lq_h)
@@ -806,6 +912,8 @@ mod tests {
             MotorModel::servo(),
             MotorModel::industrial_2k2(),
             MotorModel::small_fast(),
+            MotorModel::industrial_ipm(),
+            MotorModel::traction_ipm(),
         ] {
             assert_eq!(m.validate(), Ok(()));
             assert_eq!(m.params().validate(), Ok(()));
@@ -814,5 +922,111 @@ mod tests {
         m.ld_h = -1e-3;
         let e = m.validate().err();
         assert_eq!(e.map(|e| e.field), Some("motor.ld_h".to_string()));
+    }
+
+    #[test]
+    fn interior_presets_match_ekf_core_and_rated_points_are_feasible() {
+        use ekf_core::MotorParams;
+        for (m, e) in [
+            (
+                MotorModel::industrial_ipm(),
+                MotorParams::<f64>::industrial_ipm(),
+            ),
+            (
+                MotorModel::traction_ipm(),
+                MotorParams::<f64>::traction_ipm(),
+            ),
+        ] {
+            assert_eq!(
+                (m.rs_ohm, m.ld_h, m.lq_h, m.psi_f_wb, m.pole_pairs),
+                (e.rs_ohm, e.ld_h, e.lq_h, e.psi_f_wb, e.pole_pairs)
+            );
+        }
+        // (motor, bus V, rated rpm, rated torque, |i| at MTPA, i_d, |u| at rated, base rpm):
+        // the numbers of the README's reference-motor table.
+        let cases = [
+            (
+                MotorModel::servo(),
+                300.0,
+                2000.0,
+                1.5,
+                1.4286,
+                0.0,
+                151.1,
+                2301.0,
+            ),
+            (
+                MotorModel::industrial_2k2(),
+                540.0,
+                1500.0,
+                10.0,
+                4.077,
+                0.0,
+                280.2,
+                1678.0,
+            ),
+            (
+                MotorModel::small_fast(),
+                48.0,
+                3429.0,
+                0.4,
+                6.349,
+                0.0,
+                16.0,
+                6054.0,
+            ),
+            (
+                MotorModel::industrial_ipm(),
+                540.0,
+                1500.0,
+                14.0,
+                6.157,
+                -0.874,
+                274.7,
+                1719.0,
+            ),
+            (
+                MotorModel::traction_ipm(),
+                48.0,
+                3000.0,
+                15.0,
+                148.40,
+                -79.14,
+                26.72,
+                3116.0,
+            ),
+        ];
+        for (m, u_dc, rpm, torque, i_mag, i_d, u_rated, base) in cases {
+            let (id, iq, i) = m.mtpa_currents_for_torque(torque);
+            assert!((m.torque_nm(id, iq) - torque).abs() < 1e-9 * torque);
+            assert!((i - i_mag).abs() < 1e-3 * i_mag, "{i}");
+            assert!((id - i_d).abs() <= 1e-3 * i_d.abs(), "{id}");
+            let dl = m.lq_h - m.ld_h;
+            if dl > 0.0 {
+                // The textbook form of the MTPA law gives the same i_d.
+                let psi = m.psi_f_wb;
+                let textbook = (psi - (psi * psi + 8.0 * dl * dl * i * i).sqrt()) / (4.0 * dl);
+                assert!((id - textbook).abs() < 1e-9 * i, "{id} {textbook}");
+            }
+            // MTPA: no other split of |i| gives more torque.
+            for k in -20..=20 {
+                let d = id + 0.01 * f64::from(k) * i;
+                if d.abs() < i {
+                    let q = (i * i - d * d).sqrt();
+                    assert!(m.torque_nm(d, q) <= torque * (1.0 + 1e-9), "{d}");
+                }
+            }
+            let w_e = rpm / 30.0 * PI * m.p();
+            let u = m.steady_voltage_v(id, iq, w_e);
+            assert!((u - u_rated).abs() < 0.01 * u_rated, "{u}");
+            assert!(
+                u < u_dc / 3f64.sqrt(),
+                "rated point above the voltage limit: {u}"
+            );
+            let b = m.base_speed_rpm(torque, u_dc);
+            assert!((b - base).abs() < 1.0 && b > rpm, "base speed {b}");
+        }
+        // Surface motors: MTPA is i_d = 0.
+        assert_eq!(MotorModel::servo().mtpa_i_d_a(3.0), 0.0);
     }
 }

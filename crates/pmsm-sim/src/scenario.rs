@@ -38,6 +38,14 @@ pub const PRESETS: &[(&str, &str)] = &[
     ),
     ("drone", include_str!("../scenarios/drone.toml")),
     (
+        "industrial-ipm",
+        include_str!("../scenarios/industrial-ipm.toml"),
+    ),
+    (
+        "traction-ipm",
+        include_str!("../scenarios/traction-ipm.toml"),
+    ),
+    (
         "motor-heating",
         include_str!("../scenarios/motor-heating.toml"),
     ),

@@ -313,3 +313,28 @@ fn faults_subcommand_prints_and_writes_its_table() {
     assert!(md.contains("## Expected behaviour"), "{md}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn suite_runs_the_chosen_motors_and_refuses_an_unknown_one() {
+    let dir = temp_dir("suite-motor");
+    let o = run(
+        &["suite", "--short", "--motor", "traction_ipm", "--out", "s"],
+        &dir,
+    );
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(
+        out.contains("| traction_ipm | sim sensored, MTPA | 20 |"),
+        "{out}"
+    );
+    assert!(!out.contains("| servo |"), "{out}");
+    assert!(dir.join("s/suite.md").is_file() && dir.join("s/suite.json").is_file());
+    let o = run(&["suite", "--motor", "nope"], &dir);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("unknown motor `nope`") && err.contains("industrial_ipm"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

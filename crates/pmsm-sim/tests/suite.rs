@@ -3,17 +3,28 @@
 //! named, with the weaker statement that holds there. (Debug profile: about 0.2 s per run.)
 
 use pmsm_sim::suite::{
-    GOAL_MEAN_DEG, GOAL_MISMATCH_PSI_PCT, GOAL_MISMATCH_RMS_DEG, GOAL_RMS_RATIO, MISMATCHES,
-    ObserverKind, SuiteMotor, SuiteOptions, SuiteReport, run_suite, suite_scenario,
+    GOAL_IPM_CONVERGENCE_S, GOAL_MEAN_DEG, GOAL_MISMATCH_PSI_PCT, GOAL_MISMATCH_RMS_DEG,
+    GOAL_RMS_RATIO, LIMIT_LOAD_STEP_DEG, MISMATCHES, ObserverKind, SuiteMotor, SuiteOptions,
+    SuiteReport, run_suite_motors, suite_scenario,
 };
 
-fn short(ideal: bool) -> SuiteReport {
-    run_suite(&SuiteOptions {
+fn opts(ideal: bool) -> SuiteOptions {
+    SuiteOptions {
         short: true,
         seed: 1,
         ideal,
-    })
-    .unwrap_or_else(|e| panic!("suite: {e}"))
+    }
+}
+
+/// The short run on the surface motors (their rows are those of the whole suite: each motor
+/// keeps its seed).
+fn short(ideal: bool) -> SuiteReport {
+    run_suite_motors(&opts(ideal), &SuiteMotor::SURFACE).unwrap_or_else(|e| panic!("suite: {e}"))
+}
+
+/// The short run on the interior motors.
+fn short_interior(ideal: bool) -> SuiteReport {
+    run_suite_motors(&opts(ideal), &SuiteMotor::INTERIOR).unwrap_or_else(|e| panic!("suite: {e}"))
 }
 
 /// Goals the default EKF misses on the realistic short run (measured, seed 1): the RMS ratio
@@ -103,7 +114,7 @@ fn short_run_goals_and_limits() {
             base.angle_rms_deg
         );
     }
-    for m in SuiteMotor::ALL {
+    for m in SuiteMotor::SURFACE {
         let base = r.transient_row(ObserverKind::FluxBaseline, m).expect("row");
         assert_eq!(base.converged_starts, base.start_angles_deg.len(), "{m:?}");
         let ekf = r.transient_row(ObserverKind::DefaultEkf, m).expect("row");
@@ -157,7 +168,7 @@ fn mismatch_rows() {
         seed: 1,
         ideal: false,
     };
-    for m in SuiteMotor::ALL {
+    for m in SuiteMotor::SURFACE {
         let told = suite_scenario(m, &opts).observer_params();
         let torque = r
             .motors
@@ -243,5 +254,143 @@ fn report_is_deterministic_and_serializes() {
         "## Goals and limits",
     ] {
         assert!(md.contains(needle), "{needle}\n{md}");
+    }
+}
+
+/// Worst EKF angle error through the rated load step on the traction motor, deg el.: the
+/// limit [`LIMIT_LOAD_STEP_DEG`] is missed there (measured on the short run, seed 1: 6.39 deg
+/// realistic, 5.94 deg ideal), the transient of the active-flux model's neglected
+/// `d psi_a / dt = (Ld - Lq) di_d/dt` while MTPA moves `i_d` from -9 A to -79 A (README,
+/// "Observer suite"). Asserted against this bound (measured + about 15 %).
+const TRACTION_LOAD_STEP_BOUND_DEG: f64 = 7.5;
+
+/// The interior motors on the short run: the goals (EKF RMS at most half the salient
+/// baseline's in every steady row, |mean| < 0.1 deg at >= 50 % speed, every start of the
+/// convergence grid, 180 deg included, converged within 50 ms) and the suite's limits hold,
+/// but the traction motor's load-step limit (bounded by [`TRACTION_LOAD_STEP_BOUND_DEG`]).
+#[test]
+fn interior_motors_goals_and_limits() {
+    for ideal in [false, true] {
+        let r = short_interior(ideal);
+        assert_eq!(r.motors.len(), 2);
+        assert_eq!(r.steady.len(), 2 * 3 * 4);
+        assert_eq!(r.transients.len(), 2 * 3);
+        assert!(r.mismatch.is_empty(), "mismatch rows are surface-only");
+        let info = |m: SuiteMotor| r.motors.iter().find(|x| x.motor == m).expect("motor");
+        // 1500 rpm x 3 at 10 kHz; 3000 rpm x 4 at 20 kHz.
+        assert!((info(SuiteMotor::IndustrialIpm).rated_w_ts_rad - 0.0471).abs() < 1e-3);
+        assert!((info(SuiteMotor::TractionIpm).rated_w_ts_rad - 0.0628).abs() < 1e-3);
+        assert_eq!(info(SuiteMotor::TractionIpm).ts_s, 5e-5);
+        for m in &r.motors {
+            assert_eq!(m.end, "completed", "{:?}", m.motor);
+            assert_eq!(m.drive, "sim sensored, MTPA");
+        }
+        for ekf in r
+            .steady
+            .iter()
+            .filter(|x| x.observer == ObserverKind::DefaultEkf)
+        {
+            let base = r
+                .steady_row(ObserverKind::FluxBaseline, ekf.motor, &ekf.condition)
+                .expect("baseline row");
+            let what = format!("{:?} {} ideal={ideal}", ekf.motor, ekf.condition);
+            assert_eq!(ekf.failures + base.failures, 0, "{what}");
+            assert!(ekf.samples > 1000 && ekf.samples == base.samples, "{what}");
+            let ratio = ekf.angle_rms_deg / base.angle_rms_deg;
+            assert!(ratio <= GOAL_RMS_RATIO, "{what}: RMS ratio {ratio}");
+            if ekf.speed_fraction >= 0.5 {
+                assert!(
+                    ekf.angle_mean_deg.abs() < GOAL_MEAN_DEG,
+                    "{what}: mean {}",
+                    ekf.angle_mean_deg
+                );
+            } else {
+                // 10 %: the industrial motor's realistic bias is 0.111 deg (as on the surface
+                // motors, sensing errors at small currents); below the baseline's.
+                assert!(
+                    ekf.angle_mean_deg.abs() < 0.8 * base.angle_mean_deg.abs(),
+                    "{what}: mean {} vs baseline {}",
+                    ekf.angle_mean_deg,
+                    base.angle_mean_deg
+                );
+            }
+        }
+        for m in SuiteMotor::INTERIOR {
+            let ekf = r.transient_row(ObserverKind::DefaultEkf, m).expect("row");
+            let base = r.transient_row(ObserverKind::FluxBaseline, m).expect("row");
+            let what = format!("{m:?} ideal={ideal}");
+            // The convergence grid: the standard starts and the theta+pi cell.
+            assert_eq!(ekf.start_angles_deg.len(), 5, "{what}");
+            assert!(ekf.start_angles_deg.contains(&180.0), "{what}");
+            assert_eq!(ekf.converged_starts, 5, "{what}");
+            let worst = ekf.convergence_worst_s.unwrap_or(f64::INFINITY);
+            assert!(worst <= GOAL_IPM_CONVERGENCE_S, "{what}: {worst} s");
+            assert_eq!(base.converged_starts, 5, "{what}");
+            // Through the load step: below the baseline's worst error.
+            assert!(
+                ekf.load_step_max_deg < base.load_step_max_deg,
+                "{what}: {} vs {}",
+                ekf.load_step_max_deg,
+                base.load_step_max_deg
+            );
+            if m == SuiteMotor::TractionIpm {
+                assert!(
+                    ekf.load_step_max_deg < TRACTION_LOAD_STEP_BOUND_DEG,
+                    "{what}: {}",
+                    ekf.load_step_max_deg
+                );
+            } else {
+                assert!(ekf.load_step_max_deg <= LIMIT_LOAD_STEP_DEG, "{what}");
+            }
+        }
+        // Every check passes but the traction motor's load step and, on realistic sensing, the
+        // industrial motor's bias at 10 % of rated speed (0.111 deg; the bias goal is at
+        // >= 50 % speed, the suite checks it wherever w_e Ts <= 0.3).
+        for c in &r.checks {
+            let known = (c.motor == SuiteMotor::TractionIpm && c.row == "load step")
+                || (!ideal
+                    && c.motor == SuiteMotor::IndustrialIpm
+                    && c.name == "goal: EKF |mean| (deg)"
+                    && c.row == "10 %"
+                    && c.value < 0.13);
+            assert!(
+                c.pass || known,
+                "{} {:?} {} ideal={ideal}: {} > {}",
+                c.name,
+                c.motor,
+                c.row,
+                c.value,
+                c.limit
+            );
+        }
+        // 8 rows x (ratio, mean, RMS, max, speed) + 2 x (convergence, load step, 50 ms goal).
+        assert_eq!(r.checks.len(), 8 * 5 + 2 * 3);
+        let md = r.to_markdown();
+        for needle in [
+            "| traction_ipm | sim sensored, MTPA | 20 |",
+            "| industrial_ipm | 100 %, rated load | 0.047 |",
+            "theta+pi included",
+        ] {
+            assert!(md.contains(needle), "{needle}\n{md}");
+        }
+    }
+}
+
+/// The whole suite runs every motor, the surface ones first, each with the rows of its own
+/// run (the seed offset is the motor's place in `SuiteMotor::ALL`).
+#[test]
+fn the_full_suite_lists_all_five_motors() {
+    assert_eq!(SuiteMotor::ALL.len(), 5);
+    assert_eq!(
+        SuiteMotor::ALL[..3],
+        SuiteMotor::SURFACE,
+        "the surface motors keep their seeds"
+    );
+    for m in SuiteMotor::ALL {
+        assert_eq!(SuiteMotor::from_name(m.name()), Some(m));
+        assert_eq!(m.is_interior(), SuiteMotor::INTERIOR.contains(&m));
+        let sc = suite_scenario(m, &opts(false));
+        assert_eq!(sc.validate(), Ok(()), "{m:?}");
+        assert_eq!(sc.motor.lq_h > sc.motor.ld_h, m.is_interior(), "{m:?}");
     }
 }

@@ -6,9 +6,10 @@ use pyo3::types::PyDict;
 
 use crate::{PyfocError, SimulationError};
 
-/// Runs the observer suite: the three reference motors at 10/50/100 % rated speed, a rated
-/// load step and starts from unknown angles, with the seed's filter, the flux + PLL baseline
-/// and the default EKF side by side (the same as `pmsm-sim suite`).
+/// Runs the observer suite: the five reference motors (three surface, two interior) at
+/// 10/50/100 % rated speed, a rated load step and starts from unknown angles, with the seed's
+/// filter, the flux + PLL baseline and the default EKF side by side (the same as
+/// `pmsm-sim suite`).
 ///
 /// Returns the report as a dict (the JSON layout of `pmsm_sim::suite::SuiteReport`: `motors`,
 /// `steady`, `transients`, `checks`, ...) plus `markdown` (the tables as printed by the CLI)
