@@ -363,20 +363,32 @@ impl<T: Float> PmsmObserver<T> {
             }
             // All four finite but their sum overflows: absurd, yet valid input; go on.
         }
-        // Two monomorphic paths: the one without tracking carries none of its code.
-        if self.tracker.is_some() {
-            let (xm, pm, tm) = self.prior::<true>(u_prev);
-            self.correct_prior::<true>(xm, pm, tm, i)
-        } else {
-            let (xm, pm, _) = self.prior::<false>(u_prev);
-            self.correct_prior::<false>(xm, pm, None, i)
+        // Four monomorphic paths: the one without tracking carries none of its code, the
+        // surface ones none of the salient model's.
+        match (self.tracker.is_some(), self.model.discrete().salient) {
+            (true, false) => {
+                let (xm, pm, tm) = self.prior::<true, false>(u_prev);
+                self.correct_prior::<true, false>(xm, pm, tm, i)
+            }
+            (false, false) => {
+                let (xm, pm, _) = self.prior::<false, false>(u_prev);
+                self.correct_prior::<false, false>(xm, pm, None, i)
+            }
+            (true, true) => {
+                let (xm, pm, tm) = self.prior::<true, true>(u_prev);
+                self.correct_prior::<true, true>(xm, pm, tm, i)
+            }
+            (false, true) => {
+                let (xm, pm, _) = self.prior::<false, true>(u_prev);
+                self.correct_prior::<false, true>(xm, pm, None, i)
+            }
         }
     }
 
     /// The prediction `(x-, P-)` and, with tracking (`TRACK`, the tracker present), the prior
-    /// of the tracked parameters (nothing is stored here).
+    /// of the tracked parameters (nothing is stored here). `S`: the motor is salient.
     #[inline(always)]
-    fn prior<const TRACK: bool>(
+    fn prior<const TRACK: bool, const S: bool>(
         &self,
         u_prev: [T; 2],
     ) -> (Vector4<T>, Sym4<T>, Option<Tracker<T>>) {
@@ -390,13 +402,13 @@ impl<T: Float> PmsmObserver<T> {
                 let active = tr.should_track(k, tracked, self.x[2], self.p.p22);
                 let disc = self.model.discrete_at(tr.psi, tr.rs);
                 let (xm, mut pm, t) =
-                    structured::predict(&disc, q, &self.x, &self.p, u_prev, trusted);
-                let tm = tr.predict(k, &disc, &t, &self.x, &mut pm, active);
+                    structured::predict::<T, S>(&disc, q, &self.x, &self.p, u_prev, trusted);
+                let tm = tr.predict::<S>(k, &disc, &t, &self.x, &mut pm, active);
                 (xm, pm, Some(tm))
             }
             _ => {
                 let trusted = self.locked;
-                let (xm, pm, _) = structured::predict(
+                let (xm, pm, _) = structured::predict::<T, S>(
                     self.model.discrete(),
                     q,
                     &self.x,
@@ -415,14 +427,12 @@ impl<T: Float> PmsmObserver<T> {
     /// angle stays tracked.
     #[inline(always)]
     fn update_lock(&mut self) {
-        if self.model.discrete().salient {
-            let tracked = self.p.p33 <= self.angle_var_limit;
-            let settled = self
-                .gate
-                .as_ref()
-                .is_none_or(|g| g.nis_mean <= g.settled_nis);
-            self.locked = tracked && (self.locked || settled);
-        }
+        let tracked = self.p.p33 <= self.angle_var_limit;
+        let settled = self
+            .gate
+            .as_ref()
+            .is_none_or(|g| g.nis_mean <= g.settled_nis);
+        self.locked = tracked && (self.locked || settled);
     }
 
     /// Prediction only (e.g. to coast over a missing current sample), with the voltage held
@@ -432,10 +442,11 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p, tm) = if self.tracker.is_some() {
-            self.prior::<true>(u_prev)
-        } else {
-            self.prior::<false>(u_prev)
+        let (x, p, tm) = match (self.tracker.is_some(), self.model.discrete().salient) {
+            (true, false) => self.prior::<true, false>(u_prev),
+            (false, false) => self.prior::<false, false>(u_prev),
+            (true, true) => self.prior::<true, true>(u_prev),
+            (false, true) => self.prior::<false, true>(u_prev),
         };
         if !(finite(x.as_slice()) && p.all_finite() && tm.is_none_or(|t| t.finite())) {
             if self.refused_resets() {
@@ -467,17 +478,18 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        if self.tracker.is_some() {
-            self.correct_prior::<true>(self.x, self.p, self.tracker, i)
-        } else {
-            self.correct_prior::<false>(self.x, self.p, None, i)
+        match (self.tracker.is_some(), self.model.discrete().salient) {
+            (true, false) => self.correct_prior::<true, false>(self.x, self.p, self.tracker, i),
+            (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, i),
+            (true, true) => self.correct_prior::<true, true>(self.x, self.p, self.tracker, i),
+            (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, i),
         }
     }
 
     /// Correction of the prior `(xm, pm)` with the currents `i`, innovation gate, branch check
     /// and covariance health (module docs).
     #[inline(always)]
-    fn correct_prior<const TRACK: bool>(
+    fn correct_prior<const TRACK: bool, const S: bool>(
         &mut self,
         xm: Vector4<T>,
         pm: Sym4<T>,
@@ -544,7 +556,9 @@ impl<T: Float> PmsmObserver<T> {
                 gate_accepted_high(g, &mut self.counters, verdict);
             }
         }
-        self.update_lock();
+        if S {
+            self.update_lock();
+        }
         let diverged = match &mut self.health {
             Some(h) if tracking && c.nis > h.divergence_nis => {
                 h.inconsistent = h.inconsistent.saturating_add(1);

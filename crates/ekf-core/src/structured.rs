@@ -105,7 +105,7 @@ impl<T: Float> Sym4<T> {
 /// (the Jacobian's blocks). `trusted`: the angle is tracked, so a salient motor's d-axis
 /// transient correction applies (observer module docs). Values are not checked here.
 #[inline(always)]
-pub(crate) fn predict<T: Float>(
+pub(crate) fn predict<T: Float, const S: bool>(
     disc: &Discrete<T>,
     q: &Matrix4<T>,
     x: &Vector4<T>,
@@ -114,17 +114,25 @@ pub(crate) fn predict<T: Float>(
     trusted: bool,
 ) -> (Vector4<T>, Sym4<T>, TransitionTerms<T>) {
     let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
-    let t = disc.transition_terms(ia, ib, th, w, u, trusted);
+    let t = disc.transition_terms::<S>(ia, ib, th, w, u, trusted);
     let d = disc.decay;
     let g = disc.input_gain;
     let ts = disc.ts;
     let xn = Vector4::new(
-        d * ia + g * u[0] + t.ea + t.da,
-        d * ib + g * u[1] + t.eb + t.db,
+        if S {
+            d * ia + g * u[0] + t.ea + t.da
+        } else {
+            d * ia + g * u[0] + t.ea
+        },
+        if S {
+            d * ib + g * u[1] + t.eb + t.db
+        } else {
+            d * ib + g * u[1] + t.eb
+        },
         w,
         wrap_angle(th + ts * w),
     );
-    if disc.salient {
+    if S {
         return (xn, predict_cov_salient(&t, ts, q, p), t);
     }
     let (a1, a2, b1, b2) = (t.ea_w, t.ea_th, t.eb_w, t.eb_th);

@@ -219,16 +219,20 @@ impl<T: Float> PmsmModel<T> {
         w: T,
         u: [T; 2],
     ) -> TransitionTerms<T> {
-        self.disc.transition_terms(ia, ib, th, w, u, true)
+        if self.disc.salient {
+            self.disc.transition_terms::<true>(ia, ib, th, w, u, true)
+        } else {
+            self.disc.transition_terms::<false>(ia, ib, th, w, u, true)
+        }
     }
 }
 
 impl<T: Float> Discrete<T> {
     /// The back-EMF term of the step from the posterior `(i_a, i_b, th, w)` and the input
     /// `u`, and its derivatives (module docs; the currents and the input matter only for a
-    /// salient motor, whose d-axis transient correction applies when `transient`).
+    /// salient motor, `S`, whose d-axis transient correction applies when `transient`).
     #[inline(always)]
-    pub(crate) fn transition_terms(
+    pub(crate) fn transition_terms<const S: bool>(
         &self,
         ia: T,
         ib: T,
@@ -242,7 +246,7 @@ impl<T: Float> Discrete<T> {
         // EMF term c w (-j e^{j th}) G, and its derivatives.
         let ua = s * m_re + co * m_im;
         let ub = s * m_im - co * m_re;
-        let (c, c_th) = if self.salient {
+        let (c, c_th) = if S {
             // Active flux psi_f + (Ld - Lq) i_d over Lq; d i_d / d th = i_q.
             let k = self.saliency;
             (self.c + k * (ia * co + ib * s), k * (ib * co - ia * s))
@@ -267,7 +271,7 @@ impl<T: Float> Discrete<T> {
             sin_th: s,
             cos_th: co,
         };
-        if self.salient {
+        if S {
             // d c / d i = saliency (cos th, sin th).
             let (kc, ks) = (self.saliency * co, self.saliency * s);
             t.a00 += ua * kc;

@@ -453,7 +453,7 @@ impl<T: Float> Tracker<T> {
     /// `x` is the posterior the step starts from. While active, also one sample of the split
     /// filter's window.
     #[inline(always)]
-    pub fn predict(
+    pub fn predict<const S: bool>(
         &self,
         k: &TrackerConstants<T>,
         disc: &Discrete<T>,
@@ -479,7 +479,7 @@ impl<T: Float> Tracker<T> {
         let c = self.c_pp;
         let xo = &self.x;
         // X- = Phi4 X + Gamma c.
-        let (x0, x1) = if disc.salient {
+        let (x0, x1) = if S {
             // Full current block of a salient motor.
             (t.a00 * xo[0] + t.a01 * xo[1], t.a10 * xo[0] + t.a11 * xo[1])
         } else {
