@@ -10,7 +10,7 @@ def test_short_suite_report():
     steady = rep["steady"]
     assert {r["observer"] for r in steady} == {"seed_ekf", "flux_baseline", "default_ekf"}
     motors = {r["motor"] for r in steady}
-    surface = {"servo", "industrial_2k2", "small_fast"}
+    surface = {"servo", "industrial2k2", "small_fast"}  # serde names
     assert motors == surface | {"industrial_ipm", "traction_ipm"}, motors
     by = {(r["observer"], r["motor"], r["condition"]): r for r in steady}
     for m in motors:
