@@ -27,7 +27,9 @@
 //! `ekf_step_salient` (the default on an interior motor, `Lq / Ld = 1.43`: the active-flux path),
 //! `ekf_step_standard` (standard symmetrized covariance update), `ekf_step_euler` (forward
 //! Euler), `ekf_step_seed` (`ObserverConfig::seed`), `ekf_predict` and `ekf_correct` (the two
-//! halves of the default step) and `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
+//! halves of the default step), the peers `flux_step` (the flux observer + PLL baseline) and
+//! `ekf_step_generic` (the generic `Ekf` on the same model, no safeguards or tracking), and
+//! `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
 //! `ekf_core::trig`), and `foc_tick` (the full controller tick in sensorless closed loop, with
 //! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states; see
 //! [`drive`]), `foc_tick_ipm` (the tick on an interior PMSM in closed loop with MTPA and
@@ -48,9 +50,10 @@ use core::panic::PanicInfo;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use cortex_m_semihosting::{debug, heprintln, hprintln};
+use ekf_core::nalgebra::Vector2;
 use ekf_core::{
-    CovarianceUpdate, Discretization, EkfError, Estimate, MotorParams, ObserverConfig,
-    PmsmObserver, wrap_angle,
+    CovarianceUpdate, Discretization, Ekf, EkfError, Estimate, FluxObserver, FluxObserverConfig,
+    MotorParams, ObserverConfig, PmsmModel, PmsmObserver, wrap_angle,
 };
 
 use meter::{CalibrationError, Clock, Tally};
@@ -203,6 +206,11 @@ fn run() -> Result<(), &'static str> {
         ok = false;
     }
 
+    // The peers, on the same data: the flux observer + PLL baseline (the estimator of open
+    // firmware) and the generic nalgebra `Ekf` driven by the same model as `ekf_step_untracked`
+    // (no safeguards, no tracking: the cost of the plain textbook filter).
+    peers(&clock, &data, &default)?;
+
     // The observer's f32 sine/cosine (ekf_core::trig; libm's sincosf would compute in f64).
     clock.measure("sin_cos_f32", SAMPLES, |k| {
         let th = data.get(k).map_or(0.0, |s| s.theta_rad);
@@ -291,6 +299,47 @@ fn run_variant(clock: &Clock, v: &Variant, data: &[Sample; SAMPLES]) -> Result<b
         );
     }
     Ok(converged || !v.checked)
+}
+
+/// `flux_step` (`FluxObserver::step`, `FluxObserverConfig::new`) and `ekf_step_generic`
+/// (`Ekf::<f32, 4, 2>` predict + correct with `PmsmModel`, the default's model and noise).
+fn peers(
+    clock: &Clock,
+    data: &[Sample; SAMPLES],
+    default: &ObserverConfig<f32>,
+) -> Result<(), &'static str> {
+    let mut flux = FluxObserver::new(&FluxObserverConfig::new(MotorParams::servo(), TS_S))
+        .map_err(|_| "invalid flux observer config")?;
+    let mut tally = Tally::new();
+    let mut u_prev = [0.0; 2];
+    let mut failures = 0u32;
+    for s in data {
+        let mut ok = false;
+        tally.push(clock.count(&mut || ok = flux.step(u_prev, s.i).is_ok()));
+        failures += u32::from(!ok);
+        u_prev = s.u;
+    }
+    tally.report("flux_step");
+
+    let model = PmsmModel::new(default);
+    let mut ekf = Ekf::<f32, 4, 2>::new(default.x0, default.p0, default.covariance_update);
+    let mut tally = Tally::new();
+    let mut u_prev = [0.0; 2];
+    for s in data {
+        let mut ok = false;
+        tally.push(clock.count(&mut || {
+            ok = ekf.predict(&model, &Vector2::from(u_prev)).is_ok()
+                && ekf.correct(&model, &Vector2::from(s.i)).is_ok();
+        }));
+        failures += u32::from(!ok);
+        u_prev = s.u;
+    }
+    tally.report("ekf_step_generic");
+    if failures > 0 {
+        hprintln!("flux_step/ekf_step_generic: {} calls failed", failures);
+        return Err("a peer's step failed");
+    }
+    Ok(())
 }
 
 /// `wrap(estimate - truth)` in degrees electrical.
