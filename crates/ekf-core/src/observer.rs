@@ -153,7 +153,8 @@
 //! measured on the traction IPM at rated load (`Lq i_q` 1.6 x `psi_f`), a start 120 deg off
 //! ended 135 deg off, at 1.5 x the true speed, with `NIS` about 30 000 every sample. When the
 //! `NIS` exceeds `divergence_nis` (1000: a chi-square(2) tail of `e^-500`) in
-//! `divergence_samples` (200) tracked steps in a row, the observer resets itself as above. On
+//! `divergence_samples` (200) tracked steps in a row (counted by the innovation gate: the check
+//! needs it), the observer resets itself as above. On
 //! the surface reference motors it never fires in the suite.
 
 mod config;
@@ -326,6 +327,7 @@ impl<T: Float> PmsmObserver<T> {
                 nis_mean: g.nis_threshold,
                 consecutive: 0,
                 open: false,
+                inconsistent: 0,
             }),
             health: cfg.covariance_health.map(|h| HealthState {
                 refusals: 0,
@@ -335,7 +337,6 @@ impl<T: Float> PmsmObserver<T> {
                 p0,
                 divergence_nis: h.divergence_nis,
                 divergence_samples: h.divergence_samples,
-                inconsistent: 0,
             }),
             tracker,
             slow,
@@ -551,6 +552,7 @@ impl<T: Float> PmsmObserver<T> {
             if verdict == Verdict::Low {
                 g.consecutive = 0;
                 g.open = false;
+                g.inconsistent = 0;
                 g.nis_mean += (c.nis - g.nis_mean) * to_t::<T>(1.0 / 16.0);
             } else {
                 gate_accepted_high(g, &mut self.counters, verdict);
@@ -559,17 +561,7 @@ impl<T: Float> PmsmObserver<T> {
         if S {
             self.update_lock();
         }
-        let diverged = match &mut self.health {
-            Some(h) if tracking && c.nis > h.divergence_nis => {
-                h.inconsistent = h.inconsistent.saturating_add(1);
-                h.divergence_samples != 0 && h.inconsistent >= h.divergence_samples
-            }
-            Some(h) => {
-                h.inconsistent = 0;
-                false
-            }
-            None => false,
-        };
+        let diverged = verdict != Verdict::Low && self.diverging(c.nis, tracking);
         if let Some(b) = &mut self.branch {
             let w = x[2];
             let w2 = w * w;
@@ -591,6 +583,24 @@ impl<T: Float> PmsmObserver<T> {
             self.self_reset(Some(i));
         }
         Ok(self.estimate())
+    }
+
+    /// The divergence check (covariance health) for an accepted sample above the gate's
+    /// threshold: counts tracked steps in a row with `NIS > divergence_nis`; `true` at
+    /// `divergence_samples`. Out of line: the rare path.
+    #[cold]
+    #[inline(never)]
+    fn diverging(&mut self, nis: T, tracking: bool) -> bool {
+        let (Some(h), Some(g)) = (&self.health, &mut self.gate) else {
+            return false;
+        };
+        if tracking && nis > h.divergence_nis {
+            g.inconsistent = g.inconsistent.saturating_add(1);
+            h.divergence_samples != 0 && g.inconsistent >= h.divergence_samples
+        } else {
+            g.inconsistent = 0;
+            false
+        }
     }
 
     /// The tracking's slow work after a committed step, when due (a full window of the split
@@ -730,10 +740,8 @@ impl<T: Float> PmsmObserver<T> {
     /// Clears the gate's and the branch check's running state.
     fn restart_safeguards(&mut self) {
         self.locked = false;
-        if let Some(h) = &mut self.health {
-            h.inconsistent = 0;
-        }
         if let Some(g) = &mut self.gate {
+            g.inconsistent = 0;
             g.consecutive = 0;
             g.open = false;
             g.nis_mean = g.threshold;

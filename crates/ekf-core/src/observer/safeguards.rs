@@ -113,7 +113,8 @@ pub struct CovarianceHealth<T> {
     pub divergence_nis: T,
     /// ... in every one of this many steps in a row while the angle is tracked means the
     /// filter has settled on a state its model cannot explain (its covariance says it knows
-    /// the angle, its innovations say otherwise); it resets itself. 0: off.
+    /// the angle, its innovations say otherwise); it resets itself. 0: off. Needs the
+    /// innovation gate (which watches the innovations); without it the check is off.
     pub divergence_samples: u32,
 }
 
@@ -163,6 +164,9 @@ pub(super) struct GateState<T> {
     pub(super) settled_nis: T,
     /// Running mean of the accepted samples' clamped NIS (starts at the threshold: unsettled).
     pub(super) nis_mean: T,
+    /// Tracked steps in a row whose `NIS` exceeded the health check's `divergence_nis` (the
+    /// divergence check, counted here because only samples above the gate's threshold can).
+    pub(super) inconsistent: u32,
     pub(super) consecutive: u32,
     /// Open after `max_consecutive` rejections, until an accepted NIS is below the threshold.
     pub(super) open: bool,
@@ -185,8 +189,6 @@ pub(super) struct HealthState<T> {
     pub(super) p0: Sym4<T>,
     pub(super) divergence_nis: T,
     pub(super) divergence_samples: u32,
-    /// Tracked steps in a row with `NIS > divergence_nis`.
-    pub(super) inconsistent: u32,
 }
 
 /// The gate's decision on one sample.
