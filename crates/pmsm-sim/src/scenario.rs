@@ -46,6 +46,15 @@ pub const PRESETS: &[(&str, &str)] = &[
         include_str!("../scenarios/traction-ipm.toml"),
     ),
     (
+        "industrial-ipm-fw",
+        include_str!("../scenarios/industrial-ipm-fw.toml"),
+    ),
+    (
+        "traction-ipm-fw",
+        include_str!("../scenarios/traction-ipm-fw.toml"),
+    ),
+    ("servo-fw", include_str!("../scenarios/servo-fw.toml")),
+    (
         "motor-heating",
         include_str!("../scenarios/motor-heating.toml"),
     ),
