@@ -986,7 +986,11 @@ mod tests {
             c.startup.handover_speed_rad_s,
             base.startup.handover_speed_rad_s
         );
-        assert!(!cfg_of(&with("field_weakening = false")).field_weakening.enabled);
+        assert!(
+            !cfg_of(&with("field_weakening = false"))
+                .field_weakening
+                .enabled
+        );
         // A table, and an explicit maximum speed (4 pole pairs: 3000 rpm = 1256.6 rad/s el.).
         let c = cfg_of(&with(
             "max_speed_rpm = 3000.0\n[controller.foc.field_weakening]\nvoltage_margin = 0.9\n\

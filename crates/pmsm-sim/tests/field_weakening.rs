@@ -118,11 +118,7 @@ fn run(name: &'static str, base_rpm: f64, ratio: f64) -> Row {
     let sc = Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"));
     let cfg = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
     assert!(cfg.field_weakening.enabled && cfg.mtpa, "{name}");
-    let target_rpm = sc
-        .speed_ref_rpm
-        .points
-        .last()
-        .map_or(0.0, |&(_, rpm)| rpm);
+    let target_rpm = sc.speed_ref_rpm.points.last().map_or(0.0, |&(_, rpm)| rpm);
     assert!((target_rpm / base_rpm - ratio).abs() < 1e-3, "{name}");
     let mut fw = Fw {
         ts_s: sc.ts_s(),

@@ -103,7 +103,10 @@ fn interior_presets_run_foc_sensorless_with_mtpa() {
         assert!(p.max_err_deg < 2.0, "{name}: {} deg", p.max_err_deg);
         let rated = sc.rated_speed_rpm;
         assert!((speed - rated).abs() < 0.005 * rated, "{name}: {speed} rpm");
-        assert!((p.last_speed_rpm - end_rpm).abs() < 0.01 * end_rpm, "{name}");
+        assert!(
+            (p.last_speed_rpm - end_rpm).abs() < 0.01 * end_rpm,
+            "{name}"
+        );
         assert!((i_d - id_mtpa).abs() < 0.05 * i_d.hypot(i_q), "{name}");
         assert!(p.max_i_a <= 1.05 * sc.controller.current_limit_a, "{name}");
     }

@@ -72,7 +72,11 @@ fn max_torque(p: f64, ld: f64, lq: f64, psi: f64, i_s: f64) -> (f64, f64) {
         }
     }
     let b = 0.5 * (lo + hi);
-    if t(b) >= best { (t(b), b) } else { (best, b_best) }
+    if t(b) >= best {
+        (t(b), b)
+    } else {
+        (best, b_best)
+    }
 }
 
 /// The smallest current magnitude that makes torque `t_nm` (bisection), and its angle.
