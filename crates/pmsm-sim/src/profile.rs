@@ -117,6 +117,23 @@ pub enum LoadTerm {
         /// `k`, N m s^2/rad^2.
         coefficient_nm_s2_rad2: f64,
     },
+    /// A constant-power load (traction, spindles, winders above their base speed): the torque
+    /// `min(max_torque_nm, power_w / |w_mech|)` against the direction of rotation (0 at
+    /// standstill), i.e. `max_torque_nm` up to the corner speed `power_w / max_torque_nm` and
+    /// `max_torque_nm x corner / |w_mech|` above it. Off before `start_s`, then faded in
+    /// linearly over `ramp_s`.
+    ConstantPower {
+        /// Power above the corner speed, W.
+        power_w: f64,
+        /// Torque up to the corner speed, N m.
+        max_torque_nm: f64,
+        /// Time the load comes on, s (default 0).
+        #[serde(default)]
+        start_s: f64,
+        /// Time over which it fades in from `start_s`, s (default 0: a step).
+        #[serde(default)]
+        ramp_s: f64,
+    },
     /// A torque table over time.
     Table {
         /// Reading between points (default linear).
@@ -163,6 +180,30 @@ impl LoadTerm {
             LoadTerm::Fan {
                 coefficient_nm_s2_rad2,
             } => coefficient_nm_s2_rad2 * omega_mech_rad_s * omega_mech_rad_s.abs(),
+            LoadTerm::ConstantPower {
+                power_w,
+                max_torque_nm,
+                start_s,
+                ramp_s,
+            } => {
+                let fade = if t_s < *start_s {
+                    return 0.0;
+                } else if t_s < start_s + ramp_s {
+                    (t_s - start_s) / ramp_s
+                } else {
+                    1.0
+                };
+                let w = omega_mech_rad_s.abs();
+                if w == 0.0 {
+                    return 0.0;
+                }
+                let t = if max_torque_nm * w > *power_w {
+                    power_w / w
+                } else {
+                    *max_torque_nm
+                };
+                fade * t.copysign(omega_mech_rad_s)
+            }
             LoadTerm::Table {
                 interpolation,
                 points,
@@ -224,6 +265,29 @@ impl LoadTerm {
             LoadTerm::Fan {
                 coefficient_nm_s2_rad2,
             } => finite("coefficient_nm_s2_rad2", *coefficient_nm_s2_rad2),
+            LoadTerm::ConstantPower {
+                power_w,
+                max_torque_nm,
+                start_s,
+                ramp_s,
+            } => {
+                for (name, v) in [("power_w", *power_w), ("max_torque_nm", *max_torque_nm)] {
+                    if !(v.is_finite() && v > 0.0) {
+                        return Err(FieldError::new(
+                            format!("{field}.{name}"),
+                            format!("must be finite and > 0, is {v}"),
+                        ));
+                    }
+                }
+                finite("start_s", *start_s)?;
+                if !(ramp_s.is_finite() && *ramp_s >= 0.0) {
+                    return Err(FieldError::new(
+                        format!("{field}.ramp_s"),
+                        format!("must be finite and >= 0, is {ramp_s}"),
+                    ));
+                }
+                Ok(())
+            }
             LoadTerm::Table {
                 interpolation,
                 points,
@@ -330,6 +394,34 @@ mod tests {
         assert_eq!(
             bad.validate("load[0]").map_err(|e| e.field),
             Err("load[0].end_s".to_string())
+        );
+    }
+    #[test]
+    fn constant_power_load() {
+        // 1000 W, 10 N m: corner at 100 rad/s; on at 1 s, faded in over 0.5 s.
+        let cp = LoadTerm::ConstantPower {
+            power_w: 1000.0,
+            max_torque_nm: 10.0,
+            start_s: 1.0,
+            ramp_s: 0.5,
+        };
+        assert_eq!(cp.torque_nm(0.9, 50.0), 0.0);
+        assert_eq!(cp.torque_nm(2.0, 0.0), 0.0);
+        assert_eq!(cp.torque_nm(2.0, 50.0), 10.0);
+        assert_eq!(cp.torque_nm(2.0, -50.0), -10.0);
+        assert!((cp.torque_nm(2.0, 200.0) - 5.0).abs() < 1e-12);
+        assert!((cp.torque_nm(2.0, -400.0) + 2.5).abs() < 1e-12);
+        assert!((cp.torque_nm(1.25, 200.0) - 2.5).abs() < 1e-12);
+        assert!(cp.validate("load[0]").is_ok());
+        let bad = LoadTerm::ConstantPower {
+            power_w: -1.0,
+            max_torque_nm: 10.0,
+            start_s: 0.0,
+            ramp_s: 0.0,
+        };
+        assert_eq!(
+            bad.validate("load[0]").map_err(|e| e.field),
+            Err("load[0].power_w".to_string())
         );
     }
 }

@@ -46,6 +46,15 @@ pub const PRESETS: &[(&str, &str)] = &[
         include_str!("../scenarios/traction-ipm.toml"),
     ),
     (
+        "industrial-ipm-fw",
+        include_str!("../scenarios/industrial-ipm-fw.toml"),
+    ),
+    (
+        "traction-ipm-fw",
+        include_str!("../scenarios/traction-ipm-fw.toml"),
+    ),
+    ("servo-fw", include_str!("../scenarios/servo-fw.toml")),
+    (
         "motor-heating",
         include_str!("../scenarios/motor-heating.toml"),
     ),
@@ -123,6 +132,78 @@ pub struct FocSettings {
     /// Linear band of the compensation's smooth sign (`FocConfig::dead_time_band_a`), A.
     /// Default foc's: 2 % of `controller.current_limit_a`.
     pub dead_time_band_a: Option<f64>,
+    /// Maximum torque per ampere on a salient motor (`FocConfig::mtpa`): `i_d` from the MTPA
+    /// law; `false`: `i_d = 0`. Default `true` (foc's); no effect on a surface motor.
+    pub mtpa: Option<bool>,
+    /// Field weakening above base speed (`FocConfig::field_weakening`): `true`/`false`, or a
+    /// table ([`FieldWeakeningSettings`]). Default: off.
+    #[serde(deserialize_with = "field_weakening_de")]
+    pub field_weakening: Option<FieldWeakeningSettings>,
+    /// Limit of the speed command, mechanical rpm (`FocConfig::max_speed_rad_s`); speed
+    /// references above it are clamped. Default: foc's base-speed limit (the back-EMF at
+    /// 95 % of the voltage limit, `0.95 U / (sqrt(3) psi_f)`), twice that with field
+    /// weakening on.
+    pub max_speed_rpm: Option<f64>,
+}
+
+/// Field weakening in `[controller.foc]`: `field_weakening = true` (foc's defaults) or a
+/// table with `FieldWeakeningConfig`'s fields, each optional (the bandwidth in Hz, like the
+/// scenario's other loops): `enabled` (default `true`: a table asks for it),
+/// `voltage_margin` (default 0.95), `bandwidth_hz` (default a tenth of
+/// `controller.current_bandwidth_hz`, foc's rule), `max_negative_id_a` (default foc's,
+/// `min(current_limit_a, psi_f / Ld)`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldWeakeningSettings {
+    /// Whether the loop runs.
+    #[serde(default = "yes")]
+    pub enabled: bool,
+    /// The voltage magnitude held above base speed, fraction of the limit, in `[0.5, 1]`.
+    #[serde(default)]
+    pub voltage_margin: Option<f64>,
+    /// Crossover of the loop, Hz.
+    #[serde(default)]
+    pub bandwidth_hz: Option<f64>,
+    /// Largest negative d current, A (a positive number, at most the current limit).
+    #[serde(default)]
+    pub max_negative_id_a: Option<f64>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl FieldWeakeningSettings {
+    /// `field_weakening = enabled`: foc's defaults.
+    pub fn flag(enabled: bool) -> Self {
+        Self {
+            enabled,
+            voltage_margin: None,
+            bandwidth_hz: None,
+            max_negative_id_a: None,
+        }
+    }
+}
+
+/// Reads `field_weakening` as a boolean or a table.
+fn field_weakening_de<'de, D>(de: D) -> Result<Option<FieldWeakeningSettings>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+{
+    struct V;
+    impl<'de> serde::de::Visitor<'de> for V {
+        type Value = FieldWeakeningSettings;
+        fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+            f.write_str("true, false or a table of field-weakening settings")
+        }
+        fn visit_bool<E: serde::de::Error>(self, v: bool) -> Result<Self::Value, E> {
+            Ok(FieldWeakeningSettings::flag(v))
+        }
+        fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Self::Value, A::Error> {
+            FieldWeakeningSettings::deserialize(serde::de::value::MapAccessDeserializer::new(map))
+        }
+    }
+    de.deserialize_any(V).map(Some)
 }
 
 /// Controller settings (`[controller]`).
@@ -444,6 +525,28 @@ impl Scenario {
         // The drive compensates the dead time of its bridge unless told otherwise.
         cfg.dead_time_s = s.dead_time_s.unwrap_or(self.inverter.dead_time_s) as f32;
         cfg.dead_time_band_a = s.dead_time_band_a.map(|x| x as f32);
+        if let Some(on) = s.mtpa {
+            cfg.mtpa = on;
+        }
+        // After the start-up defaults (the hand-over speed's floor is 2 % of foc's base-speed
+        // limit, with or without field weakening).
+        if let Some(fw) = s.field_weakening
+            && fw.enabled
+        {
+            cfg = cfg.with_field_weakening(2.0);
+            let f = &mut cfg.field_weakening;
+            f.bandwidth_rad_s = match fw.bandwidth_hz {
+                Some(hz) => hz_to_rad_s(hz) as f32,
+                None => 0.1 * cfg.current_bw_rad_s,
+            };
+            if let Some(k) = fw.voltage_margin {
+                f.voltage_margin = k as f32;
+            }
+            f.max_negative_id_a = fw.max_negative_id_a.map(|x| x as f32);
+        }
+        if let Some(rpm) = s.max_speed_rpm {
+            cfg.max_speed_rad_s = rpm_to_e(rpm);
+        }
         cfg.validate().map_err(|e| {
             FieldError::new(
                 "controller.foc",
@@ -563,10 +666,50 @@ impl Scenario {
                     "controller.foc.startup_accel_rpm_per_s",
                     f.startup_accel_rpm_per_s,
                 ),
+                ("controller.foc.max_speed_rpm", f.max_speed_rpm),
+                (
+                    "controller.foc.field_weakening.bandwidth_hz",
+                    f.field_weakening.and_then(|w| w.bandwidth_hz),
+                ),
+                (
+                    "controller.foc.field_weakening.max_negative_id_a",
+                    f.field_weakening.and_then(|w| w.max_negative_id_a),
+                ),
             ] {
                 if let Some(v) = v {
                     positive(name, v)?;
                 }
+            }
+            if let Some(k) = f.field_weakening.and_then(|w| w.voltage_margin)
+                && !(0.5..=1.0).contains(&k)
+            {
+                return Err(FieldError::new(
+                    "controller.foc.field_weakening.voltage_margin",
+                    format!("must be in [0.5, 1], is {k}"),
+                ));
+            }
+            if let Some(w) = f.field_weakening.filter(|w| w.enabled)
+                && let Some(hz) = w.bandwidth_hz
+                && hz > c.current_bandwidth_hz
+            {
+                return Err(FieldError::new(
+                    "controller.foc.field_weakening.bandwidth_hz",
+                    format!(
+                        "{hz} Hz is above the current bandwidth ({} Hz)",
+                        c.current_bandwidth_hz
+                    ),
+                ));
+            }
+            if let Some(i) = f.field_weakening.and_then(|w| w.max_negative_id_a)
+                && i > c.current_limit_a
+            {
+                return Err(FieldError::new(
+                    "controller.foc.field_weakening.max_negative_id_a",
+                    format!(
+                        "{i} A is above controller.current_limit_a ({} A)",
+                        c.current_limit_a
+                    ),
+                ));
             }
             for (name, v) in [
                 ("controller.foc.start_time_s", Some(f.start_time_s)),
@@ -805,5 +948,94 @@ mod tests {
         let mut s = sc.clone();
         s.controller.kind = ControllerKind::FocSensored;
         assert_eq!(s.foc_config().map(|c| c.mode), Ok(Mode::Sensored));
+    }
+
+    #[test]
+    fn mtpa_field_weakening_and_max_speed_settings() {
+        let with = |extra: &str| {
+            default_text().replace(
+                "startup_accel_rpm_per_s = 2000.0",
+                &format!("startup_accel_rpm_per_s = 2000.0\n{extra}"),
+            )
+        };
+        let cfg_of = |text: &str| {
+            Scenario::from_toml_str(text, "t.toml")
+                .and_then(|sc| {
+                    sc.foc_config().map_err(|e| SimError::Scenario {
+                        file: "t.toml".into(),
+                        field: e.field,
+                        problem: e.problem,
+                    })
+                })
+                .unwrap_or_else(|e| panic!("{e}"))
+        };
+        // Defaults: foc's (MTPA on, field weakening off, base-speed limit).
+        let base = cfg_of(default_text());
+        assert!(base.mtpa);
+        assert!(!base.field_weakening.enabled);
+        let u_max = 300.0 / 3f32.sqrt();
+        assert!((base.max_speed_rad_s - 0.95 * u_max / 0.175).abs() < 1e-2);
+        // A flag: foc's defaults, the speed limit doubled, bandwidth a tenth of the current
+        // loop's (500 Hz); the hand-over speed unchanged.
+        let c = cfg_of(&with("field_weakening = true\nmtpa = false"));
+        assert!(c.field_weakening.enabled && !c.mtpa);
+        assert_eq!(c.max_speed_rad_s, 2.0 * base.max_speed_rad_s);
+        assert!((c.field_weakening.bandwidth_rad_s - 0.1 * c.current_bw_rad_s).abs() < 1e-3);
+        assert_eq!(c.field_weakening.voltage_margin, 0.95);
+        assert_eq!(
+            c.startup.handover_speed_rad_s,
+            base.startup.handover_speed_rad_s
+        );
+        assert!(
+            !cfg_of(&with("field_weakening = false"))
+                .field_weakening
+                .enabled
+        );
+        // A table, and an explicit maximum speed (4 pole pairs: 3000 rpm = 1256.6 rad/s el.).
+        let c = cfg_of(&with(
+            "max_speed_rpm = 3000.0\n[controller.foc.field_weakening]\nvoltage_margin = 0.9\n\
+             bandwidth_hz = 40.0\nmax_negative_id_a = 4.0",
+        ));
+        let fw = c.field_weakening;
+        assert!(fw.enabled);
+        assert_eq!(fw.voltage_margin, 0.9);
+        assert!((fw.bandwidth_rad_s - 251.327_4).abs() < 1e-3);
+        assert_eq!(fw.max_negative_id_a, Some(4.0));
+        assert!((c.max_speed_rad_s - 1256.637).abs() < 1e-2);
+        // Round trip of the table form.
+        let sc = Scenario::from_toml_str(&with("field_weakening = true"), "t")
+            .unwrap_or_else(|e| panic!("{e}"));
+        let back = Scenario::from_toml_str(&sc.to_toml().unwrap_or_default(), "back")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back, sc);
+        // Bad values name the field.
+        for (extra, field) in [
+            (
+                "[controller.foc.field_weakening]\nvoltage_margin = 1.2",
+                "controller.foc.field_weakening.voltage_margin",
+            ),
+            (
+                "[controller.foc.field_weakening]\nbandwidth_hz = 900.0",
+                "controller.foc.field_weakening.bandwidth_hz",
+            ),
+            (
+                "[controller.foc.field_weakening]\nmax_negative_id_a = 9.0",
+                "controller.foc.field_weakening.max_negative_id_a",
+            ),
+            (
+                "[controller.foc.field_weakening]\nmax_negative_id_a = -1.0",
+                "controller.foc.field_weakening.max_negative_id_a",
+            ),
+            ("max_speed_rpm = 0.0", "controller.foc.max_speed_rpm"),
+            (
+                "[controller.foc.field_weakening]\nmargin = 0.9",
+                "controller.foc.field_weakening.margin",
+            ),
+        ] {
+            assert_eq!(error_of(&with(extra)).0, field, "{extra}");
+        }
+        let (field, problem) = error_of(&with("field_weakening = 3"));
+        assert_eq!(field, "controller.foc.field_weakening");
+        assert!(problem.contains("true, false or a table"), "{problem}");
     }
 }

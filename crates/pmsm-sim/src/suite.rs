@@ -21,11 +21,12 @@
 //! and the voltage the controller expects of its duties (net of its dead-time compensation),
 //! delayed like the duties.
 //!
-//! **Interior motors** ([`SuiteMotor::INTERIOR`]): foc has no MTPA yet, and with `i_d = 0` the
-//! traction motor's rated torque would need 208 A and a base speed of 1931 rpm (below its
-//! rated 3000 rpm). They run on the simulator's sensored drive
-//! ([`crate::controller::SensoredController`]: true angle, the current split on the MTPA line,
-//! the dead time compensated as foc does, the voltage net of it fed to the observers); their
+//! **Interior motors** ([`SuiteMotor::INTERIOR`]): the same foc drive with its MTPA (on by
+//! default: `i_d` from the MTPA law, the reluctance torque in the torque-to-current
+//! conversion; with `i_d = 0` the traction motor's rated torque would need 208 A and a base
+//! speed of 1931 rpm, below its rated 3000 rpm). Until foc had MTPA they ran on the
+//! simulator's sensored drive ([`crate::controller::SensoredController`], which splits the
+//! current on the MTPA line); the rows moved by at most a few hundredths of a degree. Their
 //! load step is the rated torque less the fan's share (rated torque in all at rated speed,
 //! the traction motor's rated point being 4 % below its base speed); their convergence runs
 //! add the start at 180 deg (`theta + pi`, [`motor_start_angles_deg`]), with the goal
@@ -79,7 +80,6 @@ use ekf_core::{EkfError, FluxObserver, FluxObserverConfig, ObserverConfig, PmsmO
 use serde::Serialize;
 
 use crate::SimError;
-use crate::controller::{DriveController, SensoredController};
 use crate::foc_drive::FocDrive;
 use crate::inverter::InverterConfig;
 use crate::metrics::Sums;
@@ -367,7 +367,7 @@ pub struct MotorInfo {
     pub rated_torque_nm: f64,
     /// PWM period, s.
     pub ts_s: f64,
-    /// The drive: `"foc sensored"`, or `"sim sensored, MTPA"` for an interior motor.
+    /// The drive: `"foc sensored"`, or `"foc sensored, MTPA"` for an interior motor.
     pub drive: String,
     /// DC bus, V.
     pub u_dc_v: f64,
@@ -679,18 +679,13 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
             }
         },
         controller: ControllerSettings {
-            // foc has no MTPA yet: the interior motors run on the simulator's sensored drive,
-            // which has it (module docs).
-            kind: if motor.is_interior() {
-                ControllerKind::Sensored
-            } else {
-                ControllerKind::FocSensored
-            },
+            // foc sensored, on the interior motors with its MTPA (on by default).
+            kind: ControllerKind::FocSensored,
             current_limit_a: i_lim,
             current_bandwidth_hz: bw_i,
             speed_bandwidth_hz: bw_w,
             delay_compensation: None,
-            foc: (!motor.is_interior()).then(FocSettings::default),
+            foc: Some(FocSettings::default()),
         },
         observer: ObserverSettings {
             seed_filter: false,
@@ -858,36 +853,26 @@ fn run_scored(
             }
         }
     }
-    let mut drive: Box<dyn DriveController> = if sc.controller.kind == ControllerKind::Sensored {
-        // The simulator's sensored drive (MTPA for an interior motor), compensating the dead
-        // time as foc does.
-        let mut cfg = sc.controller_config();
-        cfg.dead_time_s = sc.inverter.dead_time_s;
-        Box::new(SensoredController::new(cfg, sc.motor))
-    } else {
-        // foc's own speed slew (half the acceleration of its current limit, for the motor's
-        // inertia) would turn the scenario's ramps into slower ones and leave the windows on a
-        // ramp; the profile's ramps are the acceleration here.
-        let mut cfg = sc.foc_config().map_err(|e| SimError::Scenario {
-            file: sc.name.clone(),
-            field: e.field,
-            problem: e.problem,
-        })?;
-        cfg.speed_slew_rad_s2 *= 100.0;
-        Box::new(
-            FocDrive::new(&cfg, 0.0, None).map_err(|e| SimError::Scenario {
-                file: sc.name.clone(),
-                field: "controller.foc".into(),
-                problem: e.to_string(),
-            })?,
-        )
-    };
+    // foc sensored. Its own speed slew (half the acceleration of its current limit, for the
+    // motor's inertia) would turn the scenario's ramps into slower ones and leave the windows
+    // on a ramp; the profile's ramps are the acceleration here.
+    let mut cfg = sc.foc_config().map_err(|e| SimError::Scenario {
+        file: sc.name.clone(),
+        field: e.field,
+        problem: e.problem,
+    })?;
+    cfg.speed_slew_rad_s2 *= 100.0;
+    let mut drive = FocDrive::new(&cfg, 0.0, None).map_err(|e| SimError::Scenario {
+        file: sc.name.clone(),
+        field: "controller.foc".into(),
+        problem: e.to_string(),
+    })?;
     let out = {
         let mut side: Vec<&mut dyn SideObserver> = scored
             .iter_mut()
             .map(|s| s as &mut dyn SideObserver)
             .collect();
-        run_with_side_observers(sc, drive.as_mut(), Default::default(), &mut side)?
+        run_with_side_observers(sc, &mut drive, Default::default(), &mut side)?
     };
     if !out.end.is_completed() {
         return Err(SimError::Stopped {
@@ -949,7 +934,7 @@ pub fn run_suite_motors(
             rated_torque_nm: sc.rated_torque_nm,
             ts_s: ts,
             drive: if motor.is_interior() {
-                "sim sensored, MTPA".to_string()
+                "foc sensored, MTPA".to_string()
             } else {
                 "foc sensored".to_string()
             },
@@ -1222,7 +1207,7 @@ impl SuiteReport {
         };
         let _ = writeln!(
             s,
-            "foc in sensored mode drives each surface motor (it sees the true angle: the \
+            "foc in sensored mode drives every motor (it sees the true angle: the \
              trajectory does not depend on the observers); every observer runs alongside on the \
              same measured currents and the voltages the drive expects of its duties, delayed \
              like the duties. The \
@@ -1230,9 +1215,8 @@ impl SuiteReport {
              {:.0} deg el. away. PWM as listed, one period of computation delay; {sensing}. Load: \
              friction, a fan load of {:.0} % of rated torque at rated speed, and the rated load \
              step (interior motors: the step less the fan's share, rated torque in all at rated \
-             speed). Interior motors: foc has no MTPA yet, so the simulator's sensored drive runs \
-             them on the MTPA line (compensating the dead time as foc does); their convergence \
-             starts add 180 deg (the theta+pi cell), goal: all within {:.0} ms. Steady-state \
+             speed). Interior motors: foc runs them on its MTPA curve (until it had one, the \
+             simulator's sensored drive did); their convergence starts add 180 deg (the theta+pi cell), goal: all within {:.0} ms. Steady-state \
              windows: {:.2} s each, after the speed has settled.\n",
             INITIAL_ANGLE_RAD.to_degrees(),
             FAN_LOAD_FRACTION * 100.0,

@@ -324,7 +324,7 @@ fn suite_runs_the_chosen_motors_and_refuses_an_unknown_one() {
     let out = text(&o.stdout);
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert!(
-        out.contains("| traction_ipm | sim sensored, MTPA | 20 |"),
+        out.contains("| traction_ipm | foc sensored, MTPA | 20 |"),
         "{out}"
     );
     assert!(!out.contains("| servo |"), "{out}");

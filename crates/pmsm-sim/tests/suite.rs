@@ -284,7 +284,7 @@ fn interior_motors_goals_and_limits() {
         assert_eq!(info(SuiteMotor::TractionIpm).ts_s, 5e-5);
         for m in &r.motors {
             assert_eq!(m.end, "completed", "{:?}", m.motor);
-            assert_eq!(m.drive, "sim sensored, MTPA");
+            assert_eq!(m.drive, "foc sensored, MTPA");
         }
         for ekf in r
             .steady
@@ -370,7 +370,7 @@ fn interior_motors_goals_and_limits() {
         assert_eq!(r.checks.len(), 8 * 5 + 2 * 3);
         let md = r.to_markdown();
         for needle in [
-            "| traction_ipm | sim sensored, MTPA | 20 |",
+            "| traction_ipm | foc sensored, MTPA | 20 |",
             "| industrial_ipm | 100 %, rated load | 0.047 |",
             "theta+pi included",
         ] {
