@@ -76,9 +76,9 @@
 //! gets back a `Decision`: drive with a `Plan` (control frame and current references), turn
 //! the PWM off (idle, or a fault to latch), and whether to re-seed the observer.
 
-use core::f32::consts::{FRAC_PI_4, PI};
+use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-use ekf_core::Estimate;
+use ekf_core::{Estimate, Status};
 
 use crate::config::{FocConfig, Mode, ObserverLossPolicy};
 use crate::fault::Fault;
@@ -88,6 +88,12 @@ use crate::transforms::Dq;
 use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
 
 pub use crate::state::State;
+
+const ALIGN_GAIN: f32 = 1.0;
+const KICK: f32 = 0.25;
+const COAST_S: f32 = 0.03;
+const MOVING_TICKS: u16 = 5;
+const FLIP_SIGMA: f32 = 0.3;
 
 /// A control frame: angle (rad el.), speed (rad/s el.), and whether the back-EMF lies on its
 /// q axis (feed-forward on).
@@ -178,6 +184,22 @@ struct Vars {
     stall_count: u32,
     /// First tick of sensored closed loop.
     fresh: bool,
+    /// Damping offset of the current vector (included in `gamma`), rad el.
+    phi: f32,
+    /// Alignment: the rotor was seen moving, the current is off (coast), ticks since.
+    coast: u32,
+    /// Alignment: second step (at +90 deg), the first one moved nothing.
+    second: bool,
+    /// I/f launched from the rotor's motion: a zero crossing of the ramp does not re-seed.
+    launch: bool,
+    /// Ticks in a row the observer saw the rotor move during the alignment.
+    moving: u16,
+    /// Coast: the observer's angle turned by this much (unwrapped), rad el.
+    coast_turn: f32,
+    /// Coast: the integral of the observer's speed, rad el.
+    coast_int: f32,
+    /// Coast: the observer's angle of the last tick, rad el.
+    coast_last: f32,
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -192,6 +214,16 @@ pub(crate) struct Sequencer {
     blend_ticks: u32,
     acquire_ticks: u32,
     stall_ticks: u32,
+    /// Gain of the damping, s (rad of vector angle per rad/s el. of speed error).
+    k_damp: f32,
+    /// Gain of the damping during the alignment, s.
+    k_damp_align: f32,
+    /// Largest damping offset, rad el.
+    phi_max: f32,
+    /// Speed at which the alignment sees the rotor move, rad/s el.
+    kick_speed: f32,
+    /// Coast after the rotor was seen moving, ticks.
+    coast_ticks: u32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -232,7 +264,16 @@ impl Sequencer {
         let handover = cfg.startup.handover_speed_rad_s;
         let exit_speed = cfg.startup.exit_speed_ratio * handover;
         let speed_ts = ts * f32::from(cfg.speed_divider);
+        let pp = pole_pairs;
+        let wn =
+            sqrt(1.5 * pp * pp * cfg.motor.psi_f_wb * cfg.startup.if_current_a / cfg.inertia_kg_m2);
+        let zeta = 1.0;
         Self {
+            k_damp: 2.0 * zeta / wn,
+            k_damp_align: 2.0 * zeta / wn * ALIGN_GAIN,
+            phi_max: FRAC_PI_2,
+            kick_speed: KICK * handover,
+            coast_ticks: ticks(COAST_S, ts),
             pole_pairs,
             inv_pole_pairs: 1.0 / pole_pairs,
             handover,
@@ -288,6 +329,7 @@ impl Sequencer {
         self.v = Vars {
             target_mech: self.v.target_mech,
             fresh: true,
+            gamma: wrap(cfg.startup.align_angle_rad),
             ..Vars::default()
         };
         self.state = match cfg.mode {
@@ -390,11 +432,40 @@ impl Sequencer {
         match self.state {
             State::Align => {
                 self.v.timer = self.v.timer.saturating_add(1);
-                if self.v.timer > self.align_ticks {
-                    self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
+                if self.v.coast > 0 {
+                    self.v.coast += 1;
+                    self.v.coast_turn += wrap(est.theta_rad - self.v.coast_last);
+                    self.v.coast_last = est.theta_rad;
+                    self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
+                    if self.v.coast > self.coast_ticks {
+                        reframe = Some(self.align_frame());
+                        self.launch(cfg, est, reseed);
+                    }
+                } else {
+                    let seen = est.status == Status::Tracking
+                        && est.omega_e_rad_s.abs() >= self.kick_speed;
+                    self.v.moving = if seen {
+                        self.v.moving.saturating_add(1)
+                    } else {
+                        0
+                    };
+                    if self.v.moving >= MOVING_TICKS {
+                        self.v.coast = 1;
+                        self.v.coast_last = est.theta_rad;
+                    } else if self.v.timer > self.align_ticks {
+                        if self.v.second {
+                            self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
+                        } else {
+                            reframe = Some(self.align_frame());
+                            self.v.second = true;
+                            self.v.timer = 0;
+                            self.v.gamma = wrap(self.v.gamma + FRAC_PI_2);
+                        }
+                    }
                 }
             }
             State::OpenLoop => {
+                self.damp(est.omega_e_rad_s, self.v.omega_ol, self.k_damp);
                 let target = self.target_e();
                 let w_ol = self.v.omega_ol;
                 let h = self.handover;
@@ -475,10 +546,14 @@ impl Sequencer {
         let plan = match self.state {
             State::Align => {
                 let half = (self.align_ticks / 2).max(1);
-                let ramp = min2(self.v.timer as f32 / half as f32, 1.0);
+                let ramp = if self.v.coast > 0 {
+                    0.0
+                } else {
+                    min2(self.v.timer as f32 / half as f32, 1.0)
+                };
                 Plan {
                     frame: Frame {
-                        theta: cfg.startup.align_angle_rad,
+                        theta: self.v.gamma,
                         omega: 0.0,
                         emf: false,
                     },
@@ -486,7 +561,7 @@ impl Sequencer {
                         d: cfg.startup.align_current_a * ramp,
                         q: 0.0,
                     },
-                    reframe_from: None,
+                    reframe_from: reframe,
                 }
             }
             State::OpenLoop => {
@@ -612,12 +687,59 @@ impl Sequencer {
         if w != 0.0 {
             let dir = sign(w);
             if self.v.ol_dir != 0.0 && dir != self.v.ol_dir {
-                self.reseed_observer(self.v.gamma, w, FRAC_PI_4, reseed);
-                self.v.at_speed = 0;
+                if self.v.launch {
+                    self.v.launch = false;
+                } else {
+                    self.reseed_observer(self.v.gamma, w, FRAC_PI_4, reseed);
+                    self.v.at_speed = 0;
+                }
             }
             self.v.ol_dir = dir;
         }
         self.v.omega_ol = w;
+    }
+
+    /// The damping of the current vector: its angle offset from the ramp's is
+    /// `-k (w_hat - w_ramp)`, limited to `+-phi_max` (module docs).
+    #[inline(always)]
+    fn damp(&mut self, w_hat: f32, w_ramp: f32, k: f32) {
+        let phi = limit(-k * (w_hat - w_ramp), -self.phi_max, self.phi_max);
+        self.v.gamma = wrap(self.v.gamma + (phi - self.v.phi));
+        self.v.phi = phi;
+    }
+
+    /// The control frame of the alignment.
+    fn align_frame(&self) -> Frame {
+        Frame {
+            theta: self.v.gamma,
+            omega: 0.0,
+            emf: false,
+        }
+    }
+
+    /// I/f from the rotor's motion seen by the observer: the current vector on the rotor's
+    /// d axis, the ramp at the observer's speed, the observer kept.
+    fn launch(&mut self, cfg: &FocConfig, est: &Estimate<f32>, reseed: &mut impl FnMut(Seed)) {
+        let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
+        if self.v.coast_turn * self.v.coast_int < 0.0 {
+            // The angle turned against the speed: the observer is on the wrong branch.
+            th = wrap(th + PI);
+            w = -w;
+            reseed(Seed {
+                theta: th,
+                omega: w,
+                sigma_theta: FLIP_SIGMA,
+            });
+        }
+        self.v.gamma = th;
+        self.v.phi = 0.0;
+        self.v.omega_ol = w;
+        self.v.ol_dir = sign(w);
+        self.v.launch = true;
+        self.v.amp = cfg.startup.if_current_a;
+        self.v.at_speed = 0;
+        self.health.reset(w);
+        self.state = State::OpenLoop;
     }
 
     /// I/f from standstill at the alignment angle; the observer seeded there with angle
@@ -628,8 +750,7 @@ impl Sequencer {
         sigma_theta: f32,
         reseed: &mut impl FnMut(Seed),
     ) {
-        let angle = wrap(cfg.startup.align_angle_rad);
-        self.v.gamma = angle;
+        let angle = self.v.gamma;
         self.v.omega_ol = 0.0;
         self.v.ol_dir = 0.0;
         self.v.amp = cfg.startup.if_current_a;
@@ -653,6 +774,8 @@ impl Sequencer {
         let iq = limit(self.v.i_q_ref, -0.95 * amp, 0.95 * amp);
         let id = sqrt(amp * amp - iq * iq);
         self.v.gamma = wrap(est.theta_rad + atan2(iq, id));
+        self.v.phi = 0.0;
+        self.v.launch = false;
         self.v.omega_ol = if fall_back {
             self.v.speed_ref_mech * self.pole_pairs
         } else {
