@@ -90,8 +90,12 @@ use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
 pub use crate::state::State;
 
 const ALIGN_GAIN: f32 = 1.0;
-const KICK: f32 = 0.25;
-const COAST_S: f32 = 0.03;
+const KICK: f32 = 0.2;
+const KICK_TAU_S: f32 = 0.004;
+const KICK_LAG_S: f32 = 0.002;
+const COAST_S: f32 = 0.15;
+const COAST_TURN_RAD: f32 = 0.3;
+const COAST_SETTLE_S: f32 = 0.01;
 const MOVING_TICKS: u16 = 5;
 const FLIP_SIGMA: f32 = 0.3;
 
@@ -200,6 +204,8 @@ struct Vars {
     coast_int: f32,
     /// Coast: the observer's angle of the last tick, rad el.
     coast_last: f32,
+    /// Alignment: the observer's speed, low-pass filtered, rad/s el.
+    w_f: f32,
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -222,8 +228,14 @@ pub(crate) struct Sequencer {
     phi_max: f32,
     /// Speed at which the alignment sees the rotor move, rad/s el.
     kick_speed: f32,
-    /// Coast after the rotor was seen moving, ticks.
+    /// Coast after the rotor was seen moving, ticks (at most).
     coast_ticks: u32,
+    /// Coast ticks before the branch evidence is gathered.
+    coast_settle_ticks: u32,
+    /// Weight of the new sample in the filtered speed of the alignment.
+    kick_filter: f32,
+    /// Largest rise of the alignment current per tick, A.
+    align_rise: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -274,6 +286,14 @@ impl Sequencer {
             phi_max: FRAC_PI_2,
             kick_speed: KICK * handover,
             coast_ticks: ticks(COAST_S, ts),
+            coast_settle_ticks: ticks(COAST_SETTLE_S, ts),
+            kick_filter: min2(ts / KICK_TAU_S, 1.0),
+            align_rise: {
+                // Acceleration per ampere at sin(delta) = 1, rad/s^2 el.
+                let c = 1.5 * pp * pp * cfg.motor.psi_f_wb / cfg.inertia_kg_m2;
+                let d = KICK_TAU_S + KICK_LAG_S;
+                KICK * handover / (2.0 * c * d * d) * ts
+            },
             pole_pairs,
             inv_pole_pairs: 1.0 / pole_pairs,
             handover,
@@ -434,16 +454,27 @@ impl Sequencer {
                 self.v.timer = self.v.timer.saturating_add(1);
                 if self.v.coast > 0 {
                     self.v.coast += 1;
-                    self.v.coast_turn += wrap(est.theta_rad - self.v.coast_last);
+                    if self.v.coast > self.coast_settle_ticks {
+                        // The observer has had time to converge on the moving rotor.
+                        self.v.coast_turn += wrap(est.theta_rad - self.v.coast_last);
+                        self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
+                    }
                     self.v.coast_last = est.theta_rad;
-                    self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
-                    if self.v.coast > self.coast_ticks {
+                    if self.v.coast_int.abs() >= COAST_TURN_RAD {
                         reframe = Some(self.align_frame());
                         self.launch(cfg, est, reseed);
+                    } else if self.v.coast > self.coast_ticks {
+                        // A false alarm (the rotor did not turn): back to the alignment.
+                        self.v.coast = 0;
+                        self.v.moving = 0;
+                        self.v.w_f = 0.0;
                     }
                 } else {
-                    let seen = est.status == Status::Tracking
-                        && est.omega_e_rad_s.abs() >= self.kick_speed;
+                    self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
+                    self.v.coast_turn = 0.0;
+                    self.v.coast_int = 0.0;
+                    let seen =
+                        est.status == Status::Tracking && self.v.w_f.abs() >= self.kick_speed;
                     self.v.moving = if seen {
                         self.v.moving.saturating_add(1)
                     } else {
@@ -452,7 +483,9 @@ impl Sequencer {
                     if self.v.moving >= MOVING_TICKS {
                         self.v.coast = 1;
                         self.v.coast_last = est.theta_rad;
-                    } else if self.v.timer > self.align_ticks {
+                    } else if self.v.timer > self.align_ticks
+                        && self.align_amp(cfg) >= cfg.startup.align_current_a
+                    {
                         if self.v.second {
                             self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
                         } else {
@@ -545,11 +578,10 @@ impl Sequencer {
 
         let plan = match self.state {
             State::Align => {
-                let half = (self.align_ticks / 2).max(1);
-                let ramp = if self.v.coast > 0 {
+                let amp = if self.v.coast > 0 {
                     0.0
                 } else {
-                    min2(self.v.timer as f32 / half as f32, 1.0)
+                    self.align_amp(cfg)
                 };
                 Plan {
                     frame: Frame {
@@ -557,10 +589,7 @@ impl Sequencer {
                         omega: 0.0,
                         emf: false,
                     },
-                    i_ref: Dq {
-                        d: cfg.startup.align_current_a * ramp,
-                        q: 0.0,
-                    },
+                    i_ref: Dq { d: amp, q: 0.0 },
                     reframe_from: reframe,
                 }
             }
@@ -708,6 +737,14 @@ impl Sequencer {
         self.v.phi = phi;
     }
 
+    /// The alignment current of this step (module docs), A.
+    fn align_amp(&self, cfg: &FocConfig) -> f32 {
+        let half = (self.align_ticks / 2).max(1);
+        let t = self.v.timer as f32;
+        let i = cfg.startup.align_current_a;
+        min2(min2(i * t / half as f32, self.align_rise * t), i)
+    }
+
     /// The control frame of the alignment.
     fn align_frame(&self) -> Frame {
         Frame {
@@ -721,7 +758,7 @@ impl Sequencer {
     /// d axis, the ramp at the observer's speed, the observer kept.
     fn launch(&mut self, cfg: &FocConfig, est: &Estimate<f32>, reseed: &mut impl FnMut(Seed)) {
         let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
-        if self.v.coast_turn * self.v.coast_int < 0.0 {
+        if self.v.coast_turn * self.v.coast_int < 0.25 * self.v.coast_int * self.v.coast_int {
             // The angle turned against the speed: the observer is on the wrong branch.
             th = wrap(th + PI);
             w = -w;
