@@ -96,8 +96,10 @@ const KICK_LAG_S: f32 = 0.002;
 const COAST_S: f32 = 0.15;
 const COAST_TURN_RAD: f32 = 0.3;
 const COAST_SETTLE_S: f32 = 0.01;
+const EMF_BLOCK_S: f32 = 0.005;
 const MOVING_TICKS: u16 = 5;
 const FLIP_SIGMA: f32 = 0.3;
+const LAUNCH_LEAD_RAD: f32 = 1.0;
 
 /// A control frame: angle (rad el.), speed (rad/s el.), and whether the back-EMF lies on its
 /// q axis (feed-forward on).
@@ -128,6 +130,8 @@ pub(crate) struct Inputs<'a> {
     pub observer_ok: bool,
     /// Rotor sensor reading, electrical angle (rad) and speed (rad/s), when supplied.
     pub sensor: Option<(f32, f32)>,
+    /// The stator voltage of the observer's step (applied over the last period), V.
+    pub u_ab: [f32; 2],
 }
 
 /// Why the PWM is off this tick (the sequencer's answer when there is no plan).
@@ -198,14 +202,19 @@ struct Vars {
     launch: bool,
     /// Ticks in a row the observer saw the rotor move during the alignment.
     moving: u16,
-    /// Coast: the observer's angle turned by this much (unwrapped), rad el.
-    coast_turn: f32,
     /// Coast: the integral of the observer's speed, rad el.
     coast_int: f32,
-    /// Coast: the observer's angle of the last tick, rad el.
-    coast_last: f32,
     /// Alignment: the observer's speed, low-pass filtered, rad/s el.
     w_f: f32,
+    /// Coast: sum of the voltage over the current block, V.
+    e_sum: [f32; 2],
+    /// Coast: samples in the current block.
+    e_n: u32,
+    /// Coast: mean voltage (the back-EMF) of the first and of the last complete block, V.
+    e_first: [f32; 2],
+    e_last: [f32; 2],
+    /// Coast: complete blocks.
+    e_blocks: u32,
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -232,10 +241,12 @@ pub(crate) struct Sequencer {
     coast_ticks: u32,
     /// Coast ticks before the branch evidence is gathered.
     coast_settle_ticks: u32,
+    /// Ticks per block of the back-EMF averages of the coast.
+    block_ticks: u32,
     /// Weight of the new sample in the filtered speed of the alignment.
     kick_filter: f32,
-    /// Largest rise of the alignment current per tick, A.
-    align_rise: f32,
+    /// Rise of the alignment current per tick, A.
+    align_step: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -287,12 +298,17 @@ impl Sequencer {
             kick_speed: KICK * handover,
             coast_ticks: ticks(COAST_S, ts),
             coast_settle_ticks: ticks(COAST_SETTLE_S, ts),
+            block_ticks: ticks(EMF_BLOCK_S, ts).max(1),
             kick_filter: min2(ts / KICK_TAU_S, 1.0),
-            align_rise: {
+            align_step: {
                 // Acceleration per ampere at sin(delta) = 1, rad/s^2 el.
                 let c = 1.5 * pp * pp * cfg.motor.psi_f_wb / cfg.inertia_kg_m2;
                 let d = KICK_TAU_S + KICK_LAG_S;
-                KICK * handover / (2.0 * c * d * d) * ts
+                let half = (ticks(cfg.startup.align_time_s, ts) / 2).max(1);
+                min2(
+                    KICK * handover / (2.0 * c * d * d) * ts,
+                    cfg.startup.align_current_a / half as f32,
+                )
             },
             pole_pairs,
             inv_pole_pairs: 1.0 / pole_pairs,
@@ -393,7 +409,7 @@ impl Sequencer {
     ) -> Result<Plan, Stop> {
         match cfg.mode {
             Mode::Sensored => self.sensored(cfg, input.sensor),
-            Mode::Sensorless => self.sensorless(cfg, input.estimate, input.observer_ok, reseed),
+            Mode::Sensorless => self.sensorless(cfg, input, reseed),
         }
     }
 
@@ -430,10 +446,10 @@ impl Sequencer {
     fn sensorless(
         &mut self,
         cfg: &FocConfig,
-        est: &Estimate<f32>,
-        ok: bool,
+        input: Inputs<'_>,
         reseed: &mut impl FnMut(Seed),
     ) -> Result<Plan, Stop> {
+        let (est, ok) = (input.estimate, input.observer_ok);
         let reference = match self.state {
             State::OpenLoop => Reference::OpenLoop {
                 gamma: self.v.gamma,
@@ -455,12 +471,25 @@ impl Sequencer {
                 if self.v.coast > 0 {
                     self.v.coast += 1;
                     if self.v.coast > self.coast_settle_ticks {
-                        // The observer has had time to converge on the moving rotor.
-                        self.v.coast_turn += wrap(est.theta_rad - self.v.coast_last);
+                        // The current loops have settled at zero current: the voltage is
+                        // the back-EMF.
                         self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
+                        self.v.e_sum[0] += input.u_ab[0];
+                        self.v.e_sum[1] += input.u_ab[1];
+                        self.v.e_n += 1;
+                        if self.v.e_n >= self.block_ticks {
+                            let k = 1.0 / self.v.e_n as f32;
+                            let mean = [self.v.e_sum[0] * k, self.v.e_sum[1] * k];
+                            if self.v.e_blocks == 0 {
+                                self.v.e_first = mean;
+                            }
+                            self.v.e_last = mean;
+                            self.v.e_blocks += 1;
+                            self.v.e_sum = [0.0; 2];
+                            self.v.e_n = 0;
+                        }
                     }
-                    self.v.coast_last = est.theta_rad;
-                    if self.v.coast_int.abs() >= COAST_TURN_RAD {
+                    if self.v.coast_int.abs() >= COAST_TURN_RAD && self.v.e_blocks >= 2 {
                         reframe = Some(self.align_frame());
                         self.launch(cfg, est, reseed);
                     } else if self.v.coast > self.coast_ticks {
@@ -468,13 +497,18 @@ impl Sequencer {
                         self.v.coast = 0;
                         self.v.moving = 0;
                         self.v.w_f = 0.0;
+                        self.v.e_sum = [0.0; 2];
+                        self.v.e_n = 0;
+                        self.v.e_blocks = 0;
                     }
                 } else {
+                    let i_align = cfg.startup.align_current_a;
+                    self.v.amp = min2(self.v.amp + self.align_step, i_align);
                     self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
-                    self.v.coast_turn = 0.0;
                     self.v.coast_int = 0.0;
-                    let seen =
-                        est.status == Status::Tracking && self.v.w_f.abs() >= self.kick_speed;
+                    let seen = est.status == Status::Tracking
+                        && self.v.w_f.abs() >= self.kick_speed
+                        && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {
                         self.v.moving.saturating_add(1)
                     } else {
@@ -482,16 +516,14 @@ impl Sequencer {
                     };
                     if self.v.moving >= MOVING_TICKS {
                         self.v.coast = 1;
-                        self.v.coast_last = est.theta_rad;
-                    } else if self.v.timer > self.align_ticks
-                        && self.align_amp(cfg) >= cfg.startup.align_current_a
-                    {
+                    } else if self.v.timer > self.align_ticks && self.v.amp >= i_align {
                         if self.v.second {
                             self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
                         } else {
                             reframe = Some(self.align_frame());
                             self.v.second = true;
                             self.v.timer = 0;
+                            self.v.amp = 0.0;
                             self.v.gamma = wrap(self.v.gamma + FRAC_PI_2);
                         }
                     }
@@ -578,11 +610,7 @@ impl Sequencer {
 
         let plan = match self.state {
             State::Align => {
-                let amp = if self.v.coast > 0 {
-                    0.0
-                } else {
-                    self.align_amp(cfg)
-                };
+                let amp = if self.v.coast > 0 { 0.0 } else { self.v.amp };
                 Plan {
                     frame: Frame {
                         theta: self.v.gamma,
@@ -737,14 +765,6 @@ impl Sequencer {
         self.v.phi = phi;
     }
 
-    /// The alignment current of this step (module docs), A.
-    fn align_amp(&self, cfg: &FocConfig) -> f32 {
-        let half = (self.align_ticks / 2).max(1);
-        let t = self.v.timer as f32;
-        let i = cfg.startup.align_current_a;
-        min2(min2(i * t / half as f32, self.align_rise * t), i)
-    }
-
     /// The control frame of the alignment.
     fn align_frame(&self) -> Frame {
         Frame {
@@ -758,8 +778,14 @@ impl Sequencer {
     /// d axis, the ramp at the observer's speed, the observer kept.
     fn launch(&mut self, cfg: &FocConfig, est: &Estimate<f32>, reseed: &mut impl FnMut(Seed)) {
         let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
-        if self.v.coast_turn * self.v.coast_int < 0.25 * self.v.coast_int * self.v.coast_int {
-            // The angle turned against the speed: the observer is on the wrong branch.
+        // The back-EMF `w psi j e^(j th)` turned from the first block to the last one in the
+        // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction.
+        let [f0, f1] = self.v.e_first;
+        let [l0, l1] = self.v.e_last;
+        let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
+        let th_emf = wrap(atan2(l1, l0) - dir * FRAC_PI_2);
+        if wrap(th - th_emf).abs() > FRAC_PI_2 {
+            // The observer is on the other branch (same back-EMF, angle + pi, speed - w).
             th = wrap(th + PI);
             w = -w;
             reseed(Seed {
@@ -768,7 +794,9 @@ impl Sequencer {
                 sigma_theta: FLIP_SIGMA,
             });
         }
-        self.v.gamma = th;
+        // A lead toward the commanded direction: a forward torque even when the observer's
+        // angle is off by up to the lead.
+        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * sign(self.target_e()));
         self.v.phi = 0.0;
         self.v.omega_ol = w;
         self.v.ol_dir = sign(w);
