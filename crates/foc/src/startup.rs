@@ -89,12 +89,11 @@ use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
 
 pub use crate::state::State;
 
-const ALIGN_GAIN: f32 = 1.0;
 const KICK: f32 = 0.2;
 const KICK_TAU_S: f32 = 0.004;
 const KICK_LAG_S: f32 = 0.002;
 const COAST_S: f32 = 0.15;
-const COAST_TURN_RAD: f32 = 0.3;
+const COAST_TURN_RAD: f32 = 0.5;
 const COAST_SETTLE_S: f32 = 0.01;
 const EMF_BLOCK_S: f32 = 0.005;
 const MOVING_TICKS: u16 = 5;
@@ -231,8 +230,6 @@ pub(crate) struct Sequencer {
     stall_ticks: u32,
     /// Gain of the damping, s (rad of vector angle per rad/s el. of speed error).
     k_damp: f32,
-    /// Gain of the damping during the alignment, s.
-    k_damp_align: f32,
     /// Largest damping offset, rad el.
     phi_max: f32,
     /// Speed at which the alignment sees the rotor move, rad/s el.
@@ -293,7 +290,6 @@ impl Sequencer {
         let zeta = 1.0;
         Self {
             k_damp: 2.0 * zeta / wn,
-            k_damp_align: 2.0 * zeta / wn * ALIGN_GAIN,
             phi_max: FRAC_PI_2,
             kick_speed: KICK * handover,
             coast_ticks: ticks(COAST_S, ts),

@@ -39,8 +39,8 @@
 //! - **worst ramp deviation**: the largest `|speed - ramp speed|` (the controller's own speed
 //!   reference, which under I/f is the ramp's speed) from 0.1 s ([`RAMP_SETTLE_S`]) after the
 //!   end of the alignment to the hand-over, rpm and % of rated;
-//! - **hand-over**: its time and speed (the ramp's speed at the first `handover` period, rpm
-//!   and % of rated; the true speed then as well).
+//! - **hand-over**: its time and speed (the ramp's speed in the last `open_loop` period before
+//!   the first `handover` period, rpm and % of rated; the true speed then as well).
 
 use serde::Serialize;
 
@@ -466,7 +466,8 @@ pub struct StartupMetrics {
     pub ramp_deviation_max_pct: f64,
     /// Time of the hand-over (first `handover` period), s; `None`: no hand-over.
     pub handover_s: Option<f64>,
-    /// `|ramp speed|` at the hand-over, mechanical rpm (`NaN`: no hand-over).
+    /// `|ramp speed|` at the hand-over (of the last I/f period), mechanical rpm (`NaN`: no
+    /// hand-over).
     pub handover_speed_rpm: f64,
     /// The same in % of rated speed.
     pub handover_speed_pct: f64,
@@ -483,6 +484,7 @@ pub struct StartupScore {
     done: bool,
     backward: f64,
     deviation: Option<f64>,
+    ramp: f64,
     handover: Option<(f64, f64, f64)>,
 }
 
@@ -512,8 +514,7 @@ impl StartupScore {
         }
         if state == "handover" || state == "closed_loop" || !starting {
             if state == "handover" {
-                let ramp = tel.speed_ref_rpm.unwrap_or(f64::NAN).abs();
-                self.handover = Some((s.t_s, ramp, s.truth.speed_rpm));
+                self.handover = Some((s.t_s, self.ramp.abs(), s.truth.speed_rpm));
             }
             self.done = true;
             return;
@@ -521,6 +522,7 @@ impl StartupScore {
         let w = s.truth.speed_rpm;
         self.backward = self.backward.max(-w);
         if state == "open_loop" {
+            self.ramp = tel.speed_ref_rpm.unwrap_or(f64::NAN);
             let t0 = *self.align_end.get_or_insert(s.t_s);
             if s.t_s >= t0 + RAMP_SETTLE_S - 1e-9
                 && let Some(r) = tel.speed_ref_rpm
