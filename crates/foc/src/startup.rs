@@ -12,25 +12,76 @@
 //!   any state ──fault──> Fault ──clear_fault()──> Idle
 //! ```
 //!
-//! # Align (optional)
+//! # Alignment (optional): kick, coast, launch
 //!
-//! A current vector of `align_current_a` on the d axis of `align_angle_rad` (rising linearly
-//! over the first half of `align_time_s`) pulls the rotor's d axis onto that angle. A rotor
-//! exactly at the opposite angle feels no torque (the dead point of any single-vector
-//! alignment); the I/f ramp then starts it anyway, with a jerk.
+//! The rotor stands at an unknown angle `th0`. A current vector of up to `align_current_a` on
+//! the d axis of `align_angle_rad` pulls it with the torque `k_t I sin(gamma - th)`: toward
+//! the vector, hence **backwards** for every rotor ahead of it, and an undamped pendulum
+//! swings through the vector and back at about `delta0 w_n` (the old start ran backwards at
+//! -157 rpm, 8 % of rated speed, from 57 deg). Holding it until it settles is therefore not
+//! the aim; the alignment only has to make the rotor move a little, slowly, and learn its
+//! angle from that motion:
 //!
-//! # Open loop: current-controlled ramp (I/f)
+//! 1. **Kick.** The current rises at most at `r = w_k / (2 c d^2)` per second, where
+//!    `w_k = kick_speed_ratio * handover_speed` is the speed taken as motion,
+//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d` the
+//!    delay of the detection (observer lag plus a 4 ms low-pass filter). From rest the speed
+//!    grows as `c r t^2 / 2`; seen `d` late it has gained `c r t d`, which this `r` keeps
+//!    below `w_k` (so the rotor moves at most `2 w_k`, in either direction, before the push
+//!    stops). Motion = the observer reports `Tracking` and its filtered speed exceeds `w_k`
+//!    for 5 ticks.
+//! 2. **Coast.** The current is cut (reference 0): no torque, whatever the rotor's angle. The
+//!    rotor coasts and the current loops, holding zero current, apply the back-EMF
+//!    `e = w psi_f j e^(j th)` itself. The observer gives `|w|` and `th` modulo `pi`, but at
+//!    this speed it may sit on the wrong branch (`(th + pi, -w)` gives the same back-EMF);
+//!    the back-EMF's own turn settles it: averaged over 5 ms blocks (after a 10 ms
+//!    settling), the sign of `e_first x e_last` is the true direction of rotation, and the
+//!    rotor's d axis lies 90 deg behind `e_last` in that direction. When the observer's
+//!    angle is more than 90 deg from that one, it is moved to the other branch. The coast
+//!    ends once the rotor has turned 0.5 rad by the observer's speed; a coast without
+//!    that turn within 0.15 s was a false alarm and the kick resumes.
+//! 3. **Launch.** I/f starts from the rotor's state: `gamma = th_hat + 1 rad` toward the
+//!    commanded direction (a forward torque even when the angle is somewhat off), the ramp
+//!    at the observer's speed (a slowly backward-turning rotor is braked by the ramp running
+//!    through zero; that crossing does not re-seed the observer, which is tracking), the
+//!    observer kept.
+//!
+//! A rotor that does not move within `align_time_s` sits on the vector or at its dead point
+//! (180 deg away, no torque); a second step at `align_angle + 90 deg` moves either one, and
+//! if even that moves nothing the ramp starts from standstill at the vector's angle as
+//! before (the observer seeded there, sigma 45 deg). With `kick_speed_ratio = 0` the
+//! alignment is the classic one: the vector held for `align_time_s` (current rising over
+//! the first half), then the ramp from that angle.
+//!
+//! # Open loop: damped current-controlled ramp (I/f)
 //!
 //! The current loops run in the frame of the **current vector** itself: angle `gamma`, speed
 //! `w_ol`, references `(i_d, i_q) = (if_current_a, 0)`, no back-EMF feed-forward. `w_ol`
-//! moves toward the target clamped to `+-handover_speed` at `accel_rad_s2`; `gamma`
-//! integrates it. The rotor follows because the torque `k_t I_f sin(gamma - th)` grows when it
-//! falls behind: its load angle `gamma - th` settles where the torque equals load plus
-//! inertial torque, always within +-90 deg (a stable pendulum). The ramp starts with `gamma`
-//! at the alignment angle, so the current vector is continuous from alignment. Zero speed is
-//! no special case: a reversal simply ramps `w_ol` through zero; at the crossing the
-//! observer is re-seeded at `(gamma, w_ol)` (angle sigma 45 deg), because its angle drifts
-//! where the back-EMF vanishes.
+//! moves toward the target clamped to `+-handover_speed` at `accel_rad_s2`. The rotor
+//! follows because the torque `k_t I_f sin(gamma - th)` grows when it falls behind: its load
+//! angle `delta = gamma - th` settles where the torque equals load plus inertial torque,
+//! within +-90 deg. Undamped, this is a pendulum: `J/p d2(delta)/dt2 = -k_t I_f cos(delta0)
+//! delta` with `w_n^2 = 1.5 p^2 psi_f I_f cos(delta0) / J` (servo: 18 Hz) and nothing but
+//! friction to damp it (the old ramp swung +-150 rpm around its speed).
+//!
+//! **Damping.** The vector is turned by an offset proportional to the speed error that the
+//! observer sees, `gamma = gamma_ramp + phi`, `phi = -K (w_hat - w_ol)`, `|phi| <= 90 deg`.
+//! Linearized, `phi` adds the torque `-k_t I_f K (w - w_ol)`:
+//! `s^2 + w_n^2 K s + w_n^2 = 0`, so `K = 2 zeta / w_n` gives the damping ratio
+//! `zeta = damping_ratio` (1 by default: critically damped). The observer tracks the
+//! rotor's speed from a few percent of rated speed, well above `w_n` in bandwidth; the
+//! offset is limited so that the vector never points behind the rotor. This is the
+//! stabilizing loop of I/f control (an angle correction from the speed or active-power
+//! oscillation) with the EKF's speed as the signal. `damping_ratio = 0` is the undamped
+//! ramp.
+//!
+//! The ramp's angle integrates `w_ol`; `gamma` (the vector's) carries the damping offset on
+//! top. Zero speed is no special case: a reversal simply ramps `w_ol` through zero; at the
+//! crossing the observer is re-seeded at `(gamma, w_ol)` (angle sigma 45 deg), because its
+//! angle drifts where the back-EMF vanishes.
+//!
+//! Cost: the damping is a multiply-add and a clamp per I/f tick; the kick and coast add a
+//! filter and sums during the alignment only.
 //!
 //! # Hand-over without a torque jump
 //!
@@ -89,15 +140,26 @@ use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
 
 pub use crate::state::State;
 
-const KICK: f32 = 0.2;
+/// Time constant of the filtered observer speed that detects the kick, s.
 const KICK_TAU_S: f32 = 0.004;
+/// The observer's own lag behind a starting rotor, s (the kick's current rise is sized for
+/// it and the filter).
 const KICK_LAG_S: f32 = 0.002;
-const COAST_S: f32 = 0.15;
-const COAST_TURN_RAD: f32 = 0.5;
-const COAST_SETTLE_S: f32 = 0.01;
-const EMF_BLOCK_S: f32 = 0.005;
+/// Ticks in a row the filtered speed must exceed the kick speed.
 const MOVING_TICKS: u16 = 5;
+/// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
+const COAST_S: f32 = 0.15;
+/// The coast ends once the rotor has turned this much (the observer's speed integrated), rad
+/// el.
+const COAST_TURN_RAD: f32 = 0.5;
+/// The first part of the coast (the current loops settling at zero current, the observer on
+/// the moving rotor) is not used for the evidence, s.
+const COAST_SETTLE_S: f32 = 0.01;
+/// Block over which the back-EMF is averaged during the coast, s.
+const EMF_BLOCK_S: f32 = 0.005;
+/// Angle standard deviation of the observer when it is moved to the other branch, rad.
 const FLIP_SIGMA: f32 = 0.3;
+/// Lead of the launched current vector over the rotor's angle, rad el.
 const LAUNCH_LEAD_RAD: f32 = 1.0;
 
 /// A control frame: angle (rad el.), speed (rad/s el.), and whether the back-EMF lies on its
@@ -284,28 +346,29 @@ impl Sequencer {
         let handover = cfg.startup.handover_speed_rad_s;
         let exit_speed = cfg.startup.exit_speed_ratio * handover;
         let speed_ts = ts * f32::from(cfg.speed_divider);
-        let pp = pole_pairs;
-        let wn =
-            sqrt(1.5 * pp * pp * cfg.motor.psi_f_wb * cfg.startup.if_current_a / cfg.inertia_kg_m2);
-        let zeta = 1.0;
+        let st = &cfg.startup;
+        // Acceleration per ampere of a current vector 90 deg from the rotor's d axis,
+        // rad/s^2 el. (`p^2 1.5 psi_f / J`), and the I/f pendulum's natural frequency.
+        let accel_per_a = 1.5 * pole_pairs * pole_pairs * cfg.motor.psi_f_wb / cfg.inertia_kg_m2;
+        let wn = sqrt(accel_per_a * st.if_current_a);
+        let kick_speed = st.kick_speed_ratio * handover;
+        let half = (ticks(st.align_time_s, ts) / 2).max(1);
+        let mut align_step = st.align_current_a / half as f32;
+        if kick_speed > 0.0 {
+            // The rotor's speed grows as `c r t^2 / 2` under a current rising at `r`; seen
+            // `d` late it has gained `c r t d` more: at most the kick speed itself.
+            let d = KICK_TAU_S + KICK_LAG_S;
+            align_step = min2(align_step, kick_speed / (2.0 * accel_per_a * d * d) * ts);
+        }
         Self {
-            k_damp: 2.0 * zeta / wn,
+            k_damp: 2.0 * st.damping_ratio / wn,
             phi_max: FRAC_PI_2,
-            kick_speed: KICK * handover,
+            kick_speed,
             coast_ticks: ticks(COAST_S, ts),
             coast_settle_ticks: ticks(COAST_SETTLE_S, ts),
             block_ticks: ticks(EMF_BLOCK_S, ts).max(1),
             kick_filter: min2(ts / KICK_TAU_S, 1.0),
-            align_step: {
-                // Acceleration per ampere at sin(delta) = 1, rad/s^2 el.
-                let c = 1.5 * pp * pp * cfg.motor.psi_f_wb / cfg.inertia_kg_m2;
-                let d = KICK_TAU_S + KICK_LAG_S;
-                let half = (ticks(cfg.startup.align_time_s, ts) / 2).max(1);
-                min2(
-                    KICK * handover / (2.0 * c * d * d) * ts,
-                    cfg.startup.align_current_a / half as f32,
-                )
-            },
+            align_step,
             pole_pairs,
             inv_pole_pairs: 1.0 / pole_pairs,
             handover,
@@ -502,7 +565,8 @@ impl Sequencer {
                     self.v.amp = min2(self.v.amp + self.align_step, i_align);
                     self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
                     self.v.coast_int = 0.0;
-                    let seen = est.status == Status::Tracking
+                    let seen = self.kick_speed > 0.0
+                        && est.status == Status::Tracking
                         && self.v.w_f.abs() >= self.kick_speed
                         && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {
@@ -513,7 +577,7 @@ impl Sequencer {
                     if self.v.moving >= MOVING_TICKS {
                         self.v.coast = 1;
                     } else if self.v.timer > self.align_ticks && self.v.amp >= i_align {
-                        if self.v.second {
+                        if self.v.second || self.kick_speed == 0.0 {
                             self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
                         } else {
                             reframe = Some(self.align_frame());
@@ -794,7 +858,8 @@ impl Sequencer {
         // angle is off by up to the lead.
         self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * sign(self.target_e()));
         self.v.phi = 0.0;
-        self.v.omega_ol = w;
+        // The ramp never runs faster than the hand-over speed.
+        self.v.omega_ol = limit(w, -self.handover, self.handover);
         self.v.ol_dir = sign(w);
         self.v.launch = true;
         self.v.amp = cfg.startup.if_current_a;

@@ -45,9 +45,9 @@ fn scenario(preset: &str, theta0: f64) -> Scenario {
     foc.handover_speed_rpm = Some(HANDOVER_MAX_PCT / 100.0 * sc.rated_speed_rpm);
     sc.controller.foc = Some(foc);
     sc.speed_ref_rpm = Profile::steps(vec![(0.0, sc.rated_speed_rpm)]);
-    // The alignment (0.2 s by default), the ramp to the hand-over speed (0.5 s by default),
-    // the observer's lock time and a margin.
-    sc.duration_s = foc.align_time_s.unwrap_or(0.2) + 1.0;
+    // The alignment (0.2 s by default, up to twice that and a coast), the ramp to the
+    // hand-over speed (0.5 s by default), the observer's lock time and a margin.
+    sc.duration_s = foc.align_time_s.unwrap_or(0.2) + 1.5;
     sc.faults.clear();
     sc
 }
