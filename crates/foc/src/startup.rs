@@ -73,7 +73,8 @@
 //! offset is limited so that the vector never points behind the rotor. This is the
 //! stabilizing loop of I/f control (an angle correction from the speed or active-power
 //! oscillation) with the EKF's speed as the signal. `damping_ratio = 0` is the undamped
-//! ramp.
+//! ramp. The damping acts during the start from standstill (until the first hand-over); the
+//! I/f of a reversal or of a fall-back is unchanged (undamped).
 //!
 //! The ramp's angle integrates `w_ol`; `gamma` (the vector's) carries the damping offset on
 //! top. Zero speed is no special case: a reversal simply ramps `w_ol` through zero; at the
@@ -267,6 +268,8 @@ struct Vars {
     coast_int: f32,
     /// Alignment: the observer's speed, low-pass filtered, rad/s el.
     w_f: f32,
+    /// The start from standstill, until the first hand-over: the I/f ramp is damped.
+    starting: bool,
     /// Coast: sum of the voltage over the current block, V.
     e_sum: [f32; 2],
     /// Coast: samples in the current block.
@@ -424,6 +427,7 @@ impl Sequencer {
         self.v = Vars {
             target_mech: self.v.target_mech,
             fresh: true,
+            starting: true,
             gamma: wrap(cfg.startup.align_angle_rad),
             ..Vars::default()
         };
@@ -590,7 +594,9 @@ impl Sequencer {
                 }
             }
             State::OpenLoop => {
-                self.damp(est.omega_e_rad_s, self.v.omega_ol, self.k_damp);
+                if self.v.starting {
+                    self.damp(est.omega_e_rad_s, self.v.omega_ol, self.k_damp);
+                }
                 let target = self.target_e();
                 let w_ol = self.v.omega_ol;
                 let h = self.handover;
@@ -951,6 +957,7 @@ impl Sequencer {
         self.v.speed_ref_mech = self.v.omega_ol * self.inv_pole_pairs;
         let err = self.v.speed_ref_mech - est.omega_e_rad_s * self.inv_pole_pairs;
         self.speed_pi.preset_output(iq0, err, 0.0);
+        self.v.starting = false;
         self.state = State::Handover;
     }
 }
