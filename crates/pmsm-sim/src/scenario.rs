@@ -107,6 +107,13 @@ pub struct FocSettings {
     /// Acceleration of the I/f ramp, mechanical rpm per second. Default: the hand-over speed
     /// in 0.5 s.
     pub startup_accel_rpm_per_s: Option<f64>,
+    /// Damping ratio of foc's I/f start (`StartupConfig::damping_ratio`). Default 1
+    /// (critically damped; foc's own default is 0, off).
+    pub startup_damping_ratio: Option<f64>,
+    /// Kick speed of foc's alignment as a fraction of the hand-over speed
+    /// (`StartupConfig::kick_speed_ratio`; 0: the classic alignment). Default 0.2 (foc's own
+    /// default is 0, off).
+    pub startup_kick_speed_ratio: Option<f64>,
     /// Reaction to an observer loss in closed loop (default `fall_back`).
     pub observer_loss: ObserverLoss,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
@@ -374,8 +381,10 @@ impl Scenario {
     /// observer's motor parameters (what the drive knows of the motor), `ts_s` and the
     /// nominal bus voltage, then the scenario's current limit, loop bandwidths, inertia,
     /// computation delay, mode, dead-time compensation (of `inverter.dead_time_s` unless
-    /// `[controller.foc] dead_time_s` says otherwise; 0 turns it off) and the other
-    /// `[controller.foc]` settings. Validated by `foc` itself.
+    /// `[controller.foc] dead_time_s` says otherwise; 0 turns it off), the damped start
+    /// (`startup_damping_ratio` 1 and `startup_kick_speed_ratio` 0.2 unless set; off in
+    /// foc's own defaults) and the other `[controller.foc]` settings. Validated by `foc`
+    /// itself.
     pub fn foc_config(&self) -> Result<foc::FocConfig, FieldError> {
         use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy};
         let c = &self.controller;
@@ -426,6 +435,8 @@ impl Scenario {
             Some(a) => rpm_to_e(a),
             None => st.handover_speed_rad_s / 0.5,
         };
+        st.damping_ratio = s.startup_damping_ratio.unwrap_or(1.0) as f32;
+        st.kick_speed_ratio = s.startup_kick_speed_ratio.unwrap_or(0.2) as f32;
         cfg.health.policy = match s.observer_loss {
             ObserverLoss::FallBack => ObserverLossPolicy::FallBackAndReacquire,
             ObserverLoss::Trip => ObserverLossPolicy::Trip,
