@@ -195,6 +195,7 @@ fn run() -> Result<(), &'static str> {
 
     // The full controller tick (foc), sensorless closed loop on an on-target plant.
     drive::run(&clock)?;
+    drive::run_damped(&clock)?;
 
     // The self-commissioning sequence (foc::identify): its worst tick.
     identify::run(&clock)?;
