@@ -91,11 +91,12 @@ impl Cell {
             why.push(format!("backward {:.2} %", st.backward_speed_max_pct));
         }
         if let Some(d) = self.deviation_pct()
-            && !(d <= deviation)
+            && (d.is_nan() || d > deviation)
         {
             why.push(format!("ramp deviation {d:.2} %"));
         }
-        if st.handover_s.is_none() || !(st.handover_speed_pct <= handover + 1e-3) {
+        let ho = st.handover_speed_pct;
+        if st.handover_s.is_none() || ho.is_nan() || ho > handover + 1e-3 {
             why.push(format!(
                 "hand-over {:?} at {:.2} %",
                 st.handover_s, st.handover_speed_pct
