@@ -124,7 +124,8 @@
 //! The sequencer (crate-private `Sequencer`) owns the state, the speed loop and the
 //! [`health`](crate::health) monitor, and nothing else: it never touches the observer, the
 //! current loops or the bridge. Each tick the controller passes it `Inputs` (the observer's
-//! estimate and whether its step succeeded, the sensor reading) with the configuration, and
+//! estimate and whether its step succeeded, the sensor reading, the voltage of the observer's
+//! step, which the alignment's coast reads as back-EMF) with the configuration, and
 //! gets back a `Decision`: drive with a `Plan` (control frame and current references), turn
 //! the PWM off (idle, or a fault to latch), and whether to re-seed the observer.
 
