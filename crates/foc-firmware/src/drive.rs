@@ -53,7 +53,23 @@ impl Plant {
 /// Runs the drive and prints `cortex-m4 foc_tick: N instructions/call` (closed loop, the
 /// budgeted figure) and one line per start-up state. `Err` when the drive failed.
 pub fn run(clock: &Clock) -> Result<(), &'static str> {
-    let cfg = FocConfig::new(MotorParams::servo(), TS_S, U_DC_V).with_inertia(8e-4);
+    run_start(clock, false)
+}
+
+/// As [`run`] with foc's damped start (`StartupConfig::damping_ratio` 1, `kick_speed_ratio`
+/// 0.2: kick, coast and launch, damped I/f): prints `foc_tick_align_damped`,
+/// `foc_tick_openloop_damped` and `foc_tick_handover_damped` (and the closed-loop tick as
+/// `foc_tick_closed_loop_damped`).
+pub fn run_damped(clock: &Clock) -> Result<(), &'static str> {
+    run_start(clock, true)
+}
+
+fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
+    let mut cfg = FocConfig::new(MotorParams::servo(), TS_S, U_DC_V).with_inertia(8e-4);
+    if damped {
+        cfg.startup.damping_ratio = 1.0;
+        cfg.startup.kick_speed_ratio = 0.2;
+    }
     let mut foc = Foc::new(&cfg).map_err(|_| "foc config refused")?;
     foc.set_speed_ref_mech_rad_s(SPEED_REF_MECH_RAD_S)
         .map_err(|_| "speed reference refused")?;
@@ -111,10 +127,17 @@ pub fn run(clock: &Clock) -> Result<(), &'static str> {
         SPEED_REF_MECH_RAD_S,
         speed_err
     );
-    tallies[3].report("foc_tick");
-    tallies[0].report("foc_tick_align");
-    tallies[1].report("foc_tick_openloop");
-    tallies[2].report("foc_tick_handover");
+    if damped {
+        tallies[3].report("foc_tick_closed_loop_damped");
+        tallies[0].report("foc_tick_align_damped");
+        tallies[1].report("foc_tick_openloop_damped");
+        tallies[2].report("foc_tick_handover_damped");
+    } else {
+        tallies[3].report("foc_tick");
+        tallies[0].report("foc_tick_align");
+        tallies[1].report("foc_tick_openloop");
+        tallies[2].report("foc_tick_handover");
+    }
     if closed_loop_at.is_none() || foc.state() != State::ClosedLoop {
         return Err("the drive did not reach sensorless closed loop");
     }

@@ -221,6 +221,8 @@ fn run() -> Result<(), &'static str> {
     drive::run(&clock)?;
     // The same for an interior PMSM with MTPA and field weakening.
     drive::run_ipm(&clock)?;
+    // The damped start (align by kick, coast, damped I/f).
+    drive::run_damped(&clock)?;
 
     // The self-commissioning sequence (foc::identify): its worst tick.
     identify::run(&clock)?;

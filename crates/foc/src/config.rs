@@ -36,6 +36,8 @@
 //! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` | hand-over speed in half a second |
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
+//! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
+//! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended) | as `damping_ratio` |
 //! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | |
 //! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
 //! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
@@ -124,6 +126,16 @@ pub struct StartupConfig {
     /// Time allowed at the hand-over speed for the observer to lock, s; then the observer
     /// is re-seeded (a re-acquisition attempt), or a fault trips.
     pub acquire_timeout_s: f32,
+    /// Damping ratio of the I/f ramp of the start (module [`startup`](crate::startup), "Open
+    /// loop"): the current vector is turned by `-2 zeta / w_n (w_hat - w_ramp)`; 0 (the
+    /// default) turns the damping off, 1 is critically damped. In `[0, 5]`.
+    pub damping_ratio: f32,
+    /// Speed at which the alignment takes the rotor as moving, as a fraction of
+    /// `handover_speed_rad_s` (module [`startup`](crate::startup), "Alignment"): the current
+    /// is then cut and the ramp launched from the observer's angle and speed; 0 turns this
+    /// off (the default: the alignment holds its current for `align_time_s`); 0.2 is the
+    /// recommended value. In `[0, 1]`.
+    pub kick_speed_ratio: f32,
 }
 
 /// Observer health monitoring (module [`health`](crate::health)).
@@ -376,6 +388,8 @@ impl FocConfig {
                 blend_time_s: 20e-3,
                 exit_speed_ratio: 0.7,
                 acquire_timeout_s: 1.0,
+                damping_ratio: 0.0,
+                kick_speed_ratio: 0.0,
             },
             health: HealthConfig::default(),
             samples: SampleCheckConfig::default(),
@@ -577,6 +591,8 @@ impl FocConfig {
         in_range(s.blend_time_s, 0.0, 60.0, F::BlendTime)?;
         in_range(s.exit_speed_ratio, 0.05, 0.99, F::ExitSpeedRatio)?;
         positive(s.acquire_timeout_s, F::AcquireTimeout)?;
+        in_range(s.damping_ratio, 0.0, 5.0, F::DampingRatio)?;
+        in_range(s.kick_speed_ratio, 0.0, 1.0, F::KickSpeedRatio)?;
         let h = &self.health;
         positive(h.window_s, F::HealthWindow)?;
         if h.window_s < self.ts_s {
@@ -682,6 +698,10 @@ pub enum Field {
     BlendTime,
     ExitSpeedRatio,
     AcquireTimeout,
+    /// `startup.damping_ratio`.
+    DampingRatio,
+    /// `startup.kick_speed_ratio`.
+    KickSpeedRatio,
     HealthWindow,
     NisLimit,
     /// `health.flux_range`.

@@ -554,6 +554,7 @@ impl Foc {
             estimate: &est,
             observer_ok,
             sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
+            u_ab: u_prev,
         };
         let (cfg, observer) = (&self.cfg, &mut self.observer);
         let plan = match self.seq.step(cfg, inputs, &mut |seed| {

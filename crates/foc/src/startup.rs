@@ -12,25 +12,77 @@
 //!   any state ──fault──> Fault ──clear_fault()──> Idle
 //! ```
 //!
-//! # Align (optional)
+//! # Alignment (optional): kick, coast, launch
 //!
-//! A current vector of `align_current_a` on the d axis of `align_angle_rad` (rising linearly
-//! over the first half of `align_time_s`) pulls the rotor's d axis onto that angle. A rotor
-//! exactly at the opposite angle feels no torque (the dead point of any single-vector
-//! alignment); the I/f ramp then starts it anyway, with a jerk.
+//! The rotor stands at an unknown angle `th0`. A current vector of up to `align_current_a` on
+//! the d axis of `align_angle_rad` pulls it with the torque `k_t I sin(gamma - th)`: toward
+//! the vector, hence **backwards** for every rotor ahead of it, and an undamped pendulum
+//! swings through the vector and back at about `delta0 w_n` (the old start ran backwards at
+//! -157 rpm, 8 % of rated speed, from 57 deg). Holding it until it settles is therefore not
+//! the aim; the alignment only has to make the rotor move a little, slowly, and learn its
+//! angle from that motion:
 //!
-//! # Open loop: current-controlled ramp (I/f)
+//! 1. **Kick.** The current rises at most at `r = w_k / (2 c d^2)` per second, where
+//!    `w_k = kick_speed_ratio * handover_speed` is the speed taken as motion,
+//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d` the
+//!    delay of the detection (observer lag plus a 4 ms low-pass filter). From rest the speed
+//!    grows as `c r t^2 / 2`; seen `d` late it has gained `c r t d`, which this `r` keeps
+//!    below `w_k` (so the rotor moves at most `2 w_k`, in either direction, before the push
+//!    stops). Motion = the observer reports `Tracking` and its filtered speed exceeds `w_k`
+//!    for 5 ticks.
+//! 2. **Coast.** The current is cut (reference 0): no torque, whatever the rotor's angle. The
+//!    rotor coasts and the current loops, holding zero current, apply the back-EMF
+//!    `e = w psi_f j e^(j th)` itself. The observer gives `|w|` and `th` modulo `pi`, but at
+//!    this speed it may sit on the wrong branch (`(th + pi, -w)` gives the same back-EMF);
+//!    the back-EMF's own turn settles it: averaged over 5 ms blocks (after a 10 ms
+//!    settling), the sign of `e_first x e_last` is the true direction of rotation, and the
+//!    rotor's d axis lies 90 deg behind `e_last` in that direction. When the observer's
+//!    angle is more than 90 deg from that one, it is moved to the other branch. The coast
+//!    ends once the rotor has turned 0.5 rad by the observer's speed; a coast without
+//!    that turn within 0.15 s was a false alarm and the kick resumes.
+//! 3. **Launch.** I/f starts from the rotor's state: `gamma = th_hat + 1 rad` toward the
+//!    commanded direction (a forward torque even when the angle is somewhat off), the ramp
+//!    at the observer's speed (a slowly backward-turning rotor is braked by the ramp running
+//!    through zero; that crossing does not re-seed the observer, which is tracking), the
+//!    observer kept.
+//!
+//! A rotor that does not move within `align_time_s` sits on the vector or at its dead point
+//! (180 deg away, no torque); a second step at `align_angle + 90 deg` moves either one, and
+//! if even that moves nothing the ramp starts from standstill at the vector's angle as
+//! before (the observer seeded there, sigma 45 deg). With `kick_speed_ratio = 0` the
+//! alignment is the classic one: the vector held for `align_time_s` (current rising over
+//! the first half), then the ramp from that angle.
+//!
+//! # Open loop: damped current-controlled ramp (I/f)
 //!
 //! The current loops run in the frame of the **current vector** itself: angle `gamma`, speed
 //! `w_ol`, references `(i_d, i_q) = (if_current_a, 0)`, no back-EMF feed-forward. `w_ol`
-//! moves toward the target clamped to `+-handover_speed` at `accel_rad_s2`; `gamma`
-//! integrates it. The rotor follows because the torque `k_t I_f sin(gamma - th)` grows when it
-//! falls behind: its load angle `gamma - th` settles where the torque equals load plus
-//! inertial torque, always within +-90 deg (a stable pendulum). The ramp starts with `gamma`
-//! at the alignment angle, so the current vector is continuous from alignment. Zero speed is
-//! no special case: a reversal simply ramps `w_ol` through zero; at the crossing the
-//! observer is re-seeded at `(gamma, w_ol)` (angle sigma 45 deg), because its angle drifts
-//! where the back-EMF vanishes.
+//! moves toward the target clamped to `+-handover_speed` at `accel_rad_s2`. The rotor
+//! follows because the torque `k_t I_f sin(gamma - th)` grows when it falls behind: its load
+//! angle `delta = gamma - th` settles where the torque equals load plus inertial torque,
+//! within +-90 deg. Undamped, this is a pendulum: `J/p d2(delta)/dt2 = -k_t I_f cos(delta0)
+//! delta` with `w_n^2 = 1.5 p^2 psi_f I_f cos(delta0) / J` (servo: 18 Hz) and nothing but
+//! friction to damp it (the old ramp swung +-150 rpm around its speed).
+//!
+//! **Damping.** The vector is turned by an offset proportional to the speed error that the
+//! observer sees, `gamma = gamma_ramp + phi`, `phi = -K (w_hat - w_ol)`, `|phi| <= 90 deg`.
+//! Linearized, `phi` adds the torque `-k_t I_f K (w - w_ol)`:
+//! `s^2 + w_n^2 K s + w_n^2 = 0`, so `K = 2 zeta / w_n` gives the damping ratio
+//! `zeta = damping_ratio` (1 by default: critically damped). The observer tracks the
+//! rotor's speed from a few percent of rated speed, well above `w_n` in bandwidth; the
+//! offset is limited so that the vector never points behind the rotor. This is the
+//! stabilizing loop of I/f control (an angle correction from the speed or active-power
+//! oscillation) with the EKF's speed as the signal. `damping_ratio = 0` is the undamped
+//! ramp. The damping acts during the start from standstill (until the first hand-over); the
+//! I/f of a reversal or of a fall-back is unchanged (undamped).
+//!
+//! The ramp's angle integrates `w_ol`; `gamma` (the vector's) carries the damping offset on
+//! top. Zero speed is no special case: a reversal simply ramps `w_ol` through zero; at the
+//! crossing the observer is re-seeded at `(gamma, w_ol)` (angle sigma 45 deg), because its
+//! angle drifts where the back-EMF vanishes.
+//!
+//! Cost: the damping is a multiply-add and a clamp per I/f tick; the kick and coast add a
+//! filter and sums during the alignment only.
 //!
 //! # Hand-over without a torque jump
 //!
@@ -72,13 +124,14 @@
 //! The sequencer (crate-private `Sequencer`) owns the state, the speed loop and the
 //! [`health`](crate::health) monitor, and nothing else: it never touches the observer, the
 //! current loops or the bridge. Each tick the controller passes it `Inputs` (the observer's
-//! estimate and whether its step succeeded, the sensor reading) with the configuration, and
+//! estimate and whether its step succeeded, the sensor reading, the voltage of the observer's
+//! step, which the alignment's coast reads as back-EMF) with the configuration, and
 //! gets back a `Decision`: drive with a `Plan` (control frame and current references), turn
 //! the PWM off (idle, or a fault to latch), and whether to re-seed the observer.
 
-use core::f32::consts::{FRAC_PI_4, PI};
+use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-use ekf_core::Estimate;
+use ekf_core::{Estimate, Status};
 
 use crate::config::{FocConfig, Mode, ObserverLossPolicy};
 use crate::fault::Fault;
@@ -88,6 +141,28 @@ use crate::transforms::Dq;
 use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
 
 pub use crate::state::State;
+
+/// Time constant of the filtered observer speed that detects the kick, s.
+const KICK_TAU_S: f32 = 0.004;
+/// The observer's own lag behind a starting rotor, s (the kick's current rise is sized for
+/// it and the filter).
+const KICK_LAG_S: f32 = 0.002;
+/// Ticks in a row the filtered speed must exceed the kick speed.
+const MOVING_TICKS: u16 = 5;
+/// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
+const COAST_S: f32 = 0.15;
+/// The coast ends once the rotor has turned this much (the observer's speed integrated), rad
+/// el.
+const COAST_TURN_RAD: f32 = 0.5;
+/// The first part of the coast (the current loops settling at zero current, the observer on
+/// the moving rotor) is not used for the evidence, s.
+const COAST_SETTLE_S: f32 = 0.01;
+/// Block over which the back-EMF is averaged during the coast, s.
+const EMF_BLOCK_S: f32 = 0.005;
+/// Angle standard deviation of the observer when it is moved to the other branch, rad.
+const FLIP_SIGMA: f32 = 0.3;
+/// Lead of the launched current vector over the rotor's angle, rad el.
+const LAUNCH_LEAD_RAD: f32 = 1.0;
 
 /// A control frame: angle (rad el.), speed (rad/s el.), and whether the back-EMF lies on its
 /// q axis (feed-forward on).
@@ -118,6 +193,8 @@ pub(crate) struct Inputs<'a> {
     pub observer_ok: bool,
     /// Rotor sensor reading, electrical angle (rad) and speed (rad/s), when supplied.
     pub sensor: Option<(f32, f32)>,
+    /// The stator voltage of the observer's step (applied over the last period), V.
+    pub u_ab: [f32; 2],
 }
 
 /// Why the PWM is off this tick (the sequencer's answer when there is no plan).
@@ -178,6 +255,31 @@ struct Vars {
     stall_count: u32,
     /// First tick of sensored closed loop.
     fresh: bool,
+    /// Damping offset of the current vector (included in `gamma`), rad el.
+    phi: f32,
+    /// Alignment: the rotor was seen moving, the current is off (coast), ticks since.
+    coast: u32,
+    /// Alignment: second step (at +90 deg), the first one moved nothing.
+    second: bool,
+    /// I/f launched from the rotor's motion: a zero crossing of the ramp does not re-seed.
+    launch: bool,
+    /// Ticks in a row the observer saw the rotor move during the alignment.
+    moving: u16,
+    /// Coast: the integral of the observer's speed, rad el.
+    coast_int: f32,
+    /// Alignment: the observer's speed, low-pass filtered, rad/s el.
+    w_f: f32,
+    /// The start from standstill, until the first hand-over: the I/f ramp is damped.
+    starting: bool,
+    /// Coast: sum of the voltage over the current block, V.
+    e_sum: [f32; 2],
+    /// Coast: samples in the current block.
+    e_n: u32,
+    /// Coast: mean voltage (the back-EMF) of the first and of the last complete block, V.
+    e_first: [f32; 2],
+    e_last: [f32; 2],
+    /// Coast: complete blocks.
+    e_blocks: u32,
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -192,6 +294,22 @@ pub(crate) struct Sequencer {
     blend_ticks: u32,
     acquire_ticks: u32,
     stall_ticks: u32,
+    /// Gain of the damping, s (rad of vector angle per rad/s el. of speed error).
+    k_damp: f32,
+    /// Largest damping offset, rad el.
+    phi_max: f32,
+    /// Speed at which the alignment sees the rotor move, rad/s el.
+    kick_speed: f32,
+    /// Coast after the rotor was seen moving, ticks (at most).
+    coast_ticks: u32,
+    /// Coast ticks before the branch evidence is gathered.
+    coast_settle_ticks: u32,
+    /// Ticks per block of the back-EMF averages of the coast.
+    block_ticks: u32,
+    /// Weight of the new sample in the filtered speed of the alignment.
+    kick_filter: f32,
+    /// Rise of the alignment current per tick, A.
+    align_step: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -232,7 +350,29 @@ impl Sequencer {
         let handover = cfg.startup.handover_speed_rad_s;
         let exit_speed = cfg.startup.exit_speed_ratio * handover;
         let speed_ts = ts * f32::from(cfg.speed_divider);
+        let st = &cfg.startup;
+        // Acceleration per ampere of a current vector 90 deg from the rotor's d axis,
+        // rad/s^2 el. (`p^2 1.5 psi_f / J`), and the I/f pendulum's natural frequency.
+        let accel_per_a = 1.5 * pole_pairs * pole_pairs * cfg.motor.psi_f_wb / cfg.inertia_kg_m2;
+        let wn = sqrt(accel_per_a * st.if_current_a);
+        let kick_speed = st.kick_speed_ratio * handover;
+        let half = (ticks(st.align_time_s, ts) / 2).max(1);
+        let mut align_step = st.align_current_a / half as f32;
+        if kick_speed > 0.0 {
+            // The rotor's speed grows as `c r t^2 / 2` under a current rising at `r`; seen
+            // `d` late it has gained `c r t d` more: at most the kick speed itself.
+            let d = KICK_TAU_S + KICK_LAG_S;
+            align_step = min2(align_step, kick_speed / (2.0 * accel_per_a * d * d) * ts);
+        }
         Self {
+            k_damp: 2.0 * st.damping_ratio / wn,
+            phi_max: FRAC_PI_2,
+            kick_speed,
+            coast_ticks: ticks(COAST_S, ts),
+            coast_settle_ticks: ticks(COAST_SETTLE_S, ts),
+            block_ticks: ticks(EMF_BLOCK_S, ts).max(1),
+            kick_filter: min2(ts / KICK_TAU_S, 1.0),
+            align_step,
             pole_pairs,
             inv_pole_pairs: 1.0 / pole_pairs,
             handover,
@@ -288,6 +428,8 @@ impl Sequencer {
         self.v = Vars {
             target_mech: self.v.target_mech,
             fresh: true,
+            starting: true,
+            gamma: wrap(cfg.startup.align_angle_rad),
             ..Vars::default()
         };
         self.state = match cfg.mode {
@@ -331,7 +473,7 @@ impl Sequencer {
     ) -> Result<Plan, Stop> {
         match cfg.mode {
             Mode::Sensored => self.sensored(cfg, input.sensor),
-            Mode::Sensorless => self.sensorless(cfg, input.estimate, input.observer_ok, reseed),
+            Mode::Sensorless => self.sensorless(cfg, input, reseed),
         }
     }
 
@@ -368,10 +510,10 @@ impl Sequencer {
     fn sensorless(
         &mut self,
         cfg: &FocConfig,
-        est: &Estimate<f32>,
-        ok: bool,
+        input: Inputs<'_>,
         reseed: &mut impl FnMut(Seed),
     ) -> Result<Plan, Stop> {
+        let (est, ok) = (input.estimate, input.observer_ok);
         let reference = match self.state {
             State::OpenLoop => Reference::OpenLoop {
                 gamma: self.v.gamma,
@@ -390,11 +532,72 @@ impl Sequencer {
         match self.state {
             State::Align => {
                 self.v.timer = self.v.timer.saturating_add(1);
-                if self.v.timer > self.align_ticks {
-                    self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
+                if self.v.coast > 0 {
+                    self.v.coast += 1;
+                    if self.v.coast > self.coast_settle_ticks {
+                        // The current loops have settled at zero current: the voltage is
+                        // the back-EMF.
+                        self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
+                        self.v.e_sum[0] += input.u_ab[0];
+                        self.v.e_sum[1] += input.u_ab[1];
+                        self.v.e_n += 1;
+                        if self.v.e_n >= self.block_ticks {
+                            let k = 1.0 / self.v.e_n as f32;
+                            let mean = [self.v.e_sum[0] * k, self.v.e_sum[1] * k];
+                            if self.v.e_blocks == 0 {
+                                self.v.e_first = mean;
+                            }
+                            self.v.e_last = mean;
+                            self.v.e_blocks += 1;
+                            self.v.e_sum = [0.0; 2];
+                            self.v.e_n = 0;
+                        }
+                    }
+                    if self.v.coast_int.abs() >= COAST_TURN_RAD && self.v.e_blocks >= 2 {
+                        reframe = Some(self.align_frame());
+                        self.launch(cfg, est, reseed);
+                    } else if self.v.coast > self.coast_ticks {
+                        // A false alarm (the rotor did not turn): back to the alignment.
+                        self.v.coast = 0;
+                        self.v.moving = 0;
+                        self.v.w_f = 0.0;
+                        self.v.e_sum = [0.0; 2];
+                        self.v.e_n = 0;
+                        self.v.e_blocks = 0;
+                    }
+                } else {
+                    let i_align = cfg.startup.align_current_a;
+                    self.v.amp = min2(self.v.amp + self.align_step, i_align);
+                    self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
+                    self.v.coast_int = 0.0;
+                    let seen = self.kick_speed > 0.0
+                        && est.status == Status::Tracking
+                        && self.v.w_f.abs() >= self.kick_speed
+                        && self.v.timer >= self.coast_settle_ticks;
+                    self.v.moving = if seen {
+                        self.v.moving.saturating_add(1)
+                    } else {
+                        0
+                    };
+                    if self.v.moving >= MOVING_TICKS {
+                        self.v.coast = 1;
+                    } else if self.v.timer > self.align_ticks && self.v.amp >= i_align {
+                        if self.v.second || self.kick_speed == 0.0 {
+                            self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
+                        } else {
+                            reframe = Some(self.align_frame());
+                            self.v.second = true;
+                            self.v.timer = 0;
+                            self.v.amp = 0.0;
+                            self.v.gamma = wrap(self.v.gamma + FRAC_PI_2);
+                        }
+                    }
                 }
             }
             State::OpenLoop => {
+                if self.v.starting {
+                    self.damp(est.omega_e_rad_s, self.v.omega_ol, self.k_damp);
+                }
                 let target = self.target_e();
                 let w_ol = self.v.omega_ol;
                 let h = self.handover;
@@ -474,19 +677,15 @@ impl Sequencer {
 
         let plan = match self.state {
             State::Align => {
-                let half = (self.align_ticks / 2).max(1);
-                let ramp = min2(self.v.timer as f32 / half as f32, 1.0);
+                let amp = if self.v.coast > 0 { 0.0 } else { self.v.amp };
                 Plan {
                     frame: Frame {
-                        theta: cfg.startup.align_angle_rad,
+                        theta: self.v.gamma,
                         omega: 0.0,
                         emf: false,
                     },
-                    i_ref: Dq {
-                        d: cfg.startup.align_current_a * ramp,
-                        q: 0.0,
-                    },
-                    reframe_from: None,
+                    i_ref: Dq { d: amp, q: 0.0 },
+                    reframe_from: reframe,
                 }
             }
             State::OpenLoop => {
@@ -614,12 +813,68 @@ impl Sequencer {
         if w != 0.0 {
             let dir = sign(w);
             if self.v.ol_dir != 0.0 && dir != self.v.ol_dir {
-                self.reseed_observer(self.v.gamma, w, FRAC_PI_4, reseed);
-                self.v.at_speed = 0;
+                if self.v.launch {
+                    self.v.launch = false;
+                } else {
+                    self.reseed_observer(self.v.gamma, w, FRAC_PI_4, reseed);
+                    self.v.at_speed = 0;
+                }
             }
             self.v.ol_dir = dir;
         }
         self.v.omega_ol = w;
+    }
+
+    /// The damping of the current vector: its angle offset from the ramp's is
+    /// `-k (w_hat - w_ramp)`, limited to `+-phi_max` (module docs).
+    #[inline(always)]
+    fn damp(&mut self, w_hat: f32, w_ramp: f32, k: f32) {
+        let phi = limit(-k * (w_hat - w_ramp), -self.phi_max, self.phi_max);
+        self.v.gamma = wrap(self.v.gamma + (phi - self.v.phi));
+        self.v.phi = phi;
+    }
+
+    /// The control frame of the alignment.
+    fn align_frame(&self) -> Frame {
+        Frame {
+            theta: self.v.gamma,
+            omega: 0.0,
+            emf: false,
+        }
+    }
+
+    /// I/f from the rotor's motion seen by the observer: the current vector on the rotor's
+    /// d axis, the ramp at the observer's speed, the observer kept.
+    fn launch(&mut self, cfg: &FocConfig, est: &Estimate<f32>, reseed: &mut impl FnMut(Seed)) {
+        let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
+        // The back-EMF `w psi j e^(j th)` turned from the first block to the last one in the
+        // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction.
+        let [f0, f1] = self.v.e_first;
+        let [l0, l1] = self.v.e_last;
+        let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
+        let th_emf = wrap(atan2(l1, l0) - dir * FRAC_PI_2);
+        if wrap(th - th_emf).abs() > FRAC_PI_2 {
+            // The observer is on the other branch (same back-EMF, angle + pi, speed - w).
+            th = wrap(th + PI);
+            w = -w;
+            reseed(Seed {
+                theta: th,
+                omega: w,
+                sigma_theta: FLIP_SIGMA,
+            });
+        }
+        // A lead toward the commanded direction: a forward torque even when the observer's
+        // angle is off by up to the lead.
+        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * sign(self.target_e()));
+        self.v.phi = 0.0;
+        // The ramp never runs faster than the hand-over speed.
+        self.v.omega_ol = limit(w, -self.handover, self.handover);
+        self.v.ol_dir = sign(w);
+        self.v.launch = true;
+        self.v.amp = cfg.startup.if_current_a;
+        self.v.at_speed = 0;
+        self.health.reset(w);
+        self.state = State::OpenLoop;
     }
 
     /// I/f from standstill at the alignment angle; the observer seeded there with angle
@@ -630,8 +885,7 @@ impl Sequencer {
         sigma_theta: f32,
         reseed: &mut impl FnMut(Seed),
     ) {
-        let angle = wrap(cfg.startup.align_angle_rad);
-        self.v.gamma = angle;
+        let angle = self.v.gamma;
         self.v.omega_ol = 0.0;
         self.v.ol_dir = 0.0;
         self.v.amp = cfg.startup.if_current_a;
@@ -655,6 +909,8 @@ impl Sequencer {
         let iq = limit(self.v.i_q_ref, -0.95 * amp, 0.95 * amp);
         let id = sqrt(amp * amp - iq * iq);
         self.v.gamma = wrap(est.theta_rad + atan2(iq, id));
+        self.v.phi = 0.0;
+        self.v.launch = false;
         self.v.omega_ol = if fall_back {
             self.v.speed_ref_mech * self.pole_pairs
         } else {
@@ -705,6 +961,7 @@ impl Sequencer {
         self.v.speed_ref_mech = self.v.omega_ol * self.inv_pole_pairs;
         let err = self.v.speed_ref_mech - est.omega_e_rad_s * self.inv_pole_pairs;
         self.speed_pi.preset_output(iq0, err, 0.0);
+        self.v.starting = false;
         self.state = State::Handover;
     }
 }

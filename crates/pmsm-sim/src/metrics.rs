@@ -29,6 +29,18 @@
 //! For the run: simulated time, wall time and the real-time factor, and figures of the drive:
 //! time to closed loop, the first fault, the speed error once settled (the reference constant
 //! and no load step for [`SETTLE_S`]), peak current, tracking errors.
+//!
+//! For a sensorless start (`foc`: states `align`, then `open_loop`, then `handover`), the
+//! **start-up** figures ([`StartupMetrics`]), over the first start of the run (from the first
+//! `align` or `open_loop` period to the first `handover` period, or the end of the run):
+//!
+//! - **worst backward speed**: the largest `-speed` (true mechanical speed, rpm; 0 when the
+//!   rotor never turned backwards), also in % of rated speed;
+//! - **worst ramp deviation**: the largest `|speed - ramp speed|` (the controller's own speed
+//!   reference, which under I/f is the ramp's speed) from 0.1 s ([`RAMP_SETTLE_S`]) after the
+//!   end of the alignment to the hand-over, rpm and % of rated;
+//! - **hand-over**: its time and speed (the ramp's speed in the last `open_loop` period before
+//!   the first `handover` period, rpm and % of rated; the true speed then as well).
 
 use serde::Serialize;
 
@@ -46,6 +58,9 @@ pub const SETTLE_S: f64 = 0.2;
 /// A load change larger than this fraction of the rated torque within one period is a step
 /// (restarts the settling time); fan loads and ramps change less.
 pub const LOAD_STEP_FRACTION: f64 = 0.01;
+
+/// The ramp deviation of the start-up is scored from this long after the alignment, s.
+pub const RAMP_SETTLE_S: f64 = 0.1;
 
 /// Scores of one observer over one run (module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -432,6 +447,116 @@ impl ClosedLoopScore {
     }
 }
 
+/// Figures of a sensorless start (module docs): the first `align`/`open_loop` -> `handover`
+/// of the run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StartupMetrics {
+    /// Time of the first start-up period (`align` or `open_loop`), s.
+    pub start_s: f64,
+    /// End of the alignment (first `open_loop` period), s; `None`: never reached.
+    pub align_end_s: Option<f64>,
+    /// Largest backward (negative) true speed over the start, mechanical rpm (0: never).
+    pub backward_speed_max_rpm: f64,
+    /// The same in % of rated speed.
+    pub backward_speed_max_pct: f64,
+    /// Largest `|speed - ramp speed|` from [`RAMP_SETTLE_S`] after the alignment to the
+    /// hand-over, mechanical rpm (`NaN`: an empty window).
+    pub ramp_deviation_max_rpm: f64,
+    /// The same in % of rated speed.
+    pub ramp_deviation_max_pct: f64,
+    /// Time of the hand-over (first `handover` period), s; `None`: no hand-over.
+    pub handover_s: Option<f64>,
+    /// `|ramp speed|` at the hand-over (of the last I/f period), mechanical rpm (`NaN`: no
+    /// hand-over).
+    pub handover_speed_rpm: f64,
+    /// The same in % of rated speed.
+    pub handover_speed_pct: f64,
+    /// True speed at the hand-over, mechanical rpm (`NaN`: no hand-over).
+    pub handover_true_speed_rpm: f64,
+}
+
+/// Streaming accumulator of [`StartupMetrics`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StartupScore {
+    rated_rpm: f64,
+    start: Option<f64>,
+    align_end: Option<f64>,
+    done: bool,
+    backward: f64,
+    deviation: Option<f64>,
+    ramp: f64,
+    handover: Option<(f64, f64, f64)>,
+}
+
+impl StartupScore {
+    /// An accumulator; `rated_rpm` is the rated mechanical speed (for the % figures).
+    pub fn new(rated_rpm: f64) -> Self {
+        Self {
+            rated_rpm,
+            ..Self::default()
+        }
+    }
+
+    /// Adds one sample.
+    #[inline]
+    pub fn push(&mut self, s: &Sample) {
+        if self.done {
+            return;
+        }
+        let tel = &s.control.telemetry;
+        let state = tel.state;
+        let starting = state == "align" || state == "open_loop";
+        if self.start.is_none() {
+            if !starting {
+                return;
+            }
+            self.start = Some(s.t_s);
+        }
+        if state == "handover" || state == "closed_loop" || !starting {
+            if state == "handover" {
+                self.handover = Some((s.t_s, self.ramp.abs(), s.truth.speed_rpm));
+            }
+            self.done = true;
+            return;
+        }
+        let w = s.truth.speed_rpm;
+        self.backward = self.backward.max(-w);
+        if state == "open_loop" {
+            self.ramp = tel.speed_ref_rpm.unwrap_or(f64::NAN);
+            let t0 = *self.align_end.get_or_insert(s.t_s);
+            if s.t_s >= t0 + RAMP_SETTLE_S - 1e-9
+                && let Some(r) = tel.speed_ref_rpm
+            {
+                let d = (w - r).abs();
+                self.deviation = Some(self.deviation.map_or(d, |m: f64| m.max(d)));
+            }
+        }
+    }
+
+    /// The figures (`None`: no start-up in the run).
+    pub fn finish(&self) -> Option<StartupMetrics> {
+        let start_s = self.start?;
+        let pct = |x: f64| 100.0 * x / self.rated_rpm;
+        let dev = self.deviation.unwrap_or(f64::NAN);
+        let (handover_s, ho, ho_true) = match self.handover {
+            Some((t, r, w)) => (Some(t), r, w),
+            None => (None, f64::NAN, f64::NAN),
+        };
+        Some(StartupMetrics {
+            start_s,
+            align_end_s: self.align_end,
+            backward_speed_max_rpm: self.backward,
+            backward_speed_max_pct: pct(self.backward),
+            ramp_deviation_max_rpm: dev,
+            ramp_deviation_max_pct: pct(dev),
+            handover_s,
+            handover_speed_rpm: ho,
+            handover_speed_pct: pct(ho),
+            handover_true_speed_rpm: ho_true,
+        })
+    }
+}
+
 /// Everything reported about one run.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RunMetrics {
@@ -465,6 +590,8 @@ pub struct RunMetrics {
     pub controller_observer_closed_loop: Option<ClosedLoopObserverMetrics>,
     /// The drive.
     pub drive: DriveMetrics,
+    /// The sensorless start (`None`: the controller has no start-up sequence).
+    pub startup: Option<StartupMetrics>,
 }
 
 /// Streaming accumulator of every metric of a run.
@@ -475,6 +602,7 @@ pub struct MetricsAccumulator {
     controller_observer: Option<ObserverScore>,
     closed_loop: ClosedLoopScore,
     drive: DriveScore,
+    startup: StartupScore,
     periods: usize,
     rated_omega_e_rad_s: f64,
 }
@@ -492,6 +620,7 @@ impl MetricsAccumulator {
             controller_observer: None,
             closed_loop: ClosedLoopScore::new(rated),
             drive: DriveScore::new(scenario.rated_torque_nm),
+            startup: StartupScore::new(scenario.rated_speed_rpm),
             periods: 0,
             rated_omega_e_rad_s: rated,
         }
@@ -518,6 +647,7 @@ impl MetricsAccumulator {
         }
         self.closed_loop.push(s);
         self.drive.push(s);
+        self.startup.push(s);
     }
 
     /// Drops the seed filter's score (it failed and was dropped from the run).
@@ -551,6 +681,7 @@ impl MetricsAccumulator {
             controller_observer: self.controller_observer.as_ref().and_then(|s| s.finish(ts)),
             controller_observer_closed_loop: self.closed_loop.finish(ts),
             drive: self.drive.finish(ts),
+            startup: self.startup.finish(),
         }
     }
 }

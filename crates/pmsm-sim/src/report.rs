@@ -2,7 +2,9 @@
 
 use core::fmt::Write as _;
 
-use crate::metrics::{CONVERGED_DEG, LOW_SPEED_FRACTION, ObserverMetrics, RunMetrics, SETTLE_S};
+use crate::metrics::{
+    CONVERGED_DEG, LOW_SPEED_FRACTION, ObserverMetrics, RAMP_SETTLE_S, RunMetrics, SETTLE_S,
+};
 
 /// The metrics as a plain aligned text table.
 pub fn table(m: &RunMetrics) -> String {
@@ -209,6 +211,56 @@ pub fn table(m: &RunMetrics) -> String {
     ];
     for (name, unit, v) in drive_rows {
         let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
+    }
+    if let Some(st) = &m.startup {
+        let _ = writeln!(out);
+        let _ = writeln!(out, "{:<40} {:<10} {:>14}", "start-up", "unit", "value");
+        let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+        let both = |rpm: f64, pct: f64| {
+            if rpm.is_finite() {
+                format!("{rpm:.1} ({pct:.2} %)")
+            } else {
+                "-".into()
+            }
+        };
+        let ramp_window = format!("worst |speed - ramp| from align + {RAMP_SETTLE_S} s");
+        let rows = [
+            (
+                "alignment ends",
+                "s",
+                st.align_end_s
+                    .map_or_else(|| "-".into(), |t| format!("{t:.4}")),
+            ),
+            (
+                "worst backward speed (% rated)",
+                "rpm",
+                both(st.backward_speed_max_rpm, st.backward_speed_max_pct),
+            ),
+            (
+                ramp_window.as_str(),
+                "rpm",
+                both(st.ramp_deviation_max_rpm, st.ramp_deviation_max_pct),
+            ),
+            (
+                "hand-over",
+                "s",
+                st.handover_s
+                    .map_or_else(|| "never".into(), |t| format!("{t:.4}")),
+            ),
+            (
+                "hand-over ramp speed (% rated)",
+                "rpm",
+                both(st.handover_speed_rpm, st.handover_speed_pct),
+            ),
+            (
+                "true speed at the hand-over",
+                "rpm",
+                opt(st.handover_true_speed_rpm, 1),
+            ),
+        ];
+        for (name, unit, v) in rows {
+            let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
+        }
     }
     out
 }

@@ -124,6 +124,15 @@ pub struct FocSettings {
     /// Acceleration of the I/f ramp, mechanical rpm per second. Default: the hand-over speed
     /// in 0.5 s.
     pub startup_accel_rpm_per_s: Option<f64>,
+    /// Damping ratio of foc's I/f start (`StartupConfig::damping_ratio`). Default 1
+    /// (critically damped) when the drive compensates the inverter's dead time (or there is
+    /// none), else 0; foc's own default is 0, off.
+    pub startup_damping_ratio: Option<f64>,
+    /// Kick speed of foc's alignment as a fraction of the hand-over speed
+    /// (`StartupConfig::kick_speed_ratio`; 0: the classic alignment). Default: the kick at
+    /// 0.6 % of rated speed when the dead time is compensated (as `startup_damping_ratio`),
+    /// else 0; foc's own default is 0, off.
+    pub startup_kick_speed_ratio: Option<f64>,
     /// Reaction to an observer loss in closed loop (default `fall_back`).
     pub observer_loss: ObserverLoss,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
@@ -463,8 +472,11 @@ impl Scenario {
     /// observer's motor parameters (what the drive knows of the motor), `ts_s` and the
     /// nominal bus voltage, then the scenario's current limit, loop bandwidths, inertia,
     /// computation delay, mode, dead-time compensation (of `inverter.dead_time_s` unless
-    /// `[controller.foc] dead_time_s` says otherwise; 0 turns it off) and the other
-    /// `[controller.foc]` settings. Validated by `foc` itself.
+    /// `[controller.foc] dead_time_s` says otherwise; 0 turns it off), the damped start
+    /// (`startup_damping_ratio` 1 and the kick at 0.6 % of rated speed unless set, when the
+    /// dead time is compensated; off in
+    /// foc's own defaults) and the other `[controller.foc]` settings. Validated by `foc`
+    /// itself.
     pub fn foc_config(&self) -> Result<foc::FocConfig, FieldError> {
         use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy};
         let c = &self.controller;
@@ -515,6 +527,17 @@ impl Scenario {
             Some(a) => rpm_to_e(a),
             None => st.handover_speed_rad_s / 0.5,
         };
+        // The damped start reads the observer near 1 % of rated speed, where an
+        // uncompensated dead time biases it: on by default only with the dead time
+        // compensated (or none).
+        let dead_time = s.dead_time_s.unwrap_or(self.inverter.dead_time_s);
+        let damped = self.inverter.dead_time_s == 0.0 || dead_time >= self.inverter.dead_time_s;
+        let on = if damped { 1.0 } else { 0.0 };
+        st.damping_ratio = s.startup_damping_ratio.unwrap_or(on) as f32;
+        // The kick at 0.6 % of rated speed (a fifth of a hand-over at 3 %), whatever the
+        // hand-over speed.
+        let kick = 0.006 * self.rated_speed_e_rad_s() / f64::from(st.handover_speed_rad_s);
+        st.kick_speed_ratio = s.startup_kick_speed_ratio.unwrap_or(on * kick.min(1.0)) as f32;
         cfg.health.policy = match s.observer_loss {
             ObserverLoss::FallBack => ObserverLossPolicy::FallBackAndReacquire,
             ObserverLoss::Trip => ObserverLossPolicy::Trip,

