@@ -98,7 +98,9 @@ fn interior_presets_run_foc_sensorless_with_mtpa() {
             p.last_speed_rpm,
         );
         assert_eq!(p.fault, None, "{name}");
-        assert!(p.handover_s.is_some_and(|t| t < 0.5), "{name}");
+        // Hand-over within 1 s: with the damped start (kick, coast, launch; pmsm-sim's default
+        // for a compensated drive) measured 0.814 s (industrial, J = 0.012 kg m^2) and 0.65 s.
+        assert!(p.handover_s.is_some_and(|t| t < 1.0), "{name}");
         assert!(!p.left_closed_loop, "{name}");
         assert!(p.max_err_deg < 2.0, "{name}: {} deg", p.max_err_deg);
         let rated = sc.rated_speed_rpm;
