@@ -123,6 +123,7 @@ use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
+use crate::hfi::{HfiConfig, HfiDrive, HfiError, HfiPhase, HfiStatus};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
 use crate::startup::{Frame, Inputs, Plan, Seed, Sequencer, State, Stop};
@@ -318,6 +319,8 @@ pub struct Foc {
     stuck_angle: [f32; 2],
     /// Ticks phase a / b repeated its reading.
     stuck_ticks: [u16; 2],
+    /// High-frequency injection at low speed (module docs, "Low speed by HFI"); `None`: off.
+    hfi: Option<HfiDrive>,
 }
 
 /// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
@@ -397,6 +400,7 @@ impl Foc {
             raw_last: [f32::NAN; 2],
             stuck_angle: [0.0; 2],
             stuck_ticks: [0; 2],
+            hfi: None,
         })
     }
 
@@ -405,9 +409,41 @@ impl Foc {
         &self.cfg
     }
 
-    /// Current state.
+    /// Current state (the HFI standstill test reports [`State::Align`]).
     pub fn state(&self) -> State {
-        self.seq.state()
+        match &self.hfi {
+            Some(h) if h.phase != HfiPhase::Tracking && self.seq.state() == State::ClosedLoop => {
+                State::Align
+            }
+            _ => self.seq.state(),
+        }
+    }
+
+    /// Turns high-frequency injection on for the low-speed range (module docs, "Low speed by
+    /// HFI"), with the settings `hfi` checked against the configuration and the nominal bus
+    /// voltage `u_dc_nominal_v`. Only while idle, in sensorless mode, on a salient motor.
+    pub fn enable_hfi(&mut self, hfi: &HfiConfig, u_dc_nominal_v: f32) -> Result<(), HfiError> {
+        if self.seq.state() != State::Idle {
+            return Err(HfiError::NotIdle);
+        }
+        hfi.validate(&self.cfg, u_dc_nominal_v)?;
+        self.hfi = Some(HfiDrive::new(&self.cfg, hfi));
+        Ok(())
+    }
+
+    /// Turns high-frequency injection off (the controller as built by [`Foc::new`]). Only
+    /// while idle.
+    pub fn disable_hfi(&mut self) -> Result<(), HfiError> {
+        if self.seq.state() != State::Idle {
+            return Err(HfiError::NotIdle);
+        }
+        self.hfi = None;
+        Ok(())
+    }
+
+    /// What HFI is doing (`None`: off).
+    pub fn hfi_status(&self) -> Option<HfiStatus> {
+        self.hfi.map(|h| h.status())
     }
 
     /// The latched fault, if any.
@@ -452,10 +488,21 @@ impl Foc {
             let _ = self
                 .observer
                 .reset(self.cfg.observer.x0, self.cfg.observer.p0);
+            if let Some(h) = self.hfi.as_mut() {
+                h.restart(&self.cfg);
+            }
+        }
+        // With HFI the sequencer runs its sensored path on the blended angle.
+        let hfi = self.hfi.is_some();
+        if hfi {
+            self.cfg.mode = Mode::Sensored;
         }
         let (cfg, observer) = (&self.cfg, &mut self.observer);
         self.seq
             .start(cfg, &mut |seed| reseed_observer(observer, cfg, seed));
+        if hfi {
+            self.cfg.mode = Mode::Sensorless;
+        }
         Ok(())
     }
 
@@ -550,15 +597,27 @@ impl Foc {
             }
         };
 
-        let inputs = Inputs {
-            estimate: &est,
-            observer_ok,
-            sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
+        let mut carrier = None;
+        let mut i_loop = i_ab;
+        let step = if self.hfi.is_some() {
+            self.hfi_plan(&est, observer_ok, i_ab, sample_ok)
+                .map(|(plan, c, i)| {
+                    carrier = c;
+                    i_loop = i;
+                    plan
+                })
+        } else {
+            let inputs = Inputs {
+                estimate: &est,
+                observer_ok,
+                sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
+            };
+            let (cfg, observer) = (&self.cfg, &mut self.observer);
+            self.seq.step(cfg, inputs, &mut |seed| {
+                reseed_observer(observer, cfg, seed)
+            })
         };
-        let (cfg, observer) = (&self.cfg, &mut self.observer);
-        let plan = match self.seq.step(cfg, inputs, &mut |seed| {
-            reseed_observer(observer, cfg, seed)
-        }) {
+        let plan = match step {
             Ok(plan) => plan,
             Err(Stop::Off) => return self.safe_output(),
             Err(Stop::Idle) => {
@@ -588,13 +647,18 @@ impl Foc {
         // Current loops in the control frame.
         let frame = plan.frame;
         let (s, c) = sin_cos(frame.theta);
-        let i_dq = i_ab.to_dq(s, c);
+        let i_dq = i_loop.to_dq(s, c);
         let ff = self.feed_forward(i_dq, frame);
         if let Some(old) = plan.reframe_from {
             self.reframe(old, frame, i_ab, ff);
         }
         let u_dc = input.u_dc_v;
-        let u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        let mut u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        if carrier.is_some()
+            && let Some(h) = &self.hfi
+        {
+            u_max = max2(u_max - h.cfg.injection_v, 0.0);
+        }
         // Current references: the plan's, or (salient motor, field weakening) shaped by
         // MTPA, the torque conversion, field weakening and the current circle in closed loop.
         let i_ref = if self.shaping {
@@ -623,7 +687,10 @@ impl Foc {
         // frame's sine and cosine by a small angle), SVPWM, dead-time compensation, history.
         let (sd, cd) = sin_cos_small(frame.omega * self.advance_s);
         let (s2, c2) = add_angles(s, c, sd, cd);
-        let u_ab = u_dq.to_alpha_beta(s2, c2);
+        let mut u_ab = u_dq.to_alpha_beta(s2, c2);
+        if let Some(u_h) = carrier {
+            u_ab = u_ab + u_h;
+        }
         let (duties, applied) = if self.dead_time.is_active() {
             // Phase currents predicted for the middle of the application interval, turned
             // with the frame like the voltage: the reference, which the loops will have
@@ -643,7 +710,7 @@ impl Foc {
         TickOutput {
             duties,
             pwm_enabled: true,
-            state: self.seq.state(),
+            state: self.state(),
             fault: None,
             telemetry: Telemetry {
                 i_dq,
@@ -658,6 +725,60 @@ impl Foc {
                 sample_ok,
             },
         }
+    }
+
+    /// The plan of a tick with HFI on (module docs, "Low speed by HFI"): the standstill test's
+    /// d current in the tracked frame, or the sequencer's sensored path on the blended angle;
+    /// with the carrier to add and the current the loops take.
+    #[inline(never)]
+    fn hfi_plan(
+        &mut self,
+        est: &Estimate<f32>,
+        observer_ok: bool,
+        i_ab: AlphaBeta,
+        sample_ok: bool,
+    ) -> Result<(Plan, Option<AlphaBeta>, AlphaBeta), Stop> {
+        let Some(h) = self.hfi.as_mut() else {
+            return Err(Stop::Off);
+        };
+        let (resp, fund) = h.demodulate(i_ab, sample_ok);
+        let plan = if let Some(i_d) = h.standstill(resp) {
+            Plan {
+                frame: Frame {
+                    theta: h.tracker.theta(),
+                    omega: 0.0,
+                    emf: false,
+                },
+                i_ref: Dq { d: i_d, q: 0.0 },
+                reframe_from: None,
+            }
+        } else {
+            let b = h.blend(est.theta_rad, est.omega_e_rad_s);
+            if let Some((theta, omega)) = b.reseed {
+                let seed = Seed {
+                    theta,
+                    omega,
+                    sigma_theta: 0.1,
+                };
+                reseed_observer(&mut self.observer, &self.cfg, seed);
+            }
+            let inputs = Inputs {
+                estimate: est,
+                observer_ok,
+                sensor: Some((b.theta, b.omega)),
+            };
+            self.cfg.mode = Mode::Sensored;
+            let (cfg, observer) = (&self.cfg, &mut self.observer);
+            let r = self.seq.step(cfg, inputs, &mut |seed| {
+                reseed_observer(observer, cfg, seed)
+            });
+            self.cfg.mode = Mode::Sensorless;
+            let plan = r?;
+            h.set_torque_command(plan.i_ref.q);
+            plan
+        };
+        let (carrier, i_loop) = h.finish(i_ab, fund);
+        Ok((plan, carrier, i_loop))
     }
 
     /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the
