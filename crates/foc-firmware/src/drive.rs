@@ -9,9 +9,7 @@
 
 use cortex_m_semihosting::hprintln;
 use foc::ekf_core::MotorParams;
-use foc::{
-    AlphaBeta, Foc, FocConfig, HfiConfig, HfiPhase, State, TickInput, duties_to_alpha_beta,
-};
+use foc::{AlphaBeta, Foc, FocConfig, HfiConfig, HfiPhase, State, TickInput, duties_to_alpha_beta};
 
 use crate::meter::{Clock, Tally};
 
@@ -290,7 +288,11 @@ pub fn run_ipm_hfi(clock: &Clock) -> Result<(), &'static str> {
             if status.observer_weight == 0.0 && status.injecting {
                 alone.push(n);
                 let e = foc::trig::wrap(out.telemetry.theta_rad - plant.th).abs();
-                worst_deg = if e * 57.3 > worst_deg { e * 57.3 } else { worst_deg };
+                worst_deg = if e * 57.3 > worst_deg {
+                    e * 57.3
+                } else {
+                    worst_deg
+                };
             } else if status.observer_weight > 0.0 && status.observer_weight < 1.0 {
                 blend.push(n);
             }

@@ -109,6 +109,28 @@
 //! [`crate::pi`]. When the control frame changes (hand-over, fall-back) the integrators are
 //! re-expressed in the new frame so that the voltage vector is continuous.
 //!
+//! # Low speed by HFI (salient motors, [`Foc::enable_hfi`])
+//!
+//! Off unless enabled (then only in sensorless mode on a motor with `Lq / Ld >= 1.1`); off,
+//! the tick is the one described above, bit for bit. On (module [`crate::hfi`]):
+//!
+//! - **start** from standstill: the carrier on, no current while the tracking loop settles on
+//!   the salient axis, then the magnet polarity test (two d-axis pulses); the state reads
+//!   [`State::Align`] meanwhile. Then closed loop at once (no I/f ramp);
+//! - **closed loop**: the sequencer runs its sensored path (speed loop, stop, stall check) on
+//!   a virtual sensor: the HFI angle and speed blended with the observer's, the observer's
+//!   weight rising linearly with HFI's speed from `blend_low_rad_s` to `blend_high_rad_s`.
+//!   Above `blend_high` the carrier is off and the angle is the observer's alone; it comes
+//!   back on below 80 % of it, the tracker seeded from the observer (angle, speed, and the
+//!   load as the drive's torque). When the observer's weight leaves zero it is re-seeded from
+//!   HFI (it drifts at standstill). The observer's health monitor and its fall-back to I/f
+//!   are not used in this mode;
+//! - while the carrier is on, the current loops take the mean of the samples over a carrier
+//!   period, their voltage limit is lowered by the carrier's amplitude, and the observer is
+//!   fed the fundamental (the carrier's voltage out of its input, the carrier's predicted
+//!   current out of the sample); the speed loop's torque command is fed forward to the
+//!   tracking loop.
+//!
 //! # Cost
 //!
 //! Besides the observer step, a tick evaluates three sine/cosine pairs in the common case
@@ -576,9 +598,25 @@ impl Foc {
             ComputationDelay::OnePeriod => self.u_hist[1],
             ComputationDelay::None => self.u_hist[0],
         };
+        // With the HFI carrier on, the observer sees the fundamental only: the carrier's
+        // voltage taken out of the input, its predicted current out of the sample (module
+        // docs, "Low speed by HFI").
+        let (u_prev, i_obs, hfi_demod) = match self.hfi.as_mut() {
+            None => (u_prev, i_ab, None),
+            Some(h) => {
+                let carrier = h.tracker.applied_carrier();
+                let (resp, fund) = h.demodulate(i_ab, sample_ok);
+                if h.demodulated() {
+                    let i_fund = i_ab - h.tracker.carrier_current();
+                    (u_prev - carrier, i_fund, Some((resp, fund)))
+                } else {
+                    (u_prev, i_ab, Some((resp, fund)))
+                }
+            }
+        };
         let u_prev = [u_prev.alpha, u_prev.beta];
         let (est, observer_ok) = if sample_ok {
-            match self.observer.step(u_prev, [i_ab.alpha, i_ab.beta]) {
+            match self.observer.step(u_prev, [i_obs.alpha, i_obs.beta]) {
                 Ok(e) => (e, true),
                 Err(_) => (self.observer.estimate(), false),
             }
@@ -615,7 +653,8 @@ impl Foc {
                 Err(stop) => return self.stopped(stop),
             }
         } else {
-            match self.hfi_plan(&est, observer_ok, i_ab, sample_ok) {
+            let (resp, fund) = hfi_demod.unwrap_or((None, i_ab));
+            match self.hfi_plan(&est, observer_ok, i_ab, resp, fund) {
                 Ok((plan, c, i)) => {
                     carrier = c;
                     i_loop = i;
@@ -737,12 +776,12 @@ impl Foc {
         est: &Estimate<f32>,
         observer_ok: bool,
         i_ab: AlphaBeta,
-        sample_ok: bool,
+        resp: Option<crate::hfi::Response>,
+        fund: AlphaBeta,
     ) -> Result<(Plan, Option<AlphaBeta>, AlphaBeta), Stop> {
         let Some(h) = self.hfi.as_mut() else {
             return Err(Stop::Off);
         };
-        let (resp, fund) = h.demodulate(i_ab, sample_ok);
         let plan = if let Some(i_d) = h.standstill(resp) {
             Plan {
                 frame: Frame {

@@ -2,23 +2,27 @@
 //! low speed, where the back-EMF the observer needs is too small, with magnet polarity
 //! detection.
 //!
-//! # Method: pulsating square wave on the estimated d axis at half the PWM rate
+//! # Method: pulsating square wave on the estimated d axis, a fraction of the PWM rate
 //!
-//! Each tick adds `u_h[k] = V_h s[k] (cos phi_k, sin phi_k)` to the stator voltage (alpha-beta),
-//! where `s[k] = -s[k-1]` alternates every PWM period (injection frequency `f_pwm / 2`: 5 kHz
-//! at 10 kHz, 10 kHz at 20 kHz) and `phi_k = theta_hat + w_hat advance Ts` is the tracked d
-//! axis at the middle of the period the voltage is applied in (the controller's own angle
-//! advance, module [`crate::controller`]).
+//! Each tick adds `u_h[k] = V_h s[k] (cos phi_k, sin phi_k)` to the stator voltage (alpha-beta):
+//! `s[k]` is `+1` for `N` ticks and `-1` for `N` ticks ([`HfiConfig::half_period_ticks`], 1 to
+//! 4: carrier `f_pwm / (2 N)`, e.g. 10 kHz at 20 kHz PWM with `N = 1`, 1.67 kHz at 10 kHz with
+//! `N = 3`), and `phi_k = theta_hat + w_hat advance Ts` is the tracked d axis at the middle of
+//! the period the voltage is applied in (the controller's own angle advance, module
+//! [`crate::controller`]).
 //!
-//! **Why a square wave at `f_pwm / 2`, and not a sinusoid at a lower frequency.** (1) The
-//! demodulation is a second difference of three current samples, with no band-pass or
-//! low-pass filter and no phase to tune: the response is in the very next samples, so the
-//! tracking loop can be fast. (2) The fundamental is separated from the carrier by averaging
-//! two consecutive samples (a notch exactly at `f_pwm / 2`), so the current loops keep their
-//! bandwidth and only gain half a period of delay. (3) For a given voltage the current
-//! ripple is the smallest the PWM can make (`Ts V_h / L` peak to peak), and the carrier sits
-//! at the top of the audible band or above it. A sinusoid at `f_pwm / 8` would need filters
-//! whose delay limits the tracking bandwidth (Jang 2003, Yoon 2011 compare the two).
+//! **Why a square wave and not a sinusoid.** (1) The response is demodulated from sample
+//! differences and a mean over one carrier period: no band-pass or low-pass filter, no phase
+//! to tune, and the response is in the very next samples, so the tracking loop can be fast.
+//! (2) The same mean over a period separates the fundamental from the carrier (a comb notch
+//! at the carrier and its harmonics), so the current loops keep their bandwidth and gain
+//! `N - 1/2` periods of delay. (3) For a given voltage the current ripple is the smallest the
+//! PWM can make (`N Ts V_h / L` peak to peak) and, with `N = 1`, the carrier sits at the top of
+//! the audible band or above it. A sinusoid at `f_pwm / 8` needs filters whose delay limits
+//! the tracking bandwidth (Jang 2003, Yoon 2011 compare the two). A longer half period `N`
+//! raises the signal-to-noise ratio as `sqrt(N)` at a given voltage (the current moves for `N`
+//! periods between the sign changes where the information is) and the ripple as `N`: the
+//! choice for motors of low saliency or noisy current sensing.
 //!
 //! # Equations
 //!
@@ -33,19 +37,23 @@
 //! ```
 //!
 //! The q part is proportional to the angle error times the saliency `Lq - Ld`, and zero for a
-//! surface motor ([`HfiError::SurfaceMotor`]). With the sign alternating every period, the
-//! second difference of the sampled currents `D2[k] = i[k] - 2 i[k-1] + i[k-2]` cancels the
-//! fundamental's slope and doubles the carrier's step:
+//! surface motor ([`HfiError::SurfaceMotor`]). Each sample difference, signed with the carrier
+//! applied over it and projected on that carrier's axis, `y[k] = s_a (i[k] - i[k-1])` in the
+//! `phi` frame, is one carrier step plus the fundamental's change; the fundamental's change
+//! cancels in the mean over one carrier period (the signs balance), leaving
 //!
 //! ```text
-//! (s_a / 2) D2[k] in the phi frame = Ts V (Y_s + Y_d cos 2e,  Y_d sin 2e)
+//! mean_2N(y) = Ts V (Y_s + Y_d cos 2e,  Y_d sin 2e)
 //! ```
 //!
-//! `s_a` being the sign of the voltage applied over `[t_k-1, t_k)` (computed two ticks ago with
-//! the one-period computation delay, one tick ago without it; both kept in a short history
-//! with their angle). The normalised error `eps = (s_a / 2) D2_q / (2 Ts V Y_d) = sin(2e) / 2`
-//! is `e` for small errors. The d part, `Ts V / Ld,inc` at `e = 0`, is the incremental d-axis
-//! admittance that the polarity test compares.
+//! (for `N = 1` this is the second difference `(s_a / 2) (i[k] - 2 i[k-1] + i[k-2])`). `s_a`
+//! is the sign of the voltage applied over `[t_k-1, t_k)`, computed two ticks ago with the
+//! one-period computation delay, one tick ago without it (a short history keeps sign and
+//! axis). The normalised error `eps = mean(y)_q / (2 Ts V Y_d) = sin(2e) / 2` is `e` for small
+//! errors. The d part, `Ts V / Ld,inc` at `e = 0`, is the incremental d-axis admittance that
+//! the polarity test compares. The carrier's own current is the measured step accumulated
+//! with the applied signs, less its period mean: the sample less it is the fundamental at the
+//! sample's time, which the controller's observer is fed ([`HfiTracker::carrier_current`]).
 //!
 //! # Tracking loop (PLL with the drive's torque fed forward)
 //!
@@ -201,6 +209,11 @@ pub struct HfiConfig {
     pub detect_polarity: bool,
 }
 
+/// `a < b` (false for NaN).
+fn below(a: f32, b: f32) -> bool {
+    a < b
+}
+
 /// `Lq / Ld`, or the refusal of a non-salient motor.
 fn saliency(m: &MotorParams<f32>) -> Result<f32, HfiError> {
     let s = m.lq_h / m.ld_h;
@@ -282,16 +295,16 @@ impl HfiConfig {
         if !(1..=4).contains(&self.half_period_ticks) {
             return Err(HfiError::OutOfRange(F::HalfPeriod));
         }
-        if !(self.injection_v < 0.9 * u_lim) {
+        if !below(self.injection_v, 0.9 * u_lim) {
             return Err(HfiError::OutOfRange(F::InjectionV));
         }
-        if !(self.pll_bandwidth_rad_s * cfg.ts_s < 0.1 * 2.0 * PI) {
+        if !below(self.pll_bandwidth_rad_s * cfg.ts_s, 0.1 * 2.0 * PI) {
             return Err(HfiError::OutOfRange(F::PllBandwidth));
         }
-        if !(self.blend_low_rad_s < self.blend_high_rad_s) {
+        if !below(self.blend_low_rad_s, self.blend_high_rad_s) {
             return Err(HfiError::OutOfRange(F::BlendLow));
         }
-        if !(self.blend_high_rad_s < cfg.max_speed_rad_s) {
+        if !below(self.blend_high_rad_s, cfg.max_speed_rad_s) {
             return Err(HfiError::OutOfRange(F::BlendHigh));
         }
         if !at_most(self.polarity_current_a, cfg.current_limit_a) {
@@ -358,6 +371,11 @@ pub struct HfiTracker {
     /// The last `period` samples and demodulated steps (ring, written at `pos`).
     i_ring: [AlphaBeta; 8],
     y_ring: [Dq; 8],
+    /// The carrier's current predicted from the measured step (accumulated), its last
+    /// `period` values, and the centred value of the last sample (module docs).
+    tri: AlphaBeta,
+    tri_ring: [AlphaBeta; 8],
+    tri_centred: AlphaBeta,
     pos: u8,
     /// Consecutive accepted samples (saturating), consecutive demodulated steps.
     valid: u8,
@@ -402,6 +420,9 @@ impl HfiTracker {
             i_prev: AlphaBeta::default(),
             i_ring: [AlphaBeta::default(); 8],
             y_ring: [Dq::default(); 8],
+            tri: AlphaBeta::default(),
+            tri_ring: [AlphaBeta::default(); 8],
+            tri_centred: AlphaBeta::default(),
             pos: 0,
             valid: 0,
             y_count: 0,
@@ -432,6 +453,30 @@ impl HfiTracker {
         self.valid = 0;
         self.y_count = 0;
         self.last = Response::default();
+        self.tri = AlphaBeta::default();
+        self.tri_centred = AlphaBeta::default();
+    }
+
+    /// The carrier voltage applied over the last period `[t_k-1, t_k)` (alpha-beta, V; zero
+    /// when none was), as the next [`update`](Self::update) demodulates it.
+    pub fn applied_carrier(&self) -> AlphaBeta {
+        let c = if self.one_period_delay {
+            self.hist[1]
+        } else {
+            self.hist[0]
+        };
+        let a = self.v * c.sign;
+        AlphaBeta {
+            alpha: a * c.cos,
+            beta: a * c.sin,
+        }
+    }
+
+    /// The carrier's part of the last sample (alpha-beta, A): the measured per-period step
+    /// accumulated with the applied signs, less its mean over a carrier period. The sample
+    /// less this is the fundamental at the sample's own time (no averaging lag).
+    pub fn carrier_current(&self) -> AlphaBeta {
+        self.tri_centred
     }
 
     /// Sets the estimated load (disturbance) acceleration, rad/s^2 el.
@@ -492,6 +537,15 @@ impl HfiTracker {
         } else {
             self.y_count = 0;
         }
+        // The carrier's own current: the last measured step along the applied axis,
+        // accumulated with the applied sign, centred on its mean over a period.
+        let step = Dq {
+            d: self.last.d,
+            q: self.last.q,
+        }
+        .to_alpha_beta(applied.sin, applied.cos);
+        self.tri = self.tri + step * applied.sign;
+        self.tri_ring[pos] = self.tri;
         self.i_ring[pos] = i;
         self.i_prev = i;
         self.valid = self.valid.saturating_add(1);
@@ -500,11 +554,15 @@ impl HfiTracker {
         // the fundamental cancels, the carrier's sign being balanced over a period).
         let fund = if usize::from(self.valid) >= n {
             let mut sum = AlphaBeta::default();
-            for x in self.i_ring.iter().take(n) {
+            let mut tri = AlphaBeta::default();
+            for (x, t) in self.i_ring.iter().zip(&self.tri_ring).take(n) {
                 sum = sum + *x;
+                tri = tri + *t;
             }
+            self.tri_centred = self.tri - tri * (1.0 / n as f32);
             sum * (1.0 / n as f32)
         } else {
+            self.tri_centred = AlphaBeta::default();
             i
         };
         let resp = if usize::from(self.y_count) >= n {
@@ -730,6 +788,13 @@ impl HfiDrive {
                 / foc.inertia_kg_m2,
             accel: 0.0,
         }
+    }
+
+    /// Whether this tick's sample was demodulated (the loops and the observer then take the
+    /// fundamental).
+    #[inline]
+    pub fn demodulated(&self) -> bool {
+        self.demodulated
     }
 
     /// The torque command of this tick as a surface-equivalent current (A, module
