@@ -1000,16 +1000,20 @@ mod tests {
             drop: 1.0,
             current_a: 1.0
         })));
-        for k in 0..200 {
-            let (s, c) = (0.4 + 0.001 * f64::from(k)).sin_cos();
-            let u = [-30.0 * s - 10.0 * c, 30.0 * c - 10.0 * s];
+        for _ in 0..200 {
+            // (u_d, u_q) = (-50, 30) V at the rotor's angle.
+            let (s, c) = sp.state().theta_e_rad.sin_cos();
+            let u = [-30.0 * s - 50.0 * c, 30.0 * c - 50.0 * s];
             lin.step(u, 0.5, 1e-4);
             sp.step(u, 0.5, 1e-4);
             assert!(lin.state().i_d_a < 0.0);
         }
+        // The exact step holds the speed over a period, RK4 does not: agreement to the exact
+        // step's own error (0.1 % over a second, `exact_step_matches_a_fine_rk4...`).
         let (a, b) = (lin.state(), sp.state());
-        assert!((a.i_d_a - b.i_d_a).abs() < 1e-6 && (a.i_q_a - b.i_q_a).abs() < 1e-6);
-        assert!((a.omega_mech_rad_s - b.omega_mech_rad_s).abs() < 1e-6);
+        let close = |x: f64, y: f64| (x - y).abs() <= 1e-3 * x.abs().max(y.abs()) + 1e-6;
+        assert!(close(a.i_d_a, b.i_d_a) && close(a.i_q_a, b.i_q_a), "{a:?} {b:?}");
+        assert!(close(a.omega_mech_rad_s, b.omega_mech_rad_s), "{a:?} {b:?}");
         // A positive d step at standstill: the current rises faster than on the linear plant.
         let x0 = PlantState::default();
         let (mut lin, mut sp) = (Plant::new(m, x0), Plant::new(m, x0));
