@@ -1012,7 +1012,10 @@ mod tests {
         // step's own error (0.1 % over a second, `exact_step_matches_a_fine_rk4...`).
         let (a, b) = (lin.state(), sp.state());
         let close = |x: f64, y: f64| (x - y).abs() <= 1e-3 * x.abs().max(y.abs()) + 1e-6;
-        assert!(close(a.i_d_a, b.i_d_a) && close(a.i_q_a, b.i_q_a), "{a:?} {b:?}");
+        assert!(
+            close(a.i_d_a, b.i_d_a) && close(a.i_q_a, b.i_q_a),
+            "{a:?} {b:?}"
+        );
         assert!(close(a.omega_mech_rad_s, b.omega_mech_rad_s), "{a:?} {b:?}");
         // A positive d step at standstill: the current rises faster than on the linear plant.
         let x0 = PlantState::default();
