@@ -9,7 +9,7 @@
 
 use cortex_m_semihosting::hprintln;
 use foc::ekf_core::MotorParams;
-use foc::{AlphaBeta, Foc, FocConfig, State, TickInput, duties_to_alpha_beta};
+use foc::{AlphaBeta, Foc, FocConfig, HfiConfig, HfiPhase, State, TickInput, duties_to_alpha_beta};
 
 use crate::meter::{Clock, Tally};
 
@@ -265,3 +265,86 @@ pub fn run_ipm(clock: &Clock) -> Result<(), &'static str> {
     }
     Ok(())
 }
+
+/// The interior motor held at standstill and then run slowly on high-frequency injection
+/// (`foc::hfi`, defaults of `HfiConfig::new`, 20 kHz): prints `foc_tick_hfi` (closed loop on
+/// the HFI angle alone: carrier, demodulation, tracking loop, observer and current loops) and
+/// `foc_tick_hfi_blend` (in the hand-over band, HFI and observer angles blended). The on-target
+/// plant has no saturation, so the polarity test is off and the rotor starts within 90 deg of
+/// the tracker's start angle (0). `Err` when the drive failed.
+pub fn run_ipm_hfi(clock: &Clock) -> Result<(), &'static str> {
+    let mut cfg = FocConfig::new(MotorParams::industrial_ipm(), TS_S, IPM_U_DC_V);
+    cfg.current_limit_a = 12.0;
+    cfg.over_current_a = 24.0;
+    let cfg = cfg.with_inertia(IPM_J);
+    let mut foc = Foc::new(&cfg).map_err(|_| "foc config refused (hfi)")?;
+    let mut hfi = HfiConfig::new(&cfg, IPM_U_DC_V).map_err(|_| "hfi config refused")?;
+    hfi.detect_polarity = false;
+    foc.enable_hfi(&hfi, IPM_U_DC_V)
+        .map_err(|_| "hfi refused")?;
+    foc.set_speed_ref_mech_rad_s(0.0)
+        .map_err(|_| "speed reference refused")?;
+    foc.start().map_err(|_| "start refused")?;
+    let mut plant = SalientPlant {
+        id: 0.0,
+        iq: 0.0,
+        w_mech: 0.0,
+        th: 0.3,
+    };
+    // Half-way through the blend band after 0.4 s.
+    let blend_mech = 0.5 * (hfi.blend_low_rad_s + hfi.blend_high_rad_s) / 3.0;
+    let mut pending = ([0.5_f32; 3], false);
+    let (mut alone, mut blend) = (Tally::new(), Tally::new());
+    let mut worst_deg = 0.0_f32;
+    for k in 0..HFI_TICKS {
+        if k == HFI_TICKS / 3 {
+            foc.set_speed_ref_mech_rad_s(blend_mech)
+                .map_err(|_| "speed reference refused")?;
+        }
+        let abc = plant.i_ab().to_abc();
+        let input = TickInput::abc(abc.a, abc.b, abc.c, IPM_U_DC_V);
+        let status = foc.hfi_status().ok_or("hfi off")?;
+        let mut out = None;
+        let n = clock.count(&mut || out = Some(foc.tick(&input)));
+        let out = out.ok_or("tick produced no output")?;
+        if status.phase == HfiPhase::Tracking && out.state == State::ClosedLoop {
+            if status.observer_weight == 0.0 && status.injecting {
+                alone.push(n);
+                let e = foc::trig::wrap(out.telemetry.theta_rad - plant.th).abs();
+                worst_deg = if e * 57.3 > worst_deg {
+                    e * 57.3
+                } else {
+                    worst_deg
+                };
+            } else if status.observer_weight > 0.0 && status.observer_weight < 1.0 {
+                blend.push(n);
+            }
+        }
+        if out.fault.is_some() {
+            hprintln!("foc_tick_hfi: fault {:?} at tick {}", foc.fault_info(), k);
+            return Err("the hfi drive faulted");
+        }
+        let applied = core::mem::replace(&mut pending, (out.duties, out.pwm_enabled));
+        plant.step(
+            duties_to_alpha_beta(applied.0, IPM_U_DC_V),
+            applied.1 && out.pwm_enabled,
+        );
+    }
+    hprintln!(
+        "foc_tick_hfi: industrial_ipm on HFI ({} V carrier, half period {} ticks), worst angle error on HFI alone {} deg, final {} rad/s mech (ref {})",
+        hfi.injection_v,
+        hfi.half_period_ticks,
+        worst_deg,
+        plant.w_mech,
+        blend_mech
+    );
+    alone.report("foc_tick_hfi");
+    blend.report("foc_tick_hfi_blend");
+    if worst_deg > 20.0 || (plant.w_mech - blend_mech).abs() > 0.2 * blend_mech {
+        return Err("the hfi drive lost its angle or speed");
+    }
+    Ok(())
+}
+
+/// Ticks of the HFI run (1.2 s at 20 kHz).
+const HFI_TICKS: u32 = 24_000;

@@ -34,7 +34,8 @@
 //! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states; see
 //! [`drive`]), `foc_tick_ipm` (the tick on an interior PMSM in closed loop with MTPA and
 //! field weakening engaged, at 1.5-2x base speed) and `foc_tick_ipm_mtpa` (the same motor
-//! below base speed), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
+//! below base speed), `foc_tick_hfi` and `foc_tick_hfi_blend` (the same motor at standstill
+//! on high-frequency injection, and in its hand-over band to the observer), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
 //! sequence; its line gives the **worst** tick, `identify_tick_median` the median; see
 //! [`identify`]). To add one, call [`meter::Clock::measure`] with its name.
 #![no_std]
@@ -221,6 +222,8 @@ fn run() -> Result<(), &'static str> {
     drive::run(&clock)?;
     // The same for an interior PMSM with MTPA and field weakening.
     drive::run_ipm(&clock)?;
+    // The same motor at standstill and low speed on high-frequency injection.
+    drive::run_ipm_hfi(&clock)?;
     // The damped start (align by kick, coast, damped I/f).
     drive::run_damped(&clock)?;
 

@@ -109,6 +109,28 @@
 //! [`crate::pi`]. When the control frame changes (hand-over, fall-back) the integrators are
 //! re-expressed in the new frame so that the voltage vector is continuous.
 //!
+//! # Low speed by HFI (salient motors, [`Foc::enable_hfi`])
+//!
+//! Off unless enabled (then only in sensorless mode on a motor with `Lq / Ld >= 1.1`); off,
+//! the tick is the one described above, bit for bit. On (module [`crate::hfi`]):
+//!
+//! - **start** from standstill: the carrier on, no current while the tracking loop settles on
+//!   the salient axis, then the magnet polarity test (two d-axis pulses); the state reads
+//!   [`State::Align`] meanwhile. Then closed loop at once (no I/f ramp);
+//! - **closed loop**: the sequencer runs its sensored path (speed loop, stop, stall check) on
+//!   a virtual sensor: the HFI angle and speed blended with the observer's, the observer's
+//!   weight rising linearly with HFI's speed from `blend_low_rad_s` to `blend_high_rad_s`.
+//!   Above `blend_high` the carrier is off and the angle is the observer's alone; it comes
+//!   back on below 80 % of it, the tracker seeded from the observer (angle, speed, and the
+//!   load as the drive's torque). When the observer's weight leaves zero it is re-seeded from
+//!   HFI (it drifts at standstill). The observer's health monitor and its fall-back to I/f
+//!   are not used in this mode;
+//! - while the carrier is on, the current loops take the mean of the samples over a carrier
+//!   period, their voltage limit is lowered by the carrier's amplitude, and the observer is
+//!   fed the fundamental (the carrier's voltage out of its input, the carrier's predicted
+//!   current out of the sample); the speed loop's torque command is fed forward to the
+//!   tracking loop.
+//!
 //! # Cost
 //!
 //! Besides the observer step, a tick evaluates three sine/cosine pairs in the common case
@@ -123,6 +145,7 @@ use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
+use crate::hfi::{HfiConfig, HfiDrive, HfiError, HfiPhase, HfiStatus};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
 use crate::startup::{Frame, Inputs, Plan, Seed, Sequencer, State, Stop};
@@ -318,6 +341,8 @@ pub struct Foc {
     stuck_angle: [f32; 2],
     /// Ticks phase a / b repeated its reading.
     stuck_ticks: [u16; 2],
+    /// High-frequency injection at low speed (module docs, "Low speed by HFI"); `None`: off.
+    hfi: Option<HfiDrive>,
 }
 
 /// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
@@ -397,6 +422,7 @@ impl Foc {
             raw_last: [f32::NAN; 2],
             stuck_angle: [0.0; 2],
             stuck_ticks: [0; 2],
+            hfi: None,
         })
     }
 
@@ -405,9 +431,41 @@ impl Foc {
         &self.cfg
     }
 
-    /// Current state.
+    /// Current state (the HFI standstill test reports [`State::Align`]).
     pub fn state(&self) -> State {
-        self.seq.state()
+        match &self.hfi {
+            Some(h) if h.phase != HfiPhase::Tracking && self.seq.state() == State::ClosedLoop => {
+                State::Align
+            }
+            _ => self.seq.state(),
+        }
+    }
+
+    /// Turns high-frequency injection on for the low-speed range (module docs, "Low speed by
+    /// HFI"), with the settings `hfi` checked against the configuration and the nominal bus
+    /// voltage `u_dc_nominal_v`. Only while idle, in sensorless mode, on a salient motor.
+    pub fn enable_hfi(&mut self, hfi: &HfiConfig, u_dc_nominal_v: f32) -> Result<(), HfiError> {
+        if self.seq.state() != State::Idle {
+            return Err(HfiError::NotIdle);
+        }
+        hfi.validate(&self.cfg, u_dc_nominal_v)?;
+        self.hfi = Some(HfiDrive::new(&self.cfg, hfi));
+        Ok(())
+    }
+
+    /// Turns high-frequency injection off (the controller as built by [`Foc::new`]). Only
+    /// while idle.
+    pub fn disable_hfi(&mut self) -> Result<(), HfiError> {
+        if self.seq.state() != State::Idle {
+            return Err(HfiError::NotIdle);
+        }
+        self.hfi = None;
+        Ok(())
+    }
+
+    /// What HFI is doing (`None`: off).
+    pub fn hfi_status(&self) -> Option<HfiStatus> {
+        self.hfi.map(|h| h.status())
     }
 
     /// The latched fault, if any.
@@ -452,10 +510,21 @@ impl Foc {
             let _ = self
                 .observer
                 .reset(self.cfg.observer.x0, self.cfg.observer.p0);
+            if let Some(h) = self.hfi.as_mut() {
+                h.restart(&self.cfg);
+            }
+        }
+        // With HFI the sequencer runs its sensored path on the blended angle.
+        let hfi = self.hfi.is_some();
+        if hfi {
+            self.cfg.mode = Mode::Sensored;
         }
         let (cfg, observer) = (&self.cfg, &mut self.observer);
         self.seq
             .start(cfg, &mut |seed| reseed_observer(observer, cfg, seed));
+        if hfi {
+            self.cfg.mode = Mode::Sensorless;
+        }
         Ok(())
     }
 
@@ -529,9 +598,25 @@ impl Foc {
             ComputationDelay::OnePeriod => self.u_hist[1],
             ComputationDelay::None => self.u_hist[0],
         };
+        // With the HFI carrier on, the observer sees the fundamental only: the carrier's
+        // voltage taken out of the input, its predicted current out of the sample (module
+        // docs, "Low speed by HFI").
+        let (u_prev, i_obs, hfi_demod) = match self.hfi.as_mut() {
+            None => (u_prev, i_ab, None),
+            Some(h) => {
+                let carrier = h.tracker.applied_carrier();
+                let (resp, fund) = h.demodulate(i_ab, sample_ok);
+                if h.demodulated() {
+                    let i_fund = i_ab - h.tracker.carrier_current();
+                    (u_prev - carrier, i_fund, Some((resp, fund)))
+                } else {
+                    (u_prev, i_ab, Some((resp, fund)))
+                }
+            }
+        };
         let u_prev = [u_prev.alpha, u_prev.beta];
         let (est, observer_ok) = if sample_ok {
-            match self.observer.step(u_prev, [i_ab.alpha, i_ab.beta]) {
+            match self.observer.step(u_prev, [i_obs.alpha, i_obs.beta]) {
                 Ok(e) => (e, true),
                 Err(_) => (self.observer.estimate(), false),
             }
@@ -550,25 +635,33 @@ impl Foc {
             }
         };
 
-        let inputs = Inputs {
-            estimate: &est,
-            observer_ok,
-            sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
-            u_ab: u_prev,
-        };
-        let (cfg, observer) = (&self.cfg, &mut self.observer);
-        let plan = match self.seq.step(cfg, inputs, &mut |seed| {
-            reseed_observer(observer, cfg, seed)
-        }) {
-            Ok(plan) => plan,
-            Err(Stop::Off) => return self.safe_output(),
-            Err(Stop::Idle) => {
-                self.go_idle();
-                return self.safe_output();
+        let mut carrier = None;
+        let mut i_loop = i_ab;
+        let plan = if self.hfi.is_none() {
+            // Matched right where it is made (a decision passed through memory costs about 80
+            // instructions per tick on the Cortex-M4F).
+            let inputs = Inputs {
+                estimate: &est,
+                observer_ok,
+                sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
+                u_ab: u_prev,
+            };
+            let (cfg, observer) = (&self.cfg, &mut self.observer);
+            match self.seq.step(cfg, inputs, &mut |seed| {
+                reseed_observer(observer, cfg, seed)
+            }) {
+                Ok(plan) => plan,
+                Err(stop) => return self.stopped(stop),
             }
-            Err(Stop::Trip(fault, value)) => {
-                self.trip(fault, value);
-                return self.safe_output();
+        } else {
+            let (resp, fund) = hfi_demod.unwrap_or((None, i_ab));
+            match self.hfi_plan(&est, observer_ok, i_ab, resp, fund) {
+                Ok((plan, c, i)) => {
+                    carrier = c;
+                    i_loop = i;
+                    plan
+                }
+                Err(stop) => return self.stopped(stop),
             }
         };
         // Stuck channel: a sampled phase current that repeats bit for bit while the current
@@ -589,13 +682,18 @@ impl Foc {
         // Current loops in the control frame.
         let frame = plan.frame;
         let (s, c) = sin_cos(frame.theta);
-        let i_dq = i_ab.to_dq(s, c);
+        let i_dq = i_loop.to_dq(s, c);
         let ff = self.feed_forward(i_dq, frame);
         if let Some(old) = plan.reframe_from {
             self.reframe(old, frame, i_ab, ff);
         }
         let u_dc = input.u_dc_v;
-        let u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        let mut u_max = self.cfg.max_modulation * linear_limit_v(u_dc);
+        if carrier.is_some()
+            && let Some(h) = &self.hfi
+        {
+            u_max = max2(u_max - h.cfg.injection_v, 0.0);
+        }
         // Current references: the plan's, or (salient motor, field weakening) shaped by
         // MTPA, the torque conversion, field weakening and the current circle in closed loop.
         let i_ref = if self.shaping {
@@ -624,7 +722,10 @@ impl Foc {
         // frame's sine and cosine by a small angle), SVPWM, dead-time compensation, history.
         let (sd, cd) = sin_cos_small(frame.omega * self.advance_s);
         let (s2, c2) = add_angles(s, c, sd, cd);
-        let u_ab = u_dq.to_alpha_beta(s2, c2);
+        let mut u_ab = u_dq.to_alpha_beta(s2, c2);
+        if let Some(u_h) = carrier {
+            u_ab = u_ab + u_h;
+        }
         let (duties, applied) = if self.dead_time.is_active() {
             // Phase currents predicted for the middle of the application interval, turned
             // with the frame like the voltage: the reference, which the loops will have
@@ -641,10 +742,16 @@ impl Foc {
         };
         self.u_hist = [applied, self.u_hist[0]];
 
+        // (The HFI standstill test, carrier on, reports `Align`: `state()`.)
+        let state = if carrier.is_some() {
+            self.state()
+        } else {
+            self.seq.state()
+        };
         TickOutput {
             duties,
             pwm_enabled: true,
-            state: self.seq.state(),
+            state,
             fault: None,
             telemetry: Telemetry {
                 i_dq,
@@ -659,6 +766,74 @@ impl Foc {
                 sample_ok,
             },
         }
+    }
+
+    /// The plan of a tick with HFI on (module docs, "Low speed by HFI"): the standstill test's
+    /// d current in the tracked frame, or the sequencer's sensored path on the blended angle;
+    /// with the carrier to add and the current the loops take.
+    #[inline(never)]
+    fn hfi_plan(
+        &mut self,
+        est: &Estimate<f32>,
+        observer_ok: bool,
+        i_ab: AlphaBeta,
+        resp: Option<crate::hfi::Response>,
+        fund: AlphaBeta,
+    ) -> Result<(Plan, Option<AlphaBeta>, AlphaBeta), Stop> {
+        let Some(h) = self.hfi.as_mut() else {
+            return Err(Stop::Off);
+        };
+        let plan = if let Some(i_d) = h.standstill(resp) {
+            Plan {
+                frame: Frame {
+                    theta: h.tracker.theta(),
+                    omega: 0.0,
+                    emf: false,
+                },
+                i_ref: Dq { d: i_d, q: 0.0 },
+                reframe_from: None,
+            }
+        } else {
+            let b = h.blend(est.theta_rad, est.omega_e_rad_s);
+            if let Some((theta, omega)) = b.reseed {
+                let seed = Seed {
+                    theta,
+                    omega,
+                    sigma_theta: 0.1,
+                };
+                reseed_observer(&mut self.observer, &self.cfg, seed);
+            }
+            let inputs = Inputs {
+                estimate: est,
+                observer_ok,
+                sensor: Some((b.theta, b.omega)),
+                // Read only by the damped start of the sensorless path.
+                u_ab: [0.0; 2],
+            };
+            self.cfg.mode = Mode::Sensored;
+            let (cfg, observer) = (&self.cfg, &mut self.observer);
+            let r = self.seq.step(cfg, inputs, &mut |seed| {
+                reseed_observer(observer, cfg, seed)
+            });
+            self.cfg.mode = Mode::Sensorless;
+            let plan = r?;
+            h.set_torque_command(plan.i_ref.q);
+            plan
+        };
+        let (carrier, i_loop) = h.finish(i_ab, fund);
+        Ok((plan, carrier, i_loop))
+    }
+
+    /// The PWM-off output for the sequencer's `stop` (idle, or a fault to latch).
+    #[cold]
+    #[inline(never)]
+    fn stopped(&mut self, stop: Stop) -> TickOutput {
+        match stop {
+            Stop::Off => {}
+            Stop::Idle => self.go_idle(),
+            Stop::Trip(fault, value) => self.trip(fault, value),
+        }
+        self.safe_output()
     }
 
     /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the

@@ -10,6 +10,7 @@ pub mod fault;
 pub mod fieldweak;
 pub mod hal;
 pub mod health;
+pub mod hfi;
 pub mod identify;
 pub mod mtpa;
 pub mod pi;
@@ -30,6 +31,7 @@ pub use deadtime::DeadTimeCompensation;
 pub use fault::{Fault, FaultInfo};
 pub use fieldweak::FieldWeakening;
 pub use health::{HealthReport, LossReason};
+pub use hfi::{HfiConfig, HfiError, HfiField, HfiPhase, HfiStatus, HfiTracker};
 pub use identify::{
     Identified, Identifier, IdentifyConfig, IdentifyConfigError, IdentifyError, IdentifyFailure,
     IdentifyOutput, IdentifyStep, identify_period,

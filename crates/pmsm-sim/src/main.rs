@@ -417,6 +417,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
             sinks,
             interrupt: Some(&INTERRUPTED),
             progress: Some(&mut progress),
+            ..RunOptions::default()
         },
     )?;
     if let Some(b) = &bar {

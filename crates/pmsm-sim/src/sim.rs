@@ -183,6 +183,9 @@ pub struct RunOptions<'a> {
     pub interrupt: Option<&'a AtomicBool>,
     /// Called with `(periods done, periods in all)` every 4096 periods and at the end.
     pub progress: Option<&'a mut dyn FnMut(usize, usize)>,
+    /// d-axis saturation of the plant ([`crate::plant::DSaturation`]; `None`, the default:
+    /// the linear plant of every scenario).
+    pub d_saturation: Option<crate::plant::DSaturation>,
 }
 
 /// Runs a scenario with a full trace; an early end (non-finite, observer failure) is an
@@ -274,6 +277,13 @@ pub fn run_with_side_observers(
             ..PlantState::default()
         },
     );
+    if !plant.set_d_saturation(opts.d_saturation) {
+        return Err(SimError::Scenario {
+            file: scenario.name.clone(),
+            field: "d_saturation".into(),
+            problem: format!("{:?}: drop in [0, 1), current_a > 0", opts.d_saturation),
+        });
+    }
     let mut inverter = Inverter::new(scenario.inverter);
     let mut sensor = CurrentSensor::new(scenario.sensors, scenario.seed);
     // Injected faults (`[[faults]]`; none: not built, the loop unchanged).

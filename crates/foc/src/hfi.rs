@@ -1,0 +1,1154 @@
+//! High-frequency injection (HFI): rotor angle and speed of a salient motor at standstill and
+//! low speed, where the back-EMF the observer needs is too small, with magnet polarity
+//! detection.
+//!
+//! # Method: pulsating square wave on the estimated d axis, a fraction of the PWM rate
+//!
+//! Each tick adds `u_h[k] = V_h s[k] (cos phi_k, sin phi_k)` to the stator voltage (alpha-beta):
+//! `s[k]` is `+1` for `N` ticks and `-1` for `N` ticks ([`HfiConfig::half_period_ticks`], 1 to
+//! 4: carrier `f_pwm / (2 N)`, e.g. 10 kHz at 20 kHz PWM with `N = 1`, 1.67 kHz at 10 kHz with
+//! `N = 3`), and `phi_k = theta_hat + w_hat advance Ts` is the tracked d axis at the middle of
+//! the period the voltage is applied in (the controller's own angle advance, module
+//! [`crate::controller`]).
+//!
+//! **Why a square wave and not a sinusoid.** (1) The response is demodulated from sample
+//! differences and a mean over one carrier period: no band-pass or low-pass filter, no phase
+//! to tune, and the response is in the very next samples, so the tracking loop can be fast.
+//! (2) The same mean over a period separates the fundamental from the carrier (a comb notch
+//! at the carrier and its harmonics), so the current loops keep their bandwidth and gain
+//! `N - 1/2` periods of delay. (3) For a given voltage the current ripple is the smallest the
+//! PWM can make (`N Ts V_h / L` peak to peak) and, with `N = 1`, the carrier sits at the top of
+//! the audible band or above it. A sinusoid at `f_pwm / 8` needs filters whose delay limits
+//! the tracking bandwidth (Jang 2003, Yoon 2011 compare the two). A longer half period `N`
+//! raises the signal-to-noise ratio as `sqrt(N)` at a given voltage (the current moves for `N`
+//! periods between the sign changes where the information is) and the ripple as `N`: the
+//! choice for motors of low saliency or noisy current sensing.
+//!
+//! # Equations
+//!
+//! At the carrier frequency the resistance and the speed terms are negligible next to the
+//! inductive ones, so in the rotor frame `di/dt = diag(1/Ld, 1/Lq) u`. A voltage `V` along an
+//! axis `phi` that lies `e = theta - phi` behind the rotor's d axis gives, in the `phi`
+//! frame (`Y = 1/L`):
+//!
+//! ```text
+//! di_phi,d / dt = V (Y_s + Y_d cos 2e),   di_phi,q / dt = V Y_d sin 2e
+//! Y_s = (1/Ld + 1/Lq) / 2,  Y_d = (1/Ld - 1/Lq) / 2 = (Lq - Ld) / (2 Ld Lq)
+//! ```
+//!
+//! The q part is proportional to the angle error times the saliency `Lq - Ld`, and zero for a
+//! surface motor ([`HfiError::SurfaceMotor`]). Each sample difference, signed with the carrier
+//! applied over it and projected on that carrier's axis, `y[k] = s_a (i[k] - i[k-1])` in the
+//! `phi` frame, is one carrier step plus the fundamental's change; the fundamental's change
+//! cancels in the mean over one carrier period (the signs balance), leaving
+//!
+//! ```text
+//! mean_2N(y) = Ts V (Y_s + Y_d cos 2e,  Y_d sin 2e)
+//! ```
+//!
+//! (for `N = 1` this is the second difference `(s_a / 2) (i[k] - 2 i[k-1] + i[k-2])`). `s_a`
+//! is the sign of the voltage applied over `[t_k-1, t_k)`, computed two ticks ago with the
+//! one-period computation delay, one tick ago without it (a short history keeps sign and
+//! axis). The normalised error `eps = mean(y)_q / (2 Ts V Y_d) = sin(2e) / 2` is `e` for small
+//! errors. The d part, `Ts V / Ld,inc` at `e = 0`, is the incremental d-axis admittance that
+//! the polarity test compares. The carrier's own current is the measured step accumulated
+//! with the applied signs, less its period mean: the sample less it is the fundamental at the
+//! sample's time, which the controller's observer is fed ([`HfiTracker::carrier_current`]).
+//!
+//! # Tracking loop (PLL with the drive's torque fed forward)
+//!
+//! ```text
+//! theta += Ts (w + Kp eps)                            Kp = 3 w_n
+//! w     += Ki Ts eps + Ts (a_ff - a_L)                Ki = 3 w_n^2
+//! a_L   -= K3 Ts eps                                  K3 = w_n^3   (poles at -w_n, triple)
+//! a_ff   = p T* / J = p k_t i_T / J                   (the speed loop's torque command)
+//! ```
+//!
+//! A mechanical model in the loop (Lorenz's observer structure): the acceleration the drive's
+//! own torque command gives is fed forward, and `a_L` estimates what the load (and friction,
+//! and an inertia error) take away. The loop then only has to follow the load, not the
+//! drive's own moves, so its bandwidth `w_n` ([`HfiConfig::pll_bandwidth_rad_s`]) can stay
+//! low, which is what keeps the sensor noise out of the angle: a plain type-2 PLL fast enough
+//! for the speed loop passed about 4.9 deg RMS of angle noise on the 1.4-saliency motor of
+//! the tests. The speed output is `w` (no proportional noise). With `J` unknown, `a_ff = 0`
+//! gives a type-3 loop that still tracks any speed ramp without error. `eps` is clamped to `+-1` so that a noise spike cannot throw the
+//! angle. The loop has two stable points, `e = 0` and `e = pi`: the carrier cannot see the
+//! magnet's polarity.
+//!
+//! # Magnet polarity
+//!
+//! Run once at standstill after the loop has settled: two current pulses along the tracked
+//! d axis, `+I_p` then `-I_p` ([`HfiConfig::polarity_current_a`]), with the carrier on. The
+//! pulse that adds to the magnet's flux saturates the d-axis iron and lowers its incremental
+//! inductance, so the carrier's d response (`Ts V / Ld,inc`) is larger. If the response under
+//! `-I_p` is the larger, the tracked axis points at the south pole and the angle is turned by
+//! `pi`. The ratio of the two mean responses is reported as the contrast
+//! ([`HfiStatus::polarity_contrast`]); a motor without d-axis saturation gives a contrast near 1
+//! and the decision is then a coin toss (a real motor saturates by several percent at rated
+//! current; the simulator's plant has an optional saturation model for this test).
+//!
+//! # Current feedback and voltage
+//!
+//! While the carrier is on, the current loops see the mean of the last two samples (the
+//! carrier removed), and their voltage limit is lowered by `V_h` so that the sum stays within
+//! the modulation limit.
+//!
+//! # Defaults from the motor ([`HfiConfig::new`])
+//!
+//! - `V_h`: the voltage whose carrier ripple is 10 % of the current limit peak to peak on the
+//!   d axis, `0.1 I_lim Ld / Ts`, at most 80 % of the voltage limit at the nominal bus;
+//! - half period `N` ticks: 1 (`f_pwm / 2`) unless the saliency signal of one period,
+//!   `Ts V_h Y_d`, is below 3 % of the current limit (the sensor's noise scales with its full
+//!   scale, which scales with the current limit); then the smallest `N <= 4` that reaches it,
+//!   at the full 80 % voltage. Longer half periods raise the signal-to-noise ratio as
+//!   `sqrt(N)` at a given voltage, and the ripple as `N`. The traction motor of the tests
+//!   (Lq/Ld 3) gets `N = 1` (10 kHz at 20 kHz PWM), the industrial one (Lq/Ld 1.4) `N = 3`
+//!   (1.67 kHz at 10 kHz);
+//! - tracking loop: `w_n = sqrt(a_max)`, `a_max = p k_t I_lim / J` the acceleration of a
+//!   full-torque step, so that a full-torque load step costs about `0.5 a_max / w_n^2 = 0.5`
+//!   rad of angle at most (within the loop's +-45 deg capture range), limited to 5-50 Hz and
+//!   to `0.1 / ((N + 2) Ts)` (the loop's delay: the period average and the computation delay);
+//! - hand-over band to the observer: from half the start-up hand-over speed (observer weight 0)
+//!   to the hand-over speed (weight 1; carrier off above it);
+//! - polarity pulses: `0.8 I_lim`, 20 ms each, after 60 ms of settling.
+
+use core::f32::consts::PI;
+
+use ekf_core::MotorParams;
+
+use crate::config::{ComputationDelay, FocConfig, Mode};
+use crate::transforms::{AlphaBeta, Dq};
+use crate::trig::{add_angles, at_most, sin_cos, sin_cos_small, wrap};
+
+/// Which [`HfiConfig`] field is wrong.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HfiField {
+    /// [`HfiConfig::injection_v`].
+    InjectionV,
+    /// [`HfiConfig::pll_bandwidth_rad_s`].
+    PllBandwidth,
+    /// [`HfiConfig::half_period_ticks`].
+    HalfPeriod,
+    /// [`HfiConfig::blend_low_rad_s`].
+    BlendLow,
+    /// [`HfiConfig::blend_high_rad_s`].
+    BlendHigh,
+    /// [`HfiConfig::polarity_current_a`].
+    PolarityCurrent,
+    /// [`HfiConfig::settle_time_s`].
+    SettleTime,
+    /// [`HfiConfig::pulse_time_s`].
+    PulseTime,
+}
+
+/// Why HFI was refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HfiError {
+    /// The motor is not salient enough (`Lq / Ld` given): the carrier's q response is
+    /// proportional to `Lq - Ld`, zero for a surface motor. At least 1.1 is required.
+    SurfaceMotor {
+        /// `Lq / Ld` of the motor.
+        saliency: f32,
+    },
+    /// HFI serves the sensorless mode only.
+    SensoredMode,
+    /// Only while the controller is idle.
+    NotIdle,
+    /// The field is NaN, infinite, zero or negative.
+    NotPositive(HfiField),
+    /// The field is out of range or inconsistent with another (the injection above the
+    /// voltage limit, the blend band empty or above the maximum speed, the polarity current
+    /// above the current limit, the bandwidth above a tenth of the PWM rate).
+    OutOfRange(HfiField),
+}
+
+impl core::fmt::Display for HfiError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            HfiError::SurfaceMotor { saliency } => write!(
+                f,
+                "HFI needs a salient motor (Lq/Ld >= {MIN_SALIENCY}); this one has {saliency}"
+            ),
+            HfiError::SensoredMode => f.write_str("HFI serves the sensorless mode only"),
+            HfiError::NotIdle => f.write_str("HFI can only be changed while idle"),
+            HfiError::NotPositive(x) => write!(f, "{x:?} must be finite and positive"),
+            HfiError::OutOfRange(x) => write!(f, "{x:?} is out of range"),
+        }
+    }
+}
+
+impl core::error::Error for HfiError {}
+
+/// Smallest `Lq / Ld` HFI accepts.
+pub const MIN_SALIENCY: f32 = 1.1;
+
+/// HFI settings (module docs give the defaults, [`HfiConfig::new`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HfiConfig {
+    /// Amplitude of the square-wave carrier on the tracked d axis, V.
+    pub injection_v: f32,
+    /// PWM periods per half period of the carrier, 1 to 4 (carrier frequency
+    /// `f_pwm / (2 half_period_ticks)`).
+    pub half_period_ticks: u8,
+    /// Natural frequency of the tracking loop, rad/s.
+    pub pll_bandwidth_rad_s: f32,
+    /// Electrical speed (magnitude) below which the angle is HFI's alone, rad/s.
+    pub blend_low_rad_s: f32,
+    /// Electrical speed above which the angle is the observer's alone and the carrier is off,
+    /// rad/s.
+    pub blend_high_rad_s: f32,
+    /// Magnitude of the two polarity pulses on the d axis, A.
+    pub polarity_current_a: f32,
+    /// Time the tracking loop settles at standstill (no current) before the pulses, s.
+    pub settle_time_s: f32,
+    /// Length of each polarity pulse (the second half of it is measured), s; the pulses are
+    /// separated by half of it at zero current.
+    pub pulse_time_s: f32,
+    /// Run the polarity test (`false`: the angle the loop settles on is taken as it is,
+    /// which is right only if the rotor's d axis is known to be within 90 deg of the start).
+    pub detect_polarity: bool,
+}
+
+/// `a < b` (false for NaN).
+fn below(a: f32, b: f32) -> bool {
+    a < b
+}
+
+/// `Lq / Ld`, or the refusal of a non-salient motor.
+fn saliency(m: &MotorParams<f32>) -> Result<f32, HfiError> {
+    let s = m.lq_h / m.ld_h;
+    if at_most(MIN_SALIENCY, s) {
+        Ok(s)
+    } else {
+        Err(HfiError::SurfaceMotor { saliency: s })
+    }
+}
+
+impl HfiConfig {
+    /// Defaults derived from the controller's configuration and the nominal bus voltage
+    /// (module docs). A surface motor is refused ([`HfiError::SurfaceMotor`]).
+    pub fn new(cfg: &FocConfig, u_dc_nominal_v: f32) -> Result<Self, HfiError> {
+        saliency(&cfg.motor)?;
+        let m = &cfg.motor;
+        let u_lim = cfg.max_modulation * u_dc_nominal_v * crate::transforms::FRAC_1_SQRT_3;
+        let i_lim = cfg.current_limit_a;
+        let v_cap = 0.8 * u_lim;
+        let v_ripple = 0.1 * i_lim * m.ld_h / cfg.ts_s;
+        let mut v = if v_ripple < v_cap { v_ripple } else { v_cap };
+        // The saliency signal per half period, `N Ts V Y_d`, at least 3 % of the current
+        // limit: longer half periods at the full voltage when one period is not enough.
+        let y_d = 0.5 * (1.0 / m.ld_h - 1.0 / m.lq_h);
+        let mut n: u8 = 1;
+        while n < 4 && f32::from(n) * cfg.ts_s * v * y_d < 0.03 * i_lim {
+            n += 1;
+            v = v_cap;
+        }
+        // A full-torque load step costs about `0.5 a_max / w_n^2` of angle: at most 0.5 rad.
+        let a_max = m.pole_pairs as f32 * cfg.torque_constant_nm_a() * i_lim / cfg.inertia_kg_m2;
+        // At most a tenth of the inverse of the loop's delay (the period average, N ticks, plus
+        // the computation delay and the sample, 2 ticks).
+        let w_delay = 0.1 / ((f32::from(n) + 2.0) * cfg.ts_s);
+        let w_hi = if w_delay < 2.0 * PI * 50.0 {
+            w_delay
+        } else {
+            2.0 * PI * 50.0
+        };
+        let w_pll = crate::pi::limit(crate::trig::sqrt(a_max), 2.0 * PI * 5.0, w_hi);
+        let h = cfg.startup.handover_speed_rad_s;
+        let c = Self {
+            injection_v: v,
+            half_period_ticks: n,
+            pll_bandwidth_rad_s: w_pll,
+            blend_low_rad_s: 0.5 * h,
+            blend_high_rad_s: h,
+            polarity_current_a: 0.8 * cfg.current_limit_a,
+            settle_time_s: 0.06,
+            pulse_time_s: 0.02,
+            detect_polarity: true,
+        };
+        c.validate(cfg, u_dc_nominal_v)?;
+        Ok(c)
+    }
+
+    /// Checks the settings against the controller's configuration (module [`HfiError`]).
+    pub fn validate(&self, cfg: &FocConfig, u_dc_nominal_v: f32) -> Result<(), HfiError> {
+        saliency(&cfg.motor)?;
+        if cfg.mode == Mode::Sensored {
+            return Err(HfiError::SensoredMode);
+        }
+        use HfiField as F;
+        let positive = [
+            (self.injection_v, F::InjectionV),
+            (self.pll_bandwidth_rad_s, F::PllBandwidth),
+            (self.blend_low_rad_s, F::BlendLow),
+            (self.blend_high_rad_s, F::BlendHigh),
+            (self.polarity_current_a, F::PolarityCurrent),
+            (self.settle_time_s, F::SettleTime),
+            (self.pulse_time_s, F::PulseTime),
+        ];
+        for (x, f) in positive {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(HfiError::NotPositive(f));
+            }
+        }
+        let u_lim = cfg.max_modulation * u_dc_nominal_v * crate::transforms::FRAC_1_SQRT_3;
+        if !(1..=4).contains(&self.half_period_ticks) {
+            return Err(HfiError::OutOfRange(F::HalfPeriod));
+        }
+        if !below(self.injection_v, 0.9 * u_lim) {
+            return Err(HfiError::OutOfRange(F::InjectionV));
+        }
+        if !below(self.pll_bandwidth_rad_s * cfg.ts_s, 0.1 * 2.0 * PI) {
+            return Err(HfiError::OutOfRange(F::PllBandwidth));
+        }
+        if !below(self.blend_low_rad_s, self.blend_high_rad_s) {
+            return Err(HfiError::OutOfRange(F::BlendLow));
+        }
+        if !below(self.blend_high_rad_s, cfg.max_speed_rad_s) {
+            return Err(HfiError::OutOfRange(F::BlendHigh));
+        }
+        if !at_most(self.polarity_current_a, cfg.current_limit_a) {
+            return Err(HfiError::OutOfRange(F::PolarityCurrent));
+        }
+        // At least a few carrier periods per measurement, at most a minute.
+        if !(self.settle_time_s >= 20.0 * cfg.ts_s && self.settle_time_s <= 60.0) {
+            return Err(HfiError::OutOfRange(F::SettleTime));
+        }
+        if !(self.pulse_time_s >= 20.0 * cfg.ts_s && self.pulse_time_s <= 60.0) {
+            return Err(HfiError::OutOfRange(F::PulseTime));
+        }
+        Ok(())
+    }
+}
+
+/// One carrier period as it was applied: sign and axis (sine, cosine).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Carrier {
+    sign: f32,
+    sin: f32,
+    cos: f32,
+}
+
+/// The carrier's response in one demodulation (module docs), A per period of carrier step:
+/// `d`: `Ts V / Ld,inc` at zero error; `q`: `Ts V Y_d sin 2e`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Response {
+    /// d response along the injection axis, A.
+    pub d: f32,
+    /// q response, A.
+    pub q: f32,
+    /// Normalised angle error `sin(2e) / 2`, clamped to `+-1`.
+    pub eps: f32,
+}
+
+/// The HFI angle tracker (module docs): carrier generation, demodulation, PLL. Pure: it sees
+/// only the currents it is given and returns the voltage to add.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HfiTracker {
+    v: f32,
+    ts: f32,
+    kp: f32,
+    ki_t: f32,
+    k3_t: f32,
+    /// `1 / (2 Ts V Y_d)`.
+    inv_scale: f32,
+    advance_s: f32,
+    one_period_delay: bool,
+    theta: f32,
+    omega_i: f32,
+    /// Estimated load (disturbance) acceleration, rad/s^2 el.
+    load: f32,
+    sign: f32,
+    /// Ticks per half period of the carrier (1 to 4), and per period.
+    half: u8,
+    period: u8,
+    /// Position in the carrier period of the next carrier.
+    phase: u8,
+    /// Carrier computed one and two ticks ago.
+    hist: [Carrier; 2],
+    /// The last sample `i[k-1]`.
+    i_prev: AlphaBeta,
+    /// The last `period` samples and demodulated steps (ring, written at `pos`).
+    i_ring: [AlphaBeta; 8],
+    y_ring: [Dq; 8],
+    /// The carrier's current predicted from the measured step (accumulated), its last
+    /// `period` values, and the centred value of the last sample (module docs).
+    tri: AlphaBeta,
+    tri_ring: [AlphaBeta; 8],
+    tri_centred: AlphaBeta,
+    pos: u8,
+    /// Consecutive accepted samples (saturating), consecutive demodulated steps.
+    valid: u8,
+    y_count: u8,
+    last: Response,
+}
+
+impl HfiTracker {
+    /// A tracker for `motor` at the PWM period `ts_s` with the carrier `injection_v`, the loop
+    /// bandwidth `pll_bandwidth_rad_s`, and the controller's delay and angle advance
+    /// (periods). Angle and speed start at zero.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        motor: &MotorParams<f32>,
+        ts_s: f32,
+        injection_v: f32,
+        half_period_ticks: u8,
+        pll_bandwidth_rad_s: f32,
+        delay: ComputationDelay,
+        angle_advance_periods: f32,
+    ) -> Self {
+        let half = half_period_ticks.clamp(1, 4);
+        let y_d = 0.5 * (1.0 / motor.ld_h - 1.0 / motor.lq_h);
+        let w = pll_bandwidth_rad_s;
+        Self {
+            v: injection_v,
+            ts: ts_s,
+            kp: 3.0 * w,
+            ki_t: 3.0 * w * w * ts_s,
+            k3_t: w * w * w * ts_s,
+            inv_scale: 1.0 / (2.0 * ts_s * injection_v * y_d),
+            advance_s: angle_advance_periods * ts_s,
+            one_period_delay: delay == ComputationDelay::OnePeriod,
+            theta: 0.0,
+            omega_i: 0.0,
+            load: 0.0,
+            sign: 1.0,
+            half,
+            period: 2 * half,
+            phase: 0,
+            hist: [Carrier::default(); 2],
+            i_prev: AlphaBeta::default(),
+            i_ring: [AlphaBeta::default(); 8],
+            y_ring: [Dq::default(); 8],
+            tri: AlphaBeta::default(),
+            tri_ring: [AlphaBeta::default(); 8],
+            tri_centred: AlphaBeta::default(),
+            pos: 0,
+            valid: 0,
+            y_count: 0,
+            last: Response::default(),
+        }
+    }
+
+    /// The tracker for a controller configuration and HFI settings.
+    pub fn from_config(cfg: &FocConfig, hfi: &HfiConfig) -> Self {
+        Self::new(
+            &cfg.motor,
+            cfg.ts_s,
+            hfi.injection_v,
+            hfi.half_period_ticks,
+            hfi.pll_bandwidth_rad_s,
+            cfg.delay,
+            cfg.angle_advance_periods,
+        )
+    }
+
+    /// Restarts at angle `theta` (rad el.) and speed `omega` (rad/s el.), carrier history
+    /// cleared (the first demodulation comes three samples after the carrier is applied).
+    pub fn reset(&mut self, theta: f32, omega: f32) {
+        self.theta = wrap(theta);
+        self.omega_i = if omega.is_finite() { omega } else { 0.0 };
+        self.load = 0.0;
+        self.hist = [Carrier::default(); 2];
+        self.valid = 0;
+        self.y_count = 0;
+        self.last = Response::default();
+        self.tri = AlphaBeta::default();
+        self.tri_centred = AlphaBeta::default();
+    }
+
+    /// The carrier voltage applied over the last period `[t_k-1, t_k)` (alpha-beta, V; zero
+    /// when none was), as the next [`update`](Self::update) demodulates it.
+    pub fn applied_carrier(&self) -> AlphaBeta {
+        let c = if self.one_period_delay {
+            self.hist[1]
+        } else {
+            self.hist[0]
+        };
+        let a = self.v * c.sign;
+        AlphaBeta {
+            alpha: a * c.cos,
+            beta: a * c.sin,
+        }
+    }
+
+    /// The carrier's part of the last sample (alpha-beta, A): the measured per-period step
+    /// accumulated with the applied signs, less its mean over a carrier period. The sample
+    /// less this is the fundamental at the sample's own time (no averaging lag).
+    pub fn carrier_current(&self) -> AlphaBeta {
+        self.tri_centred
+    }
+
+    /// Sets the estimated load (disturbance) acceleration, rad/s^2 el.
+    pub fn set_load(&mut self, accel_rad_s2: f32) {
+        if accel_rad_s2.is_finite() {
+            self.load = accel_rad_s2;
+        }
+    }
+
+    /// Turns the tracked axis by `pi` (after the polarity test).
+    pub fn flip(&mut self) {
+        self.theta = wrap(self.theta + PI);
+    }
+
+    /// Tracked electrical angle, rad, in `[-pi, pi)`.
+    pub fn theta(&self) -> f32 {
+        self.theta
+    }
+
+    /// Tracked electrical speed (the loop's integrator), rad/s.
+    pub fn omega(&self) -> f32 {
+        self.omega_i
+    }
+
+    /// The last demodulation.
+    pub fn response(&self) -> Response {
+        self.last
+    }
+
+    /// A sample was missing or refused: the next three accepted samples rebuild the history
+    /// before the loop corrects again (the angle keeps integrating the speed).
+    pub fn skip(&mut self, accel_rad_s2: f32) {
+        self.valid = 0;
+        self.y_count = 0;
+        self.theta = wrap(self.theta + self.omega_i * self.ts);
+        self.omega_i += self.ts * (accel_rad_s2 - self.load);
+    }
+
+    /// Takes the current sample `i[k]` (alpha-beta, A) and the acceleration the drive's own
+    /// torque command gives (rad/s^2 el., `p T* / J`; 0 if unknown): demodulates the carrier
+    /// and steps the loop (module docs). Returns the response when there was one (three samples of carrier
+    /// history), and the fundamental current, the mean of the last two samples (`i[k]` alone
+    /// on the first).
+    pub fn update(&mut self, i: AlphaBeta, accel_rad_s2: f32) -> (Option<Response>, AlphaBeta) {
+        let n = usize::from(self.period);
+        let pos = usize::from(self.pos) & 7;
+        // The carrier applied over [t_k-1, t_k): its current step, projected on its axis and
+        // signed, is one demodulated step `y`.
+        let applied = if self.one_period_delay {
+            self.hist[1]
+        } else {
+            self.hist[0]
+        };
+        if self.valid >= 1 && applied.sign != 0.0 {
+            let r = (i - self.i_prev).to_dq(applied.sin, applied.cos);
+            self.y_ring[pos] = r * applied.sign;
+            self.y_count = self.y_count.saturating_add(1);
+        } else {
+            self.y_count = 0;
+        }
+        // The carrier's own current: the last measured step along the applied axis,
+        // accumulated with the applied sign, centred on its mean over a period.
+        let step = Dq {
+            d: self.last.d,
+            q: self.last.q,
+        }
+        .to_alpha_beta(applied.sin, applied.cos);
+        self.tri = self.tri + step * applied.sign;
+        self.tri_ring[pos] = self.tri;
+        self.i_ring[pos] = i;
+        self.i_prev = i;
+        self.valid = self.valid.saturating_add(1);
+        self.pos = ((pos + 1) % n) as u8;
+        // Means over one carrier period: the fundamental current, and the step (the slope of
+        // the fundamental cancels, the carrier's sign being balanced over a period).
+        let fund = if usize::from(self.valid) >= n {
+            let mut sum = AlphaBeta::default();
+            let mut tri = AlphaBeta::default();
+            for (x, t) in self.i_ring.iter().zip(&self.tri_ring).take(n) {
+                sum = sum + *x;
+                tri = tri + *t;
+            }
+            self.tri_centred = self.tri - tri * (1.0 / n as f32);
+            sum * (1.0 / n as f32)
+        } else {
+            self.tri_centred = AlphaBeta::default();
+            i
+        };
+        let resp = if usize::from(self.y_count) >= n {
+            let mut sum = Dq::default();
+            for y in self.y_ring.iter().take(n) {
+                sum = sum + *y;
+            }
+            let m = sum * (1.0 / n as f32);
+            let eps = crate::pi::limit(m.q * self.inv_scale, -1.0, 1.0);
+            self.theta = wrap(self.theta + self.ts * (self.omega_i + self.kp * eps));
+            self.omega_i += self.ki_t * eps + self.ts * (accel_rad_s2 - self.load);
+            self.load -= self.k3_t * eps;
+            self.last = Response {
+                d: m.d,
+                q: m.q,
+                eps,
+            };
+            Some(self.last)
+        } else {
+            self.theta = wrap(self.theta + self.ts * self.omega_i);
+            self.omega_i += self.ts * (accel_rad_s2 - self.load);
+            None
+        };
+        (resp, fund)
+    }
+
+    /// The carrier voltage for this tick (alpha-beta, V), along the tracked axis advanced to
+    /// the middle of its application interval; the sign alternates every call.
+    pub fn inject(&mut self) -> AlphaBeta {
+        self.sign = if self.phase < self.half { 1.0 } else { -1.0 };
+        self.phase = (self.phase + 1) % self.period;
+        let (s0, c0) = sin_cos(self.theta);
+        let (sd, cd) = sin_cos_small(self.omega_i * self.advance_s);
+        let (s, c) = add_angles(s0, c0, sd, cd);
+        self.hist = [
+            Carrier {
+                sign: self.sign,
+                sin: s,
+                cos: c,
+            },
+            self.hist[0],
+        ];
+        let a = self.v * self.sign;
+        AlphaBeta {
+            alpha: a * c,
+            beta: a * s,
+        }
+    }
+}
+
+/// Phase of the HFI start and run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HfiPhase {
+    /// Standstill, no current: the loop settles on the salient axis.
+    #[default]
+    Settling,
+    /// First polarity pulse (`+I_p` on the tracked d axis).
+    PulsePositive,
+    /// Second polarity pulse (`-I_p`).
+    PulseNegative,
+    /// Closed loop on the HFI angle (blended with the observer's by speed).
+    Tracking,
+}
+
+/// What HFI is doing (the controller's [`hfi_status`](crate::Foc::hfi_status)).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HfiStatus {
+    /// Phase.
+    pub phase: HfiPhase,
+    /// Whether the carrier is on this tick.
+    pub injecting: bool,
+    /// Weight of the observer's angle in the control angle, `0` (HFI alone) to `1`.
+    pub observer_weight: f32,
+    /// HFI's tracked angle, rad el.
+    pub theta_rad: f32,
+    /// HFI's tracked speed, rad/s el.
+    pub omega_rad_s: f32,
+    /// Mean d response under `+I_p` over that under `-I_p` (> 1: the tracked axis was north);
+    /// NaN before the test ends or when it was not run.
+    pub polarity_contrast: f32,
+    /// Whether the polarity test turned the axis by `pi`.
+    pub polarity_flipped: bool,
+    /// The last demodulation.
+    pub response: Response,
+}
+
+/// The magnet polarity test's sequence (module docs): ticks of each step and the
+/// accumulated responses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct PolarityTest {
+    settle: u32,
+    pulse: u32,
+    gap: u32,
+    current: f32,
+    detect: bool,
+    /// Ticks in the present phase.
+    t: u32,
+    sum: [f32; 2],
+    n: [u32; 2],
+}
+
+/// What the test asks for this tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum PolarityStep {
+    /// Run with this d current reference, A.
+    Drive(f32),
+    /// Done: turn the axis by `pi` if `flip`; `contrast` as in [`HfiStatus`].
+    Done { flip: bool, contrast: f32 },
+}
+
+impl PolarityTest {
+    pub fn new(hfi: &HfiConfig, ts: f32) -> Self {
+        let t = |s: f32| crate::health::ticks(s, ts).max(1);
+        Self {
+            settle: t(hfi.settle_time_s),
+            pulse: t(hfi.pulse_time_s),
+            gap: t(0.5 * hfi.pulse_time_s),
+            current: hfi.polarity_current_a,
+            detect: hfi.detect_polarity,
+            t: 0,
+            sum: [0.0; 2],
+            n: [0; 2],
+        }
+    }
+
+    /// One tick in `phase` with this tick's response: the d current reference, the next
+    /// phase, or the result.
+    pub fn step(&mut self, phase: &mut HfiPhase, resp: Option<Response>) -> PolarityStep {
+        self.t += 1;
+        match *phase {
+            HfiPhase::Settling => {
+                if self.t >= self.settle {
+                    if !self.detect {
+                        return PolarityStep::Done {
+                            flip: false,
+                            contrast: f32::NAN,
+                        };
+                    }
+                    self.t = 0;
+                    *phase = HfiPhase::PulsePositive;
+                }
+                PolarityStep::Drive(0.0)
+            }
+            HfiPhase::PulsePositive | HfiPhase::PulseNegative => {
+                let k = usize::from(*phase == HfiPhase::PulseNegative);
+                let sign = if k == 0 { 1.0 } else { -1.0 };
+                if self.t <= self.pulse {
+                    // Measure over the second half, once the current has settled.
+                    if 2 * self.t > self.pulse
+                        && let Some(r) = resp
+                    {
+                        self.sum[k] += r.d;
+                        self.n[k] += 1;
+                    }
+                    return PolarityStep::Drive(sign * self.current);
+                }
+                if self.t < self.pulse + self.gap {
+                    return PolarityStep::Drive(0.0);
+                }
+                if k == 0 {
+                    self.t = 0;
+                    *phase = HfiPhase::PulseNegative;
+                    return PolarityStep::Drive(0.0);
+                }
+                let mean = |k: usize| self.sum[k] / (self.n[k].max(1) as f32);
+                let contrast = mean(0) / mean(1);
+                // NaN (no responses) keeps the axis.
+                PolarityStep::Done {
+                    flip: contrast < 1.0,
+                    contrast,
+                }
+            }
+            HfiPhase::Tracking => PolarityStep::Drive(0.0),
+        }
+    }
+}
+
+/// HFI inside the controller (module [`crate::controller`], "Low speed by HFI"): tracker,
+/// polarity test, blend with the observer.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HfiDrive {
+    pub cfg: HfiConfig,
+    pub tracker: HfiTracker,
+    test: PolarityTest,
+    pub phase: HfiPhase,
+    pub injecting: bool,
+    /// Observer weight of the last tick.
+    pub weight: f32,
+    contrast: f32,
+    flipped: bool,
+    /// Whether this tick's current sample went through the tracker (then the loops take
+    /// its fundamental).
+    demodulated: bool,
+    /// `p k_t / J`: electrical acceleration per ampere of torque command, rad/s^2/A.
+    accel_per_a: f32,
+    /// Acceleration of the last torque command, rad/s^2 el.
+    accel: f32,
+}
+
+/// The virtual rotor sensor HFI gives the speed loop in [`HfiPhase::Tracking`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Blend {
+    /// Angle (rad el.) and speed (rad/s el.) of the control frame.
+    pub theta: f32,
+    pub omega: f32,
+    /// The observer must be re-seeded at this (angle, speed, sigma) first.
+    pub reseed: Option<(f32, f32)>,
+}
+
+impl HfiDrive {
+    pub fn new(foc: &FocConfig, cfg: &HfiConfig) -> Self {
+        Self {
+            cfg: *cfg,
+            tracker: HfiTracker::from_config(foc, cfg),
+            test: PolarityTest::new(cfg, foc.ts_s),
+            phase: HfiPhase::Settling,
+            injecting: true,
+            weight: 0.0,
+            contrast: f32::NAN,
+            flipped: false,
+            demodulated: false,
+            accel_per_a: foc.motor.pole_pairs as f32 * foc.torque_constant_nm_a()
+                / foc.inertia_kg_m2,
+            accel: 0.0,
+        }
+    }
+
+    /// Whether this tick's sample was demodulated (the loops and the observer then take the
+    /// fundamental).
+    #[inline]
+    pub fn demodulated(&self) -> bool {
+        self.demodulated
+    }
+
+    /// The torque command of this tick as a surface-equivalent current (A, module
+    /// [`crate::mtpa`]), fed forward to the tracking loop at the next tick.
+    #[inline]
+    pub fn set_torque_command(&mut self, i_t: f32) {
+        let a = self.accel_per_a * i_t;
+        self.accel = if a.is_finite() { a } else { 0.0 };
+    }
+
+    /// Back to the standstill start (called by `Foc::start` from idle).
+    pub fn restart(&mut self, foc: &FocConfig) {
+        *self = Self::new(foc, &self.cfg);
+    }
+
+    /// Status for the user.
+    pub fn status(&self) -> HfiStatus {
+        HfiStatus {
+            phase: self.phase,
+            injecting: self.injecting,
+            observer_weight: self.weight,
+            theta_rad: self.tracker.theta(),
+            omega_rad_s: self.tracker.omega(),
+            polarity_contrast: self.contrast,
+            polarity_flipped: self.flipped,
+            response: self.tracker.response(),
+        }
+    }
+
+    /// Takes this tick's current sample (when the carrier is on): the response and the
+    /// current the loops should see.
+    #[inline]
+    pub fn demodulate(
+        &mut self,
+        i_ab: AlphaBeta,
+        sample_ok: bool,
+    ) -> (Option<Response>, AlphaBeta) {
+        self.demodulated = false;
+        if !self.injecting {
+            return (None, i_ab);
+        }
+        if !sample_ok {
+            self.tracker.skip(self.accel);
+            return (None, i_ab);
+        }
+        self.demodulated = true;
+        self.tracker.update(i_ab, self.accel)
+    }
+
+    /// The standstill test for this tick: the d current reference while it runs (`Some`),
+    /// `None` once tracking (the test ends in the tick it decides, which then tracks).
+    #[inline]
+    pub fn standstill(&mut self, resp: Option<Response>) -> Option<f32> {
+        if self.phase == HfiPhase::Tracking {
+            return None;
+        }
+        match self.test.step(&mut self.phase, resp) {
+            PolarityStep::Drive(i_d) => Some(i_d),
+            PolarityStep::Done { flip, contrast } => {
+                if flip {
+                    self.tracker.flip();
+                }
+                self.flipped = flip;
+                self.contrast = contrast;
+                self.phase = HfiPhase::Tracking;
+                None
+            }
+        }
+    }
+
+    /// The blended control angle and speed (observer estimate `theta_o`, `omega_o`):
+    /// carrier on below `blend_high` (back on below 80 % of it, the tracker seeded from the
+    /// observer), observer weight linear in `|w|` from `blend_low` to `blend_high`, the
+    /// observer re-seeded from HFI when its weight leaves zero.
+    #[inline]
+    pub fn blend(&mut self, theta_o: f32, omega_o: f32) -> Blend {
+        let c = &self.cfg;
+        // The weight follows HFI's own speed while the carrier is on (the observer's speed is
+        // unreliable at the low end of the band and would feed back into its own weight),
+        // the observer's while it is off.
+        if self.injecting && self.tracker.omega().abs() > c.blend_high_rad_s {
+            self.injecting = false;
+        } else if !self.injecting && omega_o.abs() < 0.8 * c.blend_high_rad_s {
+            self.injecting = true;
+            self.tracker.reset(theta_o, omega_o);
+            // The load takes what the drive's torque gives (steady speed assumed): the
+            // tracker starts with that disturbance instead of learning it.
+            self.tracker.set_load(self.accel);
+        }
+        let mut lam = if self.injecting {
+            let w_abs = self.tracker.omega().abs();
+            observer_weight(w_abs, c.blend_low_rad_s, c.blend_high_rad_s)
+        } else {
+            1.0
+        };
+        let (th_h, w_h) = (self.tracker.theta(), self.tracker.omega());
+        let reseed = if lam > 0.0 && self.weight == 0.0 {
+            // The observer drifted while the speed was low: it restarts from HFI's angle and
+            // takes over from the next tick.
+            lam = 0.0;
+            Some((th_h, w_h))
+        } else {
+            None
+        };
+        let theta = wrap(th_h + lam * wrap(theta_o - th_h));
+        let omega = w_h + lam * (omega_o - w_h);
+        // A reseed tick keeps weight 0 but must not reseed again: mark it with the smallest
+        // positive weight.
+        self.weight = if reseed.is_some() {
+            f32::MIN_POSITIVE
+        } else {
+            lam
+        };
+        Blend {
+            theta,
+            omega,
+            reseed,
+        }
+    }
+
+    /// The carrier for this tick (when on) and the current the loops take: the fundamental
+    /// while the carrier is demodulated, the sample itself otherwise.
+    #[inline]
+    pub fn finish(&mut self, i_ab: AlphaBeta, fund: AlphaBeta) -> (Option<AlphaBeta>, AlphaBeta) {
+        let i_loop = if self.demodulated { fund } else { i_ab };
+        let carrier = if self.injecting {
+            Some(self.tracker.inject())
+        } else {
+            None
+        };
+        (carrier, i_loop)
+    }
+}
+
+/// Observer weight in the control angle for an electrical speed magnitude `w` (linear from
+/// `lo` to `hi`).
+pub(crate) fn observer_weight(w: f32, lo: f32, hi: f32) -> f32 {
+    let x = (w - lo) / (hi - lo);
+    crate::pi::limit(x, 0.0, 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transforms::Dq;
+
+    fn ipm() -> FocConfig {
+        let mut c = FocConfig::new(MotorParams::industrial_ipm(), 1e-4, 540.0);
+        c.current_limit_a = 9.0;
+        c
+    }
+
+    /// A stationary-rotor dq plant at angle `theta` (the carrier's response only: R and speed
+    /// neglected in the plant too, plus R for realism), stepped exactly for a held voltage:
+    /// `i += Ts L^-1 u` in the rotor frame (R small enough to neglect over one period), with
+    /// an optional d-axis saturation `Ld,inc = Ld (1 - k clamp(i_d / I_s, 0, 1))`.
+    struct DqPlant {
+        ld: f32,
+        lq: f32,
+        theta: f32,
+        i: Dq,
+        sat: f32,
+        i_sat: f32,
+    }
+
+    impl DqPlant {
+        fn step(&mut self, u_ab: AlphaBeta, ts: f32) {
+            let (s, c) = sin_cos(self.theta);
+            let u = u_ab.to_dq(s, c);
+            let x = crate::pi::limit(self.i.d / self.i_sat, 0.0, 1.0);
+            let ld = self.ld * (1.0 - self.sat * x);
+            self.i.d += ts * u.d / ld;
+            self.i.q += ts * u.q / self.lq;
+        }
+        fn i_ab(&self) -> AlphaBeta {
+            let (s, c) = sin_cos(self.theta);
+            self.i.to_alpha_beta(s, c)
+        }
+    }
+
+    /// Runs the tracker on the plant with a one-period delay and a d current held by an ideal
+    /// (dead-beat on the mean) current source: returns the final tracker.
+    fn run(theta0: f32, theta_rotor: f32, ticks: u32, drift: f32) -> HfiTracker {
+        let cfg = ipm();
+        let h = HfiConfig::new(&cfg, 540.0).unwrap_or_else(|e| panic!("{e}"));
+        let mut t = HfiTracker::from_config(&cfg, &h);
+        t.reset(theta0, 0.0);
+        let mut p = DqPlant {
+            ld: cfg.motor.ld_h,
+            lq: cfg.motor.lq_h,
+            theta: theta_rotor,
+            i: Dq { d: 0.0, q: 2.0 },
+            sat: 0.0,
+            i_sat: 1.0,
+        };
+        let mut pending = AlphaBeta::default();
+        for _ in 0..ticks {
+            let _ = t.update(p.i_ab(), 0.0);
+            let u = t.inject();
+            p.step(pending, cfg.ts_s);
+            pending = u;
+            p.theta = wrap(p.theta + drift * cfg.ts_s);
+        }
+        t
+    }
+
+    #[test]
+    fn defaults_follow_the_motor_and_surface_motors_are_refused() {
+        let cfg = ipm();
+        let h = HfiConfig::new(&cfg, 540.0).unwrap_or_else(|e| panic!("{e}"));
+        // 10 % of 9 A ripple on 30 mH at 10 kHz: 270 V, capped at 80 % of 312 V.
+        assert!(
+            (h.injection_v - 0.8 * 540.0 / 3.0_f32.sqrt()).abs() < 0.5,
+            "{h:?}"
+        );
+        assert!(h.blend_low_rad_s < h.blend_high_rad_s);
+        let surface = FocConfig::new(MotorParams::servo(), 1e-4, 300.0);
+        assert_eq!(
+            HfiConfig::new(&surface, 300.0),
+            Err(HfiError::SurfaceMotor { saliency: 1.0 })
+        );
+        let mut bad = h;
+        bad.injection_v = f32::NAN;
+        assert_eq!(
+            bad.validate(&cfg, 540.0),
+            Err(HfiError::NotPositive(HfiField::InjectionV))
+        );
+        bad = h;
+        bad.blend_low_rad_s = 2.0 * h.blend_high_rad_s;
+        assert_eq!(
+            bad.validate(&cfg, 540.0),
+            Err(HfiError::OutOfRange(HfiField::BlendLow))
+        );
+        bad = h;
+        bad.polarity_current_a = 10.0;
+        assert_eq!(
+            bad.validate(&cfg, 540.0),
+            Err(HfiError::OutOfRange(HfiField::PolarityCurrent))
+        );
+        let sensored = cfg.with_mode(Mode::Sensored);
+        assert_eq!(h.validate(&sensored, 540.0), Err(HfiError::SensoredMode));
+    }
+
+    #[test]
+    fn demodulation_gives_sin_2e_over_2() {
+        // Tracker frozen (bandwidth tiny) at 0, rotor at e: eps = sin(2e)/2.
+        let cfg = ipm();
+        for (e, n) in [(-1.2_f32, 1), (-0.3, 3), (0.1, 1), (0.6, 4)] {
+            let mut t = HfiTracker::new(&cfg.motor, cfg.ts_s, 100.0, n, 1e-3, cfg.delay, 1.5);
+            t.reset(0.0, 0.0);
+            let mut p = DqPlant {
+                ld: cfg.motor.ld_h,
+                lq: cfg.motor.lq_h,
+                theta: e,
+                i: Dq { d: -1.0, q: 3.0 },
+                sat: 0.0,
+                i_sat: 1.0,
+            };
+            let mut pending = AlphaBeta::default();
+            let mut last = None;
+            for _ in 0..20 {
+                if let (Some(r), _) = t.update(p.i_ab(), 0.0) {
+                    last = Some(r);
+                }
+                let u = t.inject();
+                p.step(pending, cfg.ts_s);
+                pending = u;
+            }
+            let r = last.unwrap_or_else(|| panic!("no response"));
+            let want = 0.5 * (2.0 * e).sin();
+            assert!((r.eps - want).abs() < 2e-3, "e {e}: {} vs {want}", r.eps);
+            let d = cfg.ts_s
+                * 100.0
+                * (e.cos().powi(2) / cfg.motor.ld_h + e.sin().powi(2) / cfg.motor.lq_h);
+            assert!((r.d - d).abs() < 1e-3 * d, "{} vs {d}", r.d);
+        }
+    }
+
+    #[test]
+    fn loop_locks_on_the_axis_or_its_opposite_and_tracks_a_turning_rotor() {
+        for k in 0..12 {
+            let th = -PI + (k as f32 + 0.5) * PI / 6.0;
+            let t = run(0.0, th, 3000, 0.0);
+            let e = wrap(th - t.theta());
+            let e_mod_pi = wrap(2.0 * e) * 0.5;
+            assert!(
+                e_mod_pi.abs() < 0.5_f32.to_radians(),
+                "rotor {th}: error {e}"
+            );
+        }
+        // 30 rad/s el. ramp-free rotation: locked within a degree, speed within 1 %.
+        let t = run(0.3, 0.3, 5000, 30.0);
+        let th_end = wrap(0.3 + 30.0 * 5000.0 * 1e-4);
+        let e = wrap(th_end - t.theta());
+        assert!(e.abs() < 1.0_f32.to_radians(), "error {e}");
+        assert!((t.omega() - 30.0).abs() < 0.3, "speed {}", t.omega());
+    }
+
+    #[test]
+    fn polarity_test_finds_north_on_a_saturating_plant() {
+        let cfg = ipm();
+        let h = HfiConfig::new(&cfg, 540.0).unwrap_or_else(|e| panic!("{e}"));
+        for k in 0..12 {
+            let th = -PI + (k as f32 + 0.5) * PI / 6.0;
+            let mut t = HfiTracker::from_config(&cfg, &h);
+            t.reset(0.0, 0.0);
+            let mut test = PolarityTest::new(&h, cfg.ts_s);
+            let mut phase = HfiPhase::Settling;
+            let mut p = DqPlant {
+                ld: cfg.motor.ld_h,
+                lq: cfg.motor.lq_h,
+                theta: th,
+                i: Dq::default(),
+                sat: 0.2,
+                i_sat: 9.0,
+            };
+            let mut pending = AlphaBeta::default();
+            let mut last_ref = 0.0;
+            let result = loop {
+                let (resp, _) = t.update(p.i_ab(), 0.0);
+                match test.step(&mut phase, resp) {
+                    PolarityStep::Drive(i_d) => {
+                        // An ideal current source: the d current (tracked frame) set when the
+                        // reference changes; the carrier rides on it.
+                        if i_d != last_ref {
+                            last_ref = i_d;
+                            let (s, c) = sin_cos(t.theta());
+                            let (sr, cr) = sin_cos(p.theta);
+                            p.i = Dq { d: i_d, q: 0.0 }.to_alpha_beta(s, c).to_dq(sr, cr);
+                        }
+                    }
+                    PolarityStep::Done { flip, contrast } => break (flip, contrast),
+                }
+                let u = t.inject();
+                p.step(pending, cfg.ts_s);
+                pending = u;
+            };
+            if result.0 {
+                t.flip();
+            }
+            let e = wrap(th - t.theta());
+            assert!(
+                e.abs() < 2.0_f32.to_radians(),
+                "rotor {th}: error {e}, {result:?}"
+            );
+            assert!(result.1 > 1.05 || result.1 < 1.0 / 1.05, "{result:?}");
+        }
+    }
+
+    #[test]
+    fn weight_is_linear_and_clamped() {
+        assert_eq!(observer_weight(0.0, 10.0, 20.0), 0.0);
+        assert_eq!(observer_weight(15.0, 10.0, 20.0), 0.5);
+        assert_eq!(observer_weight(50.0, 10.0, 20.0), 1.0);
+        assert_eq!(observer_weight(f32::NAN, 10.0, 20.0), 0.0);
+    }
+}

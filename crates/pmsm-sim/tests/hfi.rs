@@ -1,0 +1,410 @@
+//! High-frequency injection (`foc::hfi`) in the simulator's closed loop, on the two interior
+//! reference motors (`industrial-ipm`: Lq/Ld 1.4, 540 V, 10 kHz, 50 mA sensor noise;
+//! `traction-ipm`: Lq/Ld 3, 48 V, 20 kHz, 0.3 A noise), with the scenarios' inverters (delay,
+//! dead time compensated by foc) and sensors, the `foc` controller sensorless with HFI on
+//! (`Foc::enable_hfi` with the defaults `HfiConfig::new` derives from the motor).
+//!
+//! The plant gets the simulator's optional d-axis saturation (`RunOptions::d_saturation`:
+//! `Ld` falls by 20 % at `+current_limit`, nothing for negative `i_d`), which the polarity
+//! test needs; without saturation no test can tell north from south.
+//!
+//! Each job: `start()` at t = 0 from standstill, the HFI start (60 ms settling, two 20 ms
+//! d-axis pulses), then closed loop on the HFI angle blended with the EKF's by speed.
+//!
+//! Ripple (what the carrier costs): the samples sit at the carrier's extremes, so the
+//! deviation of each sample from the centred mean `(x[k-1] + 2 x[k] + x[k+1]) / 4` is half the
+//! peak-to-peak ripple; the RMS of the (triangular) current ripple is that over `sqrt(3)`, as
+//! is the torque's (linear in the ripple current). Both are reported against the rated
+//! current (MTPA) and torque.
+//!
+//! `cargo test --release -p pmsm-sim --test hfi -- --nocapture` prints every number.
+
+use std::f64::consts::PI;
+
+use foc::{HfiConfig, HfiPhase, HfiStatus};
+use pmsm_sim::controller::{ControllerInput, ControllerOutput, DriveController};
+use pmsm_sim::foc_drive::FocDrive;
+use pmsm_sim::plant::DSaturation;
+use pmsm_sim::profile::{LoadTerm, Profile};
+use pmsm_sim::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
+use pmsm_sim::sim::{self, RunOptions, Sample};
+
+/// foc with HFI, recording HFI's status every period.
+struct HfiDrive {
+    drive: FocDrive,
+    status: Vec<HfiStatus>,
+}
+
+impl DriveController for HfiDrive {
+    fn sensored(&self) -> bool {
+        false
+    }
+    fn tick(&mut self, input: &ControllerInput) -> ControllerOutput {
+        let out = self.drive.tick(input);
+        if let Some(s) = self.drive.foc().hfi_status() {
+            self.status.push(s);
+        }
+        out
+    }
+}
+
+fn wrap(x: f64) -> f64 {
+    (x + PI).rem_euclid(2.0 * PI) - PI
+}
+
+/// The preset `name` as a sensorless foc job: speed profile, load terms, initial angle.
+fn job(
+    name: &str,
+    speed_rpm: Vec<(f64, f64)>,
+    load: Vec<LoadTerm>,
+    theta0: f64,
+    t_end: f64,
+) -> Scenario {
+    let mut sc = Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"));
+    sc.controller.kind = ControllerKind::Foc;
+    sc.speed_ref_rpm = Profile::linear(speed_rpm);
+    sc.load = load;
+    sc.initial.theta_e_rad = theta0;
+    sc.duration_s = t_end;
+    sc.observer.seed_filter = false;
+    sc
+}
+
+struct Run {
+    samples: Vec<Sample>,
+    status: Vec<HfiStatus>,
+    hfi: HfiConfig,
+}
+
+fn run(sc: &Scenario) -> Run {
+    let mut drive = FocDrive::from_scenario(sc).unwrap_or_else(|e| panic!("{e}"));
+    let cfg = *drive.foc().config();
+    let u_dc = sc.inverter.u_dc_v as f32;
+    let mut hfi = HfiConfig::new(&cfg, u_dc).unwrap_or_else(|e| panic!("{e}"));
+    if let Ok(x) = std::env::var("HFI_PLL") {
+        hfi.pll_bandwidth_rad_s = x.parse().unwrap_or(0.0);
+    }
+    if let Ok(x) = std::env::var("HFI_N") {
+        hfi.half_period_ticks = x.parse().unwrap_or(0);
+    }
+    if let Ok(x) = std::env::var("HFI_V") {
+        hfi.injection_v = x.parse().unwrap_or(0.0);
+    }
+    drive
+        .foc_mut()
+        .enable_hfi(&hfi, u_dc)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut d = HfiDrive {
+        drive,
+        status: Vec::new(),
+    };
+    let sat = DSaturation {
+        drop: 0.2,
+        current_a: sc.controller.current_limit_a,
+    };
+    let out = sim::run_with_controller(
+        sc,
+        &mut d,
+        RunOptions {
+            record_trace: true,
+            d_saturation: Some(sat),
+            ..RunOptions::default()
+        },
+    )
+    .unwrap_or_else(|e| panic!("{}: {e}", sc.name));
+    assert!(out.end.stop_time_s().is_none(), "{}", out.end.describe());
+    Run {
+        samples: out.trace.samples,
+        status: d.status,
+        hfi,
+    }
+}
+
+/// With `HFI_DUMP=prefix`, writes `prefix-tag.csv` (t, control angle error, HFI angle error,
+/// speed rpm, i_q, eps, EKF angle error, observer weight) for a look at a run.
+fn dump(tag: &str, r: &Run) {
+    let Ok(path) = std::env::var("HFI_DUMP") else {
+        return;
+    };
+    let mut out = String::new();
+    for (x, st) in r.samples.iter().zip(&r.status) {
+        out += &format!(
+            "{},{},{},{},{},{},{},{}\n",
+            x.t_s,
+            angle_error_deg(x),
+            wrap(f64::from(st.theta_rad) - x.truth.theta_e_rad).to_degrees(),
+            x.truth.speed_rpm,
+            x.truth.i_dq_a[1],
+            st.response.eps,
+            x.controller_observer
+                .as_ref()
+                .map_or(0.0, |o| o.angle_error_deg),
+            st.observer_weight,
+        );
+    }
+    std::fs::write(format!("{path}-{tag}.csv"), out).unwrap_or_else(|e| panic!("{e}"));
+}
+
+/// Angle error of the control frame (wrapped), deg el.
+fn angle_error_deg(x: &Sample) -> f64 {
+    wrap(x.control.telemetry.theta_e_rad - x.truth.theta_e_rad).to_degrees()
+}
+
+/// Mean, RMS and largest |e| of the control frame's angle error over `[t0, t1)`, deg el.
+fn angle_stats(s: &[Sample], t0: f64, t1: f64) -> (f64, f64, f64) {
+    let e: Vec<f64> = s
+        .iter()
+        .filter(|x| x.t_s >= t0 && x.t_s < t1)
+        .map(angle_error_deg)
+        .collect();
+    assert!(!e.is_empty());
+    let n = e.len() as f64;
+    let mean = e.iter().sum::<f64>() / n;
+    let rms = (e.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    (mean, rms, e.iter().fold(0.0_f64, |m, x| m.max(x.abs())))
+}
+
+/// Ripple over `[t0, t1)` for a carrier of half period `n` ticks (module docs): RMS current
+/// ripple (A, |dq| vector) and RMS torque ripple (N m) of the triangle.
+fn ripple(s: &[Sample], t0: f64, t1: f64, n: usize) -> (f64, f64) {
+    // Centred mean over one carrier period (2n samples: weights 1/(4n) at both ends).
+    let w: Vec<f64> = (0..=2 * n)
+        .map(|j| {
+            if j == 0 || j == 2 * n {
+                0.25 / n as f64
+            } else {
+                0.5 / n as f64
+            }
+        })
+        .collect();
+    // Samples of a triangle taken at 2n points per period starting at an extreme: mean square
+    // deviation A^2 (1/n) sum (1 - 2j/n)^2; the continuous RMS is A / sqrt(3).
+    let ms = (0..n)
+        .map(|j| (1.0 - 2.0 * j as f64 / n as f64).powi(2))
+        .sum::<f64>()
+        / n as f64;
+    let to_rms = (1.0 / 3.0 / ms).sqrt();
+    let (mut si, mut st, mut cnt) = (0.0, 0.0, 0.0);
+    for win in s.windows(2 * n + 1) {
+        let x = &win[n];
+        if !(x.t_s >= t0 && x.t_s < t1) {
+            continue;
+        }
+        let mean =
+            |f: &dyn Fn(&Sample) -> f64| win.iter().zip(&w).map(|(y, k)| k * f(y)).sum::<f64>();
+        let dd = x.truth.i_dq_a[0] - mean(&|y| y.truth.i_dq_a[0]);
+        let dq = x.truth.i_dq_a[1] - mean(&|y| y.truth.i_dq_a[1]);
+        let dt = x.truth.torque_nm - mean(&|y| y.truth.torque_nm);
+        si += dd * dd + dq * dq;
+        st += dt * dt;
+        cnt += 1.0;
+    }
+    ((si / cnt).sqrt() * to_rms, (st / cnt).sqrt() * to_rms)
+}
+
+fn rated(sc: &Scenario) -> (f64, f64) {
+    let (_, _, i) = sc.motor.mtpa_currents_for_torque(sc.rated_torque_nm);
+    (i, sc.rated_torque_nm)
+}
+
+fn tracking_start(r: &Run, ts: f64) -> f64 {
+    let k = r
+        .status
+        .iter()
+        .position(|s| s.phase == HfiPhase::Tracking)
+        .unwrap_or_else(|| panic!("HFI never tracked"));
+    k as f64 * ts
+}
+
+/// 0 rpm under the rated load (an active, constant torque from 0.3 s) for 5 s: the angle
+/// error of the control frame and the speed over 0.5-5.5 s.
+fn hold_zero(name: &str) -> (f64, f64, f64) {
+    let sc0 = Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"));
+    let load = vec![LoadTerm::Ramp {
+        start_s: 0.3,
+        end_s: 0.8,
+        from_nm: 0.0,
+        to_nm: sc0.rated_torque_nm,
+    }];
+    let sc = job(name, vec![(0.0, 0.0), (6.0, 0.0)], load, 1.0, 6.0);
+    let r = run(&sc);
+    let s = &r.samples;
+    dump(&format!("hold-{name}"), &r);
+    let t_track = tracking_start(&r, sc.ts_s());
+    let (mean, rms, max) = angle_stats(s, 1.0, 6.0);
+    let (_, _, max_ramp) = angle_stats(s, 0.3, 1.0);
+    let w = s
+        .iter()
+        .filter(|x| x.t_s >= 1.0)
+        .fold(0.0_f64, |m, x| m.max(x.truth.speed_rpm.abs()));
+    let (i_r, t_r) = rated(&sc);
+    let (ri, rt) = ripple(s, 1.0, 6.0, usize::from(r.hfi.half_period_ticks));
+    let states: std::collections::BTreeSet<_> =
+        s.iter().map(|x| x.control.telemetry.state).collect();
+    let i_end = s.last().map_or([0.0; 2], |x| x.truth.i_dq_a);
+    let flips = r
+        .status
+        .last()
+        .map(|x| (x.polarity_flipped, x.polarity_contrast));
+    println!(
+        "{name}: hold 0 rpm at {t_r} N m: tracking from {t_track:.3} s (polarity flipped, contrast {flips:?}); \
+         angle error (1-6 s) mean {mean:+.2} / RMS {rms:.2} / max {max:.2} deg el. (max {max_ramp:.2} while the load ramps up); max |speed| {w:.2} rpm; \
+         i_dq at the end {i_end:.2?} A; injection {:.1} V at {:.0} Hz, PLL {:.0} rad/s; \
+         ripple: current {ri:.3} A RMS ({:.2} % of {i_r:.2} A), torque {rt:.3} N m RMS ({:.2} % of rated); states {states:?}",
+        r.hfi.injection_v,
+        0.5 / sc.ts_s() / f64::from(r.hfi.half_period_ticks),
+        r.hfi.pll_bandwidth_rad_s,
+        100.0 * ri / i_r,
+        100.0 * rt / t_r,
+    );
+    assert!(s.iter().all(|x| x.control.telemetry.fault.is_none()));
+    (rms, max, w)
+}
+
+/// The issue's goal on the industrial motor (Lq/Ld 1.4, 50 mA sensor noise): **missed** at
+/// the defaults. Measured: RMS 1.81, max 6.85 deg el. over 1-6 s (the angle noise of the
+/// carrier's demodulation, no bias: mean -0.01 deg); with `half_period_ticks = 4` (1.25 kHz,
+/// 15.6 % current ripple) RMS 1.2-1.6, max 4.1-5.9 deg depending on the loop bandwidth.
+/// Kept with the goal's threshold; run with `--ignored`.
+#[test]
+#[ignore = "goal missed on this motor: max 6.85 deg el. (RMS 1.81) at the defaults"]
+fn industrial_ipm_holds_zero_speed_under_rated_load_within_5_deg() {
+    let (rms, max, w) = hold_zero("industrial-ipm");
+    assert!(max <= 5.0, "max angle error {max} deg (RMS {rms})");
+    assert!(w < 30.0, "speed {w} rpm");
+}
+
+/// What the industrial motor does hold at the defaults (regression guard, not the goal):
+/// RMS 1.81, max 6.85 deg el., max |speed| 8.7 rpm under 14 N m.
+#[test]
+fn industrial_ipm_holds_zero_speed_under_rated_load() {
+    let (rms, max, w) = hold_zero("industrial-ipm");
+    assert!(
+        rms <= 2.5 && max <= 10.0,
+        "angle error RMS {rms}, max {max} deg"
+    );
+    assert!(w < 30.0, "speed {w} rpm");
+}
+
+#[test]
+fn traction_ipm_holds_zero_speed_under_rated_load() {
+    let (rms, max, w) = hold_zero("traction-ipm");
+    assert!(max <= 5.0, "max angle error {max} deg (RMS {rms})");
+    assert!(w < 30.0, "speed {w} rpm");
+}
+
+/// Polarity from 12 initial rotor angles: after the start, the control angle is within
+/// 20 deg of the rotor (not pi off).
+fn polarity_grid(name: &str) -> usize {
+    let mut ok = 0;
+    for k in 0..12 {
+        let th0 = -PI + (f64::from(k) + 0.5) * PI / 6.0;
+        let sc = job(name, vec![(0.0, 0.0), (0.3, 0.0)], vec![], th0, 0.3);
+        let r = run(&sc);
+        let t_track = tracking_start(&r, sc.ts_s());
+        let (mean, _, max) = angle_stats(&r.samples, t_track + 0.02, 0.3);
+        let st = r.status.last().copied().unwrap_or_default();
+        let good = max < 20.0;
+        ok += usize::from(good);
+        println!(
+            "{name}: rotor at {:+7.1} deg: flipped {}, contrast {:.4}, error after: mean {mean:+.2} max {max:.2} deg -> {}",
+            th0.to_degrees(),
+            st.polarity_flipped,
+            st.polarity_contrast,
+            if good { "ok" } else { "WRONG" }
+        );
+    }
+    println!("{name}: polarity right {ok} / 12");
+    ok
+}
+
+#[test]
+fn polarity_is_found_from_any_rotor_angle() {
+    assert_eq!(polarity_grid("industrial-ipm"), 12);
+    assert_eq!(polarity_grid("traction-ipm"), 12);
+}
+
+/// A reversal through zero under the rated active load, closed loop all the way: +n to -n
+/// rpm over 1 s (n = 2x the speed where the carrier stops), the rated torque ramped in over
+/// 0.2-0.7 s while the speed rises to +n. The angle error is asserted where HFI has a say
+/// (observer weight below 1); where the observer is alone (above the band) it is the EKF's:
+/// on the traction motor it settles about 7 deg off at +430 rpm under rated load after the
+/// hand-over (its speed estimate too: the drive holds ~430 rpm for a 573 rpm reference), and
+/// recovers when HFI re-seeds it on the way down; the negative direction is clean.
+fn reversal(name: &str) -> (f64, f64) {
+    let sc0 = Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"));
+    let cfg = sc0.foc_config().unwrap_or_else(|e| panic!("{e}"));
+    let hi = HfiConfig::new(&cfg, sc0.inverter.u_dc_v as f32).unwrap_or_else(|e| panic!("{e}"));
+    let n_rpm =
+        2.0 * f64::from(hi.blend_high_rad_s) / f64::from(cfg.motor.pole_pairs) * RPM_PER_RAD_S;
+    let load = vec![LoadTerm::Ramp {
+        start_s: 0.2,
+        end_s: 0.7,
+        from_nm: 0.0,
+        to_nm: sc0.rated_torque_nm,
+    }];
+    let profile = vec![
+        (0.2, 0.0),
+        (0.7, n_rpm),
+        (1.2, n_rpm),
+        (2.2, -n_rpm),
+        (2.7, -n_rpm),
+    ];
+    let sc = job(name, profile, load, -2.0, 2.7);
+    let r = run(&sc);
+    dump(&format!("rev-{name}"), &r);
+    let s = &r.samples;
+    let t_track = tracking_start(&r, sc.ts_s());
+    let after: Vec<&Sample> = s.iter().filter(|x| x.t_s > t_track).collect();
+    let left = after
+        .iter()
+        .filter(|x| x.control.telemetry.state != "closed_loop")
+        .count();
+    let (mean, rms, max) = angle_stats(s, 1.2, 2.2);
+    // Where HFI has a say (observer weight below 1) and where the observer is alone.
+    let band: Vec<f64> = s
+        .iter()
+        .zip(&r.status)
+        .filter(|(x, st)| x.t_s >= 1.2 && x.t_s < 2.2 && st.observer_weight < 1.0)
+        .map(|(x, _)| angle_error_deg(x).abs())
+        .collect();
+    let max_hfi = band.iter().fold(0.0_f64, |m, x| m.max(*x));
+    let hfi_s = band.len() as f64 * sc.ts_s();
+    let track = s.iter().filter(|x| x.t_s >= 0.5).fold(0.0_f64, |m, x| {
+        m.max((x.truth.speed_rpm - x.control.speed_ref_rpm).abs())
+    });
+    let speeds = s
+        .iter()
+        .filter(|x| (2.5..2.7).contains(&x.t_s))
+        .map(|x| x.truth.speed_rpm)
+        .sum::<f64>()
+        / s.iter().filter(|x| (2.5..2.7).contains(&x.t_s)).count() as f64;
+    println!(
+        "{name}: reversal {n_rpm:.0} -> {:.0} rpm under {} N m: periods out of closed loop {left}; \
+         angle error 1.2-2.2 s mean {mean:+.2} / RMS {rms:.2} / max {max:.2} deg el., \
+         max {max_hfi:.2} deg over the {hfi_s:.3} s with HFI in the angle (observer weight < 1); \
+         worst |speed - ref| {track:.1} rpm ({:.2} % of rated {} rpm); mean speed at the end {speeds:.1} rpm",
+        -n_rpm,
+        sc.rated_torque_nm,
+        100.0 * track / sc.rated_speed_rpm,
+        sc.rated_speed_rpm
+    );
+    assert!(s.iter().all(|x| x.control.telemetry.fault.is_none()));
+    assert_eq!(left, 0, "left closed loop");
+    assert!((speeds + n_rpm).abs() < 0.05 * n_rpm, "end speed {speeds}");
+    (max_hfi, track)
+}
+
+#[test]
+fn industrial_ipm_reverses_through_zero_under_rated_load() {
+    let (max, track) = reversal("industrial-ipm");
+    assert!(max < 15.0, "angle error {max} deg");
+    assert!(track < 0.05 * 1500.0, "speed error {track} rpm");
+}
+
+#[test]
+fn traction_ipm_reverses_through_zero_under_rated_load() {
+    let (max, track) = reversal("traction-ipm");
+    assert!(max < 15.0, "angle error {max} deg");
+    assert!(track < 0.08 * 3000.0, "speed error {track} rpm");
+}
