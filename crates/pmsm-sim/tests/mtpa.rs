@@ -120,7 +120,12 @@ fn mtpa_torque_per_ampere_within_1_percent_of_the_optimum_at_rated_torque() {
             (false, true) => "sensored",
             (false, false) => "sensored, MTPA off",
         };
-        sc.controller.foc.get_or_insert_default().mtpa = Some(mtpa);
+        let f = sc.controller.foc.get_or_insert_default();
+        f.mtpa = Some(mtpa);
+        // foc's classic align / I/f start (this test is about MTPA, and its timing is the
+        // classic start's hand-over at 0.32-0.38 s; the damped start hands over later).
+        f.startup_damping_ratio = Some(0.0);
+        f.startup_kick_speed_ratio = Some(0.0);
         sc.duration_s = WINDOW_S.1;
         let half = 0.5 * sc.rated_speed_rpm;
         sc.speed_ref_rpm = Profile::linear(vec![(0.0, 0.0), (0.3, half)]);
