@@ -162,7 +162,7 @@ fn default_locks_from_any_angle_and_seed_does_not() {
 
 /// The interior motors (active-flux model) at rated q current with the MTPA d current: the
 /// default passes every cell of the grid within 50 ms too (issue 13's goal; measured: all
-/// 144 cells lock within 20 ms). At this load (the traction motor's `Lq i_q` exceeds
+/// 144 cells lock within 25 ms: worst 23 ms industrial, 25 ms traction). At this load (the traction motor's `Lq i_q` exceeds
 /// `psi_f`) the convergence transients sometimes trip the branch check the wrong way
 /// (measured 5 of 144 cells); the check then undoes it within the same run (every cell still
 /// locks), so those flips are bounded here rather than forbidden.
