@@ -120,7 +120,8 @@ class StepOutput(TypedDict):
 
 @final
 class Ekf:
-    """EKF observer of a surface PMSM, states [i_alpha, i_beta, omega_e, theta].
+    """EKF observer of a PMSM (surface, or interior with the active-flux model when
+    ld != lq), states [i_alpha, i_beta, omega_e, theta].
 
     q (4x4 or diagonal), r (2x2 or diagonal), x0 (shape (4,)), p0 (4x4 or diagonal) default to
     the motor- and ts-scaled defaults of ekf-core; x0/p0 describe the estimate one period

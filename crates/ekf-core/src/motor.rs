@@ -1,8 +1,9 @@
-//! Motor parameters of a surface-mounted PMSM, and the reference motors of `design.md` section 6.
+//! Motor parameters of a PMSM (surface or interior), the reference motors of `design.md`
+//! section 6 and the two interior reference motors of the README.
 
 use crate::{ConfigError, Float, Param, to_t};
 
-/// Electrical parameters of a surface-mounted PMSM (SI units).
+/// Electrical parameters of a PMSM (SI units): surface (`ld_h == lq_h`) or interior.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MotorParams<T> {
     /// Stator resistance per phase, ohm.

@@ -283,7 +283,8 @@ impl Observer {
     }
 }
 
-/// Extended Kalman filter observer of a surface PMSM (states `i_alpha, i_beta, omega_e, theta`).
+/// Extended Kalman filter observer of a PMSM, surface or interior (active-flux model when
+/// `ld != lq`; states `i_alpha, i_beta, omega_e, theta`).
 ///
 /// `Ekf(motor, ts, *, q=None, r=None, x0=None, p0=None, discretization="lag_free",
 /// dtype="float64", covariance_update="joseph")`.
