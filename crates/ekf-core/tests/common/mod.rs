@@ -133,30 +133,13 @@ pub fn simulate(sc: &Scenario) -> Trace {
         let (sm, cm) = (th + 0.5 * w * sc.ts).sin_cos();
         let (ua, ub) = (ud * cm - uq * sm, ud * sm + uq * cm);
         tr.u.push([ua, ub]);
-        for j in 0..sub {
-            let t0 = t + j as f64 * h;
-            let k1 = deriv(t0, ia, ib, th, ua, ub);
-            let k2 = deriv(
-                t0 + h / 2.0,
-                ia + h / 2.0 * k1.0,
-                ib + h / 2.0 * k1.1,
-                th + h / 2.0 * k1.2,
-                ua,
-                ub,
-            );
-            let k3 = deriv(
-                t0 + h / 2.0,
-                ia + h / 2.0 * k2.0,
-                ib + h / 2.0 * k2.1,
-                th + h / 2.0 * k2.2,
-                ua,
-                ub,
-            );
-            let k4 = deriv(t0 + h, ia + h * k3.0, ib + h * k3.1, th + h * k3.2, ua, ub);
-            ia += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-            ib += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-            th += h / 6.0 * (k1.2 + 2.0 * k2.2 + 2.0 * k3.2 + k4.2);
-        }
+        (ia, ib, th) = rk4_period(
+            |t, a, b, th| deriv(t, a, b, th, ua, ub),
+            t,
+            h,
+            sub,
+            (ia, ib, th),
+        );
     }
     tr
 }
@@ -211,30 +194,13 @@ pub fn simulate_salient(sc: &Scenario) -> Trace {
         let (sm, cm) = (th + 0.5 * w * sc.ts).sin_cos();
         let (ua, ub) = (ud * cm - uq * sm, ud * sm + uq * cm);
         tr.u.push([ua, ub]);
-        for j in 0..sub {
-            let t0 = t + j as f64 * h;
-            let k1 = deriv(t0, id, iq, th, ua, ub);
-            let k2 = deriv(
-                t0 + h / 2.0,
-                id + h / 2.0 * k1.0,
-                iq + h / 2.0 * k1.1,
-                th + h / 2.0 * k1.2,
-                ua,
-                ub,
-            );
-            let k3 = deriv(
-                t0 + h / 2.0,
-                id + h / 2.0 * k2.0,
-                iq + h / 2.0 * k2.1,
-                th + h / 2.0 * k2.2,
-                ua,
-                ub,
-            );
-            let k4 = deriv(t0 + h, id + h * k3.0, iq + h * k3.1, th + h * k3.2, ua, ub);
-            id += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-            iq += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-            th += h / 6.0 * (k1.2 + 2.0 * k2.2 + 2.0 * k3.2 + k4.2);
-        }
+        (id, iq, th) = rk4_period(
+            |t, a, b, th| deriv(t, a, b, th, ua, ub),
+            t,
+            h,
+            sub,
+            (id, iq, th),
+        );
     }
     tr
 }
@@ -258,6 +224,39 @@ pub fn interior_motors() -> [(&'static str, MotorParams<f64>, f64, f64, f64); 2]
             0.3,
         ),
     ]
+}
+
+/// One period of `sub` RK4 steps of `h` from `t` of the three states `y` (two currents and the
+/// angle) with the derivative `f(t, y0, y1, y2)` (the voltage held, captured by `f`).
+fn rk4_period(
+    f: impl Fn(f64, f64, f64, f64) -> (f64, f64, f64),
+    t: f64,
+    h: f64,
+    sub: usize,
+    y: (f64, f64, f64),
+) -> (f64, f64, f64) {
+    let (mut a, mut b, mut th) = y;
+    for j in 0..sub {
+        let t0 = t + j as f64 * h;
+        let k1 = f(t0, a, b, th);
+        let k2 = f(
+            t0 + h / 2.0,
+            a + h / 2.0 * k1.0,
+            b + h / 2.0 * k1.1,
+            th + h / 2.0 * k1.2,
+        );
+        let k3 = f(
+            t0 + h / 2.0,
+            a + h / 2.0 * k2.0,
+            b + h / 2.0 * k2.1,
+            th + h / 2.0 * k2.2,
+        );
+        let k4 = f(t0 + h, a + h * k3.0, b + h * k3.1, th + h * k3.2);
+        a += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+        b += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+        th += h / 6.0 * (k1.2 + 2.0 * k2.2 + 2.0 * k3.2 + k4.2);
+    }
+    (a, b, th)
 }
 
 /// Runs an observer over a trace with the project's timing: row k predicts with `u[k-1]`
