@@ -9,6 +9,29 @@ use ekf_core::{
     ConfigError, MotorKind, MotorParams, ObserverConfig, Param, PmsmObserver, Status, wrap_angle,
 };
 
+/// A run at constant speed `w` (rad/s el.) and q current `iq` (A), `n` samples, starting at
+/// 0.3 rad (the MTPA d current in the plant).
+fn steady(
+    motor: MotorParams<f64>,
+    ts: f64,
+    w: f64,
+    iq: f64,
+    noise_a: f64,
+    n: usize,
+    seed: u64,
+) -> Trace {
+    simulate(&Scenario {
+        motor,
+        ts,
+        n,
+        speed: &move |_t: f64| w,
+        iq_ref: &move |_t: f64| iq,
+        th0: 0.3,
+        noise_a,
+        seed,
+    })
+}
+
 /// Steady-state bias and RMS on both interior motors, at `w_e Ts` from 0.02 to 0.3 (Ts chosen
 /// per point), at rated q current with the MTPA d current. Goal (issue 13): bias < 0.1 deg.
 #[test]
@@ -90,18 +113,7 @@ fn surface_model_is_far_off_on_an_interior_motor() {
     for (name, motor, rated, iq_rated, noise) in interior_motors() {
         let ts = 1e-4;
         let w = 0.5 * rated;
-        let speed = move |_t: f64| w;
-        let iq = move |_t: f64| iq_rated;
-        let tr = simulate(&Scenario {
-            motor,
-            ts,
-            n: 4000,
-            speed: &speed,
-            iq_ref: &iq,
-            th0: 0.3,
-            noise_a: noise,
-            seed: 13,
-        });
+        let tr = steady(motor, ts, w, iq_rated, noise, 4000, 13);
         let ls = 0.5 * (motor.ld_h + motor.lq_h);
         let surface = MotorParams {
             ld_h: ls,
@@ -164,18 +176,7 @@ fn flux_tracking_on_interior_motors() {
         for scale in [0.9, 1.1] {
             let ts = 1e-4;
             let w = 0.6 * rated;
-            let speed = move |_t: f64| w;
-            let iq = move |_t: f64| 0.5 * iq_rated;
-            let tr = simulate(&Scenario {
-                motor,
-                ts,
-                n: 30000,
-                speed: &speed,
-                iq_ref: &iq,
-                th0: 0.3,
-                noise_a: noise,
-                seed: 19,
-            });
+            let tr = steady(motor, ts, w, 0.5 * iq_rated, noise, 30000, 19);
             let told = MotorParams {
                 psi_f_wb: motor.psi_f_wb * scale,
                 ..motor
@@ -202,18 +203,7 @@ fn f32_on_interior_motors() {
     for (name, motor, rated, iq_rated, noise) in interior_motors() {
         let ts = 1e-4;
         let w = 0.5 * rated;
-        let speed = move |_t: f64| w;
-        let iq = move |_t: f64| iq_rated;
-        let tr = simulate(&Scenario {
-            motor,
-            ts,
-            n: 4000,
-            speed: &speed,
-            iq_ref: &iq,
-            th0: 0.3,
-            noise_a: noise,
-            seed: 23,
-        });
+        let tr = steady(motor, ts, w, iq_rated, noise, 4000, 23);
         let m32 = MotorParams::<f32>::salient_from_f64(
             motor.rs_ohm,
             motor.ld_h,
@@ -316,18 +306,7 @@ fn salient_flux_baseline_and_ekf() {
     for (name, motor, rated, iq_rated, noise) in interior_motors() {
         let ts = 1e-4;
         let w = 0.5 * rated;
-        let speed = move |_t: f64| w;
-        let iq = move |_t: f64| iq_rated;
-        let tr = simulate(&Scenario {
-            motor,
-            ts,
-            n: 6000,
-            speed: &speed,
-            iq_ref: &iq,
-            th0: 0.3,
-            noise_a: noise,
-            seed: 29,
-        });
+        let tr = steady(motor, ts, w, iq_rated, noise, 6000, 29);
         let run_flux = |timing: FluxTiming| {
             let mut cfg = FluxObserverConfig::new(motor, ts);
             cfg.timing = timing;
