@@ -20,6 +20,12 @@ use pyo3::types::{PyBytes, PyDict, PyList, PyString, PyTuple};
 /// A real array, float64, borrowed read-only from Python (no copy for a float64 ndarray).
 pub(crate) type RealArray<'py> = PyReadonlyArrayDyn<'py, f64>;
 
+/// The slice of an array numpy has just allocated for `pyfoc` (always contiguous), or a
+/// RuntimeError should it not be.
+pub(crate) fn contiguous<S>(r: Result<S, numpy::AsSliceError>) -> PyResult<S> {
+    r.map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(format!("internal array: {e}")))
+}
+
 /// An empty vector with room for `n` values, or MemoryError naming `what`.
 pub(crate) fn try_vec<T>(n: usize, what: &str) -> PyResult<Vec<T>> {
     let mut v = Vec::new();

@@ -15,7 +15,7 @@ use ekf_core::{
 };
 use std::sync::{Mutex, PoisonError};
 
-use numpy::{PyArray1, PyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods, ToPyArray};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -28,7 +28,7 @@ mod simulate;
 mod suite;
 mod tune;
 
-use convert::{fixed, rows2, square, to_vec, try_vec};
+use convert::{contiguous, fixed, rows2, square, to_vec};
 
 create_exception!(
     pyfoc,
@@ -249,21 +249,19 @@ struct Row {
 impl Observer {
     /// One step; a refused sample yields the unchanged estimate with the rejected status.
     fn step(&mut self, u: [f64; 2], i: [f64; 2]) -> Row {
-        fn go<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: [T; 2], i: [T; 2]) -> Row {
-            match o.step(u, i) {
-                Ok(e) => Row {
-                    values: outputs(&e),
-                    status: RowStatus::of(e.status),
-                },
-                Err(_) => Row {
-                    values: outputs(&o.estimate()),
-                    status: RowStatus::Rejected,
-                },
-            }
-        }
         match self {
-            Observer::F64(o) => go(o, u, i),
-            Observer::F32(o) => go(o, u.map(|v| v as f32), i.map(|v| v as f32)),
+            Observer::F64(o) => step_row(o, u, i),
+            Observer::F32(o) => step_row(o, u, i),
+        }
+    }
+
+    /// `run`'s loop: row `k` predicts with the voltage of row `k - 1` (`prev` for row 0) and
+    /// corrects with the currents of row `k`; returns the last row's voltage. One dispatch on
+    /// the precision per call, so the loop itself is the observer's step and the stores.
+    fn run(&mut self, prev: [f64; 2], u: &[f64], i: &[f64], cols: &mut Columns) -> [f64; 2] {
+        match self {
+            Observer::F64(o) => run_rows(o, prev, u, i, cols),
+            Observer::F32(o) => run_rows(o, prev, u, i, cols),
         }
     }
 
@@ -281,6 +279,38 @@ impl Observer {
         };
         core::array::from_fn(|r| core::array::from_fn(|c| m[(r, c)]))
     }
+}
+
+/// One step of a filter in either precision, as an output row.
+#[inline(always)]
+fn step_row<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: [f64; 2], i: [f64; 2]) -> Row {
+    let c = |v: f64| T::from_subset(&v);
+    match o.step(u.map(c), i.map(c)) {
+        Ok(e) => Row {
+            values: outputs(&e),
+            status: RowStatus::of(e.status),
+        },
+        Err(_) => Row {
+            values: outputs(&o.estimate()),
+            status: RowStatus::Rejected,
+        },
+    }
+}
+
+/// [`Observer::run`] for one precision.
+fn run_rows<T: Float + Into<f64>>(
+    o: &mut PmsmObserver<T>,
+    mut prev: [f64; 2],
+    u: &[f64],
+    i: &[f64],
+    cols: &mut Columns,
+) -> [f64; 2] {
+    let rows = u.chunks_exact(2).zip(i.chunks_exact(2));
+    for (k, (uk, ik)) in rows.enumerate() {
+        cols.set(k, &step_row(o, prev, [ik[0], ik[1]]));
+        prev = [uk[0], uk[1]];
+    }
+    prev
 }
 
 /// Extended Kalman filter observer of a PMSM, surface or interior (active-flux model when
@@ -322,42 +352,31 @@ impl Ekf {
     }
 }
 
-/// Output columns of `run`: one per [`OUTPUTS`] name, and the status codes.
-struct Columns {
-    values: [Vec<f64>; OUTPUTS.len()],
-    status: Vec<i8>,
+/// Output columns of `run`, written in place: one slice per [`OUTPUTS`] name, and the status
+/// codes, all of one length. They are the data of arrays `run` has just allocated through
+/// numpy (which asks the kernel for huge pages for large arrays: the first write to 80 bytes
+/// per row of fresh memory is the largest cost of `run` after the steps themselves).
+struct Columns<'a> {
+    values: [&'a mut [f64]; OUTPUTS.len()],
+    status: &'a mut [i8],
 }
 
-impl Columns {
-    /// Room for `n` rows, or MemoryError.
-    fn with_capacity(n: usize) -> PyResult<Self> {
-        let mut values: [Vec<f64>; OUTPUTS.len()] = Default::default();
-        for v in &mut values {
-            *v = try_vec(n, "run output")?;
-        }
-        Ok(Self {
-            values,
-            status: try_vec(n, "run output")?,
-        })
-    }
-
+impl Columns<'_> {
     /// Bytes per row.
     const ROW_BYTES: u128 = (OUTPUTS.len() * 8 + 1) as u128;
 
-    fn push(&mut self, r: &Row) {
+    /// Stores row `k` (ignored past the end, which `run` never reaches: its input and these
+    /// columns have one length).
+    #[inline(always)]
+    fn set(&mut self, k: usize, r: &Row) {
         for (col, v) in self.values.iter_mut().zip(r.values) {
-            col.push(v);
+            if let Some(x) = col.get_mut(k) {
+                *x = v;
+            }
         }
-        self.status.push(r.status as i8);
-    }
-
-    fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-        let out = PyDict::new(py);
-        for (name, col) in OUTPUTS.iter().zip(self.values) {
-            out.set_item(name, PyArray1::from_vec(py, col))?;
+        if let Some(x) = self.status.get_mut(k) {
+            *x = r.status as i8;
         }
-        out.set_item("status", PyArray1::from_vec(py, self.status))?;
-        Ok(out)
     }
 }
 
@@ -519,18 +538,77 @@ impl Ekf {
         let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
         // The copies of both inputs and the output columns, probed at once.
         convert::ensure_memory(n as u128 * (32 + Columns::ROW_BYTES), "run")?;
-        let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
-        let mut cols = Columns::with_capacity(n)?;
-        let cols = self.with(py, move |inner| {
-            let mut prev = u_prev.unwrap_or(inner.u_last);
-            for (uk, ik) in u.chunks_exact(2).zip(i.chunks_exact(2)) {
-                cols.push(&inner.observer.step(prev, [ik[0], ik[1]]));
-                prev = [uk[0], uk[1]];
+        // Private copies of the inputs (no other thread can change them while the GIL is
+        // released) and the output arrays, all allocated by numpy.
+        // (In row-major order: a Fortran-ordered input is rearranged first.)
+        let c_copy = |a: &convert::RealArray<'py>| a.as_array().as_standard_layout().to_pyarray(py);
+        let (u, i) = (c_copy(&u), c_copy(&i));
+        let (u, i) = (u.readonly(), i.readonly());
+        let (u, i) = (contiguous(u.as_slice())?, contiguous(i.as_slice())?);
+        let values: [Bound<'py, PyArray1<f64>>; OUTPUTS.len()] =
+            core::array::from_fn(|_| PyArray1::zeros(py, n, false));
+        let status = PyArray1::<i8>::zeros(py, n, false);
+        {
+            let mut rw = values.each_ref().map(|a| a.readwrite());
+            let mut st = status.readwrite();
+            let mut cols = Columns {
+                values: Default::default(),
+                status: contiguous(st.as_slice_mut())?,
+            };
+            for (dst, r) in cols.values.iter_mut().zip(rw.iter_mut()) {
+                *dst = contiguous(r.as_slice_mut())?;
             }
-            inner.u_last = prev;
-            cols
-        });
-        cols.into_dict(py)
+            self.with(py, move |inner| {
+                let prev = u_prev.unwrap_or(inner.u_last);
+                inner.u_last = inner.observer.run(prev, u, i, &mut cols);
+            });
+        }
+        let out = PyDict::new(py);
+        for (name, col) in OUTPUTS.iter().zip(values) {
+            out.set_item(name, col)?;
+        }
+        out.set_item("status", status)?;
+        Ok(out)
+    }
+
+    /// For `bench/bench_run.py` only: seconds that the observer's own steps take over the
+    /// rows of `u_ab`, `i_ab` (the loop of `run` without its inputs' checks, copies and
+    /// output columns), on a copy of this filter (its state is not changed).
+    fn _time_steps(
+        &self,
+        py: Python<'_>,
+        u_ab: &Bound<'_, PyAny>,
+        i_ab: &Bound<'_, PyAny>,
+    ) -> PyResult<f64> {
+        let (u, i) = (rows2(u_ab, "u_ab")?, rows2(i_ab, "i_ab")?);
+        if u.shape()[0] != i.shape()[0] {
+            return Err(PyValueError::new_err(
+                "u_ab and i_ab must have the same length",
+            ));
+        }
+        let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
+        let mut obs = self.with(py, |inner| inner.observer.clone());
+        Ok(py.detach(move || {
+            fn go<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: &[f64], i: &[f64]) -> f64 {
+                let c = |v: f64| T::from_subset(&v);
+                let mut prev = [c(0.0); 2];
+                let mut acc = 0.0;
+                let t0 = std::time::Instant::now();
+                for (uk, ik) in u.chunks_exact(2).zip(i.chunks_exact(2)) {
+                    if let Ok(e) = o.step(prev, [c(ik[0]), c(ik[1])]) {
+                        acc += e.theta_rad.into();
+                    }
+                    prev = [c(uk[0]), c(uk[1])];
+                }
+                let dt = t0.elapsed().as_secs_f64();
+                std::hint::black_box(acc);
+                dt
+            }
+            match &mut obs {
+                Observer::F64(o) => go(o, &u, &i),
+                Observer::F32(o) => go(o, &u, &i),
+            }
+        }))
     }
 
     /// One sample: predicts with `u_prev` (voltage held over the previous period), corrects
