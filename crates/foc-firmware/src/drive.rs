@@ -9,7 +9,10 @@
 
 use cortex_m_semihosting::hprintln;
 use foc::ekf_core::MotorParams;
-use foc::{AlphaBeta, Foc, FocConfig, HfiConfig, HfiPhase, State, TickInput, duties_to_alpha_beta};
+use foc::{
+    AlphaBeta, Foc, FocConfig, HfiConfig, HfiPhase, State, TickInput, TickOutput,
+    duties_to_alpha_beta,
+};
 
 use crate::meter::{Clock, Tally};
 
@@ -17,6 +20,79 @@ const TS_S: f32 = 50e-6;
 const U_DC_V: f32 = 300.0;
 const SPEED_REF_MECH_RAD_S: f32 = 104.719_76; // 1000 rpm
 const TICKS: u32 = 24_000; // 1.2 s
+
+/// An on-target plant: the phase currents it shows the controller, and one period of it under
+/// a held alpha-beta voltage (`on`: PWM enabled; off, the currents are zero).
+trait DrivePlant {
+    fn i_ab(&self) -> AlphaBeta;
+    fn step(&mut self, u: AlphaBeta, on: bool);
+}
+
+/// What every drive run shares: `foc` started on a plant, the measured tick, the fault check
+/// and the one-period delay of the duties.
+struct Drive<P> {
+    foc: Foc,
+    plant: P,
+    u_dc_v: f32,
+    /// Duties computed at tick k, applied over the next period.
+    pending: ([f32; 3], bool),
+    /// Prefix of the fault line, and the error of a faulted run.
+    name: &'static str,
+    faulted: &'static str,
+}
+
+impl<P: DrivePlant> Drive<P> {
+    /// Sets the speed reference and starts `foc` (configured, HFI enabled, by the caller).
+    fn start(
+        mut foc: Foc,
+        plant: P,
+        u_dc_v: f32,
+        speed_ref_mech_rad_s: f32,
+        (name, faulted): (&'static str, &'static str),
+    ) -> Result<Self, &'static str> {
+        foc.set_speed_ref_mech_rad_s(speed_ref_mech_rad_s)
+            .map_err(|_| "speed reference refused")?;
+        foc.start().map_err(|_| "start refused")?;
+        Ok(Self {
+            foc,
+            plant,
+            u_dc_v,
+            pending: ([0.5_f32; 3], false),
+            name,
+            faulted,
+        })
+    }
+
+    /// One measured `tick` on the plant's currents: its instruction count and output.
+    fn tick(&mut self, clock: &Clock) -> Result<(u32, TickOutput), &'static str> {
+        let abc = self.plant.i_ab().to_abc();
+        let input = TickInput::abc(abc.a, abc.b, abc.c, self.u_dc_v);
+        let foc = &mut self.foc;
+        let mut out = None;
+        let n = clock.count(&mut || out = Some(foc.tick(&input)));
+        Ok((n, out.ok_or("tick produced no output")?))
+    }
+
+    /// Ends period `k`: `Err` on a fault, else the plant runs one period on the duties of
+    /// the tick before.
+    fn advance(&mut self, out: &TickOutput, k: u32) -> Result<(), &'static str> {
+        if out.fault.is_some() {
+            hprintln!(
+                "{}: fault {:?} at tick {}",
+                self.name,
+                self.foc.fault_info(),
+                k
+            );
+            return Err(self.faulted);
+        }
+        let applied = core::mem::replace(&mut self.pending, (out.duties, out.pwm_enabled));
+        self.plant.step(
+            duties_to_alpha_beta(applied.0, self.u_dc_v),
+            applied.1 && out.pwm_enabled,
+        );
+        Ok(())
+    }
+}
 
 /// Servo motor of design.md section 6 with its mechanics.
 struct Plant {
@@ -26,7 +102,14 @@ struct Plant {
     th: f32,
 }
 
-impl Plant {
+impl DrivePlant for Plant {
+    fn i_ab(&self) -> AlphaBeta {
+        AlphaBeta {
+            alpha: self.ia,
+            beta: self.ib,
+        }
+    }
+
     fn step(&mut self, u: AlphaBeta, on: bool) {
         let (rs, ls, psi, p, j, b) = (
             2.875_f32, 8.5e-3_f32, 0.175_f32, 4.0_f32, 8e-4_f32, 1e-3_f32,
@@ -70,31 +153,20 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
         cfg.startup.damping_ratio = 1.0;
         cfg.startup.kick_speed_ratio = 0.2;
     }
-    let mut foc = Foc::new(&cfg).map_err(|_| "foc config refused")?;
-    foc.set_speed_ref_mech_rad_s(SPEED_REF_MECH_RAD_S)
-        .map_err(|_| "speed reference refused")?;
-    foc.start().map_err(|_| "start refused")?;
-    let mut plant = Plant {
+    let foc = Foc::new(&cfg).map_err(|_| "foc config refused")?;
+    let plant = Plant {
         ia: 0.0,
         ib: 0.0,
         w_mech: 0.0,
         th: 1.0,
     };
-    // Duties computed at tick k are applied over the next period.
-    let mut pending = ([0.5_f32; 3], false);
+    let names = ("foc_tick", "the drive faulted");
+    let mut drive = Drive::start(foc, plant, U_DC_V, SPEED_REF_MECH_RAD_S, names)?;
     let mut tallies = [Tally::new(), Tally::new(), Tally::new(), Tally::new()];
     let mut closed_loop_at = None;
     for k in 0..TICKS {
-        let abc = AlphaBeta {
-            alpha: plant.ia,
-            beta: plant.ib,
-        }
-        .to_abc();
-        let input = TickInput::abc(abc.a, abc.b, abc.c, U_DC_V);
-        let state = foc.state();
-        let mut out = None;
-        let n = clock.count(&mut || out = Some(foc.tick(&input)));
-        let out = out.ok_or("tick produced no output")?;
+        let state = drive.foc.state();
+        let (n, out) = drive.tick(clock)?;
         let slot = match state {
             State::Align => Some(0),
             State::OpenLoop => Some(1),
@@ -108,16 +180,9 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
         if out.state == State::ClosedLoop && closed_loop_at.is_none() {
             closed_loop_at = Some(k);
         }
-        if out.fault.is_some() {
-            hprintln!("foc_tick: fault {:?} at tick {}", foc.fault_info(), k);
-            return Err("the drive faulted");
-        }
-        let applied = core::mem::replace(&mut pending, (out.duties, out.pwm_enabled));
-        plant.step(
-            duties_to_alpha_beta(applied.0, U_DC_V),
-            applied.1 && out.pwm_enabled,
-        );
+        drive.advance(&out, k)?;
     }
+    let (foc, plant) = (&drive.foc, &drive.plant);
     let speed_err = plant.w_mech - SPEED_REF_MECH_RAD_S;
     hprintln!(
         "foc_tick: closed loop at tick {:?} ({} s), final speed {} rad/s mech (ref {}), error {}",
@@ -162,7 +227,7 @@ const IPM_U_DC_V: f32 = 540.0;
 const IPM_J: f32 = 0.015;
 const IPM_TICKS: u32 = 36_000; // 1.8 s
 
-impl SalientPlant {
+impl DrivePlant for SalientPlant {
     fn step(&mut self, u: AlphaBeta, on: bool) {
         let (rs, ld, lq, psi, p, b) = (3.6_f32, 30e-3_f32, 42e-3_f32, 0.5_f32, 3.0_f32, 1.4e-2_f32);
         if !on {
@@ -196,39 +261,40 @@ impl SalientPlant {
     }
 }
 
+/// `industrial_ipm` at [`IPM_U_DC_V`]: current limit 12 A, over-current trip 24 A, inertia
+/// [`IPM_J`].
+fn ipm_config() -> FocConfig {
+    let mut cfg = FocConfig::new(MotorParams::industrial_ipm(), TS_S, IPM_U_DC_V);
+    cfg.current_limit_a = 12.0;
+    cfg.over_current_a = 24.0;
+    cfg.with_inertia(IPM_J)
+}
+
 /// The interior motor sensorless from standstill to twice its base speed with MTPA and field
 /// weakening: prints `foc_tick_ipm` (closed loop with field weakening engaged, above 1.5x
 /// base speed) and `foc_tick_ipm_mtpa` (closed loop below base speed: MTPA, the
 /// field-weakening loop running at its clamp). `Err` when the drive failed.
 pub fn run_ipm(clock: &Clock) -> Result<(), &'static str> {
-    let mut cfg = FocConfig::new(MotorParams::industrial_ipm(), TS_S, IPM_U_DC_V);
-    cfg.current_limit_a = 12.0;
-    cfg.over_current_a = 24.0;
+    let cfg = ipm_config();
     let base_mech = cfg.max_speed_rad_s / 3.0;
-    let cfg = cfg.with_inertia(IPM_J).with_field_weakening(2.2);
-    let mut foc = Foc::new(&cfg).map_err(|_| "foc config refused (ipm)")?;
+    let cfg = cfg.with_field_weakening(2.2);
+    let foc = Foc::new(&cfg).map_err(|_| "foc config refused (ipm)")?;
     let target = 2.0 * base_mech;
-    foc.set_speed_ref_mech_rad_s(target)
-        .map_err(|_| "speed reference refused")?;
-    foc.start().map_err(|_| "start refused")?;
-    let mut plant = SalientPlant {
+    let plant = SalientPlant {
         id: 0.0,
         iq: 0.0,
         w_mech: 0.0,
         th: 1.0,
     };
-    let mut pending = ([0.5_f32; 3], false);
+    let names = ("foc_tick_ipm", "the ipm drive faulted");
+    let mut drive = Drive::start(foc, plant, IPM_U_DC_V, target, names)?;
     let (mut fw, mut mtpa) = (Tally::new(), Tally::new());
     let mut weakened = false;
     for k in 0..IPM_TICKS {
-        let abc = plant.i_ab().to_abc();
-        let input = TickInput::abc(abc.a, abc.b, abc.c, IPM_U_DC_V);
-        let state = foc.state();
-        let mut out = None;
-        let n = clock.count(&mut || out = Some(foc.tick(&input)));
-        let out = out.ok_or("tick produced no output")?;
+        let state = drive.foc.state();
+        let (n, out) = drive.tick(clock)?;
         if state == State::ClosedLoop {
-            let w = plant.w_mech;
+            let w = drive.plant.w_mech;
             if w > 1.5 * base_mech {
                 fw.push(n);
                 // Field weakening engaged: a d current well beyond the MTPA one.
@@ -237,16 +303,9 @@ pub fn run_ipm(clock: &Clock) -> Result<(), &'static str> {
                 mtpa.push(n);
             }
         }
-        if out.fault.is_some() {
-            hprintln!("foc_tick_ipm: fault {:?} at tick {}", foc.fault_info(), k);
-            return Err("the ipm drive faulted");
-        }
-        let applied = core::mem::replace(&mut pending, (out.duties, out.pwm_enabled));
-        plant.step(
-            duties_to_alpha_beta(applied.0, IPM_U_DC_V),
-            applied.1 && out.pwm_enabled,
-        );
+        drive.advance(&out, k)?;
     }
+    let (foc, plant) = (&drive.foc, &drive.plant);
     let speed_err = plant.w_mech - target;
     hprintln!(
         "foc_tick_ipm: industrial_ipm to 2x base speed ({} rad/s mech), final {} rad/s mech, i_d {} A, field weakening engaged: {}",
@@ -273,44 +332,37 @@ pub fn run_ipm(clock: &Clock) -> Result<(), &'static str> {
 /// plant has no saturation, so the polarity test is off and the rotor starts within 90 deg of
 /// the tracker's start angle (0). `Err` when the drive failed.
 pub fn run_ipm_hfi(clock: &Clock) -> Result<(), &'static str> {
-    let mut cfg = FocConfig::new(MotorParams::industrial_ipm(), TS_S, IPM_U_DC_V);
-    cfg.current_limit_a = 12.0;
-    cfg.over_current_a = 24.0;
-    let cfg = cfg.with_inertia(IPM_J);
+    let cfg = ipm_config();
     let mut foc = Foc::new(&cfg).map_err(|_| "foc config refused (hfi)")?;
     let mut hfi = HfiConfig::new(&cfg, IPM_U_DC_V).map_err(|_| "hfi config refused")?;
     hfi.detect_polarity = false;
     foc.enable_hfi(&hfi, IPM_U_DC_V)
         .map_err(|_| "hfi refused")?;
-    foc.set_speed_ref_mech_rad_s(0.0)
-        .map_err(|_| "speed reference refused")?;
-    foc.start().map_err(|_| "start refused")?;
-    let mut plant = SalientPlant {
+    let plant = SalientPlant {
         id: 0.0,
         iq: 0.0,
         w_mech: 0.0,
         th: 0.3,
     };
+    let names = ("foc_tick_hfi", "the hfi drive faulted");
+    let mut drive = Drive::start(foc, plant, IPM_U_DC_V, 0.0, names)?;
     // Half-way through the blend band after 0.4 s.
     let blend_mech = 0.5 * (hfi.blend_low_rad_s + hfi.blend_high_rad_s) / 3.0;
-    let mut pending = ([0.5_f32; 3], false);
     let (mut alone, mut blend) = (Tally::new(), Tally::new());
     let mut worst_deg = 0.0_f32;
     for k in 0..HFI_TICKS {
         if k == HFI_TICKS / 3 {
-            foc.set_speed_ref_mech_rad_s(blend_mech)
+            drive
+                .foc
+                .set_speed_ref_mech_rad_s(blend_mech)
                 .map_err(|_| "speed reference refused")?;
         }
-        let abc = plant.i_ab().to_abc();
-        let input = TickInput::abc(abc.a, abc.b, abc.c, IPM_U_DC_V);
-        let status = foc.hfi_status().ok_or("hfi off")?;
-        let mut out = None;
-        let n = clock.count(&mut || out = Some(foc.tick(&input)));
-        let out = out.ok_or("tick produced no output")?;
+        let status = drive.foc.hfi_status().ok_or("hfi off")?;
+        let (n, out) = drive.tick(clock)?;
         if status.phase == HfiPhase::Tracking && out.state == State::ClosedLoop {
             if status.observer_weight == 0.0 && status.injecting {
                 alone.push(n);
-                let e = foc::trig::wrap(out.telemetry.theta_rad - plant.th).abs();
+                let e = foc::trig::wrap(out.telemetry.theta_rad - drive.plant.th).abs();
                 worst_deg = if e * 57.3 > worst_deg {
                     e * 57.3
                 } else {
@@ -320,16 +372,9 @@ pub fn run_ipm_hfi(clock: &Clock) -> Result<(), &'static str> {
                 blend.push(n);
             }
         }
-        if out.fault.is_some() {
-            hprintln!("foc_tick_hfi: fault {:?} at tick {}", foc.fault_info(), k);
-            return Err("the hfi drive faulted");
-        }
-        let applied = core::mem::replace(&mut pending, (out.duties, out.pwm_enabled));
-        plant.step(
-            duties_to_alpha_beta(applied.0, IPM_U_DC_V),
-            applied.1 && out.pwm_enabled,
-        );
+        drive.advance(&out, k)?;
     }
+    let plant = &drive.plant;
     hprintln!(
         "foc_tick_hfi: industrial_ipm on HFI ({} V carrier, half period {} ticks), worst angle error on HFI alone {} deg, final {} rad/s mech (ref {})",
         hfi.injection_v,

@@ -397,7 +397,7 @@ mod tests {
                 worst_id = worst_id.max(s.i_d_a.abs());
             }
             let a = inv.apply(out.duties, 300.0, 300.0, plant.i_abc_a());
-            plant.step(a.u_ab_v, 0.5, 1e-4);
+            plant.step(a.u_ab_v.to_array(), 0.5, 1e-4);
         }
         (plant.state().omega_mech_rad_s - w_ref, worst_id)
     }

@@ -38,6 +38,7 @@ use crate::SimError;
 use crate::controller::{ControllerInput, ControllerOutput, DriveController};
 use crate::faults::{Channel, Channels, FaultSpec, Phase};
 use crate::foc_drive::FocDrive;
+use crate::metrics::Sums;
 use crate::profile::{LoadTerm, Profile};
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
 use crate::sim::{self, RunOptions, Sample, SampleSink};
@@ -378,7 +379,9 @@ struct Score {
     reason: Option<&'static str>,
     t_trip: Option<f64>,
     t_exit: Option<f64>,
-    worst_angle_deg: f64,
+    /// `foc`'s observer while the loops ran on it (the simulator's one error accumulator; the
+    /// worst angle error is its `max_e`).
+    closed_loop: Sums,
     max_current_a: f64,
     final_speed_rpm: f64,
 }
@@ -402,7 +405,7 @@ impl SampleSink for Score {
             && s.inverter.pwm_enabled
             && let Some(o) = &s.controller_observer
         {
-            self.worst_angle_deg = self.worst_angle_deg.max(o.angle_error_deg.abs());
+            self.closed_loop.add_sample(o);
         }
         // The true phase currents from the true alpha-beta vector.
         let abc = crate::svpwm::inverse_clarke(s.truth.i_ab_a);
@@ -436,7 +439,7 @@ pub fn run_case(case: &FaultCase, opts: &SuiteOptions) -> Result<CaseResult, Sim
         reason: None,
         t_trip: None,
         t_exit: None,
-        worst_angle_deg: 0.0,
+        closed_loop: Sums::default(),
         max_current_a: 0.0,
         final_speed_rpm: 0.0,
     };
@@ -477,7 +480,7 @@ pub fn run_case(case: &FaultCase, opts: &SuiteOptions) -> Result<CaseResult, Sim
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
         },
-        worst_angle_error_deg: score.worst_angle_deg,
+        worst_angle_error_deg: score.closed_loop.max_e,
         max_phase_current_a: score.max_current_a,
         current_limit_a: limit,
         bad_duties: checked.bad_duties,

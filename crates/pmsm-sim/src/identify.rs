@@ -20,6 +20,7 @@
 use std::path::{Path, PathBuf};
 
 use foc::{Identified, Identifier, IdentifyConfig, IdentifyStep, TickInput};
+use glam::DVec2;
 use serde::Serialize;
 
 use crate::SimError;
@@ -32,6 +33,7 @@ use crate::plot::PlotSink;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use crate::sensors::CurrentSensor;
 use crate::sim::{ControlRecord, InverterRecord, Measured, Sample, SampleSink, Truth};
+use crate::svpwm::{inverse_park, park};
 
 /// Outputs of [`identify`].
 #[derive(Clone, Debug, Default)]
@@ -266,8 +268,8 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
         let duties = out.duties.map(f64::from);
         let mut applied = inverter.apply(duties, u_dc, u_dc, i_true);
         if !out.pwm_enabled {
-            applied.u_ab_v = [0.0; 2];
-            applied.u_ab_commanded_v = [0.0; 2];
+            applied.u_ab_v = DVec2::ZERO;
+            applied.u_ab_commanded_v = DVec2::ZERO;
         }
         let ab = plant.i_ab_a();
         peak = peak.max(ab[0].hypot(ab[1]));
@@ -275,7 +277,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
             let (s, cth) = plant.sin_cos();
             let frame = f64::from(out.frame_angle_rad);
             let (fs, fc) = frame.sin_cos();
-            let (ia, ib) = (f64::from(out.i_ab.alpha), f64::from(out.i_ab.beta));
+            let i_ab = DVec2::new(f64::from(out.i_ab.alpha), f64::from(out.i_ab.beta));
             let frame_rpm = f64::from(out.frame_speed_rad_s) / p * RPM_PER_RAD_S;
             let sample = Sample {
                 k,
@@ -284,10 +286,8 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
                     theta_e_rad: state.theta_e_rad,
                     omega_e_rad_s: plant.omega_e_rad_s(),
                     speed_rpm: state.omega_mech_rad_s * RPM_PER_RAD_S,
-                    i_ab_a: [
-                        state.i_d_a * cth - state.i_q_a * s,
-                        state.i_d_a * s + state.i_q_a * cth,
-                    ],
+                    i_ab_a: inverse_park(DVec2::new(state.i_d_a, state.i_q_a), DVec2::new(cth, s))
+                        .to_array(),
                     i_dq_a: [state.i_d_a, state.i_q_a],
                     torque_nm: plant.torque_nm(),
                     load_torque_nm: 0.0,
@@ -296,7 +296,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
                 },
                 measured: Measured {
                     i_abc_a: meas.i_abc_a,
-                    i_ab_a: meas.i_ab_a,
+                    i_ab_a: meas.i_ab_a.to_array(),
                     u_dc_v: u_dc,
                 },
                 control: ControlRecord {
@@ -306,7 +306,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
                         state: out.step.name(),
                         theta_e_rad: frame,
                         omega_e_rad_s: f64::from(out.frame_speed_rad_s),
-                        i_dq_a: [fc * ia + fs * ib, -fs * ia + fc * ib],
+                        i_dq_a: park(i_ab, DVec2::new(fc, fs)).to_array(),
                         u_ab_ref_v: [f64::from(out.u_ab.alpha), f64::from(out.u_ab.beta)],
                         speed_ref_rpm: out.pwm_enabled.then_some(frame_rpm),
                         ..ControllerTelemetry::default()
@@ -315,8 +315,8 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
                 inverter: InverterRecord {
                     pwm_enabled: out.pwm_enabled,
                     duties: applied.duties,
-                    u_ab_v: applied.u_ab_v,
-                    u_ab_commanded_v: applied.u_ab_commanded_v,
+                    u_ab_v: applied.u_ab_v.to_array(),
+                    u_ab_commanded_v: applied.u_ab_commanded_v.to_array(),
                     u_dc_v: u_dc,
                 },
                 ..Sample::default()
@@ -339,7 +339,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
             f.before_step(k, &mut plant);
         }
         if out.pwm_enabled {
-            plant.step(applied.u_ab_v, 0.0, ts);
+            plant.step(applied.u_ab_v.to_array(), 0.0, ts);
         } else {
             plant.step_open(0.0, ts);
         }

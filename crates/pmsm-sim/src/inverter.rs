@@ -28,6 +28,7 @@
 
 use core::f64::consts::TAU;
 
+use glam::DVec2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
@@ -112,10 +113,10 @@ pub struct Applied {
     /// Duties applied over the period.
     pub duties: [f64; 3],
     /// Stationary stator voltage actually applied (dead time included), V.
-    pub u_ab_v: [f64; 2],
+    pub u_ab_v: DVec2,
     /// The voltage the duties would give with ideal switches on the bus voltage the
     /// controller measured when it computed them, V: what a controller knows it commanded.
-    pub u_ab_commanded_v: [f64; 2],
+    pub u_ab_commanded_v: DVec2,
 }
 
 /// The inverter with its one-period delay line.
@@ -187,12 +188,10 @@ impl Inverter {
             }
             e
         };
-        let ab = clarke(eff);
-        let cmd = clarke(d);
         Applied {
             duties: d,
-            u_ab_v: [ab[0] * u_dc_v, ab[1] * u_dc_v],
-            u_ab_commanded_v: [cmd[0] * u_dc_cmd, cmd[1] * u_dc_cmd],
+            u_ab_v: DVec2::from(clarke(eff)) * u_dc_v,
+            u_ab_commanded_v: DVec2::from(clarke(d)) * u_dc_cmd,
         }
     }
 }
@@ -219,13 +218,13 @@ mod tests {
         let d1 = svpwm([50.0, 20.0], 300.0).d;
         let d2 = svpwm([-30.0, 10.0], 300.0).d;
         let a = inv.apply(d1, 300.0, 300.0, [0.0; 3]);
-        assert_eq!(a.u_ab_v, [0.0, 0.0]);
+        assert_eq!(a.u_ab_v, DVec2::ZERO);
         let b = inv.apply(d2, 300.0, 300.0, [0.0; 3]);
-        assert!((b.u_ab_v[0] - 50.0).abs() < 1e-9 && (b.u_ab_v[1] - 20.0).abs() < 1e-9);
+        assert!((b.u_ab_v - DVec2::new(50.0, 20.0)).abs().max_element() < 1e-9);
         assert_eq!(b.u_ab_v, b.u_ab_commanded_v);
         let mut now = Inverter::new(cfg(false, 0.0));
         let c = now.apply(d2, 300.0, 300.0, [0.0; 3]);
-        assert!((c.u_ab_v[0] + 30.0).abs() < 1e-9);
+        assert!((c.u_ab_v.x + 30.0).abs() < 1e-9);
     }
 
     #[test]
@@ -235,10 +234,10 @@ mod tests {
         let mut inv = Inverter::new(cfg(false, 2e-6));
         let a = inv.apply([0.5; 3], 300.0, 300.0, [1.0, -0.5, -0.5]);
         assert!(
-            (a.u_ab_v[0] + 8.0).abs() < 1e-9 && a.u_ab_v[1].abs() < 1e-9,
+            (a.u_ab_v - DVec2::new(-8.0, 0.0)).abs().max_element() < 1e-9,
             "{a:?}"
         );
-        assert_eq!(a.u_ab_commanded_v, [0.0, 0.0]);
+        assert_eq!(a.u_ab_commanded_v, DVec2::ZERO);
     }
 
     #[test]

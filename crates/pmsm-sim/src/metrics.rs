@@ -49,6 +49,12 @@ use crate::scenario::{RPM_PER_RAD_S, Scenario};
 
 /// `|e_th|` below which the observer counts as converged, electrical degrees.
 pub const CONVERGED_DEG: f64 = 5.0;
+
+/// Whether an angle error (deg) counts as converged: `|e| <` [`CONVERGED_DEG`] (NaN does not).
+#[inline]
+pub(crate) fn is_converged(angle_error_deg: f64) -> bool {
+    !(angle_error_deg.abs() >= CONVERGED_DEG || angle_error_deg.is_nan())
+}
 /// Samples with `|w_e|` below this fraction of the rated speed are left out of the window.
 pub const LOW_SPEED_FRACTION: f64 = 0.05;
 /// The speed counts as settled once the speed reference has been constant, and the load
@@ -97,9 +103,8 @@ pub struct ObserverMetrics {
     pub rs_error_end_pct: f64,
 }
 
-/// Running sums over a set of samples.
 /// Running sums of an observer's errors over a window: the one accumulator behind every
-/// score of the simulator (these metrics, the suite's rows).
+/// score of the simulator (these metrics, the suite's rows, the fault suite's worst error).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct Sums {
     pub(crate) n: usize,
@@ -137,6 +142,21 @@ impl Sums {
     #[inline]
     pub(crate) fn add_failure(&mut self) {
         self.failures += 1;
+    }
+
+    /// RMS angle error over the window, deg (NaN when empty).
+    pub(crate) fn angle_rms_deg(&self) -> f64 {
+        (self.sum_e2 / self.n as f64).sqrt()
+    }
+
+    /// Mean angle error over the window, deg (NaN when empty).
+    pub(crate) fn angle_mean_deg(&self) -> f64 {
+        self.sum_e / self.n as f64
+    }
+
+    /// RMS speed error over the window, rad/s el. (NaN when empty).
+    pub(crate) fn speed_rms_rad_s(&self) -> f64 {
+        (self.sum_w2 / self.n as f64).sqrt()
     }
 }
 
@@ -184,7 +204,7 @@ impl ObserverScore {
             self.t_first = Some(t_s);
         }
         let e = est.angle_error_deg;
-        if e.abs() >= CONVERGED_DEG || e.is_nan() {
+        if !is_converged(e) {
             self.run_start = None;
             self.window = Sums::default();
         } else if self.run_start.is_none() {
@@ -205,15 +225,15 @@ impl ObserverScore {
         let converged = self.run_start.is_some();
         let s = if converged { &self.window } else { &self.all };
         let nf = s.n as f64;
-        let speed_rms = (s.sum_w2 / nf).sqrt();
+        let speed_rms = s.speed_rms_rad_s();
         Some(ObserverMetrics {
             converged,
             convergence_time_s: self.run_start.map(|t| t - first),
             window_samples: s.n,
             window_s: nf * ts_s,
-            angle_error_rms_deg: (s.sum_e2 / nf).sqrt(),
+            angle_error_rms_deg: s.angle_rms_deg(),
             angle_error_max_deg: if s.n > 0 { s.max_e } else { f64::NAN },
-            angle_error_mean_deg: s.sum_e / nf,
+            angle_error_mean_deg: s.angle_mean_deg(),
             speed_error_rms_rad_s: speed_rms,
             speed_error_rms_pct: 100.0 * speed_rms / self.rated_omega_e_rad_s,
             speed_error_max_rad_s: if s.n > 0 { s.max_w } else { f64::NAN },
@@ -438,10 +458,10 @@ impl ClosedLoopScore {
         Some(ClosedLoopObserverMetrics {
             window_samples: s.n,
             window_s: nf * ts_s,
-            angle_error_rms_deg: (s.sum_e2 / nf).sqrt(),
+            angle_error_rms_deg: s.angle_rms_deg(),
             angle_error_max_deg: s.max_e,
-            angle_error_mean_deg: s.sum_e / nf,
-            speed_error_rms_rad_s: (s.sum_w2 / nf).sqrt(),
+            angle_error_mean_deg: s.angle_mean_deg(),
+            speed_error_rms_rad_s: s.speed_rms_rad_s(),
             speed_error_max_rad_s: s.max_w,
         })
     }

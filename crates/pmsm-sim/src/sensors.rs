@@ -21,6 +21,7 @@
 //!
 //! The DC-bus voltage is measured exactly (the value held over the coming period).
 
+use glam::DVec2;
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand_distr::{Distribution, StandardNormal};
@@ -135,8 +136,8 @@ impl Default for ChannelFaults {
 pub struct CurrentSample {
     /// Measured phase currents `[a, b, c]` (`c = -a - b`), A.
     pub i_abc_a: [f64; 3],
-    /// Their Clarke transform `[alpha, beta]`, A.
-    pub i_ab_a: [f64; 2],
+    /// Their Clarke transform (alpha, beta), A.
+    pub i_ab_a: DVec2,
 }
 
 /// The phase-current sensor (module docs).
@@ -204,7 +205,7 @@ impl CurrentSensor {
         let abc = [a, b, -a - b];
         CurrentSample {
             i_abc_a: abc,
-            i_ab_a: clarke(abc),
+            i_ab_a: DVec2::from(clarke(abc)),
         }
     }
 
@@ -228,7 +229,7 @@ impl CurrentSensor {
         let abc = [out[0], out[1], -out[0] - out[1]];
         CurrentSample {
             i_abc_a: abc,
-            i_ab_a: clarke(abc),
+            i_ab_a: DVec2::from(clarke(abc)),
         }
     }
 }

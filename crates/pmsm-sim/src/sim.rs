@@ -37,6 +37,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use ekf_core::{EkfError, PmsmObserver};
+use glam::DVec2;
 
 use crate::SimError;
 use crate::controller::{ControllerInput, DriveController, RotorFeedback, SensoredController};
@@ -336,8 +337,9 @@ pub fn run_with_side_observers(
             ),
             None => (sensor.measure(i_abc_true), inverter.u_dc_at(t)),
         };
+        let i_ab_meas = meas.i_ab_a.to_array();
 
-        let est = match observer.step(u_prev, meas.i_ab_a) {
+        let est = match observer.step(u_prev, i_ab_meas) {
             Ok(e) => e,
             Err(error) => {
                 end = RunEnd::ObserverFailed {
@@ -349,7 +351,7 @@ pub fn run_with_side_observers(
             }
         };
         // The seed filter is only a comparison: if it fails, it is dropped, not the run.
-        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, meas.i_ab_a)) {
+        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, i_ab_meas)) {
             Some(Ok(e)) => Some(e),
             Some(Err(error)) => {
                 seed_filter = None;
@@ -360,14 +362,14 @@ pub fn run_with_side_observers(
             None => None,
         };
         side_est.clear();
-        side_est.extend(side.iter_mut().map(|o| o.step(u_prev, meas.i_ab_a)));
+        side_est.extend(side.iter_mut().map(|o| o.step(u_prev, i_ab_meas)));
 
         let speed_ref_rpm = scenario.speed_ref_rpm.at(t);
         let out = controller.tick(&ControllerInput {
             k: kk,
             t_s: t,
             i_abc_a: meas.i_abc_a,
-            i_ab_a: meas.i_ab_a,
+            i_ab_a: i_ab_meas,
             u_dc_v: u_dc,
             speed_ref_mech_rad_s: speed_ref_rpm / RPM_PER_RAD_S,
             rotor: sensored.then_some(RotorFeedback {
@@ -391,8 +393,8 @@ pub fn run_with_side_observers(
         let pwm = out.pwm_enabled;
         if !pwm {
             // All switches open: no voltage is commanded; the plant coasts (step_open).
-            applied.u_ab_v = [0.0; 2];
-            applied.u_ab_commanded_v = [0.0; 2];
+            applied.u_ab_v = DVec2::ZERO;
+            applied.u_ab_commanded_v = DVec2::ZERO;
         }
 
         let truth = Truth {
@@ -412,7 +414,7 @@ pub fn run_with_side_observers(
             truth,
             measured: crate::sim::Measured {
                 i_abc_a: meas.i_abc_a,
-                i_ab_a: meas.i_ab_a,
+                i_ab_a: i_ab_meas,
                 u_dc_v: u_dc,
             },
             observer: ObserverSample::from_controller(&est, &truth),
@@ -429,8 +431,8 @@ pub fn run_with_side_observers(
             inverter: InverterRecord {
                 pwm_enabled: pwm,
                 duties: applied.duties,
-                u_ab_v: applied.u_ab_v,
-                u_ab_commanded_v: applied.u_ab_commanded_v,
+                u_ab_v: applied.u_ab_v.to_array(),
+                u_ab_commanded_v: applied.u_ab_commanded_v.to_array(),
                 u_dc_v: u_dc,
             },
         };
@@ -464,7 +466,7 @@ pub fn run_with_side_observers(
             f.before_step(kk, &mut plant);
         }
         if pwm {
-            plant.step(applied.u_ab_v, load, ts);
+            plant.step(applied.u_ab_v.to_array(), load, ts);
         } else {
             plant.step_open(load, ts);
         }
@@ -481,7 +483,7 @@ pub fn run_with_side_observers(
             expected_now
         };
         u_prev = if pwm {
-            expected_applied.unwrap_or(applied.u_ab_commanded_v)
+            expected_applied.unwrap_or(applied.u_ab_commanded_v.to_array())
         } else {
             [0.0; 2]
         };

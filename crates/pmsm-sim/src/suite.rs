@@ -82,7 +82,7 @@ use serde::Serialize;
 use crate::SimError;
 use crate::foc_drive::FocDrive;
 use crate::inverter::InverterConfig;
-use crate::metrics::Sums;
+use crate::metrics::{Sums, is_converged};
 use crate::observer::{Observer, ObserverEstimate};
 use crate::plant::MotorModel;
 use crate::profile::{LoadTerm, Profile};
@@ -801,9 +801,9 @@ impl SideObserver for Scored {
         }
         if t < self.plan.conv_end_s {
             self.last_conv_s = t;
-            let bad = own.as_ref().is_none_or(|s| {
-                s.angle_error_deg.abs() >= CONVERGED_DEG || s.angle_error_deg.is_nan()
-            });
+            let bad = own
+                .as_ref()
+                .is_none_or(|s| !is_converged(s.angle_error_deg));
             if bad {
                 self.last_bad_s = Some(t);
             }
@@ -957,9 +957,9 @@ pub fn run_suite_motors(
                     condition: w.0.to_string(),
                     speed_fraction: w.1,
                     samples: sums.n,
-                    angle_rms_deg: (sums.sum_e2 / n).sqrt(),
+                    angle_rms_deg: sums.angle_rms_deg(),
                     angle_max_deg: sums.max_e,
-                    angle_mean_deg: sums.sum_e / n,
+                    angle_mean_deg: sums.angle_mean_deg(),
                     psi_f_error_pct: ekf.then(|| 100.0 * (ps[0] / n / truth.0 - 1.0)),
                     rs_error_pct: 100.0 * (ps[1] / n / truth.1 - 1.0),
                 });
@@ -967,8 +967,7 @@ pub fn run_suite_motors(
         }
         for (s, times) in scored.iter().filter(|s| s.told.is_none()).zip(&conv) {
             for (sums, w) in s.windows.iter().zip(&plan.windows) {
-                let n = sums.n as f64;
-                let speed_rms = (sums.sum_w2 / n).sqrt();
+                let speed_rms = sums.speed_rms_rad_s();
                 steady.push(SteadyRow {
                     observer: s.kind,
                     motor,
@@ -978,9 +977,9 @@ pub fn run_suite_motors(
                     w_ts_rad: w.1 * rated * ts,
                     samples: sums.n,
                     failures: sums.failures,
-                    angle_rms_deg: (sums.sum_e2 / n).sqrt(),
+                    angle_rms_deg: sums.angle_rms_deg(),
                     angle_max_deg: sums.max_e,
-                    angle_mean_deg: sums.sum_e / n,
+                    angle_mean_deg: sums.angle_mean_deg(),
                     speed_rms_rad_s: speed_rms,
                     speed_rms_pct: 100.0 * speed_rms / rated,
                 });
