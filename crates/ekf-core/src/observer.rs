@@ -159,6 +159,8 @@
 
 mod config;
 pub(crate) mod model;
+#[doc(hidden)]
+pub mod parts;
 mod safeguards;
 pub mod tracking;
 
