@@ -23,7 +23,7 @@ use crate::{Float, to_t, wrap_angle};
 /// `pi/2` in two parts: the first has 8 significant bits, so `k * PIO2_A` is exact for
 /// `|k| < 2^16`; the second is the rest rounded to `f32` (`pi/2 - A - B = 2.6e-12`).
 const PIO2_A: f32 = 1.570_312_5;
-const PIO2_B: f32 = 4.838_267_9e-4;
+const PIO2_B: f32 = 4.838_268e-4;
 
 /// `1.5 * 2^23`: `q + ROUND` rounds `q` (`|q| < 2^22`) to the nearest integer (ties to even),
 /// held in the low bits of the sum's mantissa, and `(q + ROUND) - ROUND` is that integer.
