@@ -40,7 +40,7 @@
 //! below base speed), `foc_tick_hfi` and `foc_tick_hfi_blend` (the same motor at standstill
 //! on high-frequency injection, and in its hand-over band to the observer), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
 //! sequence; its line gives the **worst** tick, `identify_tick_median` the median; see
-//! [`identify`]). To add one, call [`meter::Clock::measure`] with its name.
+//! [`identify`]). To add one, count calls with [`meter::Clock::count`] into a [`meter::Tally`] and report it under its name (or call [`meter::Clock::measure`]).
 #![no_std]
 #![no_main]
 
