@@ -98,6 +98,11 @@ struct Variant {
 }
 
 fn run() -> Result<(), &'static str> {
+    // Built with `EKF_PROFILE=default` (or `untracked`) in the environment, the firmware only
+    // runs 1500 steps of that observer and exits: the run `profile_step.py` traces.
+    if let Some(which) = option_env!("EKF_PROFILE") {
+        return profile_run(which);
+    }
     let cp = cortex_m::Peripherals::take().ok_or("core peripherals already taken")?;
     let clock =
         Clock::start(cp.SYST).map_err(|CalibrationError::NotLinear { first, second }| {
@@ -300,6 +305,24 @@ fn run() -> Result<(), &'static str> {
     } else {
         Err("an observer did not converge (see above)")
     }
+}
+
+/// 1500 steps of the default observer (`which == "untracked"`: without the tracking) on the
+/// synthetic run, for an execution trace (`crates/foc-firmware/profile_step.py`).
+fn profile_run(which: &str) -> Result<(), &'static str> {
+    let mut data = [Sample::default(); SAMPLES];
+    synth::generate(&mut data);
+    let mut cfg = ObserverConfig::new(MotorParams::servo(), TS_S);
+    if which == "untracked" {
+        cfg.parameter_tracking = None;
+    }
+    let mut obs = PmsmObserver::new(&cfg).map_err(|_| "invalid observer config")?;
+    let mut u_prev = [0.0; 2];
+    for s in data.iter().take(1500) {
+        let _ = black_box(obs.step(black_box(u_prev), black_box(s.i)));
+        u_prev = s.u;
+    }
+    Ok(())
 }
 
 /// Runs one configuration over the data, counting instructions per `step`; prints the final
