@@ -641,7 +641,9 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(t) = &self.tracker
             && t.rs != self.rs_constants.0
         {
-            self.rs_constants = (t.rs, self.model.discrete_at(t.psi, t.rs));
+            // At the configured flux, so that the cache is a function of `Rs` alone (its `c`
+            // is replaced each step).
+            self.rs_constants = (t.rs, self.model.discrete_at(self.nominal.0, t.rs));
         }
     }
 
