@@ -159,6 +159,8 @@
 
 mod config;
 pub(crate) mod model;
+#[doc(hidden)]
+pub mod parts;
 mod safeguards;
 pub mod tracking;
 
@@ -173,6 +175,7 @@ use crate::ekf::{Correction, EkfError, finite};
 use crate::structured;
 use crate::structured::{Outcome, Sym4};
 use crate::{ConfigError, Float, to_t, wrap_angle};
+use model::Discrete;
 use safeguards::{
     BranchState, Events, GateState, HealthState, Verdict, gate_accepted_high, gate_verdict,
 };
@@ -271,6 +274,10 @@ pub struct PmsmObserver<T: Float> {
     tracker: Option<Tracker<T>>,
     /// The tracking's constants and split filter (present with `tracker`).
     slow: Option<TrackerSlow<T>>,
+    /// The step's constants at a tracked `Rs` (`model.discrete_at(_, rs)`) and that `Rs`:
+    /// `Rs` changes only once per window of the split filter, so a step whose `Rs` is this one
+    /// recomputes only the flux's term (refreshed by [`Self::refresh_rs_constants`]).
+    rs_constants: (T, Discrete<T>),
     events: Events,
     counters: ObserverCounters,
 }
@@ -298,8 +305,14 @@ impl<T: Float> PmsmObserver<T> {
             }
             None => (None, None),
         };
+        let model = PmsmModel::new(cfg);
+        let rs_constants = (
+            cfg.motor.rs_ohm,
+            model.discrete_at(cfg.motor.psi_f_wb, cfg.motor.rs_ohm),
+        );
         Ok(Self {
-            model: PmsmModel::new(cfg),
+            model,
+            rs_constants,
             x: x0,
             p: p0,
             last: zero_correction(),
@@ -401,7 +414,11 @@ impl<T: Float> PmsmObserver<T> {
                 let tracked = self.p.p33 <= self.angle_var_limit;
                 let trusted = self.locked;
                 let active = tr.should_track(k, tracked, self.x[2], self.p.p22);
-                let disc = self.model.discrete_at(tr.psi, tr.rs);
+                let disc = if tr.rs == self.rs_constants.0 {
+                    self.model.discrete_with_flux(&self.rs_constants.1, tr.psi)
+                } else {
+                    self.model.discrete_at(tr.psi, tr.rs)
+                };
                 let (xm, mut pm, t) =
                     structured::predict::<T, S>(&disc, q, &self.x, &self.p, u_prev, trusted);
                 let tm = tr.predict::<S>(k, &disc, &t, &self.x, &mut pm, active);
@@ -611,6 +628,22 @@ impl<T: Float> PmsmObserver<T> {
             && t.housekeeping_due(&slow.k)
         {
             t.housekeeping(slow);
+            self.refresh_rs_constants();
+        }
+    }
+
+    /// Recomputes the step's constants for the tracked `Rs` when it has changed (after the
+    /// split filter's window, `set_parameters`, a restart). Only a cache: a step whose `Rs`
+    /// differs from the cached one computes its constants itself.
+    #[cold]
+    #[inline(never)]
+    fn refresh_rs_constants(&mut self) {
+        if let Some(t) = &self.tracker
+            && t.rs != self.rs_constants.0
+        {
+            // At the configured flux, so that the cache is a function of `Rs` alone (its `c`
+            // is replaced each step).
+            self.rs_constants = (t.rs, self.model.discrete_at(self.nominal.0, t.rs));
         }
     }
 
@@ -733,6 +766,7 @@ impl<T: Float> PmsmObserver<T> {
             t.restart(slow, true);
         }
         self.restart_safeguards();
+        self.refresh_rs_constants();
         self.events.reset = true;
         self.counters.covariance_resets = self.counters.covariance_resets.saturating_add(1);
     }
@@ -841,6 +875,7 @@ impl<T: Float> PmsmObserver<T> {
             t.restart(slow, false);
         }
         self.restart_safeguards();
+        self.refresh_rs_constants();
         Ok(())
     }
 
@@ -882,6 +917,7 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(s) = &mut slow.split {
             s.anchor(psi_f_wb, rs_ohm, t.c_pp, &k);
         }
+        self.refresh_rs_constants();
         Ok(())
     }
 }

@@ -27,7 +27,10 @@
 //! `ekf_step_salient` (the default on an interior motor, `Lq / Ld = 1.43`: the active-flux path),
 //! `ekf_step_standard` (standard symmetrized covariance update), `ekf_step_euler` (forward
 //! Euler), `ekf_step_seed` (`ObserverConfig::seed`), `ekf_predict` and `ekf_correct` (the two
-//! halves of the default step), the peers `flux_step` (the flux observer + PLL baseline) and
+//! halves of the default step), `ekf_step_bare` (untracked, no safeguards) and
+//! `ekf_step_bare_gate` / `_branch` / `_health` (one safeguard on), the pieces of the untracked
+//! step `ekf_part_trig`, `ekf_part_terms`, `ekf_part_predict`, `ekf_part_innovation`,
+//! `ekf_part_correct` (the cost map in the ekf-core README), the peers `flux_step` (the flux observer + PLL baseline) and
 //! `ekf_step_generic` (the generic `Ekf` on the same model, no safeguards or tracking), and
 //! `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
 //! `ekf_core::trig`), and `foc_tick` (the full controller tick in sensorless closed loop, with
@@ -37,7 +40,7 @@
 //! below base speed), `foc_tick_hfi` and `foc_tick_hfi_blend` (the same motor at standstill
 //! on high-frequency injection, and in its hand-over band to the observer), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
 //! sequence; its line gives the **worst** tick, `identify_tick_median` the median; see
-//! [`identify`]). To add one, call [`meter::Clock::measure`] with its name.
+//! [`identify`]). To add one, count calls with [`meter::Clock::count`] into a [`meter::Tally`] and report it under its name (or call [`meter::Clock::measure`]).
 #![no_std]
 #![no_main]
 
@@ -52,6 +55,7 @@ use core::panic::PanicInfo;
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use cortex_m_semihosting::{debug, heprintln, hprintln};
 use ekf_core::nalgebra::Vector2;
+use ekf_core::observer::parts::Parts;
 use ekf_core::{
     CovarianceUpdate, Discretization, Ekf, EkfError, Estimate, FluxObserver, FluxObserverConfig,
     MotorParams, ObserverConfig, PmsmModel, PmsmObserver, wrap_angle,
@@ -94,6 +98,11 @@ struct Variant {
 }
 
 fn run() -> Result<(), &'static str> {
+    // Built with `EKF_PROFILE=default` (or `untracked`) in the environment, the firmware only
+    // runs 1500 steps of that observer and exits: the run `profile_step.py` traces.
+    if let Some(which) = option_env!("EKF_PROFILE") {
+        return profile_run(which);
+    }
     let cp = cortex_m::Peripherals::take().ok_or("core peripherals already taken")?;
     let clock =
         Clock::start(cp.SYST).map_err(|CalibrationError::NotLinear { first, second }| {
@@ -147,6 +156,58 @@ fn run() -> Result<(), &'static str> {
                 MotorParams::salient_from_f64(2.875, 0.7 * 8.5e-3, 8.5e-3, 0.175, 4),
                 TS_S,
             ),
+            max_angle_err_deg: 1.0,
+            max_speed_err: 0.005,
+            checked: true,
+        },
+        Variant {
+            // The untracked step without the three safeguards (gate, branch check, health):
+            // the filter alone; the safeguards' cost is the difference to
+            // `ekf_step_untracked` (cost map: ekf-core README).
+            name: "ekf_step_bare",
+            cfg: ObserverConfig {
+                parameter_tracking: None,
+                innovation_gate: None,
+                branch_check: None,
+                covariance_health: None,
+                ..default
+            },
+            max_angle_err_deg: 1.0,
+            max_speed_err: 0.005,
+            checked: true,
+        },
+        Variant {
+            name: "ekf_step_bare_gate",
+            cfg: ObserverConfig {
+                parameter_tracking: None,
+                branch_check: None,
+                covariance_health: None,
+                ..default
+            },
+            max_angle_err_deg: 1.0,
+            max_speed_err: 0.005,
+            checked: true,
+        },
+        Variant {
+            name: "ekf_step_bare_branch",
+            cfg: ObserverConfig {
+                parameter_tracking: None,
+                innovation_gate: None,
+                covariance_health: None,
+                ..default
+            },
+            max_angle_err_deg: 1.0,
+            max_speed_err: 0.005,
+            checked: true,
+        },
+        Variant {
+            name: "ekf_step_bare_health",
+            cfg: ObserverConfig {
+                parameter_tracking: None,
+                innovation_gate: None,
+                branch_check: None,
+                ..default
+            },
             max_angle_err_deg: 1.0,
             max_speed_err: 0.005,
             checked: true,
@@ -207,16 +268,25 @@ fn run() -> Result<(), &'static str> {
         ok = false;
     }
 
+    // The pieces of the untracked step, one at a time (cost map: ekf-core README).
+    parts(&clock, &data, &default)?;
+
     // The peers, on the same data: the flux observer + PLL baseline (the estimator of open
     // firmware) and the generic nalgebra `Ekf` driven by the same model as `ekf_step_untracked`
     // (no safeguards, no tracking: the cost of the plain textbook filter).
     peers(&clock, &data, &default)?;
 
     // The observer's f32 sine/cosine (ekf_core::trig; libm's sincosf would compute in f64).
-    clock.measure("sin_cos_f32", SAMPLES, |k| {
-        let th = data.get(k).map_or(0.0, |s| s.theta_rad);
-        black_box(ekf_core::trig::sin_cos_f32(black_box(th)));
-    });
+    // The closure reads the angle and writes the result through its captures (as the step
+    // lines do): no indexing or `black_box` stack round trip is counted with the function.
+    let mut trig = Tally::new();
+    let mut sc = (0.0f32, 0.0f32);
+    for s in &data {
+        let th = s.theta_rad;
+        trig.push(clock.count(&mut || sc = ekf_core::trig::sin_cos_f32(th)));
+        black_box(sc);
+    }
+    trig.report("sin_cos_f32");
 
     // The full controller tick (foc), sensorless closed loop on an on-target plant.
     drive::run(&clock)?;
@@ -235,6 +305,24 @@ fn run() -> Result<(), &'static str> {
     } else {
         Err("an observer did not converge (see above)")
     }
+}
+
+/// 1500 steps of the default observer (`which == "untracked"`: without the tracking) on the
+/// synthetic run, for an execution trace (`crates/foc-firmware/profile_step.py`).
+fn profile_run(which: &str) -> Result<(), &'static str> {
+    let mut data = [Sample::default(); SAMPLES];
+    synth::generate(&mut data);
+    let mut cfg = ObserverConfig::new(MotorParams::servo(), TS_S);
+    if which == "untracked" {
+        cfg.parameter_tracking = None;
+    }
+    let mut obs = PmsmObserver::new(&cfg).map_err(|_| "invalid observer config")?;
+    let mut u_prev = [0.0; 2];
+    for s in data.iter().take(1500) {
+        let _ = black_box(obs.step(black_box(u_prev), black_box(s.i)));
+        u_prev = s.u;
+    }
+    Ok(())
 }
 
 /// Runs one configuration over the data, counting instructions per `step`; prints the final
@@ -343,6 +431,65 @@ fn peers(
     if failures > 0 {
         hprintln!("flux_step/ekf_step_generic: {} calls failed", failures);
         return Err("a peer's step failed");
+    }
+    Ok(())
+}
+
+/// The pieces of the untracked default step on a surface motor, each counted on a copy of
+/// the observer's state before the sample (`ekf_core::observer::parts`, not counted), then the
+/// observer steps (not counted): `ekf_part_trig` (sine and cosine of the angle),
+/// `ekf_part_terms` (trig, EMF gain `G(w)`, EMF term and Jacobian entries), `ekf_part_predict`
+/// (the terms, the predicted state and covariance), `ekf_part_innovation` (`S`, its inverse,
+/// innovation, NIS), `ekf_part_correct` (the whole correction: innovation, gain, state and
+/// Joseph covariance update, finiteness check).
+fn parts(
+    clock: &Clock,
+    data: &[Sample; SAMPLES],
+    default: &ObserverConfig<f32>,
+) -> Result<(), &'static str> {
+    let cfg = ObserverConfig {
+        parameter_tracking: None,
+        ..*default
+    };
+    let mut obs = PmsmObserver::new(&cfg).map_err(|_| "invalid untracked config")?;
+    let mut tallies = [(); 5].map(|_| Tally::new());
+    let mut u_prev = [0.0; 2];
+    let mut failures = 0u32;
+    for s in data {
+        let parts = Parts::new(&obs);
+        let [trig, terms, predict, innovation, correct] = &mut tallies;
+        trig.push(clock.count(&mut || {
+            black_box(black_box(&parts).trig());
+        }));
+        terms.push(clock.count(&mut || {
+            black_box(black_box(&parts).terms(black_box(u_prev)));
+        }));
+        predict.push(clock.count(&mut || {
+            black_box(black_box(&parts).predict(black_box(u_prev)));
+        }));
+        let mut ok = true;
+        innovation.push(clock.count(&mut || {
+            ok &= black_box(black_box(&parts).innovation(black_box(s.i))).is_some();
+        }));
+        correct.push(clock.count(&mut || {
+            ok &= black_box(black_box(&parts).correct(black_box(s.i))).is_some();
+        }));
+        failures += u32::from(!ok) + u32::from(obs.step(u_prev, s.i).is_err());
+        u_prev = s.u;
+    }
+    let names = [
+        "ekf_part_trig",
+        "ekf_part_terms",
+        "ekf_part_predict",
+        "ekf_part_innovation",
+        "ekf_part_correct",
+    ];
+    for (t, name) in tallies.iter().zip(names) {
+        t.report(name);
+    }
+    if failures > 0 {
+        hprintln!("ekf_part_*: {} calls failed", failures);
+        return Err("a part of the step failed");
     }
     Ok(())
 }

@@ -208,6 +208,16 @@ impl<T: Float> PmsmModel<T> {
         }
     }
 
+    /// [`discrete_at`](Self::discrete_at) from the constants `at_rs` it returned for the same
+    /// `rs`: only the flux's `c` is recomputed (bit for bit the same result).
+    #[inline(always)]
+    pub(crate) fn discrete_with_flux(&self, at_rs: &Discrete<T>, psi_f: T) -> Discrete<T> {
+        Discrete {
+            c: psi_f * self.disc.inv_ls,
+            ..*at_rs
+        }
+    }
+
     /// The back-EMF term of the step from `(i_a, i_b, th, w)` and the input `u`, and its
     /// derivatives (module docs).
     #[inline(always)]
