@@ -206,7 +206,10 @@ fn a_custom_controller_can_open_the_bridge() {
 /// reversal), final speed -999.5 rpm, settled speed error 0.54 rpm RMS, foc observer after
 /// the hand-over 0.078 deg RMS, 0.391 deg max, +0.003 deg mean over 1.516 s. The bounds
 /// below are those values with a margin of about 1.5x (the run is deterministic; the margin
-/// absorbs a last-digit change of the float math, not a regression).
+/// absorbs a last-digit change of the float math, not a regression). A last-digit change
+/// moves the run onto another noise path, so the mean's bound covers its spread over noise
+/// seeds: with the minimax `sin_cos_f32`, seeds 1-8 give -0.012 to +0.003 deg (seed 1:
+/// -0.012, RMS 0.079, max 0.511 deg), hence 0.025 deg (the issues' bias goal is 0.1).
 #[test]
 fn default_scenario_runs_foc_sensorless_through_the_job() {
     let sc = Scenario::default_servo();
@@ -233,7 +236,7 @@ fn default_scenario_runs_foc_sensorless_through_the_job() {
     assert!(cl.window_s > 1.45, "{cl:?}");
     assert!(cl.angle_error_rms_deg < 0.12, "{cl:?}");
     assert!(cl.angle_error_max_deg < 0.6, "{cl:?}");
-    assert!(cl.angle_error_mean_deg.abs() < 0.01, "{cl:?}");
+    assert!(cl.angle_error_mean_deg.abs() < 0.025, "{cl:?}");
     assert!(m.controller_observer.is_some());
     // The first samples: foc aligns with the PWM on; its state is in the telemetry.
     let s = &out.trace.samples;
