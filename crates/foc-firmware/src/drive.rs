@@ -18,6 +18,33 @@ const U_DC_V: f32 = 300.0;
 const SPEED_REF_MECH_RAD_S: f32 = 104.719_76; // 1000 rpm
 const TICKS: u32 = 24_000; // 1.2 s
 
+/// Markers around the counted closed-loop ticks of [`run`] for an instruction trace
+/// (feature `trace`; `crates/foc-firmware/trace_tick.py` reads QEMU's execution log between
+/// a `begin` that was passed `true` and the next `end`).
+#[cfg(feature = "trace")]
+pub mod trace {
+    /// Start of a tick; `on`: the tick is to be traced.
+    #[inline(never)]
+    pub fn begin(on: bool) {
+        if on {
+            on_mark();
+        }
+    }
+
+    #[inline(never)]
+    fn on_mark() {
+        // SAFETY: a no-op instruction; it only gives the marker an address of its own.
+        unsafe { core::arch::asm!("nop", "nop", options(nomem, nostack)) };
+    }
+
+    /// End of a tick.
+    #[inline(never)]
+    pub fn end() {
+        // SAFETY: as above.
+        unsafe { core::arch::asm!("nop", "nop", "nop", options(nomem, nostack)) };
+    }
+}
+
 /// Servo motor of design.md section 6 with its mechanics.
 struct Plant {
     ia: f32,
@@ -83,6 +110,13 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
     // Duties computed at tick k are applied over the next period.
     let mut pending = ([0.5_f32; 3], false);
     let mut tallies = [Tally::new(), Tally::new(), Tally::new(), Tally::new()];
+    // The closed-loop tick split in two: its observer step, counted again on a copy of the
+    // observer with the tick's own inputs, and the rest (tick minus that step).
+    let (mut obs_tally, mut rest_tally) = (Tally::new(), Tally::new());
+    let mut obs_mismatch = 0u32;
+    // Realized voltages of ticks k-1 and k-2 (the tick's observer input with the one-period
+    // delay is the older one).
+    let mut u_hist = [AlphaBeta::default(); 2];
     let mut closed_loop_at = None;
     for k in 0..TICKS {
         let abc = AlphaBeta {
@@ -92,9 +126,32 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
         .to_abc();
         let input = TickInput::abc(abc.a, abc.b, abc.c, U_DC_V);
         let state = foc.state();
+        // The observer as the tick finds it, stepped with the tick's inputs (closed loop,
+        // undamped run): the same code path, so the same count; its estimate is checked
+        // against the tick's bit for bit.
+        let split = !damped && state == State::ClosedLoop;
+        let mut obs_copy = split.then(|| foc.observer().clone());
+        let i_ab = abc.to_alpha_beta();
+        let (u_prev, i_obs) = ([u_hist[1].alpha, u_hist[1].beta], [i_ab.alpha, i_ab.beta]);
+        let mut obs_est = None;
+        let n_obs = obs_copy
+            .as_mut()
+            .map(|o| clock.count(&mut || obs_est = o.step(u_prev, i_obs).ok()));
         let mut out = None;
+        #[cfg(feature = "trace")]
+        trace::begin(state == State::ClosedLoop && !damped);
         let n = clock.count(&mut || out = Some(foc.tick(&input)));
+        #[cfg(feature = "trace")]
+        trace::end();
         let out = out.ok_or("tick produced no output")?;
+        u_hist = [out.telemetry.u_ab, u_hist[0]];
+        if let Some(n_obs) = n_obs {
+            if obs_est != Some(out.telemetry.estimate) {
+                obs_mismatch += 1;
+            }
+            obs_tally.push(n_obs);
+            rest_tally.push(n.saturating_sub(n_obs));
+        }
         let slot = match state {
             State::Align => Some(0),
             State::OpenLoop => Some(1),
@@ -134,9 +191,18 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
         tallies[2].report("foc_tick_handover_damped");
     } else {
         tallies[3].report("foc_tick");
+        obs_tally.report("foc_tick_observer");
+        rest_tally.report("foc_tick_rest");
         tallies[0].report("foc_tick_align");
         tallies[1].report("foc_tick_openloop");
         tallies[2].report("foc_tick_handover");
+        if obs_mismatch > 0 {
+            hprintln!(
+                "foc_tick_observer: the copy's estimate differed from the tick's {} times",
+                obs_mismatch
+            );
+            return Err("the observer split of foc_tick does not reproduce the tick's step");
+        }
     }
     if closed_loop_at.is_none() || foc.state() != State::ClosedLoop {
         return Err("the drive did not reach sensorless closed loop");
