@@ -93,7 +93,7 @@ pub fn sqrt(x: f32) -> f32 {
 /// returned inline, as `wrap_angle`'s own first test does, without the call.
 #[inline]
 pub fn wrap(x: f32) -> f32 {
-    if x >= -PI && x < PI {
+    if (-PI..PI).contains(&x) {
         return x;
     }
     ekf_core::wrap_angle(x)
