@@ -21,6 +21,63 @@ const U_DC_V: f32 = 300.0;
 const SPEED_REF_MECH_RAD_S: f32 = 104.719_76; // 1000 rpm
 const TICKS: u32 = 24_000; // 1.2 s
 
+/// Markers around the counted closed-loop ticks of [`run`] for an instruction trace
+/// (feature `trace`; `crates/foc-firmware/trace_tick.py` reads QEMU's execution log between
+/// a `begin` that was passed `true` and the next `end`).
+#[cfg(feature = "trace")]
+pub mod trace {
+    /// Start of a tick; `on`: the tick is to be traced.
+    #[inline(never)]
+    pub fn begin(on: bool) {
+        if on {
+            on_mark();
+        }
+    }
+
+    #[inline(never)]
+    fn on_mark() {
+        // SAFETY: a no-op instruction; it only gives the marker an address of its own.
+        unsafe { core::arch::asm!("nop", "nop", options(nomem, nostack)) };
+    }
+
+    /// End of a tick.
+    #[inline(never)]
+    pub fn end() {
+        // SAFETY: as above.
+        unsafe { core::arch::asm!("nop", "nop", "nop", options(nomem, nostack)) };
+    }
+}
+
+/// What the drive keeps of a tick's output, as an interrupt handler would: the duties, the
+/// PWM enable, state and fault, and the few telemetry values the runs check. Taken inside
+/// the counted call; keeping the whole 116-byte `TickOutput` in a captured place instead
+/// adds a `memcpy` of it, about 117 instructions, to every count (as before this struct).
+#[derive(Clone, Copy, Debug, Default)]
+struct Used {
+    duties: [f32; 3],
+    pwm_enabled: bool,
+    state: State,
+    fault: Option<foc::Fault>,
+    u_ab: AlphaBeta,
+    i_d_ref: f32,
+    theta_rad: f32,
+}
+
+impl From<TickOutput> for Used {
+    #[inline(always)]
+    fn from(o: TickOutput) -> Self {
+        Self {
+            duties: o.duties,
+            pwm_enabled: o.pwm_enabled,
+            state: o.state,
+            fault: o.fault,
+            u_ab: o.telemetry.u_ab,
+            i_d_ref: o.telemetry.i_dq_ref.d,
+            theta_rad: o.telemetry.theta_rad,
+        }
+    }
+}
+
 /// An on-target plant: the phase currents it shows the controller, and one period of it under
 /// a held alpha-beta voltage (`on`: PWM enabled; off, the currents are zero).
 trait DrivePlant {
@@ -63,19 +120,32 @@ impl<P: DrivePlant> Drive<P> {
         })
     }
 
-    /// One measured `tick` on the plant's currents: its instruction count and output.
-    fn tick(&mut self, clock: &Clock) -> Result<(u32, TickOutput), &'static str> {
+    /// The tick's input: the plant's currents as three phase readings.
+    fn input(&self) -> TickInput {
         let abc = self.plant.i_ab().to_abc();
-        let input = TickInput::abc(abc.a, abc.b, abc.c, self.u_dc_v);
+        TickInput::abc(abc.a, abc.b, abc.c, self.u_dc_v)
+    }
+
+    /// One measured `tick` on the plant's currents: its instruction count and what an
+    /// interrupt handler keeps of its output ([`Used`]). `traced`: between the markers of
+    /// the instruction trace (feature `trace`).
+    fn tick(&mut self, clock: &Clock, traced: bool) -> (u32, Used) {
+        let input = self.input();
         let foc = &mut self.foc;
-        let mut out = None;
-        let n = clock.count(&mut || out = Some(foc.tick(&input)));
-        Ok((n, out.ok_or("tick produced no output")?))
+        let mut out = Used::default();
+        #[cfg(feature = "trace")]
+        trace::begin(traced);
+        #[cfg(not(feature = "trace"))]
+        let _ = traced;
+        let n = clock.count(&mut || out = Used::from(foc.tick(&input)));
+        #[cfg(feature = "trace")]
+        trace::end();
+        (n, out)
     }
 
     /// Ends period `k`: `Err` on a fault, else the plant runs one period on the duties of
     /// the tick before.
-    fn advance(&mut self, out: &TickOutput, k: u32) -> Result<(), &'static str> {
+    fn advance(&mut self, out: &Used, k: u32) -> Result<(), &'static str> {
         if out.fault.is_some() {
             hprintln!(
                 "{}: fault {:?} at tick {}",
@@ -163,10 +233,37 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
     let names = ("foc_tick", "the drive faulted");
     let mut drive = Drive::start(foc, plant, U_DC_V, SPEED_REF_MECH_RAD_S, names)?;
     let mut tallies = [Tally::new(), Tally::new(), Tally::new(), Tally::new()];
+    // The closed-loop tick split in two: its observer step, counted again on a copy of the
+    // observer with the tick's own inputs, and the rest (tick minus that step).
+    let (mut obs_tally, mut rest_tally) = (Tally::new(), Tally::new());
+    let mut obs_mismatch = 0u32;
+    // Realized voltages of ticks k-1 and k-2 (the tick's observer input with the one-period
+    // delay is the older one).
+    let mut u_hist = [AlphaBeta::default(); 2];
     let mut closed_loop_at = None;
     for k in 0..TICKS {
         let state = drive.foc.state();
-        let (n, out) = drive.tick(clock)?;
+        // The observer as the tick finds it, stepped with the tick's inputs (closed loop,
+        // undamped run): the same code path, so the same count; the copy is checked to end
+        // where the tick's observer does, bit for bit.
+        let split = !damped && state == State::ClosedLoop;
+        let mut obs_copy = split.then(|| drive.foc.observer().clone());
+        let i_ab = drive.plant.i_ab().to_abc().to_alpha_beta();
+        let (u_prev, i_obs) = ([u_hist[1].alpha, u_hist[1].beta], [i_ab.alpha, i_ab.beta]);
+        let n_obs = obs_copy.as_mut().map(|o| {
+            clock.count(&mut || {
+                let _ = o.step(u_prev, i_obs);
+            })
+        });
+        let (n, out) = drive.tick(clock, split);
+        u_hist = [out.u_ab, u_hist[0]];
+        if let Some(n_obs) = n_obs {
+            if obs_copy.as_ref() != Some(drive.foc.observer()) {
+                obs_mismatch += 1;
+            }
+            obs_tally.push(n_obs);
+            rest_tally.push(n.saturating_sub(n_obs));
+        }
         let slot = match state {
             State::Align => Some(0),
             State::OpenLoop => Some(1),
@@ -199,9 +296,18 @@ fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
         tallies[2].report("foc_tick_handover_damped");
     } else {
         tallies[3].report("foc_tick");
+        obs_tally.report("foc_tick_observer");
+        rest_tally.report("foc_tick_rest");
         tallies[0].report("foc_tick_align");
         tallies[1].report("foc_tick_openloop");
         tallies[2].report("foc_tick_handover");
+        if obs_mismatch > 0 {
+            hprintln!(
+                "foc_tick_observer: the copy's estimate differed from the tick's {} times",
+                obs_mismatch
+            );
+            return Err("the observer split of foc_tick does not reproduce the tick's step");
+        }
     }
     if closed_loop_at.is_none() || foc.state() != State::ClosedLoop {
         return Err("the drive did not reach sensorless closed loop");
@@ -292,13 +398,13 @@ pub fn run_ipm(clock: &Clock) -> Result<(), &'static str> {
     let mut weakened = false;
     for k in 0..IPM_TICKS {
         let state = drive.foc.state();
-        let (n, out) = drive.tick(clock)?;
+        let (n, out) = drive.tick(clock, false);
         if state == State::ClosedLoop {
             let w = drive.plant.w_mech;
             if w > 1.5 * base_mech {
                 fw.push(n);
                 // Field weakening engaged: a d current well beyond the MTPA one.
-                weakened |= out.telemetry.i_dq_ref.d < -3.0;
+                weakened |= out.i_d_ref < -3.0;
             } else if w < 0.9 * base_mech && w > 0.2 * base_mech {
                 mtpa.push(n);
             }
@@ -358,11 +464,11 @@ pub fn run_ipm_hfi(clock: &Clock) -> Result<(), &'static str> {
                 .map_err(|_| "speed reference refused")?;
         }
         let status = drive.foc.hfi_status().ok_or("hfi off")?;
-        let (n, out) = drive.tick(clock)?;
+        let (n, out) = drive.tick(clock, false);
         if status.phase == HfiPhase::Tracking && out.state == State::ClosedLoop {
             if status.observer_weight == 0.0 && status.injecting {
                 alone.push(n);
-                let e = foc::trig::wrap(out.telemetry.theta_rad - drive.plant.th).abs();
+                let e = foc::trig::wrap(out.theta_rad - drive.plant.th).abs();
                 worst_deg = if e * 57.3 > worst_deg {
                     e * 57.3
                 } else {

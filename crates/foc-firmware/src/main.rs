@@ -34,8 +34,8 @@
 //! `ekf_step_generic` (the generic `Ekf` on the same model, no safeguards or tracking), and
 //! `sin_cos_f32` (the observer's pure-`f32` sine/cosine,
 //! `ekf_core::trig`), and `foc_tick` (the full controller tick in sensorless closed loop, with
-//! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states; see
-//! [`drive`]), `foc_tick_ipm` (the tick on an interior PMSM in closed loop with MTPA and
+//! `foc_tick_align`, `foc_tick_openloop`, `foc_tick_handover` for the start-up states, and the closed-loop tick split into
+//! `foc_tick_observer`, its observer step, and `foc_tick_rest`, the rest; see [`drive`]), `foc_tick_ipm` (the tick on an interior PMSM in closed loop with MTPA and
 //! field weakening engaged, at 1.5-2x base speed) and `foc_tick_ipm_mtpa` (the same motor
 //! below base speed), `foc_tick_hfi` and `foc_tick_hfi_blend` (the same motor at standstill
 //! on high-frequency injection, and in its hand-over band to the observer), and `identify_tick` (`foc::Identifier::tick` over the whole self-commissioning
@@ -114,6 +114,11 @@ fn run() -> Result<(), &'static str> {
             "instruction counter not linear: run QEMU with -icount shift=10"
         })?;
 
+    // The trace build (feature `trace`, `trace_tick.py`) runs the surface drive only.
+    #[cfg(feature = "trace")]
+    return drive::run(&clock);
+
+    #[cfg_attr(feature = "trace", allow(unreachable_code))]
     let mut data = [Sample::default(); SAMPLES];
     synth::generate(&mut data);
     hprintln!(

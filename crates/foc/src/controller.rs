@@ -133,9 +133,11 @@
 //!
 //! # Cost
 //!
-//! Besides the observer step, a tick evaluates three sine/cosine pairs in the common case
-//! (Park, inverse Park, plus none for the health checks), no square root unless the voltage
-//! limit is active, and no `f64`.
+//! Besides the observer step, a tick evaluates one sine/cosine pair in the common case (Park;
+//! the inverse Park and the dead-time compensation turn it by the advance with a short
+//! series), one division (SVPWM), no square root unless the voltage limit is active, and no
+//! `f64`. Counted on the Cortex-M4F and mapped part by part: the crate README, "Cost on the
+//! Cortex-M4F".
 
 use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{Estimate, PmsmObserver};

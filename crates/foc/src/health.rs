@@ -161,6 +161,9 @@ impl HealthMonitor {
     }
 
     /// One tick: the estimate, whether the observer's step succeeded, and the reference.
+    /// Inlined into the tick (once per tick, from the sequencer): the report then stays in
+    /// registers instead of going through memory.
+    #[inline(always)]
     pub(crate) fn update(
         &mut self,
         est: &Estimate<f32>,

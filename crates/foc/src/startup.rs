@@ -766,6 +766,7 @@ impl Sequencer {
     /// The speed loop, every `speed_divider` ticks: slews the reference toward the command
     /// and runs the PI on the measured mechanical speed; the output is the q current
     /// reference, limited to `+-current_limit_a`.
+    #[inline(always)]
     fn speed_loop(&mut self, cfg: &FocConfig, omega_mech: f32) {
         self.v.div = self.v.div.saturating_add(1);
         if self.v.div < cfg.speed_divider {

@@ -22,6 +22,7 @@ use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 ///
 /// A non-finite `x` gives `(0, 1)` (angle zero) rather than NaN, so that a bad value cannot
 /// reach the PWM through a rotation.
+#[inline]
 pub fn sin_cos(x: f32) -> (f32, f32) {
     if !x.is_finite() {
         return (0.0, 1.0);
@@ -88,14 +89,20 @@ pub fn sqrt(x: f32) -> f32 {
 }
 
 /// Wraps an angle to `[-pi, pi)`: [`ekf_core::wrap_angle`] (a single fold for angles at most
-/// one turn out of range). NaN stays NaN.
+/// one turn out of range). NaN stays NaN. An angle already in range (the common case) is
+/// returned inline, as `wrap_angle`'s own first test does, without the call.
+#[inline]
 pub fn wrap(x: f32) -> f32 {
+    if (-PI..PI).contains(&x) {
+        return x;
+    }
     ekf_core::wrap_angle(x)
 }
 
 /// `(sin d, cos d)` for a small angle: Taylor series through `d^7` / `d^8` for `|d| <= 0.5`
 /// (truncation below 6e-9), [`sin_cos`] otherwise. About a fifth of the cost of [`sin_cos`]; used
 /// for the inverse-Park angle advance `1.5 w Ts`.
+#[inline]
 pub fn sin_cos_small(d: f32) -> (f32, f32) {
     if !at_most(d.abs(), 0.5) {
         return sin_cos(d);
