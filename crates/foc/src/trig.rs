@@ -7,7 +7,7 @@
 //!
 //! | function | method | max abs. error |
 //! |---|---|---|
-//! | [`sin_cos`] | `ekf_core::trig::sin_cos_f32`: quadrant reduction, Taylor kernels on `[-pi/4, pi/4]`; `(0, 1)` for a non-finite `x` | 1.2e-7 for `|x| <= 8 pi` |
+//! | [`sin_cos`] | `ekf_core::trig::sin_cos_f32`: branch-free quadrant reduction, minimax kernels on `[-pi/4, pi/4]`; `(0, 1)` for a non-finite `x` | 1.2e-7 for `|x| <= 8 pi` (ekf-core measures 8.6e-8 for its kernel) |
 //! | [`atan2`] | octant reduction, Cephes `atanf` kernel | 3e-7 rad |
 //! | [`sin_cos_small`] | `ekf_core::trig::sin_cos_small` for `|d| < 0.5`, [`sin_cos`] beyond | 1.2e-7 |
 //! | [`sqrt`] | bit-level first guess, three Newton steps | 1 ulp-ish (relative 1.2e-7) |
