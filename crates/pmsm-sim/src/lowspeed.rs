@@ -110,7 +110,7 @@ fn foc_config(sc: &Scenario) -> Result<foc::FocConfig, SimError> {
 
 /// The current vector magnitude that makes the rated torque of `sc`'s motor, A.
 pub fn rated_torque_current_a(sc: &Scenario) -> Result<f64, SimError> {
-    let cfg = foc_config(&sc)?;
+    let cfg = foc_config(sc)?;
     let kt = cfg.torque_constant_nm_a();
     let i = foc::Mtpa::new(&cfg.motor).currents_for_torque(sc.rated_torque_nm as f32 / kt);
     Ok(f64::from(i.d.hypot(i.q)))
