@@ -139,7 +139,7 @@ pub struct StartupConfig {
     /// Time over which the d current of the I/f vector is faded out after the hand-over, s.
     pub blend_time_s: f32,
     /// Closed loop returns to I/f when the speed reference falls below
-    /// `exit_speed_ratio * handover_speed_rad_s` (hysteresis; in `[0.05, 0.99]`); with
+    /// `exit_speed_ratio * handover_speed_rad_s` (hysteresis; in `[0.01, 0.99]`); with
     /// [`Reversal::ClosedLoop`] only for a stop or a reference that stays there.
     pub exit_speed_ratio: f32,
     /// How a reversal passes through zero speed ([`Reversal::ClosedLoop`] by default).
@@ -611,7 +611,7 @@ impl FocConfig {
             return Err(ConfigError::OutOfRange(F::HandoverSpeed));
         }
         in_range(s.blend_time_s, 0.0, 60.0, F::BlendTime)?;
-        in_range(s.exit_speed_ratio, 0.05, 0.99, F::ExitSpeedRatio)?;
+        in_range(s.exit_speed_ratio, 0.01, 0.99, F::ExitSpeedRatio)?;
         positive(s.acquire_timeout_s, F::AcquireTimeout)?;
         in_range(s.damping_ratio, 0.0, 5.0, F::DampingRatio)?;
         in_range(s.kick_speed_ratio, 0.0, 1.0, F::KickSpeedRatio)?;

@@ -16,7 +16,7 @@
 //! ```
 //!
 //! The exit speed of `foc` (below which closed loop returns to I/f for a slow command) is
-//! set to half the test speed (`exit_speed_ratio`, at least foc's floor of 0.05 of the
+//! set to half the test speed (`exit_speed_ratio`, at least foc's floor of 0.01 of the
 //! hand-over speed): the run asks whether the observer carries the loop there, not where the
 //! default hysteresis sits.
 //!
@@ -42,7 +42,7 @@ use crate::sim::{self, RunOptions, Sample, SampleSink};
 use crate::suite::SuiteMotor;
 
 /// Test speeds, % of rated, from the top.
-pub const SPEEDS_PCT: [f64; 7] = [10.0, 7.0, 5.0, 3.0, 2.0, 1.5, 1.0];
+pub const SPEEDS_PCT: [f64; 9] = [10.0, 7.0, 5.0, 3.0, 2.0, 1.5, 1.0, 0.7, 0.5];
 /// Time held at the test speed under rated load, s.
 pub const HOLD_S: f64 = 10.0;
 /// The mean speed over the window must lie within this fraction of the test speed.
@@ -90,11 +90,11 @@ pub fn scenario(motor: SuiteMotor, speed_pct: f64, hold_s: f64) -> Result<Scenar
     foc.start_time_s = 0.0;
     foc.stop_time_s = None;
     sc.controller.foc = Some(foc);
-    // The exit speed at half the test speed (foc's floor 0.05 of the hand-over speed).
+    // The exit speed at half the test speed (foc's floor 0.01 of the hand-over speed).
     let cfg = foc_config(&sc)?;
     let handover_rpm = f64::from(cfg.startup.handover_speed_rad_s) / f64::from(sc.motor.pole_pairs)
         * crate::scenario::RPM_PER_RAD_S;
-    foc.exit_speed_ratio = Some((0.5 * speed / handover_rpm).clamp(0.05, 0.7));
+    foc.exit_speed_ratio = Some((0.5 * speed / handover_rpm).clamp(0.01, 0.7));
     sc.controller.foc = Some(foc);
     Ok(sc)
 }

@@ -88,7 +88,7 @@ enum Command {
         #[arg(long, default_value = "out/suite")]
         out: PathBuf,
     },
-    /// Low-speed table: for each reference motor the lowest speed (of 10, 7, 5, 3, 2, 1.5, 1 %
+    /// Low-speed table: for each reference motor the lowest speed (of 10, 7, 5, 3, 2, 1.5, 1, 0.7, 0.5 %
     /// of rated) at which foc sensorless runs closed loop under rated load for 10 s without a
     /// fall-back, with its RMS current per rated-torque current (printed, and written as
     /// lowspeed.md and lowspeed.json).

@@ -150,7 +150,7 @@ pub struct FocSettings {
     /// `open_loop` (I/f below the exit speed).
     pub reversal: ReversalMode,
     /// Closed loop returns to I/f below this fraction of the hand-over speed (for a stop or
-    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.05, 0.99]`). Default foc's,
+    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default foc's,
     /// 0.7.
     pub exit_speed_ratio: Option<f64>,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:

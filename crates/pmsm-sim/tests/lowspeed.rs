@@ -3,9 +3,12 @@
 //! rated load for 10 s, without a fall-back, down to at most 2 % of rated speed, drawing at
 //! most 1.15 times the rated-torque current there.
 //!
-//! Measured (seed of each preset): every listed speed down to 1 % of rated passes on all
-//! three; current ratio at 1 %: servo 1.016, industrial 2.2 kW 1.010, small fast 1.001;
-//! mean speed at 1 %: 16.7 of 20 rpm, 15.1 of 15 rpm, 33.6 of 34.3 rpm.
+//! Measured (seed of each preset): lowest speed servo 0.7 % (14 rpm, current ratio 1.030;
+//! at 0.5 % it stays closed loop but runs at 6.4 of 10 rpm: the observer's speed is biased by
+//! about -3.5 rpm at every low speed), industrial 2.2 kW 1 % (15 rpm, 1.010; at 0.7 % the
+//! loop falls back to I/f after 1.65 s of the window and the I/f vector, 4 A against the 4.08 A of rated
+//! torque, cannot hold the load), small fast 0.5 % (17.1 rpm, 1.001; the bottom of the
+//! list).
 //! `cargo test --release -p pmsm-sim --test lowspeed -- --nocapture` prints the table.
 
 use pmsm_sim::lowspeed::{
