@@ -6,9 +6,9 @@
 //! Measured (seed of each preset): lowest speed servo 0.7 % (14 rpm, current ratio 1.030;
 //! at 0.5 % it stays closed loop but runs at 6.4 of 10 rpm: the observer's speed is biased by
 //! about -3.5 rpm at every low speed), industrial 2.2 kW 1 % (15 rpm, 1.010; at 0.7 % the
-//! loop falls back to I/f after 1.65 s of the window and the I/f vector, 4 A against the 4.08 A of rated
-//! torque, cannot hold the load), small fast 0.5 % (17.1 rpm, 1.001; the bottom of the
-//! list).
+//! loop falls back to I/f after 1.65 s of the window and the I/f vector, 4 A against the
+//! 4.08 A of rated torque, cannot hold the load), small fast 0.5 % (17.1 rpm, 1.001; the
+//! bottom of the list).
 //! `cargo test --release -p pmsm-sim --test lowspeed -- --nocapture` prints the table.
 
 use pmsm_sim::lowspeed::{
