@@ -218,6 +218,42 @@ fn observer_loss_falls_back_and_reacquires() {
     assert!((rig.plant.omega_mech() - 100.0).abs() < 3.0);
 }
 
+/// Safety of the closed-loop reversal: a loss while the reference passes through the exit
+/// band (where the drive now stays on the observer) still falls back to I/f, and the drive
+/// re-acquires in the new direction.
+#[test]
+fn observer_loss_near_zero_in_a_closed_loop_reversal_falls_back() {
+    let mut rig = closed_loop_at(100.0);
+    rig.run(0.2, |_, _| {});
+    let cfg = *rig.foc.config();
+    let exit_mech = cfg.startup.exit_speed_ratio * cfg.startup.handover_speed_rad_s
+        / cfg.motor.pole_pairs as f32;
+    rig.foc.set_speed_ref_mech_rad_s(-100.0).unwrap();
+    // Into the band, still in closed loop.
+    let mut k = 0;
+    loop {
+        let out = rig.step();
+        assert_eq!(out.state, State::ClosedLoop);
+        if out.telemetry.speed_ref_mech_rad_s.abs() < 0.5 * exit_mech {
+            break;
+        }
+        k += 1;
+        assert!(k < 20_000, "never reached the band");
+    }
+    rig.noise_a = 0.5;
+    let seen = visit(&mut rig, 0.05);
+    assert_eq!(seen, [State::ClosedLoop, State::OpenLoop]);
+    rig.noise_a = 0.04;
+    let seen = visit(&mut rig, 2.0);
+    assert_eq!(seen, [State::OpenLoop, State::Handover, State::ClosedLoop]);
+    assert!(rig.foc.fault().is_none());
+    assert!(
+        (rig.plant.omega_mech() + 100.0).abs() < 3.0,
+        "{}",
+        rig.plant.omega_mech()
+    );
+}
+
 #[test]
 fn observer_loss_trips_with_trip_policy() {
     let (mut cfg, _) = Rig::servo_default();
