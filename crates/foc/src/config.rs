@@ -36,6 +36,8 @@
 //! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` | hand-over speed in half a second |
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
+//! | `startup.exit_speed_ratio` | 0.7 | closed loop is left below 0.7 of the hand-over speed (hysteresis): a stop, a slow command |
+//! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
 //! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended) | as `damping_ratio` |
 //! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | |
@@ -91,6 +93,22 @@ impl ComputationDelay {
     }
 }
 
+/// How a reversal (a speed command of the other sign) passes through zero speed, sensorless
+/// (module [`startup`](crate::startup), "Closed loop, reversal, stop").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Reversal {
+    /// Stay in closed loop on the observer through zero: the EKF's model carries the angle
+    /// over the short interval in which the back-EMF vanishes. The speed reference keeps its
+    /// closed-loop slew rate; the drive leaves closed loop below the exit speed only for a
+    /// stop or a reference that stands still there (`startup::BAND_DWELL_S`), or when the
+    /// health monitor reports a loss (then it falls back to I/f as usual).
+    #[default]
+    ClosedLoop,
+    /// Leave closed loop below the exit speed, ramp the I/f vector through zero and hand over
+    /// again in the new direction (the classic sensorless reversal).
+    OpenLoop,
+}
+
 /// What to do when the observer is lost in closed loop.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ObserverLossPolicy {
@@ -121,8 +139,11 @@ pub struct StartupConfig {
     /// Time over which the d current of the I/f vector is faded out after the hand-over, s.
     pub blend_time_s: f32,
     /// Closed loop returns to I/f when the speed reference falls below
-    /// `exit_speed_ratio * handover_speed_rad_s` (hysteresis; in `(0, 1)`).
+    /// `exit_speed_ratio * handover_speed_rad_s` (hysteresis; in `[0.01, 0.99]`); with
+    /// [`Reversal::ClosedLoop`] only for a stop or a reference that stays there.
     pub exit_speed_ratio: f32,
+    /// How a reversal passes through zero speed ([`Reversal::ClosedLoop`] by default).
+    pub reversal: Reversal,
     /// Time allowed at the hand-over speed for the observer to lock, s; then the observer
     /// is re-seeded (a re-acquisition attempt), or a fault trips.
     pub acquire_timeout_s: f32,
@@ -387,6 +408,7 @@ impl FocConfig {
                 handover_speed_rad_s: handover,
                 blend_time_s: 20e-3,
                 exit_speed_ratio: 0.7,
+                reversal: Reversal::ClosedLoop,
                 acquire_timeout_s: 1.0,
                 damping_ratio: 0.0,
                 kick_speed_ratio: 0.0,
@@ -589,7 +611,7 @@ impl FocConfig {
             return Err(ConfigError::OutOfRange(F::HandoverSpeed));
         }
         in_range(s.blend_time_s, 0.0, 60.0, F::BlendTime)?;
-        in_range(s.exit_speed_ratio, 0.05, 0.99, F::ExitSpeedRatio)?;
+        in_range(s.exit_speed_ratio, 0.01, 0.99, F::ExitSpeedRatio)?;
         positive(s.acquire_timeout_s, F::AcquireTimeout)?;
         in_range(s.damping_ratio, 0.0, 5.0, F::DampingRatio)?;
         in_range(s.kick_speed_ratio, 0.0, 1.0, F::KickSpeedRatio)?;

@@ -17,7 +17,9 @@
 //!   (a stable load angle), so an estimate more than `lock_angle_rad` (default 135 deg) away
 //!   from the vector, or a speed estimate of the opposite sign to the ramp (beyond a quarter
 //!   of it), is the wrong solution; checked once the ramp is above half the hand-over speed.
-//!   In closed loop: the speed estimate has the opposite sign to the speed reference.
+//!   In closed loop: the speed estimate has the opposite sign to the speed reference, while
+//!   the reference is at or above the exit speed (inside that band a closed-loop reversal
+//!   passes through zero, and a rotor lagging its reference turns the other way for a moment).
 //! - **Tracked flux** (closed loop): the observer's tracked flux linkage outside
 //!   `flux_range` (default 0.7 to 1.3) times the configured one. Heat moves it by about 12 %
 //!   per 100 K; a fit beyond the range means the model no longer describes the motor (an
@@ -233,7 +235,10 @@ impl HealthMonitor {
                     None
                 } else if basic.is_some() {
                     basic
-                } else if wrong_way && w.abs() > 0.25 * self.exit_speed {
+                } else if wrong_way
+                    && w.abs() > 0.25 * self.exit_speed
+                    && speed_ref.abs() >= self.exit_speed
+                {
                     Some(LossReason::PiLock)
                 } else if !(est.psi_f_wb >= self.flux_lo && est.psi_f_wb <= self.flux_hi) {
                     Some(LossReason::FluxImplausible)

@@ -22,7 +22,7 @@ pub mod trig;
 
 pub use config::{
     ComputationDelay, ConfigError, Field, FieldWeakeningConfig, FocConfig, HealthConfig, Mode,
-    ObserverLossPolicy, SampleCheckConfig, StartupConfig,
+    ObserverLossPolicy, Reversal, SampleCheckConfig, StartupConfig,
 };
 pub use controller::{
     CommandError, Foc, PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput,

@@ -101,12 +101,29 @@
 //! # Closed loop, reversal, stop
 //!
 //! The speed loop (every `speed_divider` ticks) follows the command slewed at
-//! `speed_slew_rad_s2` (at `accel_rad_s2` while the reference is below the hand-over speed). Below `exit_speed_ratio * handover_speed` (default 0.7, hysteresis to the
-//! hand-over) the observer is no longer trusted, so the controller goes back to I/f: the new
-//! current vector of magnitude `I_f` is placed so that its torque component equals the last
-//! `i_q` reference (no torque jump), at the observer's speed. A reversal therefore runs
-//! closed loop -> I/f through zero -> hand-over in the new direction -> closed loop; a stop
-//! runs down the same way and turns the PWM off at zero ramp speed.
+//! `speed_slew_rad_s2` (at `accel_rad_s2` while the reference is below the hand-over speed,
+//! except in a closed-loop reversal). Below `exit_speed_ratio * handover_speed` (default 0.7,
+//! hysteresis to the hand-over) the observer is no longer trusted for a stop or a slow
+//! command, so the controller goes back to I/f: the new current vector of magnitude `I_f` is
+//! placed so that its torque component equals the last `i_q` reference (no torque jump), at
+//! the observer's speed. A stop runs down that way and turns the PWM off at zero ramp speed.
+//!
+//! A **reversal** (a reference passing through zero) depends on `startup.reversal`:
+//!
+//! - [`Reversal::ClosedLoop`] (default): the drive stays on the observer through zero, with
+//!   the reference at its closed-loop slew rate, as long as the reference keeps moving
+//!   through the exit band (or the command lies outside it); a reference that stands still
+//!   inside the band for [`BAND_DWELL_S`] (a slow or zero command) and a stop leave closed
+//!   loop as above. The EKF's angle is not observable at exactly
+//!   zero speed on a surface motor, but it is predicted by the model (the currents and the
+//!   rotor's motion it knows) over the few milliseconds of a pass under load, and the
+//!   back-EMF is observable again right after. The health monitor keeps watching (NIS,
+//!   speed consistency, covariance status, flux); only its wrong-direction check is
+//!   suspended while the reference is inside the exit band, where a rotor lagging its
+//!   reference by a few rpm legitimately turns the other way. A real loss still falls back
+//!   to I/f.
+//! - [`Reversal::OpenLoop`]: closed loop -> I/f through zero (below the exit speed) ->
+//!   hand-over in the new direction -> closed loop.
 //!
 //! # Observer loss
 //!
@@ -133,7 +150,7 @@ use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
 use ekf_core::{Estimate, Status};
 
-use crate::config::{FocConfig, Mode, ObserverLossPolicy};
+use crate::config::{FocConfig, Mode, ObserverLossPolicy, Reversal};
 use crate::fault::Fault;
 use crate::health::{HealthMonitor, HealthReport, Reference, ticks};
 use crate::pi::{Pi, limit};
@@ -163,6 +180,9 @@ const EMF_BLOCK_S: f32 = 0.005;
 const FLIP_SIGMA: f32 = 0.3;
 /// Lead of the launched current vector over the rotor's angle, rad el.
 const LAUNCH_LEAD_RAD: f32 = 1.0;
+/// A closed-loop reversal ([`Reversal::ClosedLoop`]) leaves closed loop once its reference
+/// has stood still inside the exit band this long (a slow or zero command, not a pass), s.
+pub const BAND_DWELL_S: f32 = 0.02;
 
 /// A control frame: angle (rad el.), speed (rad/s el.), and whether the back-EMF lies on its
 /// q axis (feed-forward on).
@@ -247,6 +267,8 @@ struct Vars {
     at_speed: u32,
     /// Ticks in closed loop.
     cl_ticks: u32,
+    /// Ticks the slewed speed reference has not moved.
+    still: u32,
     /// Re-acquisitions in a row.
     attempts: u8,
     /// d current of the ramp's vector at the hand-over, A.
@@ -294,6 +316,8 @@ pub(crate) struct Sequencer {
     blend_ticks: u32,
     acquire_ticks: u32,
     stall_ticks: u32,
+    /// [`BAND_DWELL_S`] in ticks.
+    dwell_ticks: u32,
     /// Gain of the damping, s (rad of vector angle per rad/s el. of speed error).
     k_damp: f32,
     /// Largest damping offset, rad el.
@@ -381,6 +405,7 @@ impl Sequencer {
             blend_ticks: ticks(cfg.startup.blend_time_s, ts),
             acquire_ticks: ticks(cfg.startup.acquire_timeout_s, ts),
             stall_ticks: ticks(cfg.health.stall_time_s, ts),
+            dwell_ticks: ticks(BAND_DWELL_S, ts),
             health: HealthMonitor::new(&cfg.health, ts, handover, exit_speed, cfg.motor.psi_f_wb),
             speed_pi: Pi::new(cfg.speed_pi_gains(), speed_ts),
             state: State::Idle,
@@ -475,6 +500,17 @@ impl Sequencer {
             Mode::Sensored => self.sensored(cfg, input.sensor),
             Mode::Sensorless => self.sensorless(cfg, input, reseed),
         }
+    }
+
+    /// Closed loop through the exit band ([`Reversal::ClosedLoop`], no stop requested): the
+    /// reference is still moving (a reversal or a speed change passing through), or the
+    /// command lies outside the band. A reference held inside the band for
+    /// [`BAND_DWELL_S`] (a slow or zero command) leaves closed loop as before.
+    #[inline(always)]
+    fn through_zero(&self, cfg: &FocConfig) -> bool {
+        cfg.startup.reversal == Reversal::ClosedLoop
+            && !self.v.stop_requested
+            && (self.v.still < self.dwell_ticks || self.target_e().abs() >= self.exit_speed)
     }
 
     fn target_e(&self) -> f32 {
@@ -666,7 +702,9 @@ impl Sequencer {
                             self.v.attempts = 0;
                         }
                     }
-                    if (self.v.speed_ref_mech * self.pole_pairs).abs() < self.exit_speed {
+                    if (self.v.speed_ref_mech * self.pole_pairs).abs() < self.exit_speed
+                        && !self.through_zero(cfg)
+                    {
                         reframe = Some(observer_frame(est));
                         self.enter_open_loop_from_closed(cfg, est, false, reseed);
                     }
@@ -783,13 +821,22 @@ impl Sequencer {
         // so that the rotor reaches the exit speed with a torque the I/f vector continues
         // smoothly.
         let slow = (self.v.speed_ref_mech * self.pole_pairs).abs() <= self.handover;
-        let rate = if slow && cfg.mode == Mode::Sensorless {
+        // (Through zero in closed loop the reference keeps its slew rate; the hand-over's own
+        // first step at the ramp speed stays at the I/f acceleration either way.)
+        let keep = self.through_zero(cfg) && self.state == State::ClosedLoop;
+        let rate = if slow && cfg.mode == Mode::Sensorless && !keep {
             cfg.startup.accel_rad_s2
         } else {
             cfg.speed_slew_rad_s2
         };
         let step = rate * self.inv_pole_pairs * cfg.ts_s * f32::from(cfg.speed_divider);
-        self.v.speed_ref_mech = slew(self.v.speed_ref_mech, target, step);
+        let moved = slew(self.v.speed_ref_mech, target, step);
+        self.v.still = if moved == self.v.speed_ref_mech {
+            self.v.still.saturating_add(u32::from(cfg.speed_divider))
+        } else {
+            0
+        };
+        self.v.speed_ref_mech = moved;
         // A torque command (surface-equivalent current, module `mtpa`): `current_limit_a`
         // for a surface motor.
         let lim = cfg.torque_current_limit_a();
@@ -958,6 +1005,7 @@ impl Sequencer {
         self.v.timer = 0;
         self.v.div = 0;
         self.v.cl_ticks = 0;
+        self.v.still = 0;
         self.v.saturated = false;
         self.v.speed_ref_mech = self.v.omega_ol * self.inv_pole_pairs;
         let err = self.v.speed_ref_mech - est.omega_e_rad_s * self.inv_pole_pairs;

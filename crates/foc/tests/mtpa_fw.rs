@@ -6,8 +6,8 @@
 
 use foc::ekf_core::MotorParams;
 use foc::{
-    ComputationDelay, ConfigError, Field, Foc, FocConfig, Mode, Mtpa, State, TickInput, TickOutput,
-    duties_to_alpha_beta,
+    ComputationDelay, ConfigError, Field, Foc, FocConfig, Mode, Mtpa, Reversal, State, TickInput,
+    TickOutput, duties_to_alpha_beta,
 };
 
 // ---------------------------------------------------------------------------------------
@@ -546,14 +546,21 @@ fn bad_field_weakening_settings_are_refused() {
 }
 
 /// Sensorless start-up, hand-over and reversal of both IPMSMs (the salient observer of
-/// ekf-core, MTPA on) from a rotor at rest at 1 rad, with a friction load.
+/// ekf-core, MTPA on) from a rotor at rest at 1 rad, with a friction load; the reversal
+/// through I/f (a second hand-over) and in closed loop (none, foc's default).
 #[test]
 fn salient_motors_start_hand_over_and_reverse_sensorless() {
-    for (d, delay) in drives()
-        .into_iter()
-        .flat_map(|d| [ComputationDelay::None, ComputationDelay::OnePeriod].map(|x| (d, x)))
-    {
+    for (d, delay, reversal) in drives().into_iter().flat_map(|d| {
+        [
+            (ComputationDelay::None, Reversal::OpenLoop),
+            (ComputationDelay::OnePeriod, Reversal::OpenLoop),
+            (ComputationDelay::None, Reversal::ClosedLoop),
+            (ComputationDelay::OnePeriod, Reversal::ClosedLoop),
+        ]
+        .map(|(x, r)| (d, x, r))
+    }) {
         let mut cfg = FocConfig::new(d.m, d.ts, d.u_dc).with_delay(delay);
+        cfg.startup.reversal = reversal;
         let mut pending = [0.5f32; 3];
         let lim = rated_current(&d.m);
         cfg.current_limit_a = lim;
@@ -616,13 +623,26 @@ fn salient_motors_start_hand_over_and_reverse_sensorless() {
         }
         let (e1, e2) = (err_fwd / n_fwd as f64, err_rev / n_rev as f64);
         println!(
-            "{} ({delay:?}): states {states:?}; mean |speed error| {:.3} % at 0.5x base, {:.3} % after the reversal to -0.3x base; observer angle error in closed loop up to {worst_angle:.4} deg",
+            "{} ({delay:?}, {reversal:?}): states {states:?}; mean |speed error| {:.3} % at 0.5x base, {:.3} % after the reversal to -0.3x base; observer angle error in closed loop up to {worst_angle:.4} deg",
             d.name,
             100.0 * e1,
             100.0 * e2
         );
         let visits = |s: State| states.iter().filter(|x| **x == s).count();
-        assert!(visits(State::Handover) >= 2, "{}: {states:?}", d.name);
+        match reversal {
+            Reversal::OpenLoop => assert!(visits(State::Handover) >= 2, "{}: {states:?}", d.name),
+            Reversal::ClosedLoop => assert_eq!(
+                states,
+                [
+                    State::Align,
+                    State::OpenLoop,
+                    State::Handover,
+                    State::ClosedLoop
+                ],
+                "{}",
+                d.name
+            ),
+        }
         assert_eq!(states.last(), Some(&State::ClosedLoop), "{}", d.name);
         assert!(e1 < 0.01 && e2 < 0.01, "{}: {e1} {e2}", d.name);
         assert!(worst_angle < 5.0, "{}: {worst_angle}", d.name);

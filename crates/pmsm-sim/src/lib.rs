@@ -9,6 +9,7 @@ pub mod faults;
 pub mod foc_drive;
 pub mod identify;
 pub mod inverter;
+pub mod lowspeed;
 pub mod mcap_log;
 pub mod metrics;
 pub mod observer;

@@ -88,6 +88,22 @@ enum Command {
         #[arg(long, default_value = "out/suite")]
         out: PathBuf,
     },
+    /// Low-speed table: for each reference motor the lowest speed (of 10, 7, 5, 3, 2, 1.5, 1, 0.7, 0.5 %
+    /// of rated) at which foc sensorless runs closed loop under rated load for 10 s without a
+    /// fall-back, with its RMS current per rated-torque current (printed, and written as
+    /// lowspeed.md and lowspeed.json).
+    LowSpeed {
+        /// Only this motor (repeatable): servo, industrial_2k2, small_fast, industrial_ipm,
+        /// traction_ipm. Default: the three surface motors.
+        #[arg(long = "motor", value_parser = parse_suite_motor)]
+        motors: Vec<SuiteMotor>,
+        /// Time held at each speed, s.
+        #[arg(long, default_value_t = pmsm_sim::lowspeed::HOLD_S)]
+        hold: f64,
+        /// Output directory.
+        #[arg(long, default_value = "out/lowspeed")]
+        out: PathBuf,
+    },
     /// Run the fault suite: every injected fault kind in closed loop with the foc sensorless
     /// controller; prints a markdown table and writes it to <out>/faults.md.
     Faults {
@@ -218,6 +234,7 @@ fn main() -> ExitCode {
             ideal,
             out,
         }) => suite(SuiteOptions { short, seed, ideal }, &motors, &out),
+        Some(Command::LowSpeed { motors, hold, out }) => low_speed_command(&motors, hold, &out),
         Some(Command::Faults {
             out,
             t_fault,
@@ -747,6 +764,38 @@ fn suite(opts: SuiteOptions, motors: &[SuiteMotor], out: &Path) -> Result<ExitCo
     std::fs::write(&md_path, &md).map_err(|e| out_err(&md_path, e))?;
     let json_path = out.join("suite.json");
     let json = serde_json::to_string_pretty(&report).map_err(|e| out_err(&json_path, e))?;
+    std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
+    println!("\noutputs: {} {}", md_path.display(), json_path.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `pmsm-sim low-speed` (module `pmsm_sim::lowspeed`): the table, printed and written to
+/// `out`. A missed goal is a result, not an error.
+fn low_speed_command(motors: &[SuiteMotor], hold: f64, out: &Path) -> Result<ExitCode, SimError> {
+    use pmsm_sim::lowspeed::{SPEEDS_PCT, run_motor, to_markdown};
+    if !(hold.is_finite() && hold > 0.0) {
+        return Err(SimError::Scenario {
+            file: "command line".into(),
+            field: "--hold".into(),
+            problem: format!("must be a positive time in s, is {hold}"),
+        });
+    }
+    let motors = if motors.is_empty() {
+        &SuiteMotor::SURFACE[..]
+    } else {
+        motors
+    };
+    let mut rows = vec![];
+    for &m in motors {
+        rows.push(run_motor(m, &SPEEDS_PCT, hold)?);
+    }
+    let md = to_markdown(&rows);
+    print!("{md}");
+    std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
+    let md_path = out.join("lowspeed.md");
+    std::fs::write(&md_path, &md).map_err(|e| out_err(&md_path, e))?;
+    let json_path = out.join("lowspeed.json");
+    let json = serde_json::to_string_pretty(&rows).map_err(|e| out_err(&json_path, e))?;
     std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
     println!("\noutputs: {} {}", md_path.display(), json_path.display());
     Ok(ExitCode::SUCCESS)

@@ -41,6 +41,10 @@
 //!   end of the alignment to the hand-over, rpm and % of rated;
 //! - **hand-over**: its time and speed (the ramp's speed in the last `open_loop` period before
 //!   the first `handover` period, rpm and % of rated; the true speed then as well).
+//!
+//! For the **speed reversals** ([`ReversalMetrics`], window in [`ReversalScore`]): the
+//! longest time outside closed loop within a reversal, the exits from closed loop and the
+//! worst `|speed reference - speed|` (rpm and % of rated).
 
 use serde::Serialize;
 
@@ -577,6 +581,154 @@ impl StartupScore {
     }
 }
 
+/// Figures of the speed reversals of a run (module docs): the worst over its reversals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct ReversalMetrics {
+    /// Reversals scored (zero crossings of the speed reference).
+    pub count: usize,
+    /// Start of the first one (the reference leaves its last constant value), s.
+    pub first_start_s: f64,
+    /// Longest time outside closed loop within one reversal (the controller's
+    /// `closed_loop` flag off), s.
+    pub outside_closed_loop_max_s: f64,
+    /// Closed-loop exits within the reversals (planned returns to I/f and fall-backs).
+    pub closed_loop_exits: usize,
+    /// Largest `|speed reference - speed|` within a reversal, mechanical rpm.
+    pub tracking_error_max_rpm: f64,
+    /// The same in % of rated speed.
+    pub tracking_error_max_pct: f64,
+}
+
+/// One reversal in progress.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Pass {
+    start: f64,
+    outside: usize,
+    exits: usize,
+    max_err: f64,
+}
+
+impl Pass {
+    fn add(&mut self, err: f64, closed: bool, exit: bool) {
+        self.max_err = self.max_err.max(err);
+        self.outside += usize::from(!closed);
+        self.exits += usize::from(exit);
+    }
+}
+
+/// Streaming accumulator of [`ReversalMetrics`].
+///
+/// A **reversal** is a change of sign of the scenario's speed reference (zero itself
+/// belongs to neither side). Its window opens where the reference left its last constant
+/// value before the crossing (the start of the ramp, or the step) and closes once the
+/// reference has been constant for [`SETTLE_S`] after the crossing (or at the end of the
+/// run): the approach, the crossing and the catch-up after it. Over the window: the time
+/// the controller is not in closed loop, its exits from closed loop, and the largest
+/// `|speed reference - speed|` (true mechanical speed).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ReversalScore {
+    rated_rpm: f64,
+    prev_ref: Option<f64>,
+    /// Sign of the last non-zero reference.
+    sign: f64,
+    /// The moving segment since the reference was last constant (a reversal candidate).
+    moving: Option<Pass>,
+    /// The reversal under way (crossed), and the time its reference became constant.
+    active: Option<Pass>,
+    quiet_since: Option<f64>,
+    was_closed: bool,
+    count: usize,
+    first_start: Option<f64>,
+    outside_max: usize,
+    exits: usize,
+    max_err: f64,
+}
+
+impl ReversalScore {
+    /// An accumulator; `rated_rpm` is the rated mechanical speed (for the % figure).
+    pub fn new(rated_rpm: f64) -> Self {
+        Self {
+            rated_rpm,
+            ..Self::default()
+        }
+    }
+
+    fn close(&mut self, p: Pass) {
+        self.count += 1;
+        self.first_start.get_or_insert(p.start);
+        self.outside_max = self.outside_max.max(p.outside);
+        self.exits += p.exits;
+        self.max_err = self.max_err.max(p.max_err);
+    }
+
+    /// Adds one sample.
+    #[inline]
+    pub fn push(&mut self, s: &Sample) {
+        let r = s.control.speed_ref_rpm;
+        let closed = s.control.telemetry.closed_loop;
+        let exit = self.was_closed && !closed;
+        self.was_closed = closed;
+        let err = (s.truth.speed_rpm - r).abs();
+        let still = self.prev_ref == Some(r);
+        self.prev_ref = Some(r);
+        if still {
+            self.moving = None;
+        } else {
+            self.moving.get_or_insert(Pass {
+                start: s.t_s,
+                ..Pass::default()
+            });
+        }
+        if let Some(m) = self.moving.as_mut() {
+            m.add(err, closed, exit);
+        }
+        let crossed = r != 0.0 && self.sign != 0.0 && r.signum() != self.sign;
+        if r != 0.0 {
+            self.sign = r.signum();
+        }
+        if let Some(a) = self.active.as_mut() {
+            // A crossing while one is under way continues it.
+            a.add(err, closed, exit);
+        } else if crossed {
+            // The approach (this moving segment, this sample included) opens the reversal.
+            self.active = self.moving;
+            self.quiet_since = None;
+        }
+        if self.active.is_some() {
+            let q = if still {
+                *self.quiet_since.get_or_insert(s.t_s)
+            } else {
+                self.quiet_since = None;
+                s.t_s
+            };
+            if s.t_s - q >= SETTLE_S - 1e-9
+                && let Some(p) = self.active.take()
+            {
+                self.close(p);
+                self.quiet_since = None;
+            }
+        }
+    }
+
+    /// The figures (`None`: no reversal), with samples of period `ts_s`; a reversal still
+    /// under way at the end counts.
+    pub fn finish(&self, ts_s: f64) -> Option<ReversalMetrics> {
+        let mut me = self.clone();
+        if let Some(p) = me.active.take() {
+            me.close(p);
+        }
+        let start = me.first_start?;
+        Some(ReversalMetrics {
+            count: me.count,
+            first_start_s: start,
+            outside_closed_loop_max_s: me.outside_max as f64 * ts_s,
+            closed_loop_exits: me.exits,
+            tracking_error_max_rpm: me.max_err,
+            tracking_error_max_pct: 100.0 * me.max_err / self.rated_rpm,
+        })
+    }
+}
+
 /// Everything reported about one run.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RunMetrics {
@@ -612,6 +764,8 @@ pub struct RunMetrics {
     pub drive: DriveMetrics,
     /// The sensorless start (`None`: the controller has no start-up sequence).
     pub startup: Option<StartupMetrics>,
+    /// The speed reversals (`None`: the reference never changes sign).
+    pub reversal: Option<ReversalMetrics>,
 }
 
 /// Streaming accumulator of every metric of a run.
@@ -623,6 +777,7 @@ pub struct MetricsAccumulator {
     closed_loop: ClosedLoopScore,
     drive: DriveScore,
     startup: StartupScore,
+    reversal: ReversalScore,
     periods: usize,
     rated_omega_e_rad_s: f64,
 }
@@ -641,6 +796,7 @@ impl MetricsAccumulator {
             closed_loop: ClosedLoopScore::new(rated),
             drive: DriveScore::new(scenario.rated_torque_nm),
             startup: StartupScore::new(scenario.rated_speed_rpm),
+            reversal: ReversalScore::new(scenario.rated_speed_rpm),
             periods: 0,
             rated_omega_e_rad_s: rated,
         }
@@ -668,6 +824,7 @@ impl MetricsAccumulator {
         self.closed_loop.push(s);
         self.drive.push(s);
         self.startup.push(s);
+        self.reversal.push(s);
     }
 
     /// Drops the seed filter's score (it failed and was dropped from the run).
@@ -702,6 +859,7 @@ impl MetricsAccumulator {
             controller_observer_closed_loop: self.closed_loop.finish(ts),
             drive: self.drive.finish(ts),
             startup: self.startup.finish(),
+            reversal: self.reversal.finish(ts),
         }
     }
 }

@@ -2,8 +2,12 @@
 //! over time.
 //!
 //! [`PlotSink`] keeps every `stride`-th sample (at most about [`MAX_POINTS`] per curve) while
-//! the run goes, and [`PlotSink::write_svg`] draws four panels:
+//! the run goes, and every change of the controller's state (at the period it happens), and
+//! [`PlotSink::write_svg`] draws a band and four panels:
 //!
+//! 0. the **drive state** along the time axis: one coloured bar per stretch of a state
+//!    ([`STATE_COLORS`]: align, I/f, hand-over, closed loop, HFI, fault, ...), named inside
+//!    when it is wide enough, the key in the band's caption;
 //! 1. mechanical speed: true, estimated (the simulator's EKF and the controller's own, when
 //!    it has one), the scenario's reference and the controller's own (slewed; `foc`: the I/f
 //!    ramp speed in open loop), rpm;
@@ -26,6 +30,29 @@ use crate::sim::{Sample, SampleSink};
 
 /// Largest number of points kept per curve.
 pub const MAX_POINTS: usize = 4000;
+
+/// Colour and label of each drive state in the band (by the telemetry's state name; any
+/// other name is drawn grey with its own name).
+pub const STATE_COLORS: [(&str, &str, RGBColor); 8] = [
+    ("idle", "idle", RGBColor(190, 190, 190)),
+    ("align", "align", RGBColor(255, 140, 0)),
+    ("open_loop", "I/f", RGBColor(255, 215, 0)),
+    ("handover", "hand-over", RGBColor(100, 149, 237)),
+    ("closed_loop", "closed loop", RGBColor(46, 139, 87)),
+    ("hfi", "HFI", RGBColor(148, 0, 211)),
+    ("fault", "fault", RGBColor(220, 20, 60)),
+    ("sensored", "sensored", RGBColor(0, 128, 128)),
+];
+
+/// Colour and label of the state named `name` in the band.
+pub fn state_style(name: &str) -> (&str, RGBColor) {
+    STATE_COLORS
+        .iter()
+        .find(|(n, _, _)| *n == name)
+        .map_or((name, RGBColor(120, 120, 120)), |(_, label, c)| {
+            (*label, *c)
+        })
+}
 
 /// One kept sample.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,6 +81,10 @@ pub struct PlotSink {
     skip: usize,
     pole_pairs: f64,
     points: Vec<Point>,
+    /// Every change of the controller's state: time and the new state's name.
+    states: Vec<(f64, &'static str)>,
+    /// Time of the last sample, s.
+    t_last: f64,
 }
 
 impl PlotSink {
@@ -65,6 +96,8 @@ impl PlotSink {
             skip: 0,
             pole_pairs: f64::from(pole_pairs),
             points: Vec::with_capacity(periods / stride + 1),
+            states: Vec::new(),
+            t_last: 0.0,
         }
     }
 
@@ -89,16 +122,20 @@ impl PlotSink {
 
     fn draw(&self, path: &Path, title: &str) -> Result<(), Box<dyn std::error::Error>> {
         let pts = &self.points;
-        let root = SVGBackend::new(path, (1200, 1300)).into_drawing_area();
+        let root = SVGBackend::new(path, (1200, 1380)).into_drawing_area();
         root.fill(&WHITE)?;
         let (top, rest) = root.split_vertically(40);
         top.titled(title, ("sans-serif", 22))?;
+        let (band, rest) = rest.split_vertically(80);
         let panels = rest.split_evenly((4, 1));
         let (t0, t1) = match (pts.first(), pts.last()) {
             (Some(a), Some(b)) if b.t > a.t => (a.t, b.t),
             (Some(a), _) => (a.t, a.t + 1e-3),
             _ => (0.0, 1e-3),
         };
+
+        // Band: the drive state.
+        self.draw_states(&band, t0..t1)?;
 
         // Panel 1: speed.
         let (lo, hi) = range(pts.iter().flat_map(|p| [p.speed_rpm, p.est_rpm, p.ref_rpm]));
@@ -258,6 +295,72 @@ impl PlotSink {
     }
 }
 
+impl PlotSink {
+    /// The stretches of each state: `(start, end, state)`, s.
+    pub fn state_segments(&self) -> Vec<(f64, f64, &'static str)> {
+        let mut out = Vec::with_capacity(self.states.len());
+        for (i, &(t, name)) in self.states.iter().enumerate() {
+            let end = self.states.get(i + 1).map_or(self.t_last, |x| x.0);
+            out.push((t, end, name));
+        }
+        out
+    }
+
+    /// The drive-state band (module docs) on `area` over the time range `x`.
+    fn draw_states(
+        &self,
+        area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+        x: core::ops::Range<f64>,
+    ) -> Result<(), Box<dyn std::error::Error>> {
+        let segments = self.state_segments();
+        let mut seen: Vec<&str> = vec![];
+        for (_, _, name) in &segments {
+            if !seen.contains(name) {
+                seen.push(name);
+            }
+        }
+        let key: Vec<String> = seen
+            .iter()
+            .map(|n| {
+                let (label, RGBColor(r, g, b)) = state_style(n);
+                format!("{label} #{r:02x}{g:02x}{b:02x}")
+            })
+            .collect();
+        let caption = format!("drive state: {}", key.join(", "));
+        let span = x.end - x.start;
+        let mut c = ChartBuilder::on(area)
+            .caption(caption, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(0)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x.clone(), 0.0..1.0)?;
+        c.configure_mesh()
+            .disable_mesh()
+            .disable_x_axis()
+            .y_labels(0)
+            .draw()?;
+        c.draw_series(segments.iter().map(|&(a, b, name)| {
+            let (_, color) = state_style(name);
+            Rectangle::new([(a.max(x.start), 0.0), (b.min(x.end), 1.0)], color.filled())
+        }))?;
+        // Names inside the stretches wide enough for them (5 % of the run).
+        c.draw_series(
+            segments
+                .iter()
+                .filter(|(a, b, _)| b - a >= 0.05 * span)
+                .map(|&(a, _, name)| {
+                    let (label, _) = state_style(name);
+                    Text::new(
+                        label.to_string(),
+                        (a.max(x.start) + 0.005 * span, 0.7),
+                        ("sans-serif", 13),
+                    )
+                }),
+        )?;
+        Ok(())
+    }
+}
+
 type Chart<'a, 'b> = ChartContext<
     'a,
     SVGBackend<'b>,
@@ -324,6 +427,11 @@ fn legend<'a, 'b: 'a>(c: &mut Chart<'a, 'b>) -> Result<(), Box<dyn std::error::E
 impl SampleSink for PlotSink {
     #[inline]
     fn record(&mut self, s: &Sample) -> Result<(), String> {
+        let state = s.control.telemetry.state;
+        if self.states.last().is_none_or(|x| x.1 != state) {
+            self.states.push((s.t_s, state));
+        }
+        self.t_last = s.t_s;
         if self.skip > 0 {
             self.skip -= 1;
         } else {
@@ -357,5 +465,78 @@ impl SampleSink for PlotSink {
             });
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The band: one filled rectangle per stretch of a state, in its colour, left to right,
+    /// the key in the caption and the names of the wide stretches inside.
+    #[test]
+    fn svg_has_the_drive_state_band() {
+        let plan = [
+            (0.0, "align"),
+            (0.1, "open_loop"),
+            (0.3, "handover"),
+            (0.32, "closed_loop"),
+            (0.8, "fault"),
+        ];
+        let mut sink = PlotSink::new(1000, 4);
+        for k in 0..1000 {
+            let t = k as f64 * 1e-3;
+            let state = plan
+                .iter()
+                .rev()
+                .find(|(t0, _)| t >= *t0)
+                .map_or("idle", |x| x.1);
+            let mut s = Sample {
+                t_s: t,
+                ..Sample::default()
+            };
+            s.control.telemetry.state = state;
+            s.truth.psi_f_wb = 0.175;
+            s.truth.rs_ohm = 2.875;
+            sink.record(&s).unwrap_or_else(|e| panic!("{e}"));
+        }
+        let segs = sink.state_segments();
+        assert_eq!(segs.len(), 5);
+        assert_eq!(segs[1], (0.1, 0.3, "open_loop"));
+        assert_eq!(segs[4].1, 0.999);
+
+        let path = std::env::temp_dir().join(format!("pmsm-sim-band-{}.svg", std::process::id()));
+        sink.write_svg(&path, "band")
+            .unwrap_or_else(|e| panic!("{e}"));
+        let svg = std::fs::read_to_string(&path).unwrap_or_default();
+        let _ = std::fs::remove_file(&path);
+        assert!(svg.contains(
+            "drive state: align #ff8c00, I/f #ffd700, hand-over #6495ed, closed loop #2e8b57, fault #dc143c"
+        ));
+        // The band's rectangles, in time order, are the first ones after the background.
+        let fills: Vec<&str> = svg
+            .lines()
+            .filter(|l| l.starts_with("<rect"))
+            .filter_map(|l| l.split("fill=\"").nth(1)?.split('"').next())
+            .skip(1)
+            .take(5)
+            .collect();
+        assert_eq!(
+            fills,
+            ["#FF8C00", "#FFD700", "#6495ED", "#2E8B57", "#DC143C"]
+        );
+        let xs: Vec<f64> = svg
+            .lines()
+            .filter(|l| l.starts_with("<rect"))
+            .skip(1)
+            .take(5)
+            .filter_map(|l| l.split("x=\"").nth(1)?.split('"').next()?.parse().ok())
+            .collect();
+        assert!(xs.windows(2).all(|w| w[0] < w[1]), "{xs:?}");
+        // Names inside the stretches of at least 5 % of the run (all but the 20 ms hand-over).
+        for name in ["align", "I/f", "closed loop", "fault"] {
+            assert!(svg.contains(&format!(">\n{name}\n</text>")), "{name}");
+        }
+        assert!(!svg.contains(">\nhand-over\n</text>"));
     }
 }

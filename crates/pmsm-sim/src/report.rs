@@ -262,6 +262,36 @@ pub fn table(m: &RunMetrics) -> String {
             let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
         }
     }
+    if let Some(r) = &m.reversal {
+        let _ = writeln!(out);
+        let _ = writeln!(
+            out,
+            "{:<40} {:<10} {:>14}",
+            "speed reversal", "unit", "value"
+        );
+        let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+        let rows = [
+            ("reversals", "", format!("{}", r.count)),
+            ("first one starts", "s", format!("{:.4}", r.first_start_s)),
+            (
+                "time outside closed loop (worst)",
+                "ms",
+                format!("{:.1}", 1e3 * r.outside_closed_loop_max_s),
+            ),
+            ("closed-loop exits", "", format!("{}", r.closed_loop_exits)),
+            (
+                "worst |speed ref - speed| (% rated)",
+                "rpm",
+                format!(
+                    "{:.1} ({:.2} %)",
+                    r.tracking_error_max_rpm, r.tracking_error_max_pct
+                ),
+            ),
+        ];
+        for (name, unit, v) in rows {
+            let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
+        }
+    }
     out
 }
 

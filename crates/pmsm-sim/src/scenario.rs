@@ -93,6 +93,17 @@ pub enum ObserverLoss {
     Trip,
 }
 
+/// How `foc` passes through zero speed in a reversal (`FocConfig::startup.reversal`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReversalMode {
+    /// Stay in closed loop on the observer through zero (foc's default).
+    #[default]
+    ClosedLoop,
+    /// Leave closed loop below the exit speed, I/f through zero, hand over again.
+    OpenLoop,
+}
+
 /// Settings of the `foc` controller (`[controller.foc]`, only with `kind = "foc"` or
 /// `"foc_sensored"`). Every field is optional; the defaults are `foc`'s own
 /// (`FocConfig::new`, derived from the motor, the PWM period and the bus voltage), with the
@@ -135,6 +146,13 @@ pub struct FocSettings {
     pub startup_kick_speed_ratio: Option<f64>,
     /// Reaction to an observer loss in closed loop (default `fall_back`).
     pub observer_loss: ObserverLoss,
+    /// How a reversal passes through zero speed: `closed_loop` (default, foc's) or
+    /// `open_loop` (I/f below the exit speed).
+    pub reversal: ReversalMode,
+    /// Closed loop returns to I/f below this fraction of the hand-over speed (for a stop or
+    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default foc's,
+    /// 0.7.
+    pub exit_speed_ratio: Option<f64>,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
     /// `inverter.dead_time_s` (the drive knows its bridge); 0 turns the compensation off.
     pub dead_time_s: Option<f64>,
@@ -478,7 +496,7 @@ impl Scenario {
     /// foc's own defaults) and the other `[controller.foc]` settings. Validated by `foc`
     /// itself.
     pub fn foc_config(&self) -> Result<foc::FocConfig, FieldError> {
-        use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy};
+        use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy, Reversal};
         let c = &self.controller;
         let s = c.foc.unwrap_or_default();
         let p = self.observer_params();
@@ -538,6 +556,13 @@ impl Scenario {
         // hand-over speed.
         let kick = 0.006 * self.rated_speed_e_rad_s() / f64::from(st.handover_speed_rad_s);
         st.kick_speed_ratio = s.startup_kick_speed_ratio.unwrap_or(on * kick.min(1.0)) as f32;
+        st.reversal = match s.reversal {
+            ReversalMode::ClosedLoop => Reversal::ClosedLoop,
+            ReversalMode::OpenLoop => Reversal::OpenLoop,
+        };
+        if let Some(r) = s.exit_speed_ratio {
+            st.exit_speed_ratio = r as f32;
+        }
         cfg.health.policy = match s.observer_loss {
             ObserverLoss::FallBack => ObserverLossPolicy::FallBackAndReacquire,
             ObserverLoss::Trip => ObserverLossPolicy::Trip,
