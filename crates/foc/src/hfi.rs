@@ -327,6 +327,51 @@ struct Carrier {
     sign: f32,
     sin: f32,
     cos: f32,
+    /// Position in the carrier period (0 to `2 N - 1`).
+    phase: u8,
+}
+
+/// Least-squares weights of the demodulation (module docs, "Demodulation by least
+/// squares"): `w[p0][p]` weighs the signed step `y` applied at carrier phase `p` in the window
+/// of one period whose oldest step was applied at phase `p0` (`half` ticks per half period).
+fn ls_weights(half: u8) -> [[f32; 8]; 8] {
+    let half = usize::from(half.clamp(1, 4));
+    let n = 2 * half;
+    let sign = |p: usize| if p % n < half { 1.0_f32 } else { -1.0 };
+    let mut w = [[0.0_f32; 8]; 8];
+    for (p0, row) in w.iter_mut().enumerate().take(n) {
+        // Samples j = 0..=n of the window; the carrier's accumulated current T_j (a unit
+        // step per tick, signed).
+        let mut t = [0.0_f32; 9];
+        for j in 1..=n {
+            t[j] = t[j - 1] + sign(p0 + j - 1);
+        }
+        // T less its projection on the fundamental's constant and slope (orthogonal basis
+        // 1 and j - n/2 over the n + 1 samples).
+        let m = n as f32 + 1.0;
+        let jc = |j: usize| j as f32 - 0.5 * n as f32;
+        let (mut st, mut stj, mut sjj) = (0.0, 0.0, 0.0);
+        for (j, tj) in t.iter().enumerate().take(n + 1) {
+            st += tj;
+            stj += tj * jc(j);
+            sjj += jc(j) * jc(j);
+        }
+        let mut r = [0.0_f32; 9];
+        let mut rr = 0.0;
+        for j in 0..=n {
+            r[j] = t[j] - st / m - stj / sjj * jc(j);
+            rr += r[j] * r[j];
+        }
+        // Sample weights r_j / |r|^2 (they sum to zero) as weights of the differences:
+        // v_j = sum_{m >= j} w_m for the step into sample j; y_j = s_j (i_j - i_j-1).
+        let mut v = 0.0;
+        for j in (1..=n).rev() {
+            v += r[j] / rr;
+            let p = (p0 + j - 1) % n;
+            row[p] = v * sign(p0 + j - 1);
+        }
+    }
+    w
 }
 
 /// The carrier's response in one demodulation (module docs), A per period of carrier step:
@@ -371,6 +416,9 @@ pub struct HfiTracker {
     /// The last `period` samples and demodulated steps (ring, written at `pos`).
     i_ring: [AlphaBeta; 8],
     y_ring: [Dq; 8],
+    /// Carrier phase of each step in `y_ring`, and the least-squares weights ([`ls_weights`]).
+    p_ring: [u8; 8],
+    weights: [[f32; 8]; 8],
     /// The carrier's current predicted from the measured step (accumulated), its last
     /// `period` values, and the centred value of the last sample (module docs).
     tri: AlphaBeta,
@@ -420,6 +468,8 @@ impl HfiTracker {
             i_prev: AlphaBeta::default(),
             i_ring: [AlphaBeta::default(); 8],
             y_ring: [Dq::default(); 8],
+            p_ring: [0; 8],
+            weights: ls_weights(half),
             tri: AlphaBeta::default(),
             tri_ring: [AlphaBeta::default(); 8],
             tri_centred: AlphaBeta::default(),
@@ -533,6 +583,7 @@ impl HfiTracker {
         if self.valid >= 1 && applied.sign != 0.0 {
             let r = (i - self.i_prev).to_dq(applied.sin, applied.cos);
             self.y_ring[pos] = r * applied.sign;
+            self.p_ring[pos] = applied.phase;
             self.y_count = self.y_count.saturating_add(1);
         } else {
             self.y_count = 0;
@@ -566,11 +617,13 @@ impl HfiTracker {
             i
         };
         let resp = if usize::from(self.y_count) >= n {
-            let mut sum = Dq::default();
-            for y in self.y_ring.iter().take(n) {
-                sum = sum + *y;
+            // The oldest step of the window is the one after the newest (written at `pos`).
+            let p0 = usize::from((self.p_ring[pos] + 1) % self.period);
+            let w = &self.weights[p0 & 7];
+            let mut m = Dq::default();
+            for (y, p) in self.y_ring.iter().zip(&self.p_ring).take(n) {
+                m = m + *y * w[usize::from(*p) & 7];
             }
-            let m = sum * (1.0 / n as f32);
             let eps = crate::pi::limit(m.q * self.inv_scale, -1.0, 1.0);
             self.theta = wrap(self.theta + self.ts * (self.omega_i + self.kp * eps));
             self.omega_i += self.ki_t * eps + self.ts * (accel_rad_s2 - self.load);
@@ -593,6 +646,7 @@ impl HfiTracker {
     /// the middle of its application interval; the sign alternates every call.
     pub fn inject(&mut self) -> AlphaBeta {
         self.sign = if self.phase < self.half { 1.0 } else { -1.0 };
+        let phase = self.phase;
         self.phase = (self.phase + 1) % self.period;
         let (s0, c0) = sin_cos(self.theta);
         let (sd, cd) = sin_cos_small(self.omega_i * self.advance_s);
@@ -602,6 +656,7 @@ impl HfiTracker {
                 sign: self.sign,
                 sin: s,
                 cos: c,
+                phase,
             },
             self.hist[0],
         ];

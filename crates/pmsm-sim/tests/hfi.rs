@@ -67,6 +67,13 @@ fn job(
     sc.initial.theta_e_rad = theta0;
     sc.duration_s = t_end;
     sc.observer.seed_filter = false;
+    // Diagnostics: another noise realization, another dead time.
+    if let Ok(x) = std::env::var("HFI_SEED") {
+        sc.seed = x.parse().unwrap_or(sc.seed);
+    }
+    if let Ok(x) = std::env::var("HFI_DT") {
+        sc.inverter.dead_time_s = x.parse().unwrap_or(sc.inverter.dead_time_s);
+    }
     sc
 }
 
