@@ -139,6 +139,8 @@ pub enum HfiField {
     SettleTime,
     /// [`HfiConfig::pulse_time_s`].
     PulseTime,
+    /// The current sensors' noise given to [`HfiConfig::with_current_noise`].
+    CurrentNoise,
 }
 
 /// Why HFI was refused.
@@ -179,6 +181,12 @@ impl core::fmt::Display for HfiError {
 
 impl core::error::Error for HfiError {}
 
+/// Longest half period of the carrier, PWM periods ([`HfiConfig::half_period_ticks`]).
+pub const MAX_HALF_PERIOD: u8 = 8;
+
+/// Length of the tracker's history rings: one carrier period at the longest half period.
+const RING: usize = 2 * MAX_HALF_PERIOD as usize;
+
 /// Smallest `Lq / Ld` HFI accepts.
 pub const MIN_SALIENCY: f32 = 1.1;
 
@@ -187,7 +195,7 @@ pub const MIN_SALIENCY: f32 = 1.1;
 pub struct HfiConfig {
     /// Amplitude of the square-wave carrier on the tracked d axis, V.
     pub injection_v: f32,
-    /// PWM periods per half period of the carrier, 1 to 4 (carrier frequency
+    /// PWM periods per half period of the carrier, 1 to [`MAX_HALF_PERIOD`] (carrier frequency
     /// `f_pwm / (2 half_period_ticks)`).
     pub half_period_ticks: u8,
     /// Natural frequency of the tracking loop, rad/s.
@@ -209,6 +217,33 @@ pub struct HfiConfig {
     pub detect_polarity: bool,
 }
 
+/// Peak angle error (rad el.) of the tracking loop after a step `a` of the load's acceleration,
+/// times `w_n^2 / a` (triple pole at `-w_n`).
+pub const LOAD_STEP_PEAK: f32 = 0.27;
+
+/// Angle noise (RMS, rad el.) [`HfiConfig::with_current_noise`] aims at: 1 deg, so that the
+/// largest error over seconds, about four times the RMS, stays within 5 deg.
+pub const TARGET_ANGLE_RMS_RAD: f32 = 1.0 * PI / 180.0;
+
+/// Predicted RMS angle noise (rad el.) of the tracking loop for a current noise `sigma` (A per
+/// phase, two phases sampled) at the worst rotor orientation (module docs, "Angle noise").
+fn angle_noise_rms(
+    m: &MotorParams<f32>,
+    ts: f32,
+    v: f32,
+    half: u8,
+    w_pll: f32,
+    sigma: f32,
+) -> f32 {
+    let y_d = 0.5 * (1.0 / m.ld_h - 1.0 / m.lq_h);
+    let n = f32::from(half);
+    // eps per unit of noise: the least-squares step estimate's long-run variance is at most
+    // 12 / N^2 of a sample's, the worst axis carries 2 sigma^2, eps = step / (2 Ts V Y_d).
+    let s_eps = 12.0 / (n * n) * 2.0 * sigma * sigma / (4.0 * ts * ts * v * v * y_d * y_d);
+    // Through the loop: its noise bandwidth is 1.03 w_n (Hz for w_n in rad/s).
+    crate::trig::sqrt(s_eps * 2.0 * 1.03 * w_pll * ts)
+}
+
 /// `a < b` (false for NaN).
 fn below(a: f32, b: f32) -> bool {
     a < b
@@ -226,8 +261,43 @@ fn saliency(m: &MotorParams<f32>) -> Result<f32, HfiError> {
 
 impl HfiConfig {
     /// Defaults derived from the controller's configuration and the nominal bus voltage
-    /// (module docs). A surface motor is refused ([`HfiError::SurfaceMotor`]).
+    /// (module docs), for a current sensing of unknown noise. A surface motor is refused
+    /// ([`HfiError::SurfaceMotor`]).
     pub fn new(cfg: &FocConfig, u_dc_nominal_v: f32) -> Result<Self, HfiError> {
+        Self::derive(cfg, u_dc_nominal_v, None)
+    }
+
+    /// Defaults for current sensors of known noise (standard deviation per phase, A; module
+    /// docs, "Defaults"): those of [`new`](Self::new) if their predicted angle noise at the
+    /// rotor orientation worst for the two sensors is at most [`TARGET_ANGLE_RMS_RAD`];
+    /// otherwise the loop's bandwidth lowered to what a full-torque load step allows and the
+    /// shortest half period that meets the target ([`MAX_HALF_PERIOD`] if none does). A negative or
+    /// non-finite noise is refused (`OutOfRange(`[`HfiField::CurrentNoise`]`)`).
+    pub fn with_current_noise(
+        cfg: &FocConfig,
+        u_dc_nominal_v: f32,
+        current_noise_std_a: f32,
+    ) -> Result<Self, HfiError> {
+        if !(current_noise_std_a.is_finite() && current_noise_std_a >= 0.0) {
+            return Err(HfiError::OutOfRange(HfiField::CurrentNoise));
+        }
+        Self::derive(cfg, u_dc_nominal_v, Some(current_noise_std_a))
+    }
+
+    /// Predicted RMS angle noise of the tracking loop, rad el. (module docs, "Angle noise"),
+    /// for these settings and a current noise of `current_noise_std_a` per phase.
+    pub fn predicted_angle_rms_rad(&self, cfg: &FocConfig, current_noise_std_a: f32) -> f32 {
+        angle_noise_rms(
+            &cfg.motor,
+            cfg.ts_s,
+            self.injection_v,
+            self.half_period_ticks,
+            self.pll_bandwidth_rad_s,
+            current_noise_std_a,
+        )
+    }
+
+    fn derive(cfg: &FocConfig, u_dc_nominal_v: f32, noise: Option<f32>) -> Result<Self, HfiError> {
         saliency(&cfg.motor)?;
         let m = &cfg.motor;
         let u_lim = cfg.max_modulation * u_dc_nominal_v * crate::transforms::FRAC_1_SQRT_3;
@@ -235,25 +305,52 @@ impl HfiConfig {
         let v_cap = 0.8 * u_lim;
         let v_ripple = 0.1 * i_lim * m.ld_h / cfg.ts_s;
         let mut v = if v_ripple < v_cap { v_ripple } else { v_cap };
-        // The saliency signal per half period, `N Ts V Y_d`, at least 3 % of the current
-        // limit: longer half periods at the full voltage when one period is not enough.
         let y_d = 0.5 * (1.0 / m.ld_h - 1.0 / m.lq_h);
+        let a_max = m.pole_pairs as f32 * cfg.torque_constant_nm_a() * i_lim / cfg.inertia_kg_m2;
+        // The bandwidth for a rule `w` at half period `n`: at most a tenth of the inverse of the
+        // loop's delay (the period's estimate, N ticks, plus the computation delay and the
+        // sample, 2 ticks), 5 to 50 Hz.
+        let limited = |w: f32, n: u8| {
+            let w_delay = 0.1 / ((f32::from(n) + 2.0) * cfg.ts_s);
+            let w_hi = if w_delay < 2.0 * PI * 50.0 {
+                w_delay
+            } else {
+                2.0 * PI * 50.0
+            };
+            crate::pi::limit(w, 2.0 * PI * 5.0, w_hi)
+        };
+        // The saliency signal per half period, `N Ts V Y_d`, at least 3 % of the current
+        // limit: longer half periods (up to 4) at the full voltage when one is not enough.
         let mut n: u8 = 1;
         while n < 4 && f32::from(n) * cfg.ts_s * v * y_d < 0.03 * i_lim {
             n += 1;
             v = v_cap;
         }
-        // A full-torque load step costs about `0.5 a_max / w_n^2` of angle: at most 0.5 rad.
-        let a_max = m.pole_pairs as f32 * cfg.torque_constant_nm_a() * i_lim / cfg.inertia_kg_m2;
-        // At most a tenth of the inverse of the loop's delay (the period average, N ticks, plus
-        // the computation delay and the sample, 2 ticks).
-        let w_delay = 0.1 / ((f32::from(n) + 2.0) * cfg.ts_s);
-        let w_hi = if w_delay < 2.0 * PI * 50.0 {
-            w_delay
-        } else {
-            2.0 * PI * 50.0
-        };
-        let w_pll = crate::pi::limit(crate::trig::sqrt(a_max), 2.0 * PI * 5.0, w_hi);
+        // `w_n = sqrt(a_max)`: a full-torque load step costs about `0.27 a_max / w_n^2` = 0.27
+        // rad of angle at most.
+        let mut w_pll = limited(crate::trig::sqrt(a_max), n);
+        if let Some(sigma) = noise
+            && !at_most(
+                angle_noise_rms(m, cfg.ts_s, v, n, w_pll, sigma),
+                TARGET_ANGLE_RMS_RAD,
+            )
+        {
+            // Too noisy: the bandwidth down to what a full-torque load step allows (0.5 rad,
+            // within the loop's +-45 deg capture range), then the shortest half period at the
+            // full voltage that meets the target.
+            let w_load = crate::trig::sqrt(LOAD_STEP_PEAK * a_max / 0.5);
+            v = v_cap;
+            w_pll = limited(w_load, n);
+            while n < MAX_HALF_PERIOD
+                && !at_most(
+                    angle_noise_rms(m, cfg.ts_s, v, n, w_pll, sigma),
+                    TARGET_ANGLE_RMS_RAD,
+                )
+            {
+                n += 1;
+                w_pll = limited(w_load, n);
+            }
+        }
         let h = cfg.startup.handover_speed_rad_s;
         let c = Self {
             injection_v: v,
@@ -292,7 +389,7 @@ impl HfiConfig {
             }
         }
         let u_lim = cfg.max_modulation * u_dc_nominal_v * crate::transforms::FRAC_1_SQRT_3;
-        if !(1..=4).contains(&self.half_period_ticks) {
+        if !(1..=MAX_HALF_PERIOD).contains(&self.half_period_ticks) {
             return Err(HfiError::OutOfRange(F::HalfPeriod));
         }
         if !below(self.injection_v, 0.9 * u_lim) {
@@ -334,15 +431,21 @@ struct Carrier {
 /// Least-squares weights of the demodulation (module docs, "Demodulation by least
 /// squares"): `w[p0][p]` weighs the signed step `y` applied at carrier phase `p` in the window
 /// of one period whose oldest step was applied at phase `p0` (`half` ticks per half period).
-fn ls_weights(half: u8) -> [[f32; 8]; 8] {
-    let half = usize::from(half.clamp(1, 4));
+fn ls_weights(half: u8) -> [[f32; RING]; RING] {
+    let half = usize::from(half.clamp(1, MAX_HALF_PERIOD));
     let n = 2 * half;
     let sign = |p: usize| if p % n < half { 1.0_f32 } else { -1.0 };
-    let mut w = [[0.0_f32; 8]; 8];
+    let mut w = [[0.0_f32; RING]; RING];
+    if half == 1 {
+        // Three samples, three unknowns: the second difference, `y` weighed 1/2 (exactly).
+        w[0][..2].fill(0.5);
+        w[1][..2].fill(0.5);
+        return w;
+    }
     for (p0, row) in w.iter_mut().enumerate().take(n) {
         // Samples j = 0..=n of the window; the carrier's accumulated current T_j (a unit
         // step per tick, signed).
-        let mut t = [0.0_f32; 9];
+        let mut t = [0.0_f32; RING + 1];
         for j in 1..=n {
             t[j] = t[j - 1] + sign(p0 + j - 1);
         }
@@ -356,7 +459,7 @@ fn ls_weights(half: u8) -> [[f32; 8]; 8] {
             stj += tj * jc(j);
             sjj += jc(j) * jc(j);
         }
-        let mut r = [0.0_f32; 9];
+        let mut r = [0.0_f32; RING + 1];
         let mut rr = 0.0;
         for j in 0..=n {
             r[j] = t[j] - st / m - stj / sjj * jc(j);
@@ -414,15 +517,15 @@ pub struct HfiTracker {
     /// The last sample `i[k-1]`.
     i_prev: AlphaBeta,
     /// The last `period` samples and demodulated steps (ring, written at `pos`).
-    i_ring: [AlphaBeta; 8],
-    y_ring: [Dq; 8],
+    i_ring: [AlphaBeta; RING],
+    y_ring: [Dq; RING],
     /// Carrier phase of each step in `y_ring`, and the least-squares weights ([`ls_weights`]).
-    p_ring: [u8; 8],
-    weights: [[f32; 8]; 8],
+    p_ring: [u8; RING],
+    weights: [[f32; RING]; RING],
     /// The carrier's current predicted from the measured step (accumulated), its last
     /// `period` values, and the centred value of the last sample (module docs).
     tri: AlphaBeta,
-    tri_ring: [AlphaBeta; 8],
+    tri_ring: [AlphaBeta; RING],
     tri_centred: AlphaBeta,
     pos: u8,
     /// Consecutive accepted samples (saturating), consecutive demodulated steps.
@@ -445,7 +548,7 @@ impl HfiTracker {
         delay: ComputationDelay,
         angle_advance_periods: f32,
     ) -> Self {
-        let half = half_period_ticks.clamp(1, 4);
+        let half = half_period_ticks.clamp(1, MAX_HALF_PERIOD);
         let y_d = 0.5 * (1.0 / motor.ld_h - 1.0 / motor.lq_h);
         let w = pll_bandwidth_rad_s;
         Self {
@@ -466,12 +569,12 @@ impl HfiTracker {
             phase: 0,
             hist: [Carrier::default(); 2],
             i_prev: AlphaBeta::default(),
-            i_ring: [AlphaBeta::default(); 8],
-            y_ring: [Dq::default(); 8],
-            p_ring: [0; 8],
+            i_ring: [AlphaBeta::default(); RING],
+            y_ring: [Dq::default(); RING],
+            p_ring: [0; RING],
             weights: ls_weights(half),
             tri: AlphaBeta::default(),
-            tri_ring: [AlphaBeta::default(); 8],
+            tri_ring: [AlphaBeta::default(); RING],
             tri_centred: AlphaBeta::default(),
             pos: 0,
             valid: 0,
@@ -572,7 +675,7 @@ impl HfiTracker {
     /// on the first).
     pub fn update(&mut self, i: AlphaBeta, accel_rad_s2: f32) -> (Option<Response>, AlphaBeta) {
         let n = usize::from(self.period);
-        let pos = usize::from(self.pos) & 7;
+        let pos = usize::from(self.pos) % RING;
         // The carrier applied over [t_k-1, t_k): its current step, projected on its axis and
         // signed, is one demodulated step `y`.
         let applied = if self.one_period_delay {
@@ -619,10 +722,10 @@ impl HfiTracker {
         let resp = if usize::from(self.y_count) >= n {
             // The oldest step of the window is the one after the newest (written at `pos`).
             let p0 = usize::from((self.p_ring[pos] + 1) % self.period);
-            let w = &self.weights[p0 & 7];
+            let w = &self.weights[p0 % RING];
             let mut m = Dq::default();
             for (y, p) in self.y_ring.iter().zip(&self.p_ring).take(n) {
-                m = m + *y * w[usize::from(*p) & 7];
+                m = m + *y * w[usize::from(*p) % RING];
             }
             let eps = crate::pi::limit(m.q * self.inv_scale, -1.0, 1.0);
             self.theta = wrap(self.theta + self.ts * (self.omega_i + self.kp * eps));

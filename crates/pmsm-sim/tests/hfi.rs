@@ -71,6 +71,12 @@ fn job(
     if let Ok(x) = std::env::var("HFI_SEED") {
         sc.seed = x.parse().unwrap_or(sc.seed);
     }
+    if let Ok(x) = std::env::var("HFI_NOISE") {
+        sc.sensors.current_noise_std_a = x.parse().unwrap_or(sc.sensors.current_noise_std_a);
+    }
+    if let Ok(x) = std::env::var("HFI_CBW") {
+        sc.controller.current_bandwidth_hz = x.parse().unwrap_or(sc.controller.current_bandwidth_hz);
+    }
     if let Ok(x) = std::env::var("HFI_DT") {
         sc.inverter.dead_time_s = x.parse().unwrap_or(sc.inverter.dead_time_s);
     }
@@ -87,7 +93,9 @@ fn run(sc: &Scenario) -> Run {
     let mut drive = FocDrive::from_scenario(sc).unwrap_or_else(|e| panic!("{e}"));
     let cfg = *drive.foc().config();
     let u_dc = sc.inverter.u_dc_v as f32;
-    let mut hfi = HfiConfig::new(&cfg, u_dc).unwrap_or_else(|e| panic!("{e}"));
+    let noise = sc.sensors.current_noise_std_a as f32;
+    let mut hfi =
+        HfiConfig::with_current_noise(&cfg, u_dc, noise).unwrap_or_else(|e| panic!("{e}"));
     if let Ok(x) = std::env::var("HFI_PLL") {
         hfi.pll_bandwidth_rad_s = x.parse().unwrap_or(0.0);
     }
@@ -136,7 +144,7 @@ fn dump(tag: &str, r: &Run) {
     let mut out = String::new();
     for (x, st) in r.samples.iter().zip(&r.status) {
         out += &format!(
-            "{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{}\n",
             x.t_s,
             angle_error_deg(x),
             wrap(f64::from(st.theta_rad) - x.truth.theta_e_rad).to_degrees(),
@@ -147,6 +155,7 @@ fn dump(tag: &str, r: &Run) {
                 .as_ref()
                 .map_or(0.0, |o| o.angle_error_deg),
             st.observer_weight,
+            x.truth.theta_e_rad,
         );
     }
     std::fs::write(format!("{path}-{tag}.csv"), out).unwrap_or_else(|e| panic!("{e}"));
@@ -233,7 +242,8 @@ fn hold_zero(name: &str) -> (f64, f64, f64) {
         from_nm: 0.0,
         to_nm: sc0.rated_torque_nm,
     }];
-    let sc = job(name, vec![(0.0, 0.0), (6.0, 0.0)], load, 1.0, 6.0);
+    let theta0 = std::env::var("HFI_TH0").map_or(1.0, |x| x.parse().unwrap_or(1.0));
+    let sc = job(name, vec![(0.0, 0.0), (6.0, 0.0)], load, theta0, 6.0);
     let r = run(&sc);
     let s = &r.samples;
     dump(&format!("hold-{name}"), &r);
