@@ -6,7 +6,7 @@
 //!
 //! Each tick adds `u_h[k] = V_h s[k] (cos phi_k, sin phi_k)` to the stator voltage (alpha-beta):
 //! `s[k]` is `+1` for `N` ticks and `-1` for `N` ticks ([`HfiConfig::half_period_ticks`], 1 to
-//! 4: carrier `f_pwm / (2 N)`, e.g. 10 kHz at 20 kHz PWM with `N = 1`, 1.67 kHz at 10 kHz with
+//! 8: carrier `f_pwm / (2 N)`, e.g. 10 kHz at 20 kHz PWM with `N = 1`, 1.67 kHz at 10 kHz with
 //! `N = 3`), and `phi_k = theta_hat + w_hat advance Ts` is the tracked d axis at the middle of
 //! the period the voltage is applied in (the controller's own angle advance, module
 //! [`crate::controller`]).
@@ -20,7 +20,7 @@
 //! PWM can make (`N Ts V_h / L` peak to peak) and, with `N = 1`, the carrier sits at the top of
 //! the audible band or above it. A sinusoid at `f_pwm / 8` needs filters whose delay limits
 //! the tracking bandwidth (Jang 2003, Yoon 2011 compare the two). A longer half period `N`
-//! raises the signal-to-noise ratio as `sqrt(N)` at a given voltage (the current moves for `N`
+//! raises the signal-to-noise ratio as `N` at a given voltage with the least-squares demodulation (the current moves for `N`
 //! periods between the sign changes where the information is) and the ripple as `N`: the
 //! choice for motors of low saliency or noisy current sensing.
 //!
@@ -46,7 +46,8 @@
 //! mean_2N(y) = Ts V (Y_s + Y_d cos 2e,  Y_d sin 2e)
 //! ```
 //!
-//! (for `N = 1` this is the second difference `(s_a / 2) (i[k] - 2 i[k-1] + i[k-2])`). `s_a`
+//! (for `N = 1` this is the second difference `(s_a / 2) (i[k] - 2 i[k-1] + i[k-2])`; for longer
+//! half periods the mean is replaced by least-squares weights, below). `s_a`
 //! is the sign of the voltage applied over `[t_k-1, t_k)`, computed two ticks ago with the
 //! one-period computation delay, one tick ago without it (a short history keeps sign and
 //! axis). The normalised error `eps = mean(y)_q / (2 Ts V Y_d) = sin(2e) / 2` is `e` for small
@@ -54,6 +55,39 @@
 //! the polarity test compares. The carrier's own current is the measured step accumulated
 //! with the applied signs, less its period mean: the sample less it is the fundamental at the
 //! sample's time, which the controller's observer is fed ([`HfiTracker::carrier_current`]).
+//!
+//! # Demodulation by least squares
+//!
+//! The plain mean of the `2N` signed steps telescopes to the samples next to the carrier's
+//! sign changes: it uses 2 samples of `2N + 1`. Every tick the tracker instead fits the last
+//! `2N + 1` samples (each axis of the `phi` frame) with `a + b j + c T_j`, where `T_j` is the
+//! carrier's current (the applied signs accumulated) and `a + b j` the fundamental (offset and
+//! slope, as before), and takes `c`, the carrier step: weights `T_perp / |T_perp|^2` on the
+//! samples (`T_perp`: `T` less its projection on `1` and `j`), turned into weights of the
+//! signed steps, a table per window phase computed once ([`HfiTracker::new`]). For `N = 1`
+//! they are the mean (three samples, three unknowns); for `N = 4` the long-run noise variance
+//! of the step falls to 0.67 of the mean's (12/N^2 for long half periods), the angle noise
+//! RMS to 0.82 of it (measured on the industrial motor: 2.11 -> 1.75 deg RMS).
+//!
+//! # Angle noise
+//!
+//! The current sensors' noise (`sigma` per phase, two phases sampled: `c = -a - b`) is not
+//! the same on every axis: its variance along an axis at `psi` from phase a is
+//! `sigma^2 (4/3 - cos(2 psi) / 3 + sin(2 psi) / sqrt 3)`, from `2/3` to `2 sigma^2`. The angle
+//! information is the q response, so the angle noise depends on the rotor's orientation by
+//! `sqrt 3` (measured on the industrial motor at rest: 1.16 to 1.90 deg RMS over rotor
+//! angles, the same noise realization), which is why a sweep of the loop bandwidth at one
+//! start angle is not monotonic (the rotor comes to rest at another angle). Through the
+//! loop (noise bandwidth `1.03 w_n` Hz for `w_n` in rad/s) the predicted angle noise at the
+//! worst orientation is
+//!
+//! ```text
+//! sigma_theta^2 = (12 / N^2) 2 sigma^2 / (2 Ts V Y_d)^2 * 2 (1.03 w_n) Ts
+//! ```
+//!
+//! (it scales exactly as `sigma^2` in the simulator; measured on the industrial motor at
+//! `N = 4`, `w_n = 82`: 1.9 deg RMS at the worst orientation, predicted 1.9). The largest
+//! error over a few seconds is about four times the RMS.
 //!
 //! # Tracking loop (PLL with the drive's torque fed forward)
 //!
@@ -97,17 +131,27 @@
 //!
 //! - `V_h`: the voltage whose carrier ripple is 10 % of the current limit peak to peak on the
 //!   d axis, `0.1 I_lim Ld / Ts`, at most 80 % of the voltage limit at the nominal bus;
-//! - half period `N` ticks: 1 (`f_pwm / 2`) unless the saliency signal of one period,
+//! - half period `N` ticks ([`HfiConfig::new`], sensor noise unknown): 1 (`f_pwm / 2`) unless the saliency signal of one period,
 //!   `Ts V_h Y_d`, is below 3 % of the current limit (the sensor's noise scales with its full
 //!   scale, which scales with the current limit); then the smallest `N <= 4` that reaches it,
-//!   at the full 80 % voltage. Longer half periods raise the signal-to-noise ratio as
-//!   `sqrt(N)` at a given voltage, and the ripple as `N`. The traction motor of the tests
-//!   (Lq/Ld 3) gets `N = 1` (10 kHz at 20 kHz PWM), the industrial one (Lq/Ld 1.4) `N = 3`
-//!   (1.67 kHz at 10 kHz);
+//!   at the full 80 % voltage. Longer half periods raise the signal-to-noise ratio as `N`
+//!   at a given voltage, and the ripple as `N`. The traction motor of the tests (Lq/Ld 3)
+//!   gets `N = 2` at its preset's sizing (5 kHz at 20 kHz PWM), the industrial one (Lq/Ld
+//!   1.4, 12 A limit) `N = 4` (1.25 kHz at 10 kHz);
 //! - tracking loop: `w_n = sqrt(a_max)`, `a_max = p k_t I_lim / J` the acceleration of a
-//!   full-torque step, so that a full-torque load step costs about `0.5 a_max / w_n^2 = 0.5`
-//!   rad of angle at most (within the loop's +-45 deg capture range), limited to 5-50 Hz and
-//!   to `0.1 / ((N + 2) Ts)` (the loop's delay: the period average and the computation delay);
+//!   full-torque step, so that a full-torque load step costs about
+//!   [`LOAD_STEP_PEAK`]` a_max / w_n^2 = 0.27` rad of angle at most (the triple-pole loop's
+//!   peak; within the loop's +-45 deg capture range), limited to 5-50 Hz and to
+//!   `0.1 / ((N + 2) Ts)` (the loop's delay: the period's estimate and the computation delay);
+//! - with the sensors' noise known ([`HfiConfig::with_current_noise`]): the above if its
+//!   predicted angle noise ("Angle noise") is within [`TARGET_ANGLE_RMS_RAD`] (1 deg);
+//!   otherwise the bandwidth lowered to what the load step allows, `0.5` rad
+//!   (`w_n = sqrt(0.54 a_max)`), the full voltage, and the shortest `N` (up to 8) that meets
+//!   the target. The industrial motor of the tests (50 mA noise) gets `N = 7` (714 Hz) and
+//!   `w_n` 60 rad/s instead of `N = 4`, 82 rad/s: the hold under rated load goes from 2.1 to
+//!   0.6 deg RMS (max 7.4-9.8 to 2.1-2.2 deg over four seeds), at 1.75x the current ripple and
+//!   a slower, noisier hand-over band (module docs of `pmsm-sim`'s `tests/hfi.rs`). The
+//!   traction motor keeps its defaults;
 //! - hand-over band to the observer: from half the start-up hand-over speed (observer weight 0)
 //!   to the hand-over speed (weight 1; carrier off above it);
 //! - polarity pulses: `0.8 I_lim`, 20 ms each, after 60 ms of settling.
@@ -227,14 +271,7 @@ pub const TARGET_ANGLE_RMS_RAD: f32 = 1.0 * PI / 180.0;
 
 /// Predicted RMS angle noise (rad el.) of the tracking loop for a current noise `sigma` (A per
 /// phase, two phases sampled) at the worst rotor orientation (module docs, "Angle noise").
-fn angle_noise_rms(
-    m: &MotorParams<f32>,
-    ts: f32,
-    v: f32,
-    half: u8,
-    w_pll: f32,
-    sigma: f32,
-) -> f32 {
+fn angle_noise_rms(m: &MotorParams<f32>, ts: f32, v: f32, half: u8, w_pll: f32, sigma: f32) -> f32 {
     let y_d = 0.5 * (1.0 / m.ld_h - 1.0 / m.lq_h);
     let n = f32::from(half);
     // eps per unit of noise: the least-squares step estimate's long-run variance is at most
@@ -1197,10 +1234,80 @@ mod tests {
     }
 
     #[test]
+    fn noise_model_picks_bandwidth_and_half_period() {
+        // The industrial motor as the simulator's preset runs it.
+        let mut cfg = ipm();
+        cfg.current_limit_a = 12.0;
+        cfg.inertia_kg_m2 = 0.012;
+        let plain = HfiConfig::new(&cfg, 540.0).unwrap_or_else(|e| panic!("{e}"));
+        // No noise: the plain defaults.
+        assert_eq!(HfiConfig::with_current_noise(&cfg, 540.0, 0.0), Ok(plain));
+        // 50 mA: the plain defaults predict more than 1 deg; the bandwidth drops to the load
+        // step's bound, sqrt(0.54 a_max), and the half period grows until the target is met.
+        let h = HfiConfig::with_current_noise(&cfg, 540.0, 0.05).unwrap_or_else(|e| panic!("{e}"));
+        assert!(plain.predicted_angle_rms_rad(&cfg, 0.05) > TARGET_ANGLE_RMS_RAD);
+        assert!(h.predicted_angle_rms_rad(&cfg, 0.05) <= TARGET_ANGLE_RMS_RAD);
+        assert_eq!((plain.half_period_ticks, h.half_period_ticks), (4, 7));
+        assert!(h.half_period_ticks > plain.half_period_ticks, "{h:?}");
+        let ratio = h.pll_bandwidth_rad_s / plain.pll_bandwidth_rad_s;
+        assert!(
+            (ratio - (LOAD_STEP_PEAK / 0.5).sqrt()).abs() < 1e-3,
+            "{ratio}"
+        );
+        let mut shorter = h;
+        shorter.half_period_ticks -= 1;
+        assert!(shorter.predicted_angle_rms_rad(&cfg, 0.05) > TARGET_ANGLE_RMS_RAD);
+        // Far too noisy: the longest half period.
+        let n = HfiConfig::with_current_noise(&cfg, 540.0, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(n.half_period_ticks, MAX_HALF_PERIOD);
+        for bad in [-0.1, f32::NAN, f32::INFINITY] {
+            assert_eq!(
+                HfiConfig::with_current_noise(&cfg, 540.0, bad),
+                Err(HfiError::OutOfRange(HfiField::CurrentNoise))
+            );
+        }
+        let mut bad = plain;
+        bad.half_period_ticks = MAX_HALF_PERIOD + 1;
+        assert_eq!(
+            bad.validate(&cfg, 540.0),
+            Err(HfiError::OutOfRange(HfiField::HalfPeriod))
+        );
+    }
+
+    #[test]
+    fn least_squares_weights_are_unbiased_and_cancel_the_fundamental() {
+        // For every half period and window phase: the weights of the signed steps sum to 1
+        // (a carrier step is measured as itself) and weigh the carrier's signs to zero (a
+        // constant slope of the fundamental cancels).
+        for half in 1..=MAX_HALF_PERIOD {
+            let w = ls_weights(half);
+            let n = 2 * usize::from(half);
+            for (p0, row) in w.iter().enumerate().take(n) {
+                let sum: f32 = row.iter().take(n).sum();
+                let signed: f32 = row
+                    .iter()
+                    .enumerate()
+                    .take(n)
+                    .map(|(p, x)| if p < usize::from(half) { *x } else { -*x })
+                    .sum();
+                assert!((sum - 1.0).abs() < 1e-5, "N {half} p0 {p0}: {sum}");
+                assert!(signed.abs() < 1e-5, "N {half} p0 {p0}: {signed}");
+            }
+        }
+    }
+
+    #[test]
     fn demodulation_gives_sin_2e_over_2() {
         // Tracker frozen (bandwidth tiny) at 0, rotor at e: eps = sin(2e)/2.
         let cfg = ipm();
-        for (e, n) in [(-1.2_f32, 1), (-0.3, 3), (0.1, 1), (0.6, 4)] {
+        for (e, n) in [
+            (-1.2_f32, 1),
+            (-0.3, 3),
+            (0.1, 1),
+            (0.6, 4),
+            (-0.2, 7),
+            (0.4, 8),
+        ] {
             let mut t = HfiTracker::new(&cfg.motor, cfg.ts_s, 100.0, n, 1e-3, cfg.delay, 1.5);
             t.reset(0.0, 0.0);
             let mut p = DqPlant {
