@@ -6,7 +6,7 @@
 //!
 //! Each tick adds `u_h[k] = V_h s[k] (cos phi_k, sin phi_k)` to the stator voltage (alpha-beta):
 //! `s[k]` is `+1` for `N` ticks and `-1` for `N` ticks ([`HfiConfig::half_period_ticks`], 1 to
-//! 4: carrier `f_pwm / (2 N)`, e.g. 10 kHz at 20 kHz PWM with `N = 1`, 1.67 kHz at 10 kHz with
+//! 8: carrier `f_pwm / (2 N)`, e.g. 10 kHz at 20 kHz PWM with `N = 1`, 1.67 kHz at 10 kHz with
 //! `N = 3`), and `phi_k = theta_hat + w_hat advance Ts` is the tracked d axis at the middle of
 //! the period the voltage is applied in (the controller's own angle advance, module
 //! [`crate::controller`]).
@@ -20,7 +20,7 @@
 //! PWM can make (`N Ts V_h / L` peak to peak) and, with `N = 1`, the carrier sits at the top of
 //! the audible band or above it. A sinusoid at `f_pwm / 8` needs filters whose delay limits
 //! the tracking bandwidth (Jang 2003, Yoon 2011 compare the two). A longer half period `N`
-//! raises the signal-to-noise ratio as `sqrt(N)` at a given voltage (the current moves for `N`
+//! raises the signal-to-noise ratio as `N` at a given voltage with the least-squares demodulation (the current moves for `N`
 //! periods between the sign changes where the information is) and the ripple as `N`: the
 //! choice for motors of low saliency or noisy current sensing.
 //!
@@ -46,7 +46,8 @@
 //! mean_2N(y) = Ts V (Y_s + Y_d cos 2e,  Y_d sin 2e)
 //! ```
 //!
-//! (for `N = 1` this is the second difference `(s_a / 2) (i[k] - 2 i[k-1] + i[k-2])`). `s_a`
+//! (for `N = 1` this is the second difference `(s_a / 2) (i[k] - 2 i[k-1] + i[k-2])`; for longer
+//! half periods the mean is replaced by least-squares weights, below). `s_a`
 //! is the sign of the voltage applied over `[t_k-1, t_k)`, computed two ticks ago with the
 //! one-period computation delay, one tick ago without it (a short history keeps sign and
 //! axis). The normalised error `eps = mean(y)_q / (2 Ts V Y_d) = sin(2e) / 2` is `e` for small
@@ -54,6 +55,39 @@
 //! the polarity test compares. The carrier's own current is the measured step accumulated
 //! with the applied signs, less its period mean: the sample less it is the fundamental at the
 //! sample's time, which the controller's observer is fed ([`HfiTracker::carrier_current`]).
+//!
+//! # Demodulation by least squares
+//!
+//! The plain mean of the `2N` signed steps telescopes to the samples next to the carrier's
+//! sign changes: it uses 2 samples of `2N + 1`. Every tick the tracker instead fits the last
+//! `2N + 1` samples (each axis of the `phi` frame) with `a + b j + c T_j`, where `T_j` is the
+//! carrier's current (the applied signs accumulated) and `a + b j` the fundamental (offset and
+//! slope, as before), and takes `c`, the carrier step: weights `T_perp / |T_perp|^2` on the
+//! samples (`T_perp`: `T` less its projection on `1` and `j`), turned into weights of the
+//! signed steps, a table per window phase computed once ([`HfiTracker::new`]). For `N = 1`
+//! they are the mean (three samples, three unknowns); for `N = 4` the long-run noise variance
+//! of the step falls to 0.67 of the mean's (12/N^2 for long half periods), the angle noise
+//! RMS to 0.82 of it (measured on the industrial motor: 2.11 -> 1.75 deg RMS).
+//!
+//! # Angle noise
+//!
+//! The current sensors' noise (`sigma` per phase, two phases sampled: `c = -a - b`) is not
+//! the same on every axis: its variance along an axis at `psi` from phase a is
+//! `sigma^2 (4/3 - cos(2 psi) / 3 + sin(2 psi) / sqrt 3)`, from `2/3` to `2 sigma^2`. The angle
+//! information is the q response, so the angle noise depends on the rotor's orientation by
+//! `sqrt 3` (measured on the industrial motor at rest: 1.16 to 1.90 deg RMS over rotor
+//! angles, the same noise realization), which is why a sweep of the loop bandwidth at one
+//! start angle is not monotonic (the rotor comes to rest at another angle). Through the
+//! loop (noise bandwidth `1.03 w_n` Hz for `w_n` in rad/s) the predicted angle noise at the
+//! worst orientation is
+//!
+//! ```text
+//! sigma_theta^2 = (12 / N^2) 2 sigma^2 / (2 Ts V Y_d)^2 * 2 (1.03 w_n) Ts
+//! ```
+//!
+//! (it scales exactly as `sigma^2` in the simulator; measured on the industrial motor at
+//! `N = 4`, `w_n = 82`: 1.9 deg RMS at the worst orientation, predicted 1.9). The largest
+//! error over a few seconds is about four times the RMS.
 //!
 //! # Tracking loop (PLL with the drive's torque fed forward)
 //!
@@ -97,17 +131,27 @@
 //!
 //! - `V_h`: the voltage whose carrier ripple is 10 % of the current limit peak to peak on the
 //!   d axis, `0.1 I_lim Ld / Ts`, at most 80 % of the voltage limit at the nominal bus;
-//! - half period `N` ticks: 1 (`f_pwm / 2`) unless the saliency signal of one period,
+//! - half period `N` ticks ([`HfiConfig::new`], sensor noise unknown): 1 (`f_pwm / 2`) unless the saliency signal of one period,
 //!   `Ts V_h Y_d`, is below 3 % of the current limit (the sensor's noise scales with its full
 //!   scale, which scales with the current limit); then the smallest `N <= 4` that reaches it,
-//!   at the full 80 % voltage. Longer half periods raise the signal-to-noise ratio as
-//!   `sqrt(N)` at a given voltage, and the ripple as `N`. The traction motor of the tests
-//!   (Lq/Ld 3) gets `N = 1` (10 kHz at 20 kHz PWM), the industrial one (Lq/Ld 1.4) `N = 3`
-//!   (1.67 kHz at 10 kHz);
+//!   at the full 80 % voltage. Longer half periods raise the signal-to-noise ratio as `N`
+//!   at a given voltage, and the ripple as `N`. The traction motor of the tests (Lq/Ld 3)
+//!   gets `N = 2` at its preset's sizing (5 kHz at 20 kHz PWM), the industrial one (Lq/Ld
+//!   1.4, 12 A limit) `N = 4` (1.25 kHz at 10 kHz);
 //! - tracking loop: `w_n = sqrt(a_max)`, `a_max = p k_t I_lim / J` the acceleration of a
-//!   full-torque step, so that a full-torque load step costs about `0.5 a_max / w_n^2 = 0.5`
-//!   rad of angle at most (within the loop's +-45 deg capture range), limited to 5-50 Hz and
-//!   to `0.1 / ((N + 2) Ts)` (the loop's delay: the period average and the computation delay);
+//!   full-torque step, so that a full-torque load step costs about
+//!   [`LOAD_STEP_PEAK`]` a_max / w_n^2 = 0.27` rad of angle at most (the triple-pole loop's
+//!   peak; within the loop's +-45 deg capture range), limited to 5-50 Hz and to
+//!   `0.1 / ((N + 2) Ts)` (the loop's delay: the period's estimate and the computation delay);
+//! - with the sensors' noise known ([`HfiConfig::with_current_noise`]): the above if its
+//!   predicted angle noise ("Angle noise") is within [`TARGET_ANGLE_RMS_RAD`] (1 deg);
+//!   otherwise the bandwidth lowered to what the load step allows, `0.5` rad
+//!   (`w_n = sqrt(0.54 a_max)`), the full voltage, and the shortest `N` (up to 8) that meets
+//!   the target. The industrial motor of the tests (50 mA noise) gets `N = 7` (714 Hz) and
+//!   `w_n` 60 rad/s instead of `N = 4`, 82 rad/s: the hold under rated load goes from 2.1 to
+//!   0.6 deg RMS (max 7.4-9.8 to 2.1-2.2 deg over four seeds), at 1.75x the current ripple and
+//!   a slower, noisier hand-over band (module docs of `pmsm-sim`'s `tests/hfi.rs`). The
+//!   traction motor keeps its defaults;
 //! - hand-over band to the observer: from half the start-up hand-over speed (observer weight 0)
 //!   to the hand-over speed (weight 1; carrier off above it);
 //! - polarity pulses: `0.8 I_lim`, 20 ms each, after 60 ms of settling.
@@ -139,6 +183,8 @@ pub enum HfiField {
     SettleTime,
     /// [`HfiConfig::pulse_time_s`].
     PulseTime,
+    /// The current sensors' noise given to [`HfiConfig::with_current_noise`].
+    CurrentNoise,
 }
 
 /// Why HFI was refused.
@@ -179,6 +225,12 @@ impl core::fmt::Display for HfiError {
 
 impl core::error::Error for HfiError {}
 
+/// Longest half period of the carrier, PWM periods ([`HfiConfig::half_period_ticks`]).
+pub const MAX_HALF_PERIOD: u8 = 8;
+
+/// Length of the tracker's history rings: one carrier period at the longest half period.
+const RING: usize = 2 * MAX_HALF_PERIOD as usize;
+
 /// Smallest `Lq / Ld` HFI accepts.
 pub const MIN_SALIENCY: f32 = 1.1;
 
@@ -187,7 +239,7 @@ pub const MIN_SALIENCY: f32 = 1.1;
 pub struct HfiConfig {
     /// Amplitude of the square-wave carrier on the tracked d axis, V.
     pub injection_v: f32,
-    /// PWM periods per half period of the carrier, 1 to 4 (carrier frequency
+    /// PWM periods per half period of the carrier, 1 to [`MAX_HALF_PERIOD`] (carrier frequency
     /// `f_pwm / (2 half_period_ticks)`).
     pub half_period_ticks: u8,
     /// Natural frequency of the tracking loop, rad/s.
@@ -209,6 +261,26 @@ pub struct HfiConfig {
     pub detect_polarity: bool,
 }
 
+/// Peak angle error (rad el.) of the tracking loop after a step `a` of the load's acceleration,
+/// times `w_n^2 / a` (triple pole at `-w_n`).
+pub const LOAD_STEP_PEAK: f32 = 0.27;
+
+/// Angle noise (RMS, rad el.) [`HfiConfig::with_current_noise`] aims at: 1 deg, so that the
+/// largest error over seconds, about four times the RMS, stays within 5 deg.
+pub const TARGET_ANGLE_RMS_RAD: f32 = 1.0 * PI / 180.0;
+
+/// Predicted RMS angle noise (rad el.) of the tracking loop for a current noise `sigma` (A per
+/// phase, two phases sampled) at the worst rotor orientation (module docs, "Angle noise").
+fn angle_noise_rms(m: &MotorParams<f32>, ts: f32, v: f32, half: u8, w_pll: f32, sigma: f32) -> f32 {
+    let y_d = 0.5 * (1.0 / m.ld_h - 1.0 / m.lq_h);
+    let n = f32::from(half);
+    // eps per unit of noise: the least-squares step estimate's long-run variance is at most
+    // 12 / N^2 of a sample's, the worst axis carries 2 sigma^2, eps = step / (2 Ts V Y_d).
+    let s_eps = 12.0 / (n * n) * 2.0 * sigma * sigma / (4.0 * ts * ts * v * v * y_d * y_d);
+    // Through the loop: its noise bandwidth is 1.03 w_n (Hz for w_n in rad/s).
+    crate::trig::sqrt(s_eps * 2.0 * 1.03 * w_pll * ts)
+}
+
 /// `a < b` (false for NaN).
 fn below(a: f32, b: f32) -> bool {
     a < b
@@ -226,8 +298,43 @@ fn saliency(m: &MotorParams<f32>) -> Result<f32, HfiError> {
 
 impl HfiConfig {
     /// Defaults derived from the controller's configuration and the nominal bus voltage
-    /// (module docs). A surface motor is refused ([`HfiError::SurfaceMotor`]).
+    /// (module docs), for a current sensing of unknown noise. A surface motor is refused
+    /// ([`HfiError::SurfaceMotor`]).
     pub fn new(cfg: &FocConfig, u_dc_nominal_v: f32) -> Result<Self, HfiError> {
+        Self::derive(cfg, u_dc_nominal_v, None)
+    }
+
+    /// Defaults for current sensors of known noise (standard deviation per phase, A; module
+    /// docs, "Defaults"): those of [`new`](Self::new) if their predicted angle noise at the
+    /// rotor orientation worst for the two sensors is at most [`TARGET_ANGLE_RMS_RAD`];
+    /// otherwise the loop's bandwidth lowered to what a full-torque load step allows and the
+    /// shortest half period that meets the target ([`MAX_HALF_PERIOD`] if none does). A negative or
+    /// non-finite noise is refused (`OutOfRange(`[`HfiField::CurrentNoise`]`)`).
+    pub fn with_current_noise(
+        cfg: &FocConfig,
+        u_dc_nominal_v: f32,
+        current_noise_std_a: f32,
+    ) -> Result<Self, HfiError> {
+        if !(current_noise_std_a.is_finite() && current_noise_std_a >= 0.0) {
+            return Err(HfiError::OutOfRange(HfiField::CurrentNoise));
+        }
+        Self::derive(cfg, u_dc_nominal_v, Some(current_noise_std_a))
+    }
+
+    /// Predicted RMS angle noise of the tracking loop, rad el. (module docs, "Angle noise"),
+    /// for these settings and a current noise of `current_noise_std_a` per phase.
+    pub fn predicted_angle_rms_rad(&self, cfg: &FocConfig, current_noise_std_a: f32) -> f32 {
+        angle_noise_rms(
+            &cfg.motor,
+            cfg.ts_s,
+            self.injection_v,
+            self.half_period_ticks,
+            self.pll_bandwidth_rad_s,
+            current_noise_std_a,
+        )
+    }
+
+    fn derive(cfg: &FocConfig, u_dc_nominal_v: f32, noise: Option<f32>) -> Result<Self, HfiError> {
         saliency(&cfg.motor)?;
         let m = &cfg.motor;
         let u_lim = cfg.max_modulation * u_dc_nominal_v * crate::transforms::FRAC_1_SQRT_3;
@@ -235,25 +342,52 @@ impl HfiConfig {
         let v_cap = 0.8 * u_lim;
         let v_ripple = 0.1 * i_lim * m.ld_h / cfg.ts_s;
         let mut v = if v_ripple < v_cap { v_ripple } else { v_cap };
-        // The saliency signal per half period, `N Ts V Y_d`, at least 3 % of the current
-        // limit: longer half periods at the full voltage when one period is not enough.
         let y_d = 0.5 * (1.0 / m.ld_h - 1.0 / m.lq_h);
+        let a_max = m.pole_pairs as f32 * cfg.torque_constant_nm_a() * i_lim / cfg.inertia_kg_m2;
+        // The bandwidth for a rule `w` at half period `n`: at most a tenth of the inverse of the
+        // loop's delay (the period's estimate, N ticks, plus the computation delay and the
+        // sample, 2 ticks), 5 to 50 Hz.
+        let limited = |w: f32, n: u8| {
+            let w_delay = 0.1 / ((f32::from(n) + 2.0) * cfg.ts_s);
+            let w_hi = if w_delay < 2.0 * PI * 50.0 {
+                w_delay
+            } else {
+                2.0 * PI * 50.0
+            };
+            crate::pi::limit(w, 2.0 * PI * 5.0, w_hi)
+        };
+        // The saliency signal per half period, `N Ts V Y_d`, at least 3 % of the current
+        // limit: longer half periods (up to 4) at the full voltage when one is not enough.
         let mut n: u8 = 1;
         while n < 4 && f32::from(n) * cfg.ts_s * v * y_d < 0.03 * i_lim {
             n += 1;
             v = v_cap;
         }
-        // A full-torque load step costs about `0.5 a_max / w_n^2` of angle: at most 0.5 rad.
-        let a_max = m.pole_pairs as f32 * cfg.torque_constant_nm_a() * i_lim / cfg.inertia_kg_m2;
-        // At most a tenth of the inverse of the loop's delay (the period average, N ticks, plus
-        // the computation delay and the sample, 2 ticks).
-        let w_delay = 0.1 / ((f32::from(n) + 2.0) * cfg.ts_s);
-        let w_hi = if w_delay < 2.0 * PI * 50.0 {
-            w_delay
-        } else {
-            2.0 * PI * 50.0
-        };
-        let w_pll = crate::pi::limit(crate::trig::sqrt(a_max), 2.0 * PI * 5.0, w_hi);
+        // `w_n = sqrt(a_max)`: a full-torque load step costs about `0.27 a_max / w_n^2` = 0.27
+        // rad of angle at most.
+        let mut w_pll = limited(crate::trig::sqrt(a_max), n);
+        if let Some(sigma) = noise
+            && !at_most(
+                angle_noise_rms(m, cfg.ts_s, v, n, w_pll, sigma),
+                TARGET_ANGLE_RMS_RAD,
+            )
+        {
+            // Too noisy: the bandwidth down to what a full-torque load step allows (0.5 rad,
+            // within the loop's +-45 deg capture range), then the shortest half period at the
+            // full voltage that meets the target.
+            let w_load = crate::trig::sqrt(LOAD_STEP_PEAK * a_max / 0.5);
+            v = v_cap;
+            w_pll = limited(w_load, n);
+            while n < MAX_HALF_PERIOD
+                && !at_most(
+                    angle_noise_rms(m, cfg.ts_s, v, n, w_pll, sigma),
+                    TARGET_ANGLE_RMS_RAD,
+                )
+            {
+                n += 1;
+                w_pll = limited(w_load, n);
+            }
+        }
         let h = cfg.startup.handover_speed_rad_s;
         let c = Self {
             injection_v: v,
@@ -292,7 +426,7 @@ impl HfiConfig {
             }
         }
         let u_lim = cfg.max_modulation * u_dc_nominal_v * crate::transforms::FRAC_1_SQRT_3;
-        if !(1..=4).contains(&self.half_period_ticks) {
+        if !(1..=MAX_HALF_PERIOD).contains(&self.half_period_ticks) {
             return Err(HfiError::OutOfRange(F::HalfPeriod));
         }
         if !below(self.injection_v, 0.9 * u_lim) {
@@ -327,6 +461,57 @@ struct Carrier {
     sign: f32,
     sin: f32,
     cos: f32,
+    /// Position in the carrier period (0 to `2 N - 1`).
+    phase: u8,
+}
+
+/// Least-squares weights of the demodulation (module docs, "Demodulation by least
+/// squares"): `w[p0][p]` weighs the signed step `y` applied at carrier phase `p` in the window
+/// of one period whose oldest step was applied at phase `p0` (`half` ticks per half period).
+fn ls_weights(half: u8) -> [[f32; RING]; RING] {
+    let half = usize::from(half.clamp(1, MAX_HALF_PERIOD));
+    let n = 2 * half;
+    let sign = |p: usize| if p % n < half { 1.0_f32 } else { -1.0 };
+    let mut w = [[0.0_f32; RING]; RING];
+    if half == 1 {
+        // Three samples, three unknowns: the second difference, `y` weighed 1/2 (exactly).
+        w[0][..2].fill(0.5);
+        w[1][..2].fill(0.5);
+        return w;
+    }
+    for (p0, row) in w.iter_mut().enumerate().take(n) {
+        // Samples j = 0..=n of the window; the carrier's accumulated current T_j (a unit
+        // step per tick, signed).
+        let mut t = [0.0_f32; RING + 1];
+        for j in 1..=n {
+            t[j] = t[j - 1] + sign(p0 + j - 1);
+        }
+        // T less its projection on the fundamental's constant and slope (orthogonal basis
+        // 1 and j - n/2 over the n + 1 samples).
+        let m = n as f32 + 1.0;
+        let jc = |j: usize| j as f32 - 0.5 * n as f32;
+        let (mut st, mut stj, mut sjj) = (0.0, 0.0, 0.0);
+        for (j, tj) in t.iter().enumerate().take(n + 1) {
+            st += tj;
+            stj += tj * jc(j);
+            sjj += jc(j) * jc(j);
+        }
+        let mut r = [0.0_f32; RING + 1];
+        let mut rr = 0.0;
+        for j in 0..=n {
+            r[j] = t[j] - st / m - stj / sjj * jc(j);
+            rr += r[j] * r[j];
+        }
+        // Sample weights r_j / |r|^2 (they sum to zero) as weights of the differences:
+        // v_j = sum_{m >= j} w_m for the step into sample j; y_j = s_j (i_j - i_j-1).
+        let mut v = 0.0;
+        for j in (1..=n).rev() {
+            v += r[j] / rr;
+            let p = (p0 + j - 1) % n;
+            row[p] = v * sign(p0 + j - 1);
+        }
+    }
+    w
 }
 
 /// The carrier's response in one demodulation (module docs), A per period of carrier step:
@@ -369,12 +554,15 @@ pub struct HfiTracker {
     /// The last sample `i[k-1]`.
     i_prev: AlphaBeta,
     /// The last `period` samples and demodulated steps (ring, written at `pos`).
-    i_ring: [AlphaBeta; 8],
-    y_ring: [Dq; 8],
+    i_ring: [AlphaBeta; RING],
+    y_ring: [Dq; RING],
+    /// Carrier phase of each step in `y_ring`, and the least-squares weights ([`ls_weights`]).
+    p_ring: [u8; RING],
+    weights: [[f32; RING]; RING],
     /// The carrier's current predicted from the measured step (accumulated), its last
     /// `period` values, and the centred value of the last sample (module docs).
     tri: AlphaBeta,
-    tri_ring: [AlphaBeta; 8],
+    tri_ring: [AlphaBeta; RING],
     tri_centred: AlphaBeta,
     pos: u8,
     /// Consecutive accepted samples (saturating), consecutive demodulated steps.
@@ -397,7 +585,7 @@ impl HfiTracker {
         delay: ComputationDelay,
         angle_advance_periods: f32,
     ) -> Self {
-        let half = half_period_ticks.clamp(1, 4);
+        let half = half_period_ticks.clamp(1, MAX_HALF_PERIOD);
         let y_d = 0.5 * (1.0 / motor.ld_h - 1.0 / motor.lq_h);
         let w = pll_bandwidth_rad_s;
         Self {
@@ -418,10 +606,12 @@ impl HfiTracker {
             phase: 0,
             hist: [Carrier::default(); 2],
             i_prev: AlphaBeta::default(),
-            i_ring: [AlphaBeta::default(); 8],
-            y_ring: [Dq::default(); 8],
+            i_ring: [AlphaBeta::default(); RING],
+            y_ring: [Dq::default(); RING],
+            p_ring: [0; RING],
+            weights: ls_weights(half),
             tri: AlphaBeta::default(),
-            tri_ring: [AlphaBeta::default(); 8],
+            tri_ring: [AlphaBeta::default(); RING],
             tri_centred: AlphaBeta::default(),
             pos: 0,
             valid: 0,
@@ -522,7 +712,7 @@ impl HfiTracker {
     /// on the first).
     pub fn update(&mut self, i: AlphaBeta, accel_rad_s2: f32) -> (Option<Response>, AlphaBeta) {
         let n = usize::from(self.period);
-        let pos = usize::from(self.pos) & 7;
+        let pos = usize::from(self.pos) % RING;
         // The carrier applied over [t_k-1, t_k): its current step, projected on its axis and
         // signed, is one demodulated step `y`.
         let applied = if self.one_period_delay {
@@ -533,6 +723,7 @@ impl HfiTracker {
         if self.valid >= 1 && applied.sign != 0.0 {
             let r = (i - self.i_prev).to_dq(applied.sin, applied.cos);
             self.y_ring[pos] = r * applied.sign;
+            self.p_ring[pos] = applied.phase;
             self.y_count = self.y_count.saturating_add(1);
         } else {
             self.y_count = 0;
@@ -566,11 +757,13 @@ impl HfiTracker {
             i
         };
         let resp = if usize::from(self.y_count) >= n {
-            let mut sum = Dq::default();
-            for y in self.y_ring.iter().take(n) {
-                sum = sum + *y;
+            // The oldest step of the window is the one after the newest (written at `pos`).
+            let p0 = usize::from((self.p_ring[pos] + 1) % self.period);
+            let w = &self.weights[p0 % RING];
+            let mut m = Dq::default();
+            for (y, p) in self.y_ring.iter().zip(&self.p_ring).take(n) {
+                m = m + *y * w[usize::from(*p) % RING];
             }
-            let m = sum * (1.0 / n as f32);
             let eps = crate::pi::limit(m.q * self.inv_scale, -1.0, 1.0);
             self.theta = wrap(self.theta + self.ts * (self.omega_i + self.kp * eps));
             self.omega_i += self.ki_t * eps + self.ts * (accel_rad_s2 - self.load);
@@ -593,6 +786,7 @@ impl HfiTracker {
     /// the middle of its application interval; the sign alternates every call.
     pub fn inject(&mut self) -> AlphaBeta {
         self.sign = if self.phase < self.half { 1.0 } else { -1.0 };
+        let phase = self.phase;
         self.phase = (self.phase + 1) % self.period;
         let (s0, c0) = sin_cos(self.theta);
         let (sd, cd) = sin_cos_small(self.omega_i * self.advance_s);
@@ -602,6 +796,7 @@ impl HfiTracker {
                 sign: self.sign,
                 sin: s,
                 cos: c,
+                phase,
             },
             self.hist[0],
         ];
@@ -1039,10 +1234,80 @@ mod tests {
     }
 
     #[test]
+    fn noise_model_picks_bandwidth_and_half_period() {
+        // The industrial motor as the simulator's preset runs it.
+        let mut cfg = ipm();
+        cfg.current_limit_a = 12.0;
+        cfg.inertia_kg_m2 = 0.012;
+        let plain = HfiConfig::new(&cfg, 540.0).unwrap_or_else(|e| panic!("{e}"));
+        // No noise: the plain defaults.
+        assert_eq!(HfiConfig::with_current_noise(&cfg, 540.0, 0.0), Ok(plain));
+        // 50 mA: the plain defaults predict more than 1 deg; the bandwidth drops to the load
+        // step's bound, sqrt(0.54 a_max), and the half period grows until the target is met.
+        let h = HfiConfig::with_current_noise(&cfg, 540.0, 0.05).unwrap_or_else(|e| panic!("{e}"));
+        assert!(plain.predicted_angle_rms_rad(&cfg, 0.05) > TARGET_ANGLE_RMS_RAD);
+        assert!(h.predicted_angle_rms_rad(&cfg, 0.05) <= TARGET_ANGLE_RMS_RAD);
+        assert_eq!((plain.half_period_ticks, h.half_period_ticks), (4, 7));
+        assert!(h.half_period_ticks > plain.half_period_ticks, "{h:?}");
+        let ratio = h.pll_bandwidth_rad_s / plain.pll_bandwidth_rad_s;
+        assert!(
+            (ratio - (LOAD_STEP_PEAK / 0.5).sqrt()).abs() < 1e-3,
+            "{ratio}"
+        );
+        let mut shorter = h;
+        shorter.half_period_ticks -= 1;
+        assert!(shorter.predicted_angle_rms_rad(&cfg, 0.05) > TARGET_ANGLE_RMS_RAD);
+        // Far too noisy: the longest half period.
+        let n = HfiConfig::with_current_noise(&cfg, 540.0, 1.0).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(n.half_period_ticks, MAX_HALF_PERIOD);
+        for bad in [-0.1, f32::NAN, f32::INFINITY] {
+            assert_eq!(
+                HfiConfig::with_current_noise(&cfg, 540.0, bad),
+                Err(HfiError::OutOfRange(HfiField::CurrentNoise))
+            );
+        }
+        let mut bad = plain;
+        bad.half_period_ticks = MAX_HALF_PERIOD + 1;
+        assert_eq!(
+            bad.validate(&cfg, 540.0),
+            Err(HfiError::OutOfRange(HfiField::HalfPeriod))
+        );
+    }
+
+    #[test]
+    fn least_squares_weights_are_unbiased_and_cancel_the_fundamental() {
+        // For every half period and window phase: the weights of the signed steps sum to 1
+        // (a carrier step is measured as itself) and weigh the carrier's signs to zero (a
+        // constant slope of the fundamental cancels).
+        for half in 1..=MAX_HALF_PERIOD {
+            let w = ls_weights(half);
+            let n = 2 * usize::from(half);
+            for (p0, row) in w.iter().enumerate().take(n) {
+                let sum: f32 = row.iter().take(n).sum();
+                let signed: f32 = row
+                    .iter()
+                    .enumerate()
+                    .take(n)
+                    .map(|(p, x)| if p < usize::from(half) { *x } else { -*x })
+                    .sum();
+                assert!((sum - 1.0).abs() < 1e-5, "N {half} p0 {p0}: {sum}");
+                assert!(signed.abs() < 1e-5, "N {half} p0 {p0}: {signed}");
+            }
+        }
+    }
+
+    #[test]
     fn demodulation_gives_sin_2e_over_2() {
         // Tracker frozen (bandwidth tiny) at 0, rotor at e: eps = sin(2e)/2.
         let cfg = ipm();
-        for (e, n) in [(-1.2_f32, 1), (-0.3, 3), (0.1, 1), (0.6, 4)] {
+        for (e, n) in [
+            (-1.2_f32, 1),
+            (-0.3, 3),
+            (0.1, 1),
+            (0.6, 4),
+            (-0.2, 7),
+            (0.4, 8),
+        ] {
             let mut t = HfiTracker::new(&cfg.motor, cfg.ts_s, 100.0, n, 1e-3, cfg.delay, 1.5);
             t.reset(0.0, 0.0);
             let mut p = DqPlant {
