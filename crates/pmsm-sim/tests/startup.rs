@@ -33,9 +33,11 @@ const BACKWARD_MAX_PCT: f64 = 1.0;
 const DEVIATION_MAX_PCT: f64 = 10.0;
 const HANDOVER_MAX_PCT: f64 = 3.0;
 
-fn scenario(preset: &str, theta0: f64) -> Scenario {
+/// The preset's scenario from `theta0` (rad el.), its noise seed moved by `dseed`.
+fn scenario(preset: &str, theta0: f64, dseed: u64) -> Scenario {
     let mut sc = Scenario::preset(preset).unwrap_or_else(|e| panic!("{e}"));
     sc.name = format!("{preset} from {:.0} deg", theta0.to_degrees());
+    sc.seed += dseed;
     sc.initial.theta_e_rad = theta0;
     sc.initial.speed_rpm = 0.0;
     sc.controller.kind = ControllerKind::Foc;
@@ -64,6 +66,7 @@ fn startup(sc: &Scenario) -> (StartupMetrics, Option<String>) {
 /// One cell of the grid.
 struct Cell {
     motor: &'static str,
+    dseed: u64,
     theta0_deg: f64,
     st: StartupMetrics,
     fault: Option<String>,
@@ -106,8 +109,10 @@ impl Cell {
     }
 }
 
-/// Runs the grid and prints its table (per cell, then the worst per motor).
-fn grid() -> Vec<Cell> {
+/// Runs the grid with the presets' noise seeds moved by `dseed` and prints its table (per
+/// cell, then the worst per motor).
+fn grid(dseed: u64) -> Vec<Cell> {
+    println!("Noise seeds: the presets' + {dseed}");
     println!(
         "| motor | rotor at (deg el.) | backward (% rated) | ramp deviation (% rated) | hand-over (s) | hand-over speed (% rated) |"
     );
@@ -116,10 +121,11 @@ fn grid() -> Vec<Cell> {
     for (motor, preset) in MOTORS {
         for k in 0..12 {
             let theta0_deg = f64::from(k) * 30.0 - 180.0;
-            let sc = scenario(preset, theta0_deg.to_radians());
+            let sc = scenario(preset, theta0_deg.to_radians(), dseed);
             let (st, fault) = startup(&sc);
             let cell = Cell {
                 motor,
+                dseed,
                 theta0_deg,
                 st,
                 fault,
@@ -156,17 +162,26 @@ fn grid() -> Vec<Cell> {
 }
 
 /// The goals of issue 14 item 1, as they stand: backward at most 1 % of rated speed, ramp
-/// deviation at most 10 %, hand-over at or below 3 %, no fault, on every cell.
+/// deviation at most 10 %, hand-over at or below 3 %, no fault, on every cell, with the
+/// presets' noise seeds and with the next ones (a start that meets the goals by the luck of
+/// one noise sequence does not count).
 ///
-/// Measured (seed of each preset): small_fast meets every goal (worst backward 0.99 %,
+/// Measured with the presets' seeds: small_fast meets every goal (worst backward 0.99 %,
 /// deviation 0.28 %); servo and industrial_2k2 meet the deviation and hand-over goals but
 /// not the backward one (servo 1.44 % at -180 deg and 1.04-1.14 % from 30 to 150 deg;
-/// industrial_2k2 up to 2.47 %, at 60 deg). Ignored until it passes: `cargo test --release
-/// -p pmsm-sim --test startup -- --ignored --nocapture` lists the misses.
+/// industrial_2k2 up to 2.47 %, at 60 deg, set at the kick's detection). With the next
+/// seeds: servo 1.12 %, industrial_2k2 22.2 % (from -180 deg) and small_fast 14.1 % (from
+/// -30 deg), both reached after the launch (below 0.03 % during the alignment); traced on
+/// industrial_2k2: the rotor coasted forwards at 1.1 % with the observer on the right
+/// branch, the coast's back-EMF evidence moved it to the other one and the launch drove the
+/// rotor backwards. Ignored until it passes: `cargo test --release -p pmsm-sim --test
+/// startup -- --ignored --nocapture` lists the misses.
 #[test]
-#[ignore = "issue 14 item 1: backward-speed goal missed on servo (1.44 %) and industrial_2k2 (2.47 %)"]
+#[ignore = "issue 14 item 1: backward-speed goal missed on servo (1.44 %), industrial_2k2 (2.47 %; 22.2 % with the next seed) and small_fast (14.1 % with the next seed)"]
 fn damped_start_meets_the_goals_on_three_motors_and_twelve_rotor_angles() {
-    let failures: Vec<String> = grid()
+    let mut cells = grid(0);
+    cells.extend(grid(1));
+    let failures: Vec<String> = cells
         .iter()
         .map(|c| {
             (
@@ -175,7 +190,15 @@ fn damped_start_meets_the_goals_on_three_motors_and_twelve_rotor_angles() {
             )
         })
         .filter(|(_, m)| !m.is_empty())
-        .map(|(c, m)| format!("{} from {:.0} deg: {}", c.motor, c.theta0_deg, m.join(", ")))
+        .map(|(c, m)| {
+            format!(
+                "{} (seed + {}) from {:.0} deg: {}",
+                c.motor,
+                c.dseed,
+                c.theta0_deg,
+                m.join(", ")
+            )
+        })
         .collect();
     assert!(failures.is_empty(), "{failures:#?}");
 }
@@ -188,7 +211,7 @@ fn damped_start_meets_the_goals_on_three_motors_and_twelve_rotor_angles() {
 /// motor meets the full goals.
 #[test]
 fn damped_start_over_three_motors_and_twelve_rotor_angles() {
-    let cells = grid();
+    let cells = grid(0);
     let mut failures = vec![];
     for c in &cells {
         let m = if c.motor == "small_fast" {
