@@ -172,7 +172,12 @@ impl Rig {
             u_dc,
             pending: ([0.5; 3], false),
             delay: cfg.delay == foc::ComputationDelay::OnePeriod,
-            noise: Noise::new(7),
+            noise: Noise::new(
+                std::env::var("FOC_TEST_SEED")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(7),
+            ),
             noise_a: 0.0,
             offset_a: 0.0,
             swap_bc: false,
@@ -191,6 +196,11 @@ impl Rig {
         let cfg = FocConfig::new(MotorParams::servo(), 50e-6, 300.0).with_inertia(8e-4);
         let rig = Self::new(&cfg, Plant::servo(), 300.0);
         (cfg, rig)
+    }
+
+    /// Restarts the measurement noise from `seed`.
+    pub fn reseed(&mut self, seed: u64) {
+        self.noise = Noise::new(seed);
     }
 
     pub fn input(&mut self) -> TickInput {
