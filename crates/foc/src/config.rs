@@ -219,15 +219,17 @@ pub struct SampleCheckConfig {
     /// channel cannot repeat: over any eighth of a period a sinusoid moves by at least
     /// `1 - cos(pi / 8)` = 7.6 % of its amplitude (19 mA at the 5 % floor of the servo's
     /// 5.1 A limit, two steps of a 12-bit ADC over +-20 A), more than an ADC step and its
-    /// noise. Not longer: a frozen reading misleads the current loops, which drive the real
-    /// current past the over-current level within about an eighth of a period at 400 rad/s
-    /// el. (servo test rig), so a quarter-period rule was beaten by the over-current trip
-    /// (the wrong diagnosis, after 11 A). 0 turns the check off.
+    /// noise (a smaller angle would not guarantee a code step at that floor). Not longer: a
+    /// frozen reading misleads the current loops, which drive the real current up within a
+    /// few milliseconds; on the servo test rig at 400 rad/s el. a quarter-period rule was
+    /// beaten by the over-current trip (the wrong diagnosis, after 11 A) for most noise
+    /// seeds, an eighth-period rule trips first (real current 2-12 A by then). 0 turns the
+    /// check off.
     pub stuck_angle_rad: f32,
 }
 
 impl Default for SampleCheckConfig {
-    /// Derived step limit, five missing samples, two over-current samples, stuck after a
+    /// Derived step limit, five missing samples, two over-current samples, stuck after an
     /// eighth of a turn.
     fn default() -> Self {
         Self {
