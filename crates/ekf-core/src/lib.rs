@@ -11,6 +11,9 @@ pub mod motor;
 pub mod noise;
 pub mod observer;
 mod structured;
+#[cfg(feature = "testing")]
+#[doc(hidden)]
+pub mod testing;
 pub mod trig;
 
 pub use angle::wrap_angle;

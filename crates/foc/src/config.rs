@@ -43,7 +43,7 @@
 //! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | |
 //! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
 //! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
-//! | `samples.stuck_angle_rad` | `pi / 2` | a phase reading repeated bit for bit while the current vector turns a quarter period: [`Fault::CurrentSensor`](crate::Fault::CurrentSensor) |
+//! | `samples.stuck_angle_rad` | `pi / 4` | a phase reading repeated bit for bit while the current vector turns an eighth of a period: [`Fault::CurrentSensor`](crate::Fault::CurrentSensor) |
 //! | `samples.over_current_trip_ticks` | 2 | the software over-current trip is debounced: one sample never trips it, two in a row do. The hardware comparator of the bridge is the real over-current protection (microseconds); this one is the controller's back-up |
 //!
 //! Health thresholds: [`HealthConfig::default`].
@@ -237,20 +237,27 @@ pub struct SampleCheckConfig {
     /// that repeats its reading bit for bit while the commanded current vector (at least
     /// 5 % of `current_limit_a`) turns by more than this electrical angle (and at least 4
     /// ticks) trips [`Fault::CurrentSensor`](crate::Fault::CurrentSensor), rad. A live
-    /// channel cannot repeat: a sinusoid changes by at least 29 % of its amplitude over a
-    /// quarter period, far more than an ADC step and its noise. 0 turns the check off.
+    /// channel cannot repeat: over any eighth of a period a sinusoid moves by at least
+    /// `1 - cos(pi / 8)` = 7.6 % of its amplitude (19 mA at the 5 % floor of the servo's
+    /// 5.1 A limit, two steps of a 12-bit ADC over +-20 A), more than an ADC step and its
+    /// noise (a smaller angle would not guarantee a code step at that floor). Not longer: a
+    /// frozen reading misleads the current loops, which drive the real current up within a
+    /// few milliseconds; on the servo test rig at 400 rad/s el. a quarter-period rule was
+    /// beaten by the over-current trip (the wrong diagnosis, after 11 A) for most noise
+    /// seeds, an eighth-period rule trips first (real current 2-12 A by then). 0 turns the
+    /// check off.
     pub stuck_angle_rad: f32,
 }
 
 impl Default for SampleCheckConfig {
-    /// Derived step limit, five missing samples, two over-current samples, stuck after a
-    /// quarter turn.
+    /// Derived step limit, five missing samples, two over-current samples, stuck after an
+    /// eighth of a turn.
     fn default() -> Self {
         Self {
             max_step_a: None,
             missing_trip_ticks: 5,
             over_current_trip_ticks: 2,
-            stuck_angle_rad: 0.5 * PI,
+            stuck_angle_rad: 0.25 * PI,
         }
     }
 }
@@ -263,7 +270,7 @@ impl SampleCheckConfig {
             max_step_a: Some(f32::INFINITY),
             missing_trip_ticks: 1,
             over_current_trip_ticks: 1,
-            stuck_angle_rad: 0.5 * PI,
+            stuck_angle_rad: 0.25 * PI,
         }
     }
 }

@@ -64,8 +64,8 @@
 //!
 //! A **stuck channel** (phase `a` or `b` of [`PhaseCurrents::Abc`] repeating its reading bit
 //! for bit while the commanded current vector, at least 5 % of the current limit, turns by
-//! `samples.stuck_angle_rad`, a quarter period by default) trips [`Fault::CurrentSensor`]:
-//! a live channel's sinusoid moves by 29 % of its amplitude over a quarter period. Found by
+//! `samples.stuck_angle_rad`, an eighth of a period by default) trips [`Fault::CurrentSensor`]:
+//! a live channel's sinusoid moves by 7.6 % of its amplitude over an eighth period. Found by
 //! two comparisons per tick. Without it a frozen reading goes unnoticed by the other checks
 //! (it is plausible and finite) while the loops, chasing a current they cannot move, drive
 //! the real one far past the over-current level before anything trips.
@@ -343,6 +343,9 @@ pub struct Foc {
     stuck_angle: [f32; 2],
     /// Ticks phase a / b repeated its reading.
     stuck_ticks: [u16; 2],
+    /// Frame speed magnitude when phase a / b began to repeat, rad/s el. (set on the first
+    /// repeat; the rate the stuck check counts at least).
+    stuck_omega: [f32; 2],
     /// High-frequency injection at low speed (module docs, "Low speed by HFI"); `None`: off.
     hfi: Option<HfiDrive>,
 }
@@ -424,6 +427,7 @@ impl Foc {
             raw_last: [f32::NAN; 2],
             stuck_angle: [0.0; 2],
             stuck_ticks: [0; 2],
+            stuck_omega: [0.0; 2],
             hfi: None,
         })
     }
@@ -896,24 +900,32 @@ impl Foc {
     /// (only while the commanded current is at least 5 % of the current limit) and trips
     /// [`Fault::CurrentSensor`] once it exceeds `samples.stuck_angle_rad` (and at least 4
     /// ticks). Returns whether it tripped.
+    ///
+    /// The angle accrues at the larger of the frame's present speed and its speed when the
+    /// repetition began. The frozen reading feeds the observer, so the frame's speed soon
+    /// follows the fault, not the rotor: on the servo test rig at 400 rad/s el. it swings
+    /// between -260 and +830 rad/s within a quarter period, and counted at the present
+    /// speed alone a quarter turn took up to 1.4 quarter periods. A rotor cannot shed its
+    /// speed that fast, so the speed at the onset bounds the rate the real vector turns.
     #[cold]
     #[inline(never)]
     fn stuck_channel(&mut self, same: [bool; 2], x: Abc, plan: Plan) -> bool {
         let limit = self.cfg.samples.stuck_angle_rad;
         let i_min = 0.05 * self.cfg.current_limit_a;
-        let step = if at_most(i_min * i_min, plan.i_ref.norm_squared()) {
-            let w = plan.frame.omega;
-            max2(w, -w) * self.cfg.ts_s
-        } else {
-            0.0
-        };
+        let driven = at_most(i_min * i_min, plan.i_ref.norm_squared());
+        let w = max2(plan.frame.omega, -plan.frame.omega);
         for (ch, v) in [x.a, x.b].into_iter().enumerate() {
             if !same[ch] {
                 self.stuck_angle[ch] = 0.0;
                 self.stuck_ticks[ch] = 0;
                 continue;
             }
-            self.stuck_angle[ch] += step;
+            if self.stuck_ticks[ch] == 0 {
+                self.stuck_omega[ch] = w;
+            }
+            if driven {
+                self.stuck_angle[ch] += max2(w, self.stuck_omega[ch]) * self.cfg.ts_s;
+            }
             self.stuck_ticks[ch] = self.stuck_ticks[ch].saturating_add(1);
             if limit > 0.0 && self.stuck_angle[ch] > limit && self.stuck_ticks[ch] >= 4 {
                 self.trip(Fault::CurrentSensor, v);

@@ -17,7 +17,7 @@
 //! | [`Fault::BusOverVoltage`] | `u_dc > u_dc_max_v` | every tick, every state |
 //! | [`Fault::BusUnderVoltage`] | `u_dc < u_dc_min_v` | while the bridge is driven (not in `Idle`) |
 //! | [`Fault::ObserverLost`] | health monitor: lost in closed loop with [`ObserverLossPolicy::Trip`](crate::ObserverLossPolicy::Trip); re-acquisitions exhausted; no lock within `acquire_timeout_s` at the hand-over speed | sensorless running states |
-//! | [`Fault::CurrentSensor`] | phase `a` or `b` reading repeated bit for bit while the commanded current vector (at least 5 % of the current limit) turned by `samples.stuck_angle_rad` (a quarter period) | running states, `Abc` input |
+//! | [`Fault::CurrentSensor`] | phase `a` or `b` reading repeated bit for bit while the commanded current vector (at least 5 % of the current limit) turned by `samples.stuck_angle_rad` (an eighth of a period) | running states, `Abc` input |
 //! | [`Fault::Stall`] | speed loop at its current limit while the rotor speed stays low for `stall_time_s`; or the I/f ramp at speed but the rotor not turning | running states |
 
 use core::fmt;

@@ -389,6 +389,11 @@ fn run_rig(compensate: bool, load_nm: f64) -> RigRun {
 /// As [`run_rig`], with the observer's parameter tracking on or off (off isolates the
 /// compensation's effect: a tracked flux absorbs much of the dead-time bias by itself).
 fn run_rig_tracking(compensate: bool, load_nm: f64, tracking: bool) -> RigRun {
+    run_rig_seeded(compensate, load_nm, tracking, None)
+}
+
+/// As [`run_rig_tracking`], with the rig's noise seeded by `seed` (`None`: the rig's own).
+fn run_rig_seeded(compensate: bool, load_nm: f64, tracking: bool, seed: Option<u64>) -> RigRun {
     let mut c = FocConfig::new(MotorParams::servo(), 50e-6, 300.0).with_inertia(8e-4);
     if !tracking {
         c.observer.parameter_tracking = None;
@@ -399,6 +404,9 @@ fn run_rig_tracking(compensate: bool, load_nm: f64, tracking: bool) -> RigRun {
     let mut rig = Rig::new(&c, Plant::servo(), 300.0);
     rig.dead_time_s = 1e-6;
     rig.noise_a = 0.04;
+    if let Some(seed) = seed {
+        rig.reseed(seed);
+    }
     rig.plant.x[3] = 1.0;
     let target = 104.72_f64;
     rig.foc.set_speed_ref_mech_rad_s(target as f32).unwrap();
@@ -431,19 +439,29 @@ fn run_rig_tracking(compensate: bool, load_nm: f64, tracking: bool) -> RigRun {
     r
 }
 
-/// Measured (`-- --nocapture`), default band (2 % of the 5.1 A limit, 0.10 A):
+/// Measured (`-- --nocapture`), default band (2 % of the 5.1 A limit, 0.10 A), one noise
+/// realization (the rig's seed):
 ///
 /// | load | compensation | angle error RMS / mean (deg el.) | speed estimate bias (rad/s el.) | speed error (rad/s mech.) |
 /// |---|---|---|---|---|
-/// | 1.5 N m | off | 6.30 / +6.29 | +37.2 | -9.24 |
-/// | 1.5 N m | on | 0.097 / +0.019 | +0.02 | -0.015 |
-/// | none | off | 0.56 / +0.38 | +1.74 | -0.37 |
-/// | none | on | 0.47 / +0.23 | +1.08 | -0.28 |
+/// | 1.5 N m | off | 6.31 / +6.30 | +37.1 | -9.29 |
+/// | 1.5 N m | on | 0.097 / +0.018 | +0.005 | -0.022 |
+/// | none | off | 0.54 / +0.35 | +1.79 | -0.31 |
+/// | none | on | 0.46 / +0.26 | +1.11 | -0.29 |
 ///
 /// Unloaded, the 0.6 A of friction current spends a fifth of each period within the band
 /// of a zero crossing, where the smooth sign under-compensates this rig's hard-sign bridge;
 /// a 0.02 A band gives 0.32 / +0.02 deg and +0.26 rad/s there (no real bridge has a hard
 /// sign: the current ripple softens it, module `deadtime`).
+///
+/// Unloaded, the bias the compensation removes is small against the noise of a 0.4 s mean:
+/// over noise seeds 1-16 the compensated/uncompensated ratio of the mean angle error ranges
+/// 0.18-0.84 (mean 0.69, standard deviation 0.16), of the speed bias 0.39-0.80 (mean 0.60,
+/// 0.10). One run compared against 0.7 passed or failed with the seed (seeds 6, 8, 9 of the
+/// former generator failed). The unloaded part therefore compares means over [`SEEDS`]
+/// seeds (ratio of the means: 0.68 for the angle, 0.60 for the speed; standard errors
+/// about 0.04 and 0.025): the bounds, 0.8 and 0.75, lie about 3 and 6 standard errors
+/// above, and still fail a compensation that removes less than a fifth of the angle bias.
 #[test]
 fn compensation_removes_the_observer_bias_on_a_dead_time_bridge() {
     let off = run_rig(false, 1.5);
@@ -457,14 +475,37 @@ fn compensation_removes_the_observer_bias_on_a_dead_time_bridge() {
         on.speed_est_mean.abs() < 0.3 && on.speed_mean.abs() < 0.1,
         "{on:?}"
     );
-    let off = run_rig(false, 0.0);
-    let on = run_rig(true, 0.0);
-    assert!(off.angle_mean > 0.25 && off.speed_est_mean > 1.2, "{off:?}");
+    // Unloaded: means over SEEDS noise realizations.
+    let mean = |compensate: bool| {
+        let runs: Vec<RigRun> = (1..=SEEDS)
+            .map(|s| run_rig_seeded(compensate, 0.0, false, Some(s)))
+            .collect();
+        let n = runs.len() as f64;
+        (
+            runs.iter().map(|r| r.angle_mean).sum::<f64>() / n,
+            runs.iter().map(|r| r.speed_est_mean).sum::<f64>() / n,
+        )
+    };
+    let (off_angle, off_speed) = mean(false);
+    let (on_angle, on_speed) = mean(true);
+    println!(
+        "unloaded, {SEEDS} seeds: angle mean {off_angle:.3} -> {on_angle:.3} deg (x{:.2}), \
+         speed bias {off_speed:.3} -> {on_speed:.3} rad/s (x{:.2})",
+        on_angle / off_angle,
+        on_speed / off_speed
+    );
     assert!(
-        on.angle_mean < 0.7 * off.angle_mean && on.speed_est_mean < 0.75 * off.speed_est_mean,
-        "{on:?}"
+        off_angle > 0.25 && off_speed > 1.2,
+        "{off_angle} {off_speed}"
+    );
+    assert!(
+        on_angle < 0.8 * off_angle && on_speed < 0.75 * off_speed,
+        "{on_angle} {on_speed}"
     );
 }
+
+/// Noise realizations the unloaded comparison averages over.
+const SEEDS: u64 = 16;
 
 /// With the observer's online flux tracking on (the default), an uncompensated dead time
 /// under rated load no longer biases the angle by 6 deg: the tracked flux lumps the

@@ -162,6 +162,14 @@ fn low_speed_command_stays_in_open_loop_and_returns_up() {
     assert_eq!(seen, [State::OpenLoop, State::Handover, State::ClosedLoop]);
 }
 
+/// A trip latches until cleared; cleared, the drive is idle and restarts from standstill
+/// through the whole sequence. The restart's duration depends on where the rotor coasted
+/// to, a function of the noise realization: over noise seeds 1-16 (`FOC_TEST_SEED`) the
+/// rotor stopped 21 to 173 deg el. from the alignment angle, and the restart reached closed
+/// loop after 0.72 to 1.26 s, the longer the larger that angle (from near 180 deg the rotor
+/// still swings when the ramp begins, and the hand-over waits; the 1.2 s allowed before
+/// held for the former generator's seed 7 only). It gets the start-up budget of
+/// [`start_closed_loop`], 1.5 s.
 #[test]
 fn fault_clear_restart() {
     let mut rig = closed_loop_at(80.0);
@@ -190,7 +198,7 @@ fn fault_clear_restart() {
     rig.run(3.0, |_, _| {});
     rig.plant.x[2] = 0.0;
     rig.foc.start().unwrap();
-    let seen = visit(&mut rig, 1.2);
+    let seen = visit(&mut rig, 1.5);
     assert_eq!(
         seen,
         [

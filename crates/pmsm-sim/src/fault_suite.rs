@@ -144,7 +144,7 @@ pub fn cases() -> Vec<FaultCase> {
                 value_a: None,
             },
             expected: Trip("current_sensor"),
-            why: "foc's stuck-channel check: a reading repeated bit for bit while the current vector turns a quarter period (1.9 ms at 2000 rpm) cannot come from a live channel",
+            why: "foc's stuck-channel check: a reading repeated bit for bit while the current vector turns an eighth of a period (0.94 ms at 2000 rpm) cannot come from a live channel",
             run_after_fault_s: None,
         },
         FaultCase {

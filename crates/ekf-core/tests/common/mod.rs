@@ -41,25 +41,9 @@ pub struct Trace {
     pub w: Vec<f64>,
 }
 
-/// xorshift64* with Box-Muller: deterministic Gaussian noise without extra dependencies.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
-    }
-    pub fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let v = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        ((v >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    pub fn gauss(&mut self) -> f64 {
-        let (a, b) = (self.uniform(), self.uniform());
-        (-2.0 * a.ln()).sqrt() * (2.0 * core::f64::consts::PI * b).cos()
-    }
-}
+/// The workspace's seeded test generator (xorshift64* with Box-Muller), shared with foc's
+/// tests.
+pub use ekf_core::testing::Rng;
 
 /// Scenario of the prescribed-speed plant.
 pub struct Scenario<'a> {

@@ -2,6 +2,7 @@
 //! inverter's one-period computation delay. Independent of `ekf-core` and of `pmsm-sim`.
 #![allow(dead_code)]
 
+use ekf_core::testing::Rng;
 use foc::ekf_core::MotorParams;
 use foc::{AlphaBeta, Foc, FocConfig, State, TickInput, TickOutput, duties_to_alpha_beta};
 
@@ -112,27 +113,14 @@ pub fn wrap(x: f64) -> f64 {
     x - tau * ((x + std::f64::consts::PI) / tau).floor()
 }
 
-/// Small deterministic Gaussian-ish noise (sum of 4 uniforms, LCG).
-#[derive(Clone, Debug)]
-pub struct Noise(u64);
-
-impl Noise {
-    pub fn new(seed: u64) -> Self {
-        Self(seed.wrapping_mul(6364136223846793005).wrapping_add(1))
-    }
-    fn uniform(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64) / ((1u64 << 53) as f64) - 0.5
-    }
-    /// Zero mean, standard deviation `sigma`.
-    pub fn gauss(&mut self, sigma: f64) -> f64 {
-        // Sum of 4 uniforms on [-0.5, 0.5): variance 4/12.
-        let s: f64 = (0..4).map(|_| self.uniform()).sum();
-        s * sigma * (3.0f64).sqrt()
-    }
+/// The rig's noise seed: `FOC_TEST_SEED` from the environment when set (to check that a
+/// test holds for the noise level, not for one realization:
+/// `FOC_TEST_SEED=3 cargo test -p foc --release`), else 7.
+pub fn noise_seed() -> u64 {
+    std::env::var("FOC_TEST_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(7)
 }
 
 /// Plant + controller + inverter delay.
@@ -144,7 +132,9 @@ pub struct Rig {
     /// Duties computed by the last tick, applied over the next period (one-period delay).
     pub pending: ([f32; 3], bool),
     pub delay: bool,
-    pub noise: Noise,
+    /// Current-sensor noise: the workspace's test generator, seeded by [`noise_seed`].
+    pub noise: Rng,
+    /// Current-sensor noise standard deviation per alpha-beta axis, A.
     pub noise_a: f64,
     /// Extra current added to the measured alpha current, A (fault injection).
     pub offset_a: f64,
@@ -172,7 +162,7 @@ impl Rig {
             u_dc,
             pending: ([0.5; 3], false),
             delay: cfg.delay == foc::ComputationDelay::OnePeriod,
-            noise: Noise::new(7),
+            noise: Rng::new(noise_seed()),
             noise_a: 0.0,
             offset_a: 0.0,
             swap_bc: false,
@@ -193,9 +183,14 @@ impl Rig {
         (cfg, rig)
     }
 
+    /// Restarts the measurement noise from `seed`.
+    pub fn reseed(&mut self, seed: u64) {
+        self.noise = Rng::new(seed);
+    }
+
     pub fn input(&mut self) -> TickInput {
-        let ia = self.plant.x[0] + self.noise.gauss(self.noise_a) + self.offset_a;
-        let mut ib = self.plant.x[1] + self.noise.gauss(self.noise_a);
+        let ia = self.plant.x[0] + self.noise_a * self.noise.gauss() + self.offset_a;
+        let mut ib = self.plant.x[1] + self.noise_a * self.noise.gauss();
         if self.swap_bc {
             ib = -ib;
         }
