@@ -162,7 +162,7 @@
 //!   (`w_n = sqrt(0.54 a_max)`), the full voltage, and the shortest `N` (up to 8) that meets
 //!   the target. The industrial motor of the tests (50 mA noise) gets `N = 7` (714 Hz) and
 //!   `w_n` 60 rad/s instead of `N = 4`, 82 rad/s: the hold under rated load goes from 2.1 to
-//!   0.6 deg RMS (max 7.4-9.8 to 2.1-2.2 deg over four seeds), at 1.75x the current ripple and
+//!   0.6 deg RMS (max 7.4-9.8 to 2.1-2.3 deg over seeds 1-4), at 1.75x the current ripple and
 //!   a slower, noisier hand-over band (module docs of `pmsm-sim`'s `tests/hfi.rs`). The
 //!   traction motor keeps its defaults;
 //! - hand-over band to the observer: from half the start-up hand-over speed (observer weight 0)
