@@ -303,7 +303,7 @@ fn industrial_ipm_holds_zero_speed_under_rated_load_within_5_deg() {
 }
 
 /// Regression guard with the bound the plain defaults met (RMS 2.11, max 7.44 deg el. before
-/// the least-squares demodulation); now RMS 0.61, max 2.09 deg, max |speed| 3.6 rpm under
+/// the least-squares demodulation); now RMS 0.61, max 2.27 deg, max |speed| 3.6 rpm under
 /// 14 N m.
 #[test]
 fn industrial_ipm_holds_zero_speed_under_rated_load() {
