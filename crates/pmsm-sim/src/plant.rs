@@ -408,6 +408,18 @@ fn sat_torque(m: &MotorModel, sat: &DSaturation, i_d: f64, i_q: f64) -> f64 {
 
 /// `d/dt [i_d, i_q, w_mech, th]` of the saturated model (module docs) at `[i_d, i_q, w_mech]`
 /// with the rotor-frame voltage `[u_d, u_q]`; Coulomb friction as `Tc sign(w)`.
+/// Coulomb friction torque at the mechanical speed `wm`: `coulomb_nm` against the motion,
+/// zero at rest (the stiction at a sign change is handled by the integrator).
+fn coulomb_nm(m: &MotorModel, wm: f64) -> f64 {
+    if wm > 0.0 {
+        m.coulomb_nm
+    } else if wm < 0.0 {
+        -m.coulomb_nm
+    } else {
+        0.0
+    }
+}
+
 fn sat_derivative(
     m: &MotorModel,
     sat: &DSaturation,
@@ -418,13 +430,7 @@ fn sat_derivative(
     let we = m.p() * wm;
     let psi_d = sat.psi_d_wb(m.ld_h, m.psi_f_wb, id);
     let te = sat_torque(m, sat, id, iq);
-    let fr = if wm > 0.0 {
-        m.coulomb_nm
-    } else if wm < 0.0 {
-        -m.coulomb_nm
-    } else {
-        0.0
-    };
+    let fr = coulomb_nm(m, wm);
     [
         (ud - m.rs_ohm * id + we * m.lq_h * iq) / sat.ld_inc_h(m.ld_h, id),
         (uq - m.rs_ohm * iq - we * psi_d) / m.lq_h,
@@ -752,13 +758,7 @@ impl Plant {
                 return sat_derivative(&m, &sat, [id, iq, wm], [ud, uq], t_load_nm);
             }
             let te = m.torque_nm(id, iq);
-            let fr = if wm > 0.0 {
-                m.coulomb_nm
-            } else if wm < 0.0 {
-                -m.coulomb_nm
-            } else {
-                0.0
-            };
+            let fr = coulomb_nm(&m, wm);
             [
                 (ud - m.rs_ohm * id + we * m.lq_h * iq) / m.ld_h,
                 (uq - m.rs_ohm * iq - we * m.ld_h * id - we * m.psi_f_wb) / m.lq_h,
