@@ -156,7 +156,7 @@ use crate::fault::Fault;
 use crate::health::{HealthMonitor, HealthReport, Reference, ticks};
 use crate::pi::{Pi, limit};
 use crate::transforms::Dq;
-use crate::trig::{atan2, min2, sin_cos, sqrt, wrap};
+use crate::trig::{atan2, max2, min2, sin_cos, sqrt, wrap};
 
 pub use crate::state::State;
 
@@ -959,11 +959,7 @@ impl Sequencer {
         reseed: &mut impl FnMut(Seed),
     ) {
         let needed = min2(self.v.i_q_ref.abs() / 0.95, cfg.current_limit_a);
-        let amp = if needed > cfg.startup.if_current_a {
-            needed
-        } else {
-            cfg.startup.if_current_a
-        };
+        let amp = max2(needed, cfg.startup.if_current_a);
         let iq = limit(self.v.i_q_ref, -0.95 * amp, 0.95 * amp);
         let id = sqrt(amp * amp - iq * iq);
         self.v.gamma = wrap(est.theta_rad + atan2(iq, id));
