@@ -172,9 +172,17 @@ class Ekf:
         covariance_update: Literal["joseph", "standard"] = "joseph",
         tracking: Literal["default", "flux", "off"] = "default",
     ) -> Ekf: ...
-    def run(self, u_ab: npt.ArrayLike, i_ab: npt.ArrayLike, *, u_prev: npt.ArrayLike | None = None) -> RunOutput:
+    def run(
+        self,
+        u_ab: npt.ArrayLike,
+        i_ab: npt.ArrayLike,
+        *,
+        u_prev: npt.ArrayLike | None = None,
+        out: RunOutput | None = None,
+    ) -> RunOutput:
         """Filter a record of shape (N, 2) each; continues from the current state (row 0 predicts
-        with u_prev if given, else u_last). Releases the GIL."""
+        with u_prev if given, else u_last). Releases the GIL. ``out``: a dict of the ten output
+        arrays (e.g. a previous result of the same length), written in place and returned."""
     def step(self, u_prev: npt.ArrayLike, i: npt.ArrayLike) -> StepOutput:
         """One sample: predict with u_prev, correct with i."""
     def reset(self, x: npt.ArrayLike, p: npt.ArrayLike) -> None:

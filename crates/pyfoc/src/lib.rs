@@ -380,6 +380,70 @@ impl Columns<'_> {
     }
 }
 
+/// `run`'s output arrays: the [`OUTPUTS`] columns and the status codes.
+type OutArrays<'py> = (
+    [Bound<'py, PyArray1<f64>>; OUTPUTS.len()],
+    Bound<'py, PyArray1<i8>>,
+);
+
+/// The output arrays of `run` in a caller's `out` dict, checked: each present, of its dtype,
+/// one-dimensional of length `n`, C-contiguous, writable, and no two overlapping (all of
+/// them are borrowed for writing at once here, which rust-numpy refuses for overlapping
+/// arrays and for read-only ones).
+fn out_arrays<'py>(d: &Bound<'py, PyDict>, n: usize) -> PyResult<OutArrays<'py>> {
+    fn get<'py, T: numpy::Element>(
+        d: &Bound<'py, PyDict>,
+        name: &str,
+        dtype: &str,
+        n: usize,
+    ) -> PyResult<Bound<'py, PyArray1<T>>> {
+        let item = d
+            .get_item(name)?
+            .ok_or_else(|| PyValueError::new_err(format!("out has no array {name:?}")))?;
+        let a = item.cast_into::<PyArray1<T>>().map_err(|_| {
+            PyValueError::new_err(format!(
+                "out[{name:?}] must be a one-dimensional {dtype} numpy array"
+            ))
+        })?;
+        if a.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "out[{name:?}] must have length {n} (the rows of u_ab), got {}",
+                a.len()
+            )));
+        }
+        if !a.is_c_contiguous() {
+            return Err(PyValueError::new_err(format!(
+                "out[{name:?}] must be C-contiguous"
+            )));
+        }
+        Ok(a)
+    }
+    let mut values = Vec::with_capacity(OUTPUTS.len());
+    for name in OUTPUTS {
+        values.push(get::<f64>(d, name, "float64", n)?);
+    }
+    let status = get::<i8>(d, "status", "int8", n)?;
+    let values: [Bound<'py, PyArray1<f64>>; OUTPUTS.len()] = values
+        .try_into()
+        .map_err(|_| PyValueError::new_err("out: internal count of arrays"))?;
+    {
+        let mut borrows = Vec::with_capacity(OUTPUTS.len());
+        for (name, a) in OUTPUTS.iter().zip(&values) {
+            borrows.push(a.try_readwrite().map_err(|e| {
+                PyValueError::new_err(format!(
+                    "out[{name:?}] cannot be written ({e}): read-only, or overlapping another output or an input"
+                ))
+            })?);
+        }
+        status.try_readwrite().map_err(|e| {
+            PyValueError::new_err(format!(
+                "out[\"status\"] cannot be written ({e}): read-only, or overlapping another output or an input"
+            ))
+        })?;
+    }
+    Ok((values, status))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn build<T: Float>(
     motor: &Motor,
@@ -518,13 +582,21 @@ impl Ekf {
     /// `pyfoc.Status`). Continues from the filter's current state: row 0
     /// predicts with `u_prev` if given, else with the last row of the previous `run` (zero
     /// for a new filter). The GIL is released while the filter runs.
-    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None))]
+    ///
+    /// `out`: a dict holding those ten arrays (e.g. the dict a previous `run` of the same
+    /// length returned), written in place and returned, so that a record filtered in chunks
+    /// allocates nothing per chunk (fresh output memory is the largest cost of `run` after
+    /// the steps). Each array must be one-dimensional of length N, C-contiguous, writable, of
+    /// the dtype above, and not shared with another output; no other thread may use them
+    /// during the call. A bad `out` raises before the filter moves.
+    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, out = None))]
     fn run<'py>(
         &self,
         py: Python<'py>,
         u_ab: &Bound<'py, PyAny>,
         i_ab: &Bound<'py, PyAny>,
         u_prev: Option<&Bound<'py, PyAny>>,
+        out: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = rows2(u_ab, "u_ab")?;
         let i = rows2(i_ab, "i_ab")?;
@@ -536,8 +608,14 @@ impl Ekf {
             )));
         }
         let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        let given = out.as_ref().map(|d| out_arrays(d, n)).transpose()?;
         // The copies of both inputs and the output columns, probed at once.
-        convert::ensure_memory(n as u128 * (32 + Columns::ROW_BYTES), "run")?;
+        let out_bytes = if given.is_some() {
+            0
+        } else {
+            Columns::ROW_BYTES
+        };
+        convert::ensure_memory(n as u128 * (32 + out_bytes), "run")?;
         // Private copies of the inputs (no other thread can change them while the GIL is
         // released) and the output arrays, all allocated by numpy.
         // (In row-major order: a Fortran-ordered input is rearranged first.)
@@ -545,10 +623,14 @@ impl Ekf {
         let (u, i) = (c_copy(&u), c_copy(&i));
         let (u, i) = (u.readonly(), i.readonly());
         let (u, i) = (contiguous(u.as_slice())?, contiguous(i.as_slice())?);
-        let values: [Bound<'py, PyArray1<f64>>; OUTPUTS.len()] =
-            core::array::from_fn(|_| PyArray1::zeros(py, n, false));
-        let status = PyArray1::<i8>::zeros(py, n, false);
+        let (values, status) = given.unwrap_or_else(|| {
+            (
+                core::array::from_fn(|_| PyArray1::zeros(py, n, false)),
+                PyArray1::<i8>::zeros(py, n, false),
+            )
+        });
         {
+            // `out_arrays` checked that these borrows succeed (writable, not shared).
             let mut rw = values.each_ref().map(|a| a.readwrite());
             let mut st = status.readwrite();
             let mut cols = Columns {
@@ -562,6 +644,9 @@ impl Ekf {
                 let prev = u_prev.unwrap_or(inner.u_last);
                 inner.u_last = inner.observer.run(prev, u, i, &mut cols);
             });
+        }
+        if let Some(d) = out {
+            return Ok(d);
         }
         let out = PyDict::new(py);
         for (name, col) in OUTPUTS.iter().zip(values) {

@@ -114,6 +114,63 @@ def test_chunked_run_equals_one_run(dtype):
         np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), one[key])
 
 
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_run_into_out_equals_run_and_reuses_the_arrays(dtype):
+    u, i, _ = record(2000)
+    one = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype).run(u, i)
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype)
+    buf = ekf.run(u[:500], i[:500])
+    ids = {k: id(v) for k, v in buf.items()}
+    for a in range(500, 2000, 500):
+        got = ekf.run(u[a:a + 500], i[a:a + 500], out=buf)
+        assert got is buf and {k: id(v) for k, v in got.items()} == ids
+        for key in one:
+            np.testing.assert_array_equal(got[key], one[key][a:a + 500])
+
+
+def test_bad_out_raises_and_leaves_filter_and_arrays_alone():
+    u, i, _ = record(100)
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    good = ekf.run(u, i)
+    state, cov, u_last = ekf.state.copy(), ekf.covariance.copy(), ekf.u_last.copy()
+
+    def variant(key, value):
+        d = {k: v.copy() for k, v in good.items()}
+        if value is None:
+            del d[key]
+        else:
+            d[key] = value
+        return d
+
+    ro = good["nis"].copy()
+    ro.setflags(write=False)
+    shared = good["omega"].copy()
+    cases = [
+        (variant("rs", None), 'no array "rs"'),
+        (variant("theta", np.zeros(100, dtype=np.float32)), "float64"),
+        (variant("status", np.zeros(100)), "int8"),
+        (variant("omega", np.zeros(99)), "length 100"),
+        (variant("omega", np.zeros((100, 1))), "one-dimensional"),
+        (variant("psi_f", np.zeros(200)[::2]), "C-contiguous"),
+        (variant("nis", ro), "cannot be written"),
+        ({**variant("theta", shared), "omega": shared}, "cannot be written"),
+    ]
+    for out, msg in cases:
+        before = {k: v.copy() for k, v in out.items()}
+        with pytest.raises(ValueError, match=msg):
+            ekf.run(u, i, out=out)
+        for k, v in out.items():
+            np.testing.assert_array_equal(v, before[k])
+    overlap = np.zeros(200)
+    with pytest.raises(ValueError, match="cannot be written"):
+        ekf.run(u, i, out={**variant("theta", overlap[:100]), "omega": overlap[50:150]})
+    with pytest.raises(TypeError):
+        ekf.run(u, i, out=[good[k] for k in good])
+    np.testing.assert_array_equal(ekf.state, state)
+    np.testing.assert_array_equal(ekf.covariance, cov)
+    np.testing.assert_array_equal(ekf.u_last, u_last)
+
+
 def test_step_equals_run():
     u, i, _ = record(300)
     out = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u, i)
