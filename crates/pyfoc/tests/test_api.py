@@ -128,6 +128,19 @@ def test_run_into_out_equals_run_and_reuses_the_arrays(dtype):
             np.testing.assert_array_equal(got[key], one[key][a:a + 500])
 
 
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_long_run_equals_short_runs(dtype):
+    # A long run maps its output pages on a second thread and filters block by block
+    # (2^14 rows); short runs do neither. The rows must not depend on it.
+    n = 70_001
+    u, i, _ = record(n)
+    one = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype).run(u, i)
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype)
+    parts = [ekf.run(u[a:a + 7000], i[a:a + 7000]) for a in range(0, n, 7000)]
+    for key in one:
+        np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), one[key])
+
+
 def test_bad_out_raises_and_leaves_filter_and_arrays_alone():
     u, i, _ = record(100)
     ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
