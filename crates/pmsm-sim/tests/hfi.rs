@@ -7,8 +7,9 @@
 //!
 //! Diagnostics (environment): `HFI_PLL`, `HFI_N`, `HFI_V` override the settings, `HFI_SEED`
 //! the noise seed, `HFI_NOISE` the current noise (A), `HFI_DT` the dead time (s), `HFI_CBW`
-//! the current-loop bandwidth (Hz), `HFI_TH0` the hold's start angle (rad), `HFI_DUMP=prefix`
-//! writes a CSV per run.
+//! the current-loop bandwidth (Hz), `HFI_TH0` the hold's start angle (rad), `HFI_NOTRACK`
+//! turns the observer's online `psi_f`/`Rs` tracking off, `HFI_DUMP=prefix` writes a CSV per
+//! run.
 //!
 //! The plant gets the simulator's optional d-axis saturation (`RunOptions::d_saturation`:
 //! `Ld` falls by 20 % at `+current_limit`, nothing for negative `i_d`), which the polarity
@@ -97,7 +98,13 @@ struct Run {
 }
 
 fn run(sc: &Scenario) -> Run {
-    let mut drive = FocDrive::from_scenario(sc).unwrap_or_else(|e| panic!("{e}"));
+    let mut fc = sc.foc_config().unwrap_or_else(|e| panic!("{}", e.problem));
+    if std::env::var("HFI_NOTRACK").is_ok() {
+        fc.observer.parameter_tracking = None;
+    }
+    let s = sc.controller.foc.unwrap_or_default();
+    let mut drive =
+        FocDrive::new(&fc, s.start_time_s, s.stop_time_s).unwrap_or_else(|e| panic!("{e}"));
     let cfg = *drive.foc().config();
     let u_dc = sc.inverter.u_dc_v as f32;
     let noise = sc.sensors.current_noise_std_a as f32;
@@ -143,7 +150,8 @@ fn run(sc: &Scenario) -> Run {
 }
 
 /// With `HFI_DUMP=prefix`, writes `prefix-tag.csv` (t, control angle error, HFI angle error,
-/// speed rpm, i_q, eps, EKF angle error, observer weight, rotor angle) for a look at a run.
+/// speed rpm, i_q, eps, EKF angle error, observer weight, rotor angle; electrical speeds: true,
+/// control, EKF, HFI tracker; carrier on; the EKF's psi_f and Rs) for a look at a run.
 fn dump(tag: &str, r: &Run) {
     let Ok(path) = std::env::var("HFI_DUMP") else {
         return;
@@ -151,7 +159,7 @@ fn dump(tag: &str, r: &Run) {
     let mut out = String::new();
     for (x, st) in r.samples.iter().zip(&r.status) {
         out += &format!(
-            "{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             x.t_s,
             angle_error_deg(x),
             wrap(f64::from(st.theta_rad) - x.truth.theta_e_rad).to_degrees(),
@@ -163,6 +171,25 @@ fn dump(tag: &str, r: &Run) {
                 .map_or(0.0, |o| o.angle_error_deg),
             st.observer_weight,
             x.truth.theta_e_rad,
+            x.truth.omega_e_rad_s,
+            x.control.telemetry.omega_e_rad_s,
+            x.control
+                .telemetry
+                .estimate
+                .as_ref()
+                .map_or(f64::NAN, |e| e.omega_e_rad_s),
+            st.omega_rad_s,
+            u8::from(st.injecting),
+            x.control
+                .telemetry
+                .estimate
+                .as_ref()
+                .map_or(f64::NAN, |e| e.psi_f_wb),
+            x.control
+                .telemetry
+                .estimate
+                .as_ref()
+                .map_or(f64::NAN, |e| e.rs_ohm),
         );
     }
     std::fs::write(format!("{path}-{tag}.csv"), out).unwrap_or_else(|e| panic!("{e}"));
