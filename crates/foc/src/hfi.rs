@@ -247,6 +247,11 @@ const RING: usize = 2 * MAX_HALF_PERIOD as usize;
 /// Smallest `Lq / Ld` HFI accepts.
 pub const MIN_SALIENCY: f32 = 1.1;
 
+/// With HFI on, the observer's online `psi_f`/`Rs` tracking is frozen below this many times
+/// [`HfiConfig::blend_high_rad_s`] (`Foc::enable_hfi`): twice the top of the blend band, where
+/// the observer's speed is still noisy and the carrier may come back on.
+pub const HFI_TRACKING_SPEED_FACTOR: f32 = 2.0;
+
 /// HFI settings (module docs give the defaults, [`HfiConfig::new`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HfiConfig {
@@ -989,6 +994,12 @@ pub(crate) struct HfiDrive {
     accel_per_a: f32,
     /// Acceleration of the last torque command, rad/s^2 el.
     accel: f32,
+    /// The observer's speed low-passed at the tracking loop's bandwidth, rad/s el.: what
+    /// turns the carrier back on and seeds the tracker's speed (the observer's own speed is
+    /// noisiest at the bottom of its range).
+    omega_o_lp: f32,
+    /// Gain of that low-pass per tick.
+    lp_gain: f32,
 }
 
 /// The virtual rotor sensor HFI gives the speed loop in [`HfiPhase::Tracking`].
@@ -1016,6 +1027,8 @@ impl HfiDrive {
             accel_per_a: foc.motor.pole_pairs as f32 * foc.torque_constant_nm_a()
                 / foc.inertia_kg_m2,
             accel: 0.0,
+            omega_o_lp: 0.0,
+            lp_gain: crate::trig::min2(cfg.pll_bandwidth_rad_s * foc.ts_s, 1.0),
         }
     }
 
@@ -1103,12 +1116,17 @@ impl HfiDrive {
         let c = &self.cfg;
         // The weight follows HFI's own speed while the carrier is on (the observer's speed is
         // unreliable at the low end of the band and would feed back into its own weight),
-        // the observer's while it is off.
+        // the observer's, low-passed, while it is off.
+        self.omega_o_lp += self.lp_gain * (omega_o - self.omega_o_lp);
+        if !self.omega_o_lp.is_finite() {
+            self.omega_o_lp = self.tracker.omega();
+        }
         if self.injecting && self.tracker.omega().abs() > c.blend_high_rad_s {
             self.injecting = false;
-        } else if !self.injecting && omega_o.abs() < 0.8 * c.blend_high_rad_s {
+            self.omega_o_lp = self.tracker.omega();
+        } else if !self.injecting && self.omega_o_lp.abs() < 0.8 * c.blend_high_rad_s {
             self.injecting = true;
-            self.tracker.reset(theta_o, omega_o);
+            self.tracker.reset(theta_o, self.omega_o_lp);
             // The load takes what the drive's torque gives (steady speed assumed): the
             // tracker starts with that disturbance instead of learning it.
             self.tracker.set_load(self.accel);

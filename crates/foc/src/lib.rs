@@ -31,7 +31,9 @@ pub use deadtime::DeadTimeCompensation;
 pub use fault::{Fault, FaultInfo};
 pub use fieldweak::FieldWeakening;
 pub use health::{HealthReport, LossReason};
-pub use hfi::{HfiConfig, HfiError, HfiField, HfiPhase, HfiStatus, HfiTracker};
+pub use hfi::{
+    HFI_TRACKING_SPEED_FACTOR, HfiConfig, HfiError, HfiField, HfiPhase, HfiStatus, HfiTracker,
+};
 pub use identify::{
     Identified, Identifier, IdentifyConfig, IdentifyConfigError, IdentifyError, IdentifyFailure,
     IdentifyOutput, IdentifyStep, identify_period,
