@@ -166,7 +166,15 @@
 //!   a slower, noisier hand-over band (module docs of `pmsm-sim`'s `tests/hfi.rs`). The
 //!   traction motor keeps its defaults;
 //! - hand-over band to the observer: from half the start-up hand-over speed (observer weight 0)
-//!   to the hand-over speed (weight 1; carrier off above it);
+//!   to the hand-over speed (weight 1; carrier off above it, by HFI's speed; back on below
+//!   80 % of it, by the observer's speed low-passed at the tracking loop's bandwidth, which
+//!   also seeds the tracker's speed: the observer's raw speed at the bottom of its range
+//!   toggled the carrier and threw the tracker off on the noisy traction motor);
+//! - the observer's online `psi_f`/`Rs` tracking frozen below
+//!   [`HFI_TRACKING_SPEED_FACTOR`]` = 2` times the top of the band (`Foc::enable_hfi`
+//!   rebuilds it so; `disable_hfi` restores it): measured on the traction motor, a flux
+//!   estimate let loose at 7 % of rated speed fell by 45 % within 2 ms, and the drive lost
+//!   the reversal by pi;
 //! - polarity pulses: `0.8 I_lim`, 20 ms each, after 60 ms of settling.
 
 use core::f32::consts::PI;
