@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use cpu_time::{ProcessTime, ThreadTime};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::controller::{ControllerInput, RotorFeedback};
 use pmsm_sim::mcap_log::{LogCompression, LogEncoding, LogOptions, McapLog};
@@ -548,8 +549,18 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
         base.ts_s() * 1e6
     );
     println!(
-        "{:<46} {:>10} {:>10} {:>11} {:>12}",
-        "configuration", "wall (ms)", "ns/period", "real-time x", "MB / sim. s"
+        "{:<46} {:>10} {:>10} {:>11} {:>12} {:>12} {:>12}",
+        "configuration",
+        "wall (ms)",
+        "ns/period",
+        "real-time x",
+        "CPU sim thr.",
+        "CPU all thr.",
+        "MB / sim. s"
+    );
+    println!(
+        "{:<46} {:>10} {:>10} {:>11} {:>12} {:>12}",
+        "", "", "(wall)", "(wall)", "ns/period", "ns/period"
     );
     let log = |compression, encoding| {
         Some(LogOptions {
@@ -589,10 +600,13 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             log(LogCompression::Zstd, json),
         ),
     ];
+    let mut no_log_ns = None;
     for (name, seed_filter, log) in configs {
         let mut sc = base.clone();
         sc.observer.seed_filter = seed_filter;
         let mut walls = Vec::with_capacity(runs);
+        let mut cpu_thread = Vec::with_capacity(runs);
+        let mut cpu_all = Vec::with_capacity(runs);
         let mut size = 0;
         for _ in 0..runs {
             let mut logger = match log {
@@ -605,6 +619,7 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             }
             // Wall time includes finishing the file.
             let t = Instant::now();
+            let (thread0, process0) = (ThreadTime::try_now().ok(), ProcessTime::try_now().ok());
             let r = sim::run_with(
                 &sc,
                 RunOptions {
@@ -616,6 +631,12 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
                 l.finish(Some(&r.metrics))?;
             }
             walls.push(t.elapsed().as_secs_f64());
+            if let Some(Ok(d)) = thread0.map(|t| t.try_elapsed()) {
+                cpu_thread.push(d.as_secs_f64());
+            }
+            if let Some(Ok(d)) = process0.map(|t| t.try_elapsed()) {
+                cpu_all.push(d.as_secs_f64());
+            }
             if log.is_some() {
                 size = std::fs::metadata(&mcap_path).map_or(0, |m| m.len());
             }
@@ -627,25 +648,31 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             }
         }
         let w = median(walls);
+        if seed_filter && log.is_none() {
+            no_log_ns = Some(median(cpu_thread.clone()) * 1e9 / sc.periods() as f64);
+        }
         let mb = if log.is_some() {
             format!("{:.2}", size as f64 / 1e6 / sc.duration_s)
         } else {
             "-".into()
         };
+        let per = |v: Vec<f64>| median(v) * 1e9 / sc.periods() as f64;
         println!(
-            "{name:<46} {:>10.2} {:>10.0} {:>11.0} {mb:>12}",
+            "{name:<46} {:>10.2} {:>10.0} {:>11.0} {:>12.0} {:>12.0} {mb:>12}",
             w * 1e3,
             w * 1e9 / sc.periods() as f64,
-            sc.duration_s / w
+            sc.duration_s / w,
+            per(cpu_thread),
+            per(cpu_all),
         );
     }
     let _ = std::fs::remove_file(&mcap_path);
-    components(&base, runs);
+    components(&base, runs, no_log_ns);
     Ok(ExitCode::SUCCESS)
 }
 
 /// Median time per call of the loop's parts, on the scenario's own trajectory.
-fn components(sc: &Scenario, runs: usize) {
+fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>) {
     use ekf_core::PmsmObserver;
     use pmsm_sim::plant::{Plant, PlantState};
     use pmsm_sim::sensors::CurrentSensor;
@@ -659,9 +686,10 @@ fn components(sc: &Scenario, runs: usize) {
     let time = |f: &mut dyn FnMut()| {
         let v: Vec<f64> = (0..runs)
             .map(|_| {
-                let t = Instant::now();
+                let t = ThreadTime::try_now();
                 f();
-                t.elapsed().as_secs_f64() * 1e9 / n
+                t.and_then(|t| t.try_elapsed())
+                    .map_or(f64::NAN, |d| d.as_secs_f64() * 1e9 / n)
             })
             .collect();
         median(v)
@@ -719,6 +747,37 @@ fn components(sc: &Scenario, runs: usize) {
             std::hint::black_box(enc.encode(s));
         }
     });
+    // The whole log as the run pays for it: the copy of each period into a batch here, the
+    // encoding and the `mcap` writer on the writer thread, creating and finishing the file
+    // (wall time: with a free core the two threads overlap).
+    let log_path = std::env::temp_dir().join(format!("pmsm-sim-bench-{}.mcap", std::process::id()));
+    let log_runs: Vec<f64> = (0..runs)
+        .map(|_| {
+            let t = ProcessTime::try_now();
+            if let Ok(mut log) = McapLog::create(&log_path, sc, LogOptions::default()) {
+                for s in samples {
+                    if log.record(s).is_err() {
+                        break;
+                    }
+                }
+                let _ = log.finish(None);
+            }
+            t.and_then(|t| t.try_elapsed())
+                .map_or(f64::NAN, |d| d.as_secs_f64() * 1e9 / n)
+        })
+        .collect();
+    let log_ns = median(log_runs);
+    let copy_ns = time(&mut || {
+        let mut batch = Vec::with_capacity(256);
+        for s in samples {
+            if batch.len() == 256 {
+                batch.clear();
+            }
+            batch.push(*s);
+            std::hint::black_box(&batch);
+        }
+    });
+    let _ = std::fs::remove_file(&log_path);
     let json_ns = time(&mut || {
         let mut buf = Vec::with_capacity(4096);
         for s in samples {
@@ -727,16 +786,35 @@ fn components(sc: &Scenario, runs: usize) {
             std::hint::black_box(&buf);
         }
     });
-    println!("\nparts of one period (median ns per call, {runs} runs):");
+    println!(
+        "\nparts of one period (median CPU ns per call of the thread, {runs} runs; the whole \
+         log: CPU of both threads):"
+    );
     for (name, ns) in [
         ("plant step (exact electrical, mechanics)", plant_ns),
         ("observer step (default EKF)", obs_ns),
         ("controller tick (incl. SVPWM)", ctl_ns),
         ("current sensor (noise, ADC)", sensor_ns),
         ("protobuf encoding of the period message", proto_ns),
+        ("copy of the period into the log's batch", copy_ns),
+        ("MCAP log, whole: encoding, mcap, file", log_ns),
         ("JSON encoding of the period message", json_ns),
     ] {
         println!("  {name:<44} {ns:>8.1}");
+    }
+    if let Some(no_log) = no_log_ns {
+        // What the parts leave of the no-log loop: the record of the period, the streaming
+        // metrics, the speed and load profiles, the inverter, the adapters.
+        // (A difference of medians: as noisy as the noisiest of them.)
+        let rest = no_log - (plant_ns + 2.0 * obs_ns + ctl_ns + sensor_ns);
+        println!(
+            "  {:<44} {rest:>8.1}",
+            "rest of the no-log loop (record, metrics, ...)"
+        );
+        println!(
+            "  ({no_log:.0} CPU ns per period without the log, with the seed filter: the parts \
+             above with the EKF step twice, the simulator's and the seed filter's)"
+        );
     }
 }
 

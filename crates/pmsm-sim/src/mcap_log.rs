@@ -284,7 +284,10 @@ impl McapLog {
             }
             return Ok(());
         };
-        let next = t.spare.try_recv().unwrap_or_else(|_| Vec::with_capacity(BATCH));
+        let next = t
+            .spare
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(BATCH));
         let full = core::mem::replace(&mut self.batch, next);
         if t.jobs.send(full).is_err() {
             // The thread ended early: only on an error, which joining returns.
@@ -336,7 +339,9 @@ impl McapLog {
         self.hand_over()?;
         self.join()?;
         self.hand_over()?;
-        self.inner.as_mut().ok_or_else(|| "log already finished".to_string())
+        self.inner
+            .as_mut()
+            .ok_or_else(|| "log already finished".to_string())
     }
 
     /// Writes an event (e.g. why the run stopped) at simulated time `t_s`, after every
