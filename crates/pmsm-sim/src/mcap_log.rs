@@ -12,7 +12,7 @@
 //!
 //! The per-period channel is protobuf by default: message encoding `protobuf`, schema encoding
 //! `protobuf` with a `FileDescriptorSet` ([`proto::file_descriptor_set`]; the `.proto` text is
-//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 700 bytes
+//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 940 bytes
 //! per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
 //! [`proto::json_schema`] (same field names, about 40 times slower to write). All three come
 //! from the one description of the record in [`crate::record`] (how to add a field: there).
@@ -26,11 +26,26 @@
 //! Chunk and data-section CRCs are not computed (0, "not computed" in the MCAP spec: the
 //! `mcap` crate's CRC costs about 110 ns per message); the summary's is.
 //!
+//! # Writer thread
+//!
+//! The encoding, the `mcap` writer and the file writes run on a thread of their own
+//! (`pmsm-sim mcap`): [`SampleSink::record`] copies the period's [`Sample`] into a batch of
+//! 256 and hands each full batch over (at most 4 in flight; then `record` waits for the
+//! writer). The run loop's own cost of the log is that copy (about 1 KB per period); with a
+//! free core the rest overlaps the simulation. The file is the same, message for message and
+//! byte for byte, as when it was written on the caller's thread: one writer, the messages in
+//! the order they were recorded, the same sequence numbers. [`McapLog::event`] and
+//! [`McapLog::finish`] first wait for every period recorded before them to be written (the
+//! writer then comes back to the caller's thread). A write error surfaces at the next
+//! hand-over (up to 256 periods after the period that failed; the run then ends with
+//! `SinkFailed` there) or in `finish`.
+//!
 //! # Always finished
 //!
 //! [`McapLog::finish`] writes the summary and footer. A run that stops early (non-finite
 //! state, Ctrl-C) still ends in `finish`, after an `/pmsm_sim/event` message; and should the
-//! log be dropped without it (a panic), the `mcap` writer's `Drop` finishes the file.
+//! log be dropped without it (a panic), its `Drop` writes the periods still queued and the
+//! `mcap` writer's `Drop` finishes the file.
 
 use std::collections::BTreeMap;
 use std::fs::File;
