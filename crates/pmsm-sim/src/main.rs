@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use cpu_time::{ProcessTime, ThreadTime};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::controller::{ControllerInput, RotorFeedback};
 use pmsm_sim::mcap_log::{LogCompression, LogEncoding, LogOptions, McapLog};
@@ -548,8 +549,18 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
         base.ts_s() * 1e6
     );
     println!(
-        "{:<46} {:>10} {:>10} {:>11} {:>12}",
-        "configuration", "wall (ms)", "ns/period", "real-time x", "MB / sim. s"
+        "{:<46} {:>10} {:>10} {:>11} {:>12} {:>12} {:>12}",
+        "configuration",
+        "wall (ms)",
+        "ns/period",
+        "real-time x",
+        "CPU sim thr.",
+        "CPU all thr.",
+        "MB / sim. s"
+    );
+    println!(
+        "{:<46} {:>10} {:>10} {:>11} {:>12} {:>12}",
+        "", "", "(wall)", "(wall)", "ns/period", "ns/period"
     );
     let log = |compression, encoding| {
         Some(LogOptions {
@@ -589,10 +600,13 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             log(LogCompression::Zstd, json),
         ),
     ];
+    let mut no_log_ns = None;
     for (name, seed_filter, log) in configs {
         let mut sc = base.clone();
         sc.observer.seed_filter = seed_filter;
         let mut walls = Vec::with_capacity(runs);
+        let mut cpu_thread = Vec::with_capacity(runs);
+        let mut cpu_all = Vec::with_capacity(runs);
         let mut size = 0;
         for _ in 0..runs {
             let mut logger = match log {
@@ -605,6 +619,7 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             }
             // Wall time includes finishing the file.
             let t = Instant::now();
+            let (thread0, process0) = (ThreadTime::try_now().ok(), ProcessTime::try_now().ok());
             let r = sim::run_with(
                 &sc,
                 RunOptions {
@@ -616,6 +631,12 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
                 l.finish(Some(&r.metrics))?;
             }
             walls.push(t.elapsed().as_secs_f64());
+            if let Some(Ok(d)) = thread0.map(|t| t.try_elapsed()) {
+                cpu_thread.push(d.as_secs_f64());
+            }
+            if let Some(Ok(d)) = process0.map(|t| t.try_elapsed()) {
+                cpu_all.push(d.as_secs_f64());
+            }
             if log.is_some() {
                 size = std::fs::metadata(&mcap_path).map_or(0, |m| m.len());
             }
@@ -627,25 +648,31 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             }
         }
         let w = median(walls);
+        if seed_filter && log.is_none() {
+            no_log_ns = Some(median(cpu_thread.clone()) * 1e9 / sc.periods() as f64);
+        }
         let mb = if log.is_some() {
             format!("{:.2}", size as f64 / 1e6 / sc.duration_s)
         } else {
             "-".into()
         };
+        let per = |v: Vec<f64>| median(v) * 1e9 / sc.periods() as f64;
         println!(
-            "{name:<46} {:>10.2} {:>10.0} {:>11.0} {mb:>12}",
+            "{name:<46} {:>10.2} {:>10.0} {:>11.0} {:>12.0} {:>12.0} {mb:>12}",
             w * 1e3,
             w * 1e9 / sc.periods() as f64,
-            sc.duration_s / w
+            sc.duration_s / w,
+            per(cpu_thread),
+            per(cpu_all),
         );
     }
     let _ = std::fs::remove_file(&mcap_path);
-    components(&base, runs);
+    components(&base, runs, no_log_ns);
     Ok(ExitCode::SUCCESS)
 }
 
 /// Median time per call of the loop's parts, on the scenario's own trajectory.
-fn components(sc: &Scenario, runs: usize) {
+fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>) {
     use ekf_core::PmsmObserver;
     use pmsm_sim::plant::{Plant, PlantState};
     use pmsm_sim::sensors::CurrentSensor;
@@ -656,12 +683,25 @@ fn components(sc: &Scenario, runs: usize) {
     };
     let samples = &out.trace.samples;
     let n = samples.len().max(1) as f64;
+    // Each part reads its inputs from a compact copy: read from the trace (20 MB, one sample
+    // about 1 KB) every call would also time a cache miss, which the run loop, where the
+    // period's values are at hand, does not pay.
+    let plant_in: Vec<([f64; 2], f64)> = samples
+        .iter()
+        .map(|s| (s.inverter.u_ab_v, s.truth.load_torque_nm))
+        .collect();
+    let obs_in: Vec<([f64; 2], [f64; 2])> = samples
+        .iter()
+        .map(|s| (s.inverter.u_ab_commanded_v, s.measured.i_ab_a))
+        .collect();
+    let sensor_in: Vec<[f64; 2]> = samples.iter().map(|s| s.truth.i_ab_a).collect();
     let time = |f: &mut dyn FnMut()| {
         let v: Vec<f64> = (0..runs)
             .map(|_| {
-                let t = Instant::now();
+                let t = ThreadTime::try_now();
                 f();
-                t.elapsed().as_secs_f64() * 1e9 / n
+                t.and_then(|t| t.try_elapsed())
+                    .map_or(f64::NAN, |d| d.as_secs_f64() * 1e9 / n)
             })
             .collect();
         median(v)
@@ -669,8 +709,8 @@ fn components(sc: &Scenario, runs: usize) {
     let ts = sc.ts_s();
     let plant_ns = time(&mut || {
         let mut p = Plant::new(sc.motor, PlantState::default());
-        for s in samples {
-            p.step(s.inverter.u_ab_v, s.truth.load_torque_nm, ts);
+        for &(u, load) in &plant_in {
+            p.step(u, load, ts);
         }
         std::hint::black_box(p.state());
     });
@@ -679,46 +719,88 @@ fn components(sc: &Scenario, runs: usize) {
             return;
         };
         let mut u = [0.0; 2];
-        for s in samples {
-            let _ = std::hint::black_box(o.step(u, s.measured.i_ab_a));
-            u = s.inverter.u_ab_commanded_v;
+        for &(u_applied, i) in &obs_in {
+            let _ = std::hint::black_box(o.step(u, i));
+            u = u_applied;
         }
     });
     let Ok(sensored) = sim::build_controller(sc).map(|c| c.sensored()) else {
         return;
     };
+    let ctl_in: Vec<ControllerInput> = samples
+        .iter()
+        .map(|s| ControllerInput {
+            k: s.k,
+            t_s: s.t_s,
+            i_abc_a: s.measured.i_abc_a,
+            i_ab_a: s.measured.i_ab_a,
+            u_dc_v: s.measured.u_dc_v,
+            speed_ref_mech_rad_s: s.control.speed_ref_rpm / pmsm_sim::scenario::RPM_PER_RAD_S,
+            rotor: sensored.then_some(RotorFeedback {
+                theta_e_rad: s.truth.theta_e_rad,
+                omega_mech_rad_s: s.truth.speed_rpm / pmsm_sim::scenario::RPM_PER_RAD_S,
+            }),
+        })
+        .collect();
     let ctl_ns = time(&mut || {
         let Ok(mut c) = sim::build_controller(sc) else {
             return;
         };
-        for s in samples {
-            let out = c.tick(&ControllerInput {
-                k: s.k,
-                t_s: s.t_s,
-                i_abc_a: s.measured.i_abc_a,
-                i_ab_a: s.measured.i_ab_a,
-                u_dc_v: s.measured.u_dc_v,
-                speed_ref_mech_rad_s: s.control.speed_ref_rpm / pmsm_sim::scenario::RPM_PER_RAD_S,
-                rotor: sensored.then_some(RotorFeedback {
-                    theta_e_rad: s.truth.theta_e_rad,
-                    omega_mech_rad_s: s.truth.speed_rpm / pmsm_sim::scenario::RPM_PER_RAD_S,
-                }),
-            });
-            std::hint::black_box(out);
+        for input in &ctl_in {
+            std::hint::black_box(c.tick(input));
         }
     });
     let sensor_ns = time(&mut || {
         let mut se = CurrentSensor::new(sc.sensors, sc.seed);
-        for s in samples {
-            std::hint::black_box(se.measure(pmsm_sim::svpwm::inverse_clarke(s.truth.i_ab_a)));
+        for &i in &sensor_in {
+            std::hint::black_box(se.measure(pmsm_sim::svpwm::inverse_clarke(i)));
         }
     });
+    // The encoder and the copy into the log's batch read a whole sample: they cycle over the
+    // first 64 (in cache, as the period's sample is in the run).
+    let hot = &samples[..samples.len().min(64)];
+    let hot_sample = |i: usize| hot.get(i % hot.len().max(1));
     let proto_ns = time(&mut || {
         let mut enc = pmsm_sim::mcap_log::proto::PeriodEncoder::new();
-        for s in samples {
-            std::hint::black_box(enc.encode(s));
+        for i in 0..samples.len() {
+            if let Some(s) = hot_sample(i) {
+                std::hint::black_box(enc.encode(s));
+            }
         }
     });
+    // The whole log as the run pays for it: the copy of each period into a batch here, the
+    // encoding and the `mcap` writer on the writer thread, creating and finishing the file
+    // (wall time: with a free core the two threads overlap).
+    let log_path = std::env::temp_dir().join(format!("pmsm-sim-bench-{}.mcap", std::process::id()));
+    let log_runs: Vec<f64> = (0..runs)
+        .map(|_| {
+            let t = ProcessTime::try_now();
+            if let Ok(mut log) = McapLog::create(&log_path, sc, LogOptions::default()) {
+                for s in samples {
+                    if log.record(s).is_err() {
+                        break;
+                    }
+                }
+                let _ = log.finish(None);
+            }
+            t.and_then(|t| t.try_elapsed())
+                .map_or(f64::NAN, |d| d.as_secs_f64() * 1e9 / n)
+        })
+        .collect();
+    let log_ns = median(log_runs);
+    let copy_ns = time(&mut || {
+        let mut batch = Vec::with_capacity(256);
+        for i in 0..samples.len() {
+            if batch.len() == 256 {
+                batch.clear();
+            }
+            if let Some(s) = hot_sample(i) {
+                batch.push(*s);
+            }
+            std::hint::black_box(&batch);
+        }
+    });
+    let _ = std::fs::remove_file(&log_path);
     let json_ns = time(&mut || {
         let mut buf = Vec::with_capacity(4096);
         for s in samples {
@@ -727,16 +809,35 @@ fn components(sc: &Scenario, runs: usize) {
             std::hint::black_box(&buf);
         }
     });
-    println!("\nparts of one period (median ns per call, {runs} runs):");
+    println!(
+        "\nparts of one period (median CPU ns per call of the thread, {runs} runs; the whole \
+         log: CPU of both threads):"
+    );
     for (name, ns) in [
         ("plant step (exact electrical, mechanics)", plant_ns),
         ("observer step (default EKF)", obs_ns),
         ("controller tick (incl. SVPWM)", ctl_ns),
         ("current sensor (noise, ADC)", sensor_ns),
         ("protobuf encoding of the period message", proto_ns),
+        ("copy of the period into the log's batch", copy_ns),
+        ("MCAP log, whole: encoding, mcap, file", log_ns),
         ("JSON encoding of the period message", json_ns),
     ] {
         println!("  {name:<44} {ns:>8.1}");
+    }
+    if let Some(no_log) = no_log_ns {
+        // What the parts leave of the no-log loop: the record of the period, the streaming
+        // metrics, the speed and load profiles, the inverter, the adapters.
+        // (A difference of medians: as noisy as the noisiest of them.)
+        let rest = no_log - (plant_ns + 2.0 * obs_ns + ctl_ns + sensor_ns);
+        println!(
+            "  {:<44} {rest:>8.1}",
+            "rest of the no-log loop (record, metrics, ...)"
+        );
+        println!(
+            "  ({no_log:.0} CPU ns per period without the log, with the seed filter: the parts \
+             above with the EKF step twice, the simulator's and the seed filter's)"
+        );
     }
 }
 

@@ -12,7 +12,7 @@
 //!
 //! The per-period channel is protobuf by default: message encoding `protobuf`, schema encoding
 //! `protobuf` with a `FileDescriptorSet` ([`proto::file_descriptor_set`]; the `.proto` text is
-//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 700 bytes
+//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 940 bytes
 //! per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
 //! [`proto::json_schema`] (same field names, about 40 times slower to write). All three come
 //! from the one description of the record in [`crate::record`] (how to add a field: there).
@@ -26,16 +26,33 @@
 //! Chunk and data-section CRCs are not computed (0, "not computed" in the MCAP spec: the
 //! `mcap` crate's CRC costs about 110 ns per message); the summary's is.
 //!
+//! # Writer thread
+//!
+//! The encoding, the `mcap` writer and the file writes run on a thread of their own
+//! (`pmsm-sim mcap`): [`SampleSink::record`] copies the period's [`Sample`] into a batch of
+//! 256 and hands each full batch over (at most 4 in flight; then `record` waits for the
+//! writer). The run loop's own cost of the log is that copy (about 1 KB per period); with a
+//! free core the rest overlaps the simulation. The file is the same, message for message and
+//! byte for byte, as when it was written on the caller's thread: one writer, the messages in
+//! the order they were recorded, the same sequence numbers. [`McapLog::event`] and
+//! [`McapLog::finish`] first wait for every period recorded before them to be written (the
+//! writer then comes back to the caller's thread). A write error surfaces at the next
+//! hand-over (up to 256 periods after the period that failed; the run then ends with
+//! `SinkFailed` there) or in `finish`.
+//!
 //! # Always finished
 //!
 //! [`McapLog::finish`] writes the summary and footer. A run that stops early (non-finite
 //! state, Ctrl-C) still ends in `finish`, after an `/pmsm_sim/event` message; and should the
-//! log be dropped without it (a panic), the `mcap` writer's `Drop` finishes the file.
+//! log be dropped without it (a panic), its `Drop` writes the periods still queued and the
+//! `mcap` writer's `Drop` finishes the file.
 
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
 
 use mcap::records::{MessageHeader, Metadata};
 use mcap::{Compression, WriteOptions, Writer};
@@ -105,10 +122,42 @@ pub struct LogOptions {
     pub encoding: LogEncoding,
 }
 
+/// Periods handed to the writer thread at a time (a batch of copied [`Sample`]s, about
+/// 1 KB each): one channel operation per batch, not per period.
+const BATCH: usize = 256;
+/// Batches in flight (queued for the writer thread or being written) before
+/// [`SampleSink::record`] waits for it: bounds the memory and keeps the writer close behind.
+const IN_FLIGHT: usize = 4;
+
 /// An open MCAP log (module docs).
+///
+/// The file is written on a thread of its own ("Writer thread" in the module docs): the run
+/// loop only copies each [`Sample`] into a batch.
 pub struct McapLog {
-    writer: Writer<BufWriter<File>>,
     path: PathBuf,
+    ts_ns: u64,
+    last_ns: u64,
+    /// The periods not handed over yet.
+    batch: Vec<Sample>,
+    /// The writer thread (`None` once joined).
+    thread: Option<WriterThread>,
+    /// The writer, back from its thread ([`McapLog::finish`], [`McapLog::event`]).
+    inner: Option<Inner>,
+    /// The writer thread's error, once it failed.
+    failed: Option<String>,
+}
+
+/// The writer thread: its job queue, the batches it hands back for reuse, and its handle.
+struct WriterThread {
+    jobs: SyncSender<Vec<Sample>>,
+    spare: Receiver<Vec<Sample>>,
+    handle: JoinHandle<Result<Inner, String>>,
+}
+
+/// The writer and its state: on the writer thread while the run goes, back on the caller's
+/// thread for the last messages.
+struct Inner {
+    writer: Writer<BufWriter<File>>,
     encoding: LogEncoding,
     period: u16,
     scenario: u16,
@@ -116,7 +165,6 @@ pub struct McapLog {
     event: u16,
     seq: u32,
     ts_ns: u64,
-    last_ns: u64,
     buf: Vec<u8>,
     proto: proto::PeriodEncoder,
 }
@@ -143,7 +191,7 @@ struct EventMessage<'a> {
 }
 
 impl McapLog {
-    /// Creates the log at `path` and writes the scenario.
+    /// Creates the log at `path`, writes the scenario, and starts the writer thread.
     pub fn create(path: &Path, scenario: &Scenario, options: LogOptions) -> Result<Self, SimError> {
         let file = File::create(path).map_err(|e| out_err(path, e))?;
         let opts = WriteOptions::new()
@@ -195,17 +243,16 @@ impl McapLog {
                 ]),
             })
             .map_err(|e| out_err(path, e))?;
-        let mut log = Self {
+        let ts_ns = (scenario.ts_s() * 1e9).round() as u64;
+        let mut inner = Inner {
             writer,
-            path: path.to_path_buf(),
             encoding: options.encoding,
             period,
             scenario: scenario_ch,
             metrics,
             event,
             seq: 0,
-            ts_ns: (scenario.ts_s() * 1e9).round() as u64,
-            last_ns: 0,
+            ts_ns,
             buf: Vec::with_capacity(4096),
             proto: proto::PeriodEncoder::new(),
         };
@@ -214,9 +261,20 @@ impl McapLog {
             toml: &toml,
             scenario,
         };
-        log.write_json(log.scenario, 0, &msg)
+        let ch = inner.scenario;
+        inner
+            .write_json(ch, 0, &msg)
             .map_err(|e| out_err(path, e))?;
-        Ok(log)
+        let thread = WriterThread::spawn(inner).map_err(|e| out_err(path, e))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            ts_ns,
+            last_ns: 0,
+            batch: Vec::with_capacity(BATCH),
+            thread: Some(thread),
+            inner: None,
+            failed: None,
+        })
     }
 
     /// The file.
@@ -224,6 +282,164 @@ impl McapLog {
         &self.path
     }
 
+    /// Hands the pending periods to the writer thread (a full batch, or the rest before an
+    /// event and at the end). Err: the writer thread failed (its error).
+    fn hand_over(&mut self) -> Result<(), String> {
+        if let Some(e) = &self.failed {
+            return Err(e.clone());
+        }
+        if self.batch.is_empty() {
+            return Ok(());
+        }
+        let Some(t) = self.thread.as_mut() else {
+            // The writer is back on this thread (after an event): write here.
+            let inner = self.inner.as_mut().ok_or("log already finished")?;
+            for s in self.batch.drain(..) {
+                inner.period(&s)?;
+            }
+            return Ok(());
+        };
+        let next = t
+            .spare
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(BATCH));
+        let full = core::mem::replace(&mut self.batch, next);
+        if t.jobs.send(full).is_err() {
+            // The thread ended early: only on an error, which joining returns.
+            let e = match self.join() {
+                Err(e) => e,
+                Ok(()) => "the log's writer thread stopped".to_string(),
+            };
+            self.failed = Some(e.clone());
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// Hands over the pending periods and waits for the writer thread to write them; the
+    /// writer is then back on this thread.
+    fn join(&mut self) -> Result<(), String> {
+        if let Some(e) = &self.failed {
+            return Err(e.clone());
+        }
+        let Some(t) = self.thread.take() else {
+            return Ok(());
+        };
+        let WriterThread {
+            jobs,
+            spare,
+            handle,
+        } = t;
+        // Closing the queue ends the thread once it has written what is queued.
+        drop(jobs);
+        drop(spare);
+        let r = match handle.join() {
+            Ok(r) => r,
+            Err(_) => Err("the log's writer thread panicked".to_string()),
+        };
+        match r {
+            Ok(inner) => {
+                self.inner = Some(inner);
+                Ok(())
+            }
+            Err(e) => {
+                self.failed = Some(e.clone());
+                Err(e)
+            }
+        }
+    }
+
+    /// Everything so far written, the writer back on this thread.
+    fn drain(&mut self) -> Result<&mut Inner, String> {
+        self.hand_over()?;
+        self.join()?;
+        self.hand_over()?;
+        self.inner
+            .as_mut()
+            .ok_or_else(|| "log already finished".to_string())
+    }
+
+    /// Writes an event (e.g. why the run stopped) at simulated time `t_s`, after every
+    /// period recorded so far.
+    pub fn event(&mut self, t_s: f64, level: &str, message: &str) -> Result<(), SimError> {
+        let t_ns = if t_s.is_finite() && t_s > 0.0 {
+            (t_s * 1e9).round() as u64
+        } else {
+            self.last_ns
+        };
+        self.last_ns = self.last_ns.max(t_ns);
+        let path = self.path.clone();
+        let inner = self.drain().map_err(|e| out_err(&path, e))?;
+        let ch = inner.event;
+        inner
+            .write_json(
+                ch,
+                t_ns,
+                &EventMessage {
+                    t_s,
+                    level,
+                    message,
+                },
+            )
+            .map_err(|e| out_err(&path, e))
+    }
+
+    /// Writes the periods still queued, the metrics (if any), then the summary and footer,
+    /// and flushes the file.
+    pub fn finish(mut self, metrics: Option<&RunMetrics>) -> Result<PathBuf, SimError> {
+        let path = self.path.clone();
+        let t = self.last_ns;
+        let inner = self.drain().map_err(|e| out_err(&path, e))?;
+        if let Some(m) = metrics {
+            let ch = inner.metrics;
+            inner.write_json(ch, t, m).map_err(|e| out_err(&path, e))?;
+        }
+        inner.writer.finish().map_err(|e| out_err(&path, e))?;
+        let Some(inner) = self.inner.take() else {
+            return Err(out_err(&path, "log already finished"));
+        };
+        let mut file = inner.writer.into_inner();
+        file.flush().map_err(|e| out_err(&path, e))?;
+        Ok(path)
+    }
+}
+
+/// Without [`McapLog::finish`] (a panic, an early return): the queued periods are written
+/// and the `mcap` writer's `Drop` finishes the file.
+impl Drop for McapLog {
+    fn drop(&mut self) {
+        let _ = self.hand_over();
+        let _ = self.join();
+        let _ = self.hand_over();
+    }
+}
+
+impl WriterThread {
+    fn spawn(mut inner: Inner) -> std::io::Result<Self> {
+        let (jobs, queue) = sync_channel::<Vec<Sample>>(IN_FLIGHT);
+        let (give_back, spare) = sync_channel::<Vec<Sample>>(IN_FLIGHT + 1);
+        let handle = std::thread::Builder::new()
+            .name("pmsm-sim mcap".into())
+            .spawn(move || {
+                for mut batch in queue {
+                    for s in &batch {
+                        inner.period(s)?;
+                    }
+                    batch.clear();
+                    // The caller may have stopped taking them back: then it is dropped.
+                    let _ = give_back.try_send(batch);
+                }
+                Ok(inner)
+            })?;
+        Ok(Self {
+            jobs,
+            spare,
+            handle,
+        })
+    }
+}
+
+impl Inner {
     fn write_json<T: Serialize>(
         &mut self,
         channel: u16,
@@ -242,7 +458,6 @@ impl McapLog {
     #[inline]
     fn header(&mut self, channel: u16, t_ns: u64) -> MessageHeader {
         self.seq = self.seq.wrapping_add(1);
-        self.last_ns = self.last_ns.max(t_ns);
         MessageHeader {
             channel_id: channel,
             sequence: self.seq,
@@ -251,44 +466,9 @@ impl McapLog {
         }
     }
 
-    /// Writes an event (e.g. why the run stopped) at simulated time `t_s`.
-    pub fn event(&mut self, t_s: f64, level: &str, message: &str) -> Result<(), SimError> {
-        let t_ns = if t_s.is_finite() && t_s > 0.0 {
-            (t_s * 1e9).round() as u64
-        } else {
-            self.last_ns
-        };
-        let ch = self.event;
-        self.write_json(
-            ch,
-            t_ns,
-            &EventMessage {
-                t_s,
-                level,
-                message,
-            },
-        )
-        .map_err(|e| out_err(&self.path, e))
-    }
-
-    /// Writes the metrics (if any), then the summary and footer, and flushes the file.
-    pub fn finish(mut self, metrics: Option<&RunMetrics>) -> Result<PathBuf, SimError> {
-        if let Some(m) = metrics {
-            let (ch, t) = (self.metrics, self.last_ns);
-            self.write_json(ch, t, m)
-                .map_err(|e| out_err(&self.path, e))?;
-        }
-        self.writer.finish().map_err(|e| out_err(&self.path, e))?;
-        let path = self.path.clone();
-        let mut inner = self.writer.into_inner();
-        inner.flush().map_err(|e| out_err(&path, e))?;
-        Ok(path)
-    }
-}
-
-impl SampleSink for McapLog {
+    /// Writes the message of one period.
     #[inline]
-    fn record(&mut self, sample: &Sample) -> Result<(), String> {
+    fn period(&mut self, sample: &Sample) -> Result<(), String> {
         let t_ns = sample.k.saturating_mul(self.ts_ns);
         let ch = self.period;
         match self.encoding {
@@ -301,5 +481,17 @@ impl SampleSink for McapLog {
             }
             LogEncoding::Json => self.write_json(ch, t_ns, sample),
         }
+    }
+}
+
+impl SampleSink for McapLog {
+    #[inline]
+    fn record(&mut self, sample: &Sample) -> Result<(), String> {
+        self.last_ns = self.last_ns.max(sample.k.saturating_mul(self.ts_ns));
+        self.batch.push(*sample);
+        if self.batch.len() >= BATCH {
+            self.hand_over()?;
+        }
+        Ok(())
     }
 }

@@ -201,10 +201,21 @@ impl Enc<'_> {
         }
     }
 
+    /// A `double` field: key and value in one nine-byte copy when the key is one byte (field
+    /// numbers up to 15, every field of the record), one bounds check per field.
     #[inline(always)]
     pub(crate) fn double(&mut self, field: u32, v: f64) {
-        self.key(field, WT_I64);
-        self.le8(v.to_le_bytes());
+        let k = (field << 3) | WT_I64;
+        if k < 0x80 {
+            let b = v.to_le_bytes();
+            let p = self.pos;
+            self.out[p..p + 9]
+                .copy_from_slice(&[k as u8, b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]);
+            self.pos = p + 9;
+        } else {
+            self.key(field, WT_I64);
+            self.le8(v.to_le_bytes());
+        }
     }
 
     #[inline(always)]
@@ -215,8 +226,15 @@ impl Enc<'_> {
 
     #[inline(always)]
     pub(crate) fn bool(&mut self, field: u32, v: bool) {
-        self.key(field, WT_VARINT);
-        self.byte(u8::from(v));
+        let k = (field << 3) | WT_VARINT;
+        if k < 0x80 {
+            let p = self.pos;
+            self.out[p..p + 2].copy_from_slice(&[k as u8, u8::from(v)]);
+            self.pos = p + 2;
+        } else {
+            self.key(field, WT_VARINT);
+            self.byte(u8::from(v));
+        }
     }
 
     #[inline]
@@ -230,11 +248,24 @@ impl Enc<'_> {
     #[inline(always)]
     fn doubles<const N: usize>(&mut self, field: u32, v: &[f64; N]) {
         const { assert!(N * 8 < 0x80) };
-        self.key(field, WT_LEN);
-        self.byte((N * 8) as u8);
-        for x in v {
-            self.le8(x.to_le_bytes());
+        let k = (field << 3) | WT_LEN;
+        if k >= 0x80 {
+            self.key(field, WT_LEN);
+            self.byte((N * 8) as u8);
+            for x in v {
+                self.le8(x.to_le_bytes());
+            }
+            return;
         }
+        // One bounds check for the field: key, length, the values.
+        let p = self.pos;
+        let out = &mut self.out[p..p + 2 + 8 * N];
+        out[0] = k as u8;
+        out[1] = (N * 8) as u8;
+        for (dst, x) in out[2..].chunks_exact_mut(8).zip(v) {
+            dst.copy_from_slice(&x.to_le_bytes());
+        }
+        self.pos = p + 2 + 8 * N;
     }
 
     /// A nested message: one length byte reserved (`RESERVE = 1`, a body that is shorter than
