@@ -33,7 +33,8 @@ pub use nalgebra;
 /// The scalar of the filter: `f32` (Cortex-M4F) or `f64` (host).
 pub trait Float: nalgebra::RealField + Copy {
     /// `(sin x, cos x)` computed in this precision only: [`trig::sin_cos_f32`] for `f32` (no
-    /// `f64` on a single-precision FPU), the standard library's (or `libm`'s) for `f64`.
+    /// `f64` on a single-precision FPU), [`trig::sin_cos_f64`] for `f64` (inline, within 1 ulp
+    /// like the standard library's call, and the same with and without `std`).
     fn sin_cos_angle(self) -> (Self, Self);
 }
 
@@ -47,7 +48,7 @@ impl Float for f32 {
 impl Float for f64 {
     #[inline]
     fn sin_cos_angle(self) -> (f64, f64) {
-        nalgebra::ComplexField::sin_cos(self)
+        trig::sin_cos_f64(self)
     }
 }
 
