@@ -9,8 +9,12 @@
 //!
 //! Run it with two values of `N`: the difference of the totals over the difference of `N` is
 //! the cost of one step; `callgrind_annotate --auto=yes` spreads it over the source lines.
-//! Configurations: `f64-default`, `f64-untracked`, `f64-seed`, `f64-salient`, `f64-flux`,
+//! Configurations: `f64-default`, `f64-default-x4` (four observers in turn),
+//! `f64-untracked`, `f64-seed`, `f64-salient`, `f64-flux`,
 //! `f32-default`, `f32-seed`.
+//!
+//! With `STEP_COUNT_TIME=1` in the environment it also prints the fastest of 200 batches of
+//! `N / 200` steps, in ns per step (on a loaded machine the minimum is the stable figure).
 use std::hint::black_box;
 
 use ekf_core::{
@@ -30,13 +34,42 @@ fn samples<T: Float>(conv: impl Fn(f64) -> T) -> Vec<([T; 2], [T; 2])> {
         .collect()
 }
 
+/// Runs `n` steps of `step(k)`; with `STEP_COUNT_TIME` set, in 200 timed batches.
+fn batches(n: usize, mut step: impl FnMut(usize)) {
+    if std::env::var_os("STEP_COUNT_TIME").is_none() {
+        (0..n).for_each(step);
+        return;
+    }
+    let per = (n / 200).max(1);
+    let mut best = f64::INFINITY;
+    for b in 0..200 {
+        let t0 = std::time::Instant::now();
+        (b * per..(b + 1) * per).for_each(&mut step);
+        best = best.min(t0.elapsed().as_secs_f64() * 1e9 / per as f64);
+    }
+    println!("{best:.1} ns/step (fastest of 200 batches of {per})");
+}
+
 fn run<T: Float>(cfg: ObserverConfig<T>, data: &[([T; 2], [T; 2])], n: usize) {
     let mut obs = PmsmObserver::new(&cfg).expect("valid config");
-    for k in 0..n {
+    batches(n, |k| {
         let (u, i) = data[k & 1023];
         // A refused step is part of what is measured; its error is not of interest here.
         let _ = black_box(obs.step(black_box(u), black_box(i)));
-    }
+    });
+}
+
+/// Four observers stepped in turn: their chains of dependent operations overlap, so the time
+/// per step against [`run`]'s shows how much of a step is latency (the diagnostic of the cost
+/// map).
+fn run4<T: Float>(cfg: ObserverConfig<T>, data: &[([T; 2], [T; 2])], n: usize) {
+    let mut obs: Vec<_> = (0..4)
+        .map(|_| PmsmObserver::new(&cfg).expect("valid config"))
+        .collect();
+    batches(n, |k| {
+        let (u, i) = data[(k >> 2) & 1023];
+        let _ = black_box(obs[k & 3].step(black_box(u), black_box(i)));
+    });
 }
 
 fn main() {
@@ -49,6 +82,7 @@ fn main() {
     let servo = MotorParams::<f64>::servo;
     match which.as_str() {
         "f64-default" => run(ObserverConfig::new(servo(), ts), &d64, n),
+        "f64-default-x4" => run4(ObserverConfig::new(servo(), ts), &d64, n),
         "f64-untracked" => run(
             ObserverConfig {
                 parameter_tracking: None,
@@ -67,12 +101,12 @@ fn main() {
             n,
         ),
         "f64-flux" => {
-            let mut flux = FluxObserver::new(&FluxObserverConfig::new(servo(), ts))
-                .expect("valid config");
-            for k in 0..n {
+            let mut flux =
+                FluxObserver::new(&FluxObserverConfig::new(servo(), ts)).expect("valid config");
+            batches(n, |k| {
                 let (u, i) = d64[k & 1023];
                 let _ = black_box(flux.step(black_box(u), black_box(i)));
-            }
+            });
         }
         "f32-default" => run(
             ObserverConfig::new(MotorParams::<f32>::servo(), ts as f32),
