@@ -155,23 +155,20 @@ fn sin_cos_f64_reduced(x: f64) -> (f64, f64) {
     let r_lo = (hi0 - r) + lo0;
     let z = r * r;
     let f = |n: f64| 1.0 / n;
+    // Estrin's scheme (pairs, then pairs of pairs): a third of Horner's chain of dependent
+    // operations, the same number of them.
+    let z2 = z * z;
+    let z4 = z2 * z2;
     let ps = z
-        * (-f(6.0)
-            + z * (f(120.0)
-                + z * (-f(5040.0)
-                    + z * (f(362_880.0)
-                        + z * (-f(39_916_800.0)
-                            + z * (f(6_227_020_800.0)
-                                + z * (-f(1_307_674_368_000.0)
-                                    + z * f(355_687_428_096_000.0))))))));
+        * ((-f(6.0) + z * f(120.0))
+            + z2 * (-f(5040.0) + z * f(362_880.0))
+            + z4 * ((-f(39_916_800.0) + z * f(6_227_020_800.0))
+                + z2 * (-f(1_307_674_368_000.0) + z * f(355_687_428_096_000.0))));
     let s = r + (r * ps + (r_lo - r_lo * (0.5 * z)));
-    let pc = (z * z)
-        * (f(24.0)
-            + z * (-f(720.0)
-                + z * (f(40_320.0)
-                    + z * (-f(3_628_800.0)
-                        + z * (f(479_001_600.0)
-                            + z * (-f(87_178_291_200.0) + z * f(20_922_789_888_000.0)))))));
+    let pc = z2
+        * ((f(24.0) + z * -f(720.0))
+            + z2 * (f(40_320.0) + z * -f(3_628_800.0))
+            + z4 * ((f(479_001_600.0) + z * -f(87_178_291_200.0)) + z2 * f(20_922_789_888_000.0)));
     let hz = 0.5 * z;
     let w = 1.0 - hz;
     let c = w + (((1.0 - w) - hz) + (pc - r * r_lo));
@@ -191,27 +188,28 @@ pub fn sin_cos_small<T: Float>(x: T) -> (T, T) {
     }
     let x2 = x * x;
     let c = |v: f64| -> T { to_t(v) };
-    let single = T::default_epsilon() > to_t(1e-10);
-    // Horner in x^2 with coefficients (-1)^n / (2n+1)! and (-1)^n / (2n)!; the f64 tails are
-    // folded away at compile time for f32.
-    let (s_tail, c_tail) = if single {
-        (T::zero(), T::zero())
-    } else {
-        (
-            x2 * (c(1.0 / 362_880.0)
-                + x2 * (c(-1.0 / 39_916_800.0)
-                    + x2 * (c(1.0 / 6_227_020_800.0) + x2 * c(-1.0 / 1_307_674_368_000.0)))),
-            x2 * (c(-1.0 / 3_628_800.0)
-                + x2 * (c(1.0 / 479_001_600.0)
-                    + x2 * (c(-1.0 / 87_178_291_200.0) + x2 * c(1.0 / 20_922_789_888_000.0)))),
-        )
-    };
+    if T::default_epsilon() > to_t(1e-10) {
+        // Single precision: Horner through x^7 / x^8 (the Cortex-M4F's code, unchanged).
+        let s =
+            x * (T::one() + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * c(-1.0 / 5040.0))));
+        let co = T::one()
+            + x2 * (c(-0.5)
+                + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * c(1.0 / 40_320.0))));
+        return (s, co);
+    }
+    // Double precision, through x^15 / x^16: Estrin's scheme in x^2 (pairs, then pairs of
+    // pairs), a third of Horner's chain of dependent operations; coefficients
+    // (-1)^n / (2n+1)! and (-1)^n / (2n)!.
+    let x4 = x2 * x2;
+    let x8 = x4 * x4;
     let s = x
-        * (T::one()
-            + x2 * (c(-1.0 / 6.0) + x2 * (c(1.0 / 120.0) + x2 * (c(-1.0 / 5040.0) + s_tail))));
-    let co = T::one()
-        + x2 * (c(-0.5)
-            + x2 * (c(1.0 / 24.0) + x2 * (c(-1.0 / 720.0) + x2 * (c(1.0 / 40_320.0) + c_tail))));
+        * (((T::one() + x2 * c(-1.0 / 6.0)) + x4 * (c(1.0 / 120.0) + x2 * c(-1.0 / 5040.0)))
+            + x8 * ((c(1.0 / 362_880.0) + x2 * c(-1.0 / 39_916_800.0))
+                + x4 * (c(1.0 / 6_227_020_800.0) + x2 * c(-1.0 / 1_307_674_368_000.0))));
+    let co = ((T::one() + x2 * c(-0.5)) + x4 * (c(1.0 / 24.0) + x2 * c(-1.0 / 720.0)))
+        + x8 * ((c(1.0 / 40_320.0) + x2 * c(-1.0 / 3_628_800.0))
+            + x4 * (c(1.0 / 479_001_600.0) + x2 * c(-1.0 / 87_178_291_200.0)))
+        + (x8 * x8) * c(1.0 / 20_922_789_888_000.0);
     (s, co)
 }
 
