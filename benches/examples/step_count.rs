@@ -15,6 +15,9 @@
 //!
 //! With `STEP_COUNT_TIME=1` in the environment it also prints the fastest of 200 batches of
 //! `N / 200` steps, in ns per step (on a loaded machine the minimum is the stable figure).
+//! With `STEP_COUNT_PORTABLE=1` the observers run `step_portable` (the build for any x86-64)
+//! instead of the dispatched `step` (AVX2 and FMA where the CPU has them; valgrind 3.19 does
+//! not decode every AVX instruction of that build, e.g. the seed configuration's).
 use std::hint::black_box;
 
 use ekf_core::{
@@ -52,6 +55,13 @@ fn batches(n: usize, mut step: impl FnMut(usize)) {
 
 fn run<T: Float>(cfg: ObserverConfig<T>, data: &[([T; 2], [T; 2])], n: usize) {
     let mut obs = PmsmObserver::new(&cfg).expect("valid config");
+    if std::env::var_os("STEP_COUNT_PORTABLE").is_some() {
+        batches(n, |k| {
+            let (u, i) = data[k & 1023];
+            let _ = black_box(obs.step_portable(black_box(u), black_box(i)));
+        });
+        return;
+    }
     batches(n, |k| {
         let (u, i) = data[k & 1023];
         // A refused step is part of what is measured; its error is not of interest here.
