@@ -177,8 +177,12 @@ const COAST_TURN_RAD: f32 = 0.5;
 const COAST_SETTLE_S: f32 = 0.01;
 /// Block over which the back-EMF is averaged during the coast, s.
 const EMF_BLOCK_S: f32 = 0.005;
-/// Angle standard deviation of the observer when it is moved to the other branch, rad.
-const FLIP_SIGMA: f32 = 0.3;
+/// Angle standard deviation of the observer when it is re-seeded at the launch, rad.
+const LAUNCH_SIGMA: f32 = 0.3;
+/// Coast: amplitude of the injected current vector, as a fraction of the alignment current.
+const COAST_INJECTION: f32 = 0.15;
+/// Coast: turns of the injected current vector per back-EMF block.
+const COAST_INJECTION_TURNS: f32 = 4.0;
 /// Lead of the launched current vector over the rotor's angle, rad el.
 const LAUNCH_LEAD_RAD: f32 = 1.0;
 /// A closed-loop reversal ([`Reversal::ClosedLoop`]) leaves closed loop once its reference
@@ -303,6 +307,8 @@ struct Vars {
     e_last: [f32; 2],
     /// Coast: complete blocks.
     e_blocks: u32,
+    /// Coast: the unit vector of the injected current, in the alignment's frame.
+    inj: [f32; 2],
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -335,6 +341,10 @@ pub(crate) struct Sequencer {
     kick_filter: f32,
     /// Rise of the alignment current per tick, A.
     align_step: f32,
+    /// Turn of the coast's injected current per tick (sine, cosine): once per block.
+    inj_step: [f32; 2],
+    /// `1 / psi_f`, 1/Wb.
+    inv_psi: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -389,13 +399,17 @@ impl Sequencer {
             let d = KICK_TAU_S + KICK_LAG_S;
             align_step = min2(align_step, kick_speed / (2.0 * accel_per_a * d * d) * ts);
         }
+        let block_ticks = ticks(EMF_BLOCK_S, ts).max(1);
+        let (inj_s, inj_c) = sin_cos(wrap(2.0 * PI * COAST_INJECTION_TURNS / block_ticks as f32));
         Self {
+            inj_step: [inj_s, inj_c],
+            inv_psi: 1.0 / cfg.motor.psi_f_wb,
             k_damp: 2.0 * st.damping_ratio / wn,
             phi_max: FRAC_PI_2,
             kick_speed,
             coast_ticks: ticks(COAST_S, ts),
             coast_settle_ticks: ticks(COAST_SETTLE_S, ts),
-            block_ticks: ticks(EMF_BLOCK_S, ts).max(1),
+            block_ticks,
             kick_filter: min2(ts / KICK_TAU_S, 1.0),
             align_step,
             pole_pairs,
@@ -571,6 +585,11 @@ impl Sequencer {
                 self.v.timer = self.v.timer.saturating_add(1);
                 if self.v.coast > 0 {
                     self.v.coast += 1;
+                    // The injected current turns once per block: its voltage (resistive,
+                    // inductive, dead time) averages out of every block.
+                    let [c, sn] = self.v.inj;
+                    let [ds, dc] = self.inj_step;
+                    self.v.inj = [c * dc - sn * ds, sn * dc + c * ds];
                     if self.v.coast > self.coast_settle_ticks {
                         // The current loops have settled at zero current: the voltage is
                         // the back-EMF.
@@ -592,7 +611,7 @@ impl Sequencer {
                     }
                     if self.v.coast_int.abs() >= COAST_TURN_RAD && self.v.e_blocks >= 2 {
                         reframe = Some(self.align_frame());
-                        self.launch(cfg, est, reseed);
+                        self.launch(cfg, reseed);
                     } else if self.v.coast > self.coast_ticks {
                         // A false alarm (the rotor did not turn): back to the alignment.
                         self.v.coast = 0;
@@ -618,6 +637,7 @@ impl Sequencer {
                     };
                     if self.v.moving >= MOVING_TICKS {
                         self.v.coast = 1;
+                        self.v.inj = [1.0, 0.0];
                     } else if self.v.timer > self.align_ticks && self.v.amp >= i_align {
                         if self.v.second || self.kick_speed == 0.0 {
                             self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
@@ -716,14 +736,25 @@ impl Sequencer {
 
         let plan = match self.state {
             State::Align => {
-                let amp = if self.v.coast > 0 { 0.0 } else { self.v.amp };
+                let i_ref = if self.v.coast > 0 {
+                    let a = COAST_INJECTION * cfg.startup.align_current_a;
+                    Dq {
+                        d: a * self.v.inj[0],
+                        q: a * self.v.inj[1],
+                    }
+                } else {
+                    Dq {
+                        d: self.v.amp,
+                        q: 0.0,
+                    }
+                };
                 Plan {
                     frame: Frame {
                         theta: self.v.gamma,
                         omega: 0.0,
                         emf: false,
                     },
-                    i_ref: Dq { d: amp, q: 0.0 },
+                    i_ref,
                     reframe_from: reframe,
                 }
             }
@@ -894,31 +925,32 @@ impl Sequencer {
 
     /// I/f from the rotor's motion seen by the observer: the current vector on the rotor's
     /// d axis, the ramp at the observer's speed, the observer kept.
-    fn launch(&mut self, cfg: &FocConfig, est: &Estimate<f32>, reseed: &mut impl FnMut(Seed)) {
-        let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
+    fn launch(&mut self, cfg: &FocConfig, reseed: &mut impl FnMut(Seed)) {
         // The back-EMF `w psi j e^(j th)` turned from the first block to the last one in the
-        // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction.
+        // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction,
+        // and its length is `|w| psi`. The last block's mean stands for the rotor half a
+        // block (and the tick of the voltage's delay) ago.
         let [f0, f1] = self.v.e_first;
         let [l0, l1] = self.v.e_last;
         let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
-        let th_emf = wrap(atan2(l1, l0) - dir * FRAC_PI_2);
-        if wrap(th - th_emf).abs() > FRAC_PI_2 {
-            // The observer is on the other branch (same back-EMF, angle + pi, speed - w).
-            th = wrap(th + PI);
-            w = -w;
-            reseed(Seed {
-                theta: th,
-                omega: w,
-                sigma_theta: FLIP_SIGMA,
-            });
-        }
-        // A lead toward the commanded direction: a forward torque even when the observer's
-        // angle is off by up to the lead.
-        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * sign(self.target_e()));
+        let w = dir * sqrt(l0 * l0 + l1 * l1) * self.inv_psi;
+        let age = (0.5 * self.block_ticks as f32 + 1.0) * cfg.ts_s;
+        let th = wrap(atan2(l1, l0) - dir * FRAC_PI_2 + w * age);
+        reseed(Seed {
+            theta: th,
+            omega: w,
+            sigma_theta: LAUNCH_SIGMA,
+        });
+        // A lead toward the commanded direction: a forward torque even when the angle is
+        // off by up to the lead.
+        let fwd = sign(self.target_e());
+        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * fwd);
         self.v.phi = 0.0;
-        // The ramp never runs faster than the hand-over speed.
-        self.v.omega_ol = limit(w, -self.handover, self.handover);
-        self.v.ol_dir = sign(w);
+        // The ramp starts at the rotor's speed when it turns the commanded way, else at zero:
+        // a backward-turning rotor is braked at once. It never runs faster than the hand-over
+        // speed.
+        self.v.omega_ol = fwd * min2(max2(w * fwd, 0.0), self.handover);
+        self.v.ol_dir = sign(self.v.omega_ol);
         self.v.launch = true;
         self.v.amp = cfg.startup.if_current_a;
         self.v.at_speed = 0;
