@@ -179,8 +179,12 @@ const COAST_SETTLE_S: f32 = 0.01;
 const EMF_BLOCK_S: f32 = 0.005;
 /// Angle standard deviation of the observer when it is re-seeded at the launch, rad.
 const LAUNCH_SIGMA: f32 = 0.3;
-/// Coast: amplitude of the injected current vector, as a fraction of the alignment current.
+/// Coast: largest amplitude of the injected current vector, as a fraction of the alignment
+/// current.
 const COAST_INJECTION: f32 = 0.15;
+/// Coast: largest speed ripple of the injected current (its torque), as a fraction of the
+/// kick speed.
+const COAST_RIPPLE: f32 = 0.1;
 /// Coast: turns of the injected current vector per back-EMF block.
 const COAST_INJECTION_TURNS: f32 = 4.0;
 /// Lead of the launched current vector over the rotor's angle, rad el.
@@ -341,8 +345,10 @@ pub(crate) struct Sequencer {
     kick_filter: f32,
     /// Rise of the alignment current per tick, A.
     align_step: f32,
-    /// Turn of the coast's injected current per tick (sine, cosine): once per block.
+    /// Turn of the coast's injected current per tick (sine, cosine).
     inj_step: [f32; 2],
+    /// Amplitude of the coast's injected current, A.
+    inj_amp: f32,
     /// `1 / psi_f`, 1/Wb.
     inv_psi: f32,
     // Parts.
@@ -400,8 +406,15 @@ impl Sequencer {
             align_step = min2(align_step, kick_speed / (2.0 * accel_per_a * d * d) * ts);
         }
         let block_ticks = ticks(EMF_BLOCK_S, ts).max(1);
-        let (inj_s, inj_c) = sin_cos(wrap(2.0 * PI * COAST_INJECTION_TURNS / block_ticks as f32));
+        let w_inj = 2.0 * PI * COAST_INJECTION_TURNS / (block_ticks as f32 * ts);
+        let (inj_s, inj_c) = sin_cos(wrap(w_inj * ts));
+        // The injected current's torque swings the speed by `c I / w_inj`.
+        let inj_amp = min2(
+            COAST_INJECTION * st.align_current_a,
+            COAST_RIPPLE * kick_speed * w_inj / accel_per_a,
+        );
         Self {
+            inj_amp,
             inj_step: [inj_s, inj_c],
             inv_psi: 1.0 / cfg.motor.psi_f_wb,
             k_damp: 2.0 * st.damping_ratio / wn,
@@ -737,7 +750,7 @@ impl Sequencer {
         let plan = match self.state {
             State::Align => {
                 let i_ref = if self.v.coast > 0 {
-                    let a = COAST_INJECTION * cfg.startup.align_current_a;
+                    let a = self.inj_amp;
                     Dq {
                         d: a * self.v.inj[0],
                         q: a * self.v.inj[1],
