@@ -161,15 +161,15 @@ use crate::trig::{atan2, max2, min2, sin_cos, sqrt, wrap};
 pub use crate::state::State;
 
 /// Time constant of the filtered observer speed that detects the kick, s.
-const KICK_TAU_S: f32 = 0.004;
-/// The observer's own lag behind a starting rotor, s (the kick's current rise is sized for
-/// it and the filter).
-const KICK_LAG_S: f32 = 0.002;
+const KICK_TAU_S: f32 = 0.001;
+/// The detection's delay behind a starting rotor (the observer's lag and the filter), s: the
+/// kick's current rise is sized for it.
+const KICK_DELAY_S: f32 = 0.006;
 /// Ticks in a row the filtered speed must exceed the kick speed.
 const MOVING_TICKS: u16 = 5;
 /// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
 const COAST_S: f32 = 0.15;
-/// The coast ends once the rotor has turned this much (the observer's speed integrated), rad
+/// The coast ends once the back-EMF has turned this much from its first block, rad
 /// el.
 const COAST_TURN_RAD: f32 = 0.5;
 /// The first part of the coast (the current loops settling at zero current, the observer on
@@ -296,7 +296,7 @@ struct Vars {
     launch: bool,
     /// Ticks in a row the observer saw the rotor move during the alignment.
     moving: u16,
-    /// Coast: the integral of the observer's speed, rad el.
+    /// Coast: the back-EMF's turn from the first block to the last one, rad el.
     coast_int: f32,
     /// Alignment: the observer's speed, low-pass filtered, rad/s el.
     w_f: f32,
@@ -351,6 +351,8 @@ pub(crate) struct Sequencer {
     inj_amp: f32,
     /// `1 / psi_f`, 1/Wb.
     inv_psi: f32,
+    /// Coast: the back-EMF of half the kick speed, V.
+    e_min: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -402,7 +404,7 @@ impl Sequencer {
         if kick_speed > 0.0 {
             // The rotor's speed grows as `c r t^2 / 2` under a current rising at `r`; seen
             // `d` late it has gained `c r t d` more: at most the kick speed itself.
-            let d = KICK_TAU_S + KICK_LAG_S;
+            let d = KICK_DELAY_S;
             align_step = min2(align_step, kick_speed / (2.0 * accel_per_a * d * d) * ts);
         }
         let block_ticks = ticks(EMF_BLOCK_S, ts).max(1);
@@ -417,6 +419,7 @@ impl Sequencer {
             inj_amp,
             inj_step: [inj_s, inj_c],
             inv_psi: 1.0 / cfg.motor.psi_f_wb,
+            e_min: 0.5 * kick_speed * cfg.motor.psi_f_wb,
             k_damp: 2.0 * st.damping_ratio / wn,
             phi_max: FRAC_PI_2,
             kick_speed,
@@ -606,7 +609,6 @@ impl Sequencer {
                     if self.v.coast > self.coast_settle_ticks {
                         // The current loops have settled at zero current: the voltage is
                         // the back-EMF.
-                        self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
                         self.v.e_sum[0] += input.u_ab[0];
                         self.v.e_sum[1] += input.u_ab[1];
                         self.v.e_n += 1;
@@ -618,6 +620,18 @@ impl Sequencer {
                             }
                             self.v.e_last = mean;
                             self.v.e_blocks += 1;
+                            // The back-EMF's turn since the first block, counted while both
+                            // blocks show at least half the kick speed's back-EMF.
+                            let [f0, f1] = self.v.e_first;
+                            let [l0, l1] = mean;
+                            let e_min = self.e_min * self.e_min;
+                            self.v.coast_int = if f0 * f0 + f1 * f1 >= e_min
+                                && l0 * l0 + l1 * l1 >= e_min
+                            {
+                                atan2(f0 * l1 - f1 * l0, f0 * l0 + f1 * l1)
+                            } else {
+                                0.0
+                            };
                             self.v.e_sum = [0.0; 2];
                             self.v.e_n = 0;
                         }
