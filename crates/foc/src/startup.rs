@@ -149,7 +149,7 @@
 
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-use ekf_core::{Estimate, Status};
+use ekf_core::Estimate;
 
 use crate::config::{FocConfig, Mode, ObserverLossPolicy, Reversal};
 use crate::fault::Fault;
@@ -625,13 +625,12 @@ impl Sequencer {
                             let [f0, f1] = self.v.e_first;
                             let [l0, l1] = mean;
                             let e_min = self.e_min * self.e_min;
-                            self.v.coast_int = if f0 * f0 + f1 * f1 >= e_min
-                                && l0 * l0 + l1 * l1 >= e_min
-                            {
-                                atan2(f0 * l1 - f1 * l0, f0 * l0 + f1 * l1)
-                            } else {
-                                0.0
-                            };
+                            self.v.coast_int =
+                                if f0 * f0 + f1 * f1 >= e_min && l0 * l0 + l1 * l1 >= e_min {
+                                    atan2(f0 * l1 - f1 * l0, f0 * l0 + f1 * l1)
+                                } else {
+                                    0.0
+                                };
                             self.v.e_sum = [0.0; 2];
                             self.v.e_n = 0;
                         }
@@ -654,7 +653,6 @@ impl Sequencer {
                     self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
                     self.v.coast_int = 0.0;
                     let seen = self.kick_speed > 0.0
-                        && est.status == Status::Tracking
                         && self.v.w_f.abs() >= self.kick_speed
                         && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {
