@@ -24,27 +24,35 @@
 //!
 //! 1. **Kick.** The current rises at most at `r = w_k / (2 c d^2)` per second, where
 //!    `w_k = kick_speed_ratio * handover_speed` is the speed taken as motion,
-//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d` the
-//!    delay of the detection (observer lag plus a 4 ms low-pass filter). From rest the speed
-//!    grows as `c r t^2 / 2`; seen `d` late it has gained `c r t d`, which this `r` keeps
-//!    below `w_k` (so the rotor moves at most `2 w_k`, in either direction, before the push
-//!    stops). Motion = the observer reports `Tracking` and its filtered speed exceeds `w_k`
-//!    for 5 ticks.
-//! 2. **Coast.** The current is cut (reference 0): no torque, whatever the rotor's angle. The
-//!    rotor coasts and the current loops, holding zero current, apply the back-EMF
-//!    `e = w psi_f j e^(j th)` itself. The observer gives `|w|` and `th` modulo `pi`, but at
-//!    this speed it may sit on the wrong branch (`(th + pi, -w)` gives the same back-EMF);
-//!    the back-EMF's own turn settles it: averaged over 5 ms blocks (after a 10 ms
-//!    settling), the sign of `e_first x e_last` is the true direction of rotation, and the
-//!    rotor's d axis lies 90 deg behind `e_last` in that direction. When the observer's
-//!    angle is more than 90 deg from that one, it is moved to the other branch. The coast
-//!    ends once the rotor has turned 0.5 rad by the observer's speed; a coast without
-//!    that turn within 0.15 s was a false alarm and the kick resumes.
-//! 3. **Launch.** I/f starts from the rotor's state: `gamma = th_hat + 1 rad` toward the
-//!    commanded direction (a forward torque even when the angle is somewhat off), the ramp
-//!    at the observer's speed (a slowly backward-turning rotor is braked by the ramp running
-//!    through zero; that crossing does not re-seed the observer, which is tracking), the
-//!    observer kept.
+//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d`
+//!    (6 ms) the delay of the detection. From rest the speed grows as `c r t^2 / 2`; seen `d`
+//!    late it has gained `c r t d`, which this `r` keeps below `w_k` (so the rotor moves at
+//!    most `2 w_k`, in either direction, before the push stops). Motion = the observer's
+//!    speed, low-pass filtered (1 ms), exceeds `w_k` for 5 ticks (whatever the observer's
+//!    status: at standstill its angle may be 90 deg off and it reports `Uncertain` until
+//!    long after the rotor moves; a false alarm is caught by the coast).
+//! 2. **Coast.** The current is cut to a small vector (at most 15 % of the alignment
+//!    current, and small enough that its torque swings the speed by at most a tenth of
+//!    `w_k`) that turns 4 times per 5 ms block: no net torque, whatever the rotor's angle.
+//!    The current loops apply the back-EMF `e = w psi_f j e^(j th)` plus the voltage of that
+//!    current and the dead-time error, both periodic within a block, so the block average
+//!    is the back-EMF (with zero current instead, the dead-time error of a current hovering
+//!    around zero biased it by up to a third of its size at 1 % of rated speed, and turned
+//!    its apparent direction on the industrial motor). The observer gives `|w|` and `th`
+//!    modulo `pi` and at this speed often sits on the wrong branch (`(th + pi, -w)` gives the
+//!    same back-EMF); the back-EMF's own turn settles it: averaged over 5 ms blocks (after a
+//!    10 ms settling), the sign of `e_first x e_last` is the true direction of rotation.
+//!    The coast ends once the back-EMF has turned 0.5 rad from its first block (both blocks
+//!    at least half the back-EMF of `w_k`); a coast without that turn within 0.15 s was a
+//!    false alarm and the kick resumes.
+//! 3. **Launch.** The rotor's state from the last block: its d axis 90 deg behind `e_last`
+//!    in the direction of rotation (advanced by the half block since), its speed `|e_last| /
+//!    psi_f` in that direction; the observer is re-seeded there (sigma 0.3 rad; its own
+//!    angle was off by 40 deg and more on this grid). I/f starts with `gamma = th + 1 rad`
+//!    toward the commanded direction (a forward torque even when the angle is somewhat off)
+//!    and the ramp at the rotor's speed when it turns the commanded way, at zero otherwise
+//!    (a backward-turning rotor is braked at once; the ramp's first sign change does not
+//!    re-seed the observer).
 //!
 //! A rotor that does not move within `align_time_s` sits on the vector or at its dead point
 //! (180 deg away, no torque); a second step at `align_angle + 90 deg` moves either one, and
@@ -82,7 +90,8 @@
 //! angle drifts where the back-EMF vanishes.
 //!
 //! Cost: the damping is a multiply-add and a clamp per I/f tick; the kick and coast add a
-//! filter and sums during the alignment only.
+//! filter, sums and the injected vector's turn (four multiplies) during the alignment only,
+//! and an `atan2` per 5 ms block of the coast.
 //!
 //! # Hand-over without a torque jump
 //!
