@@ -48,8 +48,10 @@
 //! 3. **Launch.** The rotor's state from the last block: its d axis 90 deg behind `e_last`
 //!    in the direction of rotation (advanced by the half block since), its speed `|e_last| /
 //!    psi_f` in that direction; the observer is re-seeded there (sigma 0.3 rad; its own
-//!    angle was off by 40 deg and more on this grid). I/f starts with `gamma = th + 1 rad`
-//!    toward the commanded direction (a forward torque even when the angle is somewhat off)
+//!    angle was off by 40 deg and more on this grid). I/f starts with `gamma = th + 0.5 rad`
+//!    toward the commanded direction (a forward torque even when the angle is off by up to
+//!    about 25 deg, the worst on this grid; with 1 rad the servo's rotor overshot to 6 % of
+//!    rated speed with the ramp at zero)
 //!    and the ramp at the rotor's speed when it turns the commanded way, at zero otherwise
 //!    (a backward-turning rotor is braked at once; the ramp's first sign change does not
 //!    re-seed the observer).
@@ -197,7 +199,7 @@ const COAST_RIPPLE: f32 = 0.1;
 /// Coast: turns of the injected current vector per back-EMF block.
 const COAST_INJECTION_TURNS: f32 = 4.0;
 /// Lead of the launched current vector over the rotor's angle, rad el.
-const LAUNCH_LEAD_RAD: f32 = 1.0;
+const LAUNCH_LEAD_RAD: f32 = 0.5;
 /// A closed-loop reversal ([`Reversal::ClosedLoop`]) leaves closed loop once its reference
 /// has stood still inside the exit band this long (a slow or zero command, not a pass), s.
 pub const BAND_DWELL_S: f32 = 0.02;
