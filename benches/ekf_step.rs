@@ -6,25 +6,13 @@
 //! Run: `cargo bench -p benches --bench ekf_step`. Target (issue 2): <= 30 ns per step in f64.
 use std::hint::black_box;
 
+use benches::samples;
 use criterion::{Criterion, criterion_group, criterion_main};
 use ekf_core::nalgebra::Vector2;
 use ekf_core::{
     Ekf, Float, FluxObserver, FluxObserverConfig, MotorParams, ObserverConfig, PmsmModel,
     PmsmObserver,
 };
-
-/// 1024 samples of a servo motor turning at w_e Ts = 0.1 rad with 2 A of q current.
-fn samples<T: Float>(conv: impl Fn(f64) -> T) -> Vec<([T; 2], [T; 2])> {
-    (0..1024)
-        .map(|k| {
-            let th = 0.1 * k as f64;
-            let (s, c) = th.sin_cos();
-            let u = [conv(-180.0 * s), conv(180.0 * c)];
-            let i = [conv(-2.0 * s + 0.01 * (k % 7) as f64), conv(2.0 * c)];
-            (u, i)
-        })
-        .collect()
-}
 
 fn bench_cfg<T: Float>(
     c: &mut Criterion,

@@ -20,22 +20,10 @@
 //! not decode every AVX instruction of that build, e.g. the seed configuration's).
 use std::hint::black_box;
 
+use benches::samples;
 use ekf_core::{
     Float, FluxObserver, FluxObserverConfig, MotorParams, ObserverConfig, PmsmObserver,
 };
-
-/// The `ekf_step` bench's 1024 samples: w_e Ts = 0.1 rad, 2 A of q current.
-fn samples<T: Float>(conv: impl Fn(f64) -> T) -> Vec<([T; 2], [T; 2])> {
-    (0..1024)
-        .map(|k| {
-            let th = 0.1 * k as f64;
-            let (s, c) = th.sin_cos();
-            let u = [conv(-180.0 * s), conv(180.0 * c)];
-            let i = [conv(-2.0 * s + 0.01 * (k % 7) as f64), conv(2.0 * c)];
-            (u, i)
-        })
-        .collect()
-}
 
 /// Runs `n` steps of `step(k)`; with `STEP_COUNT_TIME` set, in 200 timed batches.
 fn batches(n: usize, mut step: impl FnMut(usize)) {
