@@ -92,13 +92,7 @@ fn dispatched_step_equals_portable_step() {
             tr,
             f64c,
         );
-        let m32 = MotorParams::<f32>::salient_from_f64(
-            motor.rs_ohm,
-            motor.ld_h,
-            motor.lq_h,
-            motor.psi_f_wb,
-            motor.pole_pairs,
-        );
+        let m32 = common::motor_f32(&motor);
         same_results(
             &format!("{name} f32 default"),
             &ObserverConfig::new(m32, ts as f32),

@@ -204,13 +204,7 @@ fn f32_on_interior_motors() {
         let ts = 1e-4;
         let w = 0.5 * rated;
         let tr = steady(motor, ts, w, iq_rated, noise, 4000, 23);
-        let m32 = MotorParams::<f32>::salient_from_f64(
-            motor.rs_ohm,
-            motor.ld_h,
-            motor.lq_h,
-            motor.psi_f_wb,
-            motor.pole_pairs,
-        );
+        let m32 = common::motor_f32(&motor);
         let mut obs = PmsmObserver::new(&ObserverConfig::new(m32, ts as f32)).expect("valid");
         let mut u_prev = [0.0f32; 2];
         let mut err = Vec::new();

@@ -59,6 +59,11 @@ pub struct Scenario<'a> {
     pub seed: u64,
 }
 
+/// The same motor in `f32` (every parameter rounded once).
+pub fn motor_f32(m: &MotorParams<f64>) -> MotorParams<f32> {
+    MotorParams::<f32>::salient_from_f64(m.rs_ohm, m.ld_h, m.lq_h, m.psi_f_wb, m.pole_pairs)
+}
+
 /// The MTPA d-axis current for a current magnitude `i` (A) of a motor with `Lq > Ld`
 /// (`design.md` section 7); 0 for a surface or inversely salient motor.
 pub fn mtpa_id(m: &MotorParams<f64>, i: f64) -> f64 {
