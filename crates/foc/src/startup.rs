@@ -24,27 +24,45 @@
 //!
 //! 1. **Kick.** The current rises at most at `r = w_k / (2 c d^2)` per second, where
 //!    `w_k = kick_speed_ratio * handover_speed` is the speed taken as motion,
-//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d` the
-//!    delay of the detection (observer lag plus a 4 ms low-pass filter). From rest the speed
-//!    grows as `c r t^2 / 2`; seen `d` late it has gained `c r t d`, which this `r` keeps
-//!    below `w_k` (so the rotor moves at most `2 w_k`, in either direction, before the push
-//!    stops). Motion = the observer reports `Tracking` and its filtered speed exceeds `w_k`
-//!    for 5 ticks.
-//! 2. **Coast.** The current is cut (reference 0): no torque, whatever the rotor's angle. The
-//!    rotor coasts and the current loops, holding zero current, apply the back-EMF
-//!    `e = w psi_f j e^(j th)` itself. The observer gives `|w|` and `th` modulo `pi`, but at
-//!    this speed it may sit on the wrong branch (`(th + pi, -w)` gives the same back-EMF);
-//!    the back-EMF's own turn settles it: averaged over 5 ms blocks (after a 10 ms
-//!    settling), the sign of `e_first x e_last` is the true direction of rotation, and the
-//!    rotor's d axis lies 90 deg behind `e_last` in that direction. When the observer's
-//!    angle is more than 90 deg from that one, it is moved to the other branch. The coast
-//!    ends once the rotor has turned 0.5 rad by the observer's speed; a coast without
-//!    that turn within 0.15 s was a false alarm and the kick resumes.
-//! 3. **Launch.** I/f starts from the rotor's state: `gamma = th_hat + 1 rad` toward the
-//!    commanded direction (a forward torque even when the angle is somewhat off), the ramp
-//!    at the observer's speed (a slowly backward-turning rotor is braked by the ramp running
-//!    through zero; that crossing does not re-seed the observer, which is tracking), the
-//!    observer kept.
+//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d`
+//!    (6 ms) the delay of the detection. From rest the speed grows as `c r t^2 / 2`; seen `d`
+//!    late it has gained `c r t d`, which this `r` keeps below `w_k` (so the rotor moves at
+//!    most `2 w_k`, in either direction, before the push stops). Motion = the observer's
+//!    speed, low-pass filtered (1 ms), exceeds `w_k` for 5 ticks (whatever the observer's
+//!    status: at standstill its angle may be 90 deg off and it reports `Uncertain` until
+//!    long after the rotor moves; a false alarm is caught by the coast).
+//! 2. **Coast.** The current is cut to a small vector (at most 15 % of the alignment
+//!    current, and small enough that its torque swings the speed by at most a tenth of
+//!    `w_k`) that turns 4 times per 5 ms block: no net torque, whatever the rotor's angle.
+//!    The current loops apply the back-EMF `e = w psi_f j e^(j th)` plus the voltage of that
+//!    current and the dead-time error, both periodic within a block, so the block average
+//!    is the back-EMF (with zero current instead, the dead-time error of a current hovering
+//!    around zero biased it by up to a third of its size at 1 % of rated speed, and turned
+//!    its apparent direction on the industrial motor). The observer gives `|w|` and `th`
+//!    modulo `pi` and at this speed often sits on the wrong branch (`(th + pi, -w)` gives the
+//!    same back-EMF); the back-EMF's own turn settles it: averaged over 5 ms blocks (after a
+//!    10 ms settling), the sign of `e_first x e_last` is the true direction of rotation.
+//!    The coast ends once the back-EMF has turned 0.5 rad from its first block (both blocks
+//!    at least half the back-EMF of `w_k`); a coast without that turn within 0.15 s was a
+//!    false alarm and the kick resumes.
+//! 3. **Launch.** The rotor's state from the last block: its d axis 90 deg behind `e_last`
+//!    in the direction of rotation (advanced by the half block since), its speed `|e_last| /
+//!    psi_f` in that direction; the observer is re-seeded there (sigma 0.3 rad; its own
+//!    angle was off by 40 deg and more on this grid). I/f starts with `gamma = th + 0.5 rad`
+//!    toward the commanded direction (a forward torque even when the angle is off by up to
+//!    about 25 deg, the worst on this grid; with 1 rad the servo's rotor overshot to 6 % of
+//!    rated speed with the ramp at zero)
+//!    and the ramp at the rotor's speed when it turns the commanded way, at zero otherwise
+//!    (a backward-turning rotor is braked at once; the ramp's first sign change does not
+//!    re-seed the observer).
+//!
+//! **Interior motors** (`Ld != Lq`) keep the earlier form of these steps, which the coast
+//! current and the launch above (sized and tested on the surface motors) broke on them:
+//! measured, the field-weakening presets stalled and the traction motor lost its observer.
+//! There the coast has no current and ends once the observer's integrated speed has turned
+//! 0.5 rad, the kick needs the observer's `Tracking` status and a 4 ms filter, and the
+//! launch starts from the observer's estimate (moved to the other branch when it lies more
+//! than 90 deg from the back-EMF's angle), with a 1 rad lead and the ramp at its speed.
 //!
 //! A rotor that does not move within `align_time_s` sits on the vector or at its dead point
 //! (180 deg away, no torque); a second step at `align_angle + 90 deg` moves either one, and
@@ -82,7 +100,8 @@
 //! angle drifts where the back-EMF vanishes.
 //!
 //! Cost: the damping is a multiply-add and a clamp per I/f tick; the kick and coast add a
-//! filter and sums during the alignment only.
+//! filter, sums and the injected vector's turn (four multiplies) during the alignment only,
+//! and an `atan2` per 5 ms block of the coast.
 //!
 //! # Hand-over without a torque jump
 //!
@@ -161,15 +180,15 @@ use crate::trig::{atan2, max2, min2, sin_cos, sqrt, wrap};
 pub use crate::state::State;
 
 /// Time constant of the filtered observer speed that detects the kick, s.
-const KICK_TAU_S: f32 = 0.004;
-/// The observer's own lag behind a starting rotor, s (the kick's current rise is sized for
-/// it and the filter).
-const KICK_LAG_S: f32 = 0.002;
+const KICK_TAU_S: f32 = 0.001;
+/// The detection's delay behind a starting rotor (the observer's lag and the filter), s: the
+/// kick's current rise is sized for it.
+const KICK_DELAY_S: f32 = 0.006;
 /// Ticks in a row the filtered speed must exceed the kick speed.
 const MOVING_TICKS: u16 = 5;
 /// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
 const COAST_S: f32 = 0.15;
-/// The coast ends once the rotor has turned this much (the observer's speed integrated), rad
+/// The coast ends once the back-EMF has turned this much from its first block, rad
 /// el.
 const COAST_TURN_RAD: f32 = 0.5;
 /// The first part of the coast (the current loops settling at zero current, the observer on
@@ -177,10 +196,26 @@ const COAST_TURN_RAD: f32 = 0.5;
 const COAST_SETTLE_S: f32 = 0.01;
 /// Block over which the back-EMF is averaged during the coast, s.
 const EMF_BLOCK_S: f32 = 0.005;
-/// Angle standard deviation of the observer when it is moved to the other branch, rad.
-const FLIP_SIGMA: f32 = 0.3;
+/// Angle standard deviation of the observer when it is re-seeded at the launch, rad.
+const LAUNCH_SIGMA: f32 = 0.3;
+/// Coast: largest amplitude of the injected current vector, as a fraction of the alignment
+/// current.
+const COAST_INJECTION: f32 = 0.15;
+/// Coast: largest speed ripple of the injected current (its torque), as a fraction of the
+/// kick speed.
+const COAST_RIPPLE: f32 = 0.1;
+/// Coast: turns of the injected current vector per back-EMF block.
+const COAST_INJECTION_TURNS: f32 = 4.0;
 /// Lead of the launched current vector over the rotor's angle, rad el.
-const LAUNCH_LEAD_RAD: f32 = 1.0;
+const LAUNCH_LEAD_RAD: f32 = 0.5;
+/// Interior motors keep the start this module had before the coast current and the launch
+/// from the back-EMF (both sized and tested on surface motors only; on the interior motors
+/// they made the start stall or lose the observer): the kick's filter time constant, s,
+/// the lead of their launch from the observer's estimate, rad, and the angle standard
+/// deviation of the observer's re-seed when its branch is flipped.
+const SALIENT_KICK_TAU_S: f32 = 0.004;
+/// See [`SALIENT_KICK_TAU_S`].
+const SALIENT_LAUNCH_LEAD_RAD: f32 = 1.0;
 /// A closed-loop reversal ([`Reversal::ClosedLoop`]) leaves closed loop once its reference
 /// has stood still inside the exit band this long (a slow or zero command, not a pass), s.
 pub const BAND_DWELL_S: f32 = 0.02;
@@ -288,7 +323,7 @@ struct Vars {
     launch: bool,
     /// Ticks in a row the observer saw the rotor move during the alignment.
     moving: u16,
-    /// Coast: the integral of the observer's speed, rad el.
+    /// Coast: the back-EMF's turn from the first block to the last one, rad el.
     coast_int: f32,
     /// Alignment: the observer's speed, low-pass filtered, rad/s el.
     w_f: f32,
@@ -303,6 +338,8 @@ struct Vars {
     e_last: [f32; 2],
     /// Coast: complete blocks.
     e_blocks: u32,
+    /// Coast: the unit vector of the injected current, in the alignment's frame.
+    inj: [f32; 2],
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -333,8 +370,18 @@ pub(crate) struct Sequencer {
     block_ticks: u32,
     /// Weight of the new sample in the filtered speed of the alignment.
     kick_filter: f32,
+    /// An interior motor: the start of [`SALIENT_KICK_TAU_S`]'s note.
+    salient: bool,
     /// Rise of the alignment current per tick, A.
     align_step: f32,
+    /// Turn of the coast's injected current per tick (sine, cosine).
+    inj_step: [f32; 2],
+    /// Amplitude of the coast's injected current, A.
+    inj_amp: f32,
+    /// `1 / psi_f`, 1/Wb.
+    inv_psi: f32,
+    /// Coast: the back-EMF of half the kick speed, V.
+    e_min: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -386,17 +433,42 @@ impl Sequencer {
         if kick_speed > 0.0 {
             // The rotor's speed grows as `c r t^2 / 2` under a current rising at `r`; seen
             // `d` late it has gained `c r t d` more: at most the kick speed itself.
-            let d = KICK_TAU_S + KICK_LAG_S;
+            let d = KICK_DELAY_S;
             align_step = min2(align_step, kick_speed / (2.0 * accel_per_a * d * d) * ts);
         }
+        let block_ticks = ticks(EMF_BLOCK_S, ts).max(1);
+        let w_inj = 2.0 * PI * COAST_INJECTION_TURNS / (block_ticks as f32 * ts);
+        let (inj_s, inj_c) = sin_cos(wrap(w_inj * ts));
+        // The injected current's torque swings the speed by `c I / w_inj`.
+        let salient = cfg.motor.is_salient();
+        let inj_amp = if salient {
+            0.0
+        } else {
+            min2(
+                COAST_INJECTION * st.align_current_a,
+                COAST_RIPPLE * kick_speed * w_inj / accel_per_a,
+            )
+        };
         Self {
+            inj_amp,
+            inj_step: [inj_s, inj_c],
+            inv_psi: 1.0 / cfg.motor.psi_f_wb,
+            e_min: 0.5 * kick_speed * cfg.motor.psi_f_wb,
             k_damp: 2.0 * st.damping_ratio / wn,
             phi_max: FRAC_PI_2,
             kick_speed,
             coast_ticks: ticks(COAST_S, ts),
             coast_settle_ticks: ticks(COAST_SETTLE_S, ts),
-            block_ticks: ticks(EMF_BLOCK_S, ts).max(1),
-            kick_filter: min2(ts / KICK_TAU_S, 1.0),
+            block_ticks,
+            kick_filter: min2(
+                ts / if salient {
+                    SALIENT_KICK_TAU_S
+                } else {
+                    KICK_TAU_S
+                },
+                1.0,
+            ),
+            salient,
             align_step,
             pole_pairs,
             inv_pole_pairs: 1.0 / pole_pairs,
@@ -571,10 +643,17 @@ impl Sequencer {
                 self.v.timer = self.v.timer.saturating_add(1);
                 if self.v.coast > 0 {
                     self.v.coast += 1;
+                    // The injected current turns once per block: its voltage (resistive,
+                    // inductive, dead time) averages out of every block.
+                    let [c, sn] = self.v.inj;
+                    let [ds, dc] = self.inj_step;
+                    self.v.inj = [c * dc - sn * ds, sn * dc + c * ds];
                     if self.v.coast > self.coast_settle_ticks {
                         // The current loops have settled at zero current: the voltage is
                         // the back-EMF.
-                        self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
+                        if self.salient {
+                            self.v.coast_int += est.omega_e_rad_s * cfg.ts_s;
+                        }
                         self.v.e_sum[0] += input.u_ab[0];
                         self.v.e_sum[1] += input.u_ab[1];
                         self.v.e_n += 1;
@@ -586,13 +665,30 @@ impl Sequencer {
                             }
                             self.v.e_last = mean;
                             self.v.e_blocks += 1;
+                            // The back-EMF's turn since the first block, counted while both
+                            // blocks show at least half the kick speed's back-EMF.
+                            let [f0, f1] = self.v.e_first;
+                            let [l0, l1] = mean;
+                            let e_min = self.e_min * self.e_min;
+                            if !self.salient {
+                                self.v.coast_int =
+                                    if f0 * f0 + f1 * f1 >= e_min && l0 * l0 + l1 * l1 >= e_min {
+                                        atan2(f0 * l1 - f1 * l0, f0 * l0 + f1 * l1)
+                                    } else {
+                                        0.0
+                                    };
+                            }
                             self.v.e_sum = [0.0; 2];
                             self.v.e_n = 0;
                         }
                     }
                     if self.v.coast_int.abs() >= COAST_TURN_RAD && self.v.e_blocks >= 2 {
                         reframe = Some(self.align_frame());
-                        self.launch(cfg, est, reseed);
+                        if self.salient {
+                            self.launch_from_observer(cfg, est, reseed);
+                        } else {
+                            self.launch(cfg, reseed);
+                        }
                     } else if self.v.coast > self.coast_ticks {
                         // A false alarm (the rotor did not turn): back to the alignment.
                         self.v.coast = 0;
@@ -608,7 +704,7 @@ impl Sequencer {
                     self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
                     self.v.coast_int = 0.0;
                     let seen = self.kick_speed > 0.0
-                        && est.status == Status::Tracking
+                        && (!self.salient || est.status == Status::Tracking)
                         && self.v.w_f.abs() >= self.kick_speed
                         && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {
@@ -618,6 +714,7 @@ impl Sequencer {
                     };
                     if self.v.moving >= MOVING_TICKS {
                         self.v.coast = 1;
+                        self.v.inj = [1.0, 0.0];
                     } else if self.v.timer > self.align_ticks && self.v.amp >= i_align {
                         if self.v.second || self.kick_speed == 0.0 {
                             self.enter_open_loop_from_rest(cfg, FRAC_PI_4, reseed);
@@ -716,14 +813,25 @@ impl Sequencer {
 
         let plan = match self.state {
             State::Align => {
-                let amp = if self.v.coast > 0 { 0.0 } else { self.v.amp };
+                let i_ref = if self.v.coast > 0 {
+                    let a = self.inj_amp;
+                    Dq {
+                        d: a * self.v.inj[0],
+                        q: a * self.v.inj[1],
+                    }
+                } else {
+                    Dq {
+                        d: self.v.amp,
+                        q: 0.0,
+                    }
+                };
                 Plan {
                     frame: Frame {
                         theta: self.v.gamma,
                         omega: 0.0,
                         emf: false,
                     },
-                    i_ref: Dq { d: amp, q: 0.0 },
+                    i_ref,
                     reframe_from: reframe,
                 }
             }
@@ -894,29 +1002,64 @@ impl Sequencer {
 
     /// I/f from the rotor's motion seen by the observer: the current vector on the rotor's
     /// d axis, the ramp at the observer's speed, the observer kept.
-    fn launch(&mut self, cfg: &FocConfig, est: &Estimate<f32>, reseed: &mut impl FnMut(Seed)) {
-        let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
+    fn launch(&mut self, cfg: &FocConfig, reseed: &mut impl FnMut(Seed)) {
         // The back-EMF `w psi j e^(j th)` turned from the first block to the last one in the
-        // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction.
+        // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction,
+        // and its length is `|w| psi`. The last block's mean stands for the rotor half a
+        // block (and the tick of the voltage's delay) ago.
+        let [f0, f1] = self.v.e_first;
+        let [l0, l1] = self.v.e_last;
+        let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
+        let w = dir * sqrt(l0 * l0 + l1 * l1) * self.inv_psi;
+        let age = (0.5 * self.block_ticks as f32 + 1.0) * cfg.ts_s;
+        let th = wrap(atan2(l1, l0) - dir * FRAC_PI_2 + w * age);
+        reseed(Seed {
+            theta: th,
+            omega: w,
+            sigma_theta: LAUNCH_SIGMA,
+        });
+        // A lead toward the commanded direction: a forward torque even when the angle is
+        // off by up to the lead.
+        let fwd = sign(self.target_e());
+        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * fwd);
+        self.v.phi = 0.0;
+        // The ramp starts at the rotor's speed when it turns the commanded way, else at zero:
+        // a backward-turning rotor is braked at once. It never runs faster than the hand-over
+        // speed.
+        self.v.omega_ol = fwd * min2(max2(w * fwd, 0.0), self.handover);
+        self.v.ol_dir = sign(self.v.omega_ol);
+        self.v.launch = true;
+        self.v.amp = cfg.startup.if_current_a;
+        self.v.at_speed = 0;
+        self.health.reset(w);
+        self.state = State::OpenLoop;
+    }
+
+    /// The launch of an interior motor (`SALIENT_KICK_TAU_S`'s note): from the observer's
+    /// estimate, moved to the other branch (angle + pi, speed - w) when it lies more than
+    /// 90 deg from the rotor angle the back-EMF's turn gives.
+    fn launch_from_observer(
+        &mut self,
+        cfg: &FocConfig,
+        est: &Estimate<f32>,
+        reseed: &mut impl FnMut(Seed),
+    ) {
+        let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
         let [f0, f1] = self.v.e_first;
         let [l0, l1] = self.v.e_last;
         let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
         let th_emf = wrap(atan2(l1, l0) - dir * FRAC_PI_2);
         if wrap(th - th_emf).abs() > FRAC_PI_2 {
-            // The observer is on the other branch (same back-EMF, angle + pi, speed - w).
             th = wrap(th + PI);
             w = -w;
             reseed(Seed {
                 theta: th,
                 omega: w,
-                sigma_theta: FLIP_SIGMA,
+                sigma_theta: LAUNCH_SIGMA,
             });
         }
-        // A lead toward the commanded direction: a forward torque even when the observer's
-        // angle is off by up to the lead.
-        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * sign(self.target_e()));
+        self.v.gamma = wrap(th + SALIENT_LAUNCH_LEAD_RAD * sign(self.target_e()));
         self.v.phi = 0.0;
-        // The ramp never runs faster than the hand-over speed.
         self.v.omega_ol = limit(w, -self.handover, self.handover);
         self.v.ol_dir = sign(w);
         self.v.launch = true;
