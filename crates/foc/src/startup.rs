@@ -1007,9 +1007,8 @@ impl Sequencer {
         // rotor's true direction; the rotor's d axis lies 90 deg behind it in that direction,
         // and its length is `|w| psi`. The last block's mean stands for the rotor half a
         // block (and the tick of the voltage's delay) ago.
-        let [f0, f1] = self.v.e_first;
         let [l0, l1] = self.v.e_last;
-        let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
+        let dir = self.emf_direction();
         let w = dir * sqrt(l0 * l0 + l1 * l1) * self.inv_psi;
         let age = (0.5 * self.block_ticks as f32 + 1.0) * cfg.ts_s;
         let th = wrap(atan2(l1, l0) - dir * FRAC_PI_2 + w * age);
@@ -1019,20 +1018,13 @@ impl Sequencer {
             sigma_theta: LAUNCH_SIGMA,
         });
         // A lead toward the commanded direction: a forward torque even when the angle is
-        // off by up to the lead.
+        // off by up to the lead. The ramp starts at the rotor's speed when it turns the
+        // commanded way, else at zero: a backward-turning rotor is braked at once. It never
+        // runs faster than the hand-over speed.
         let fwd = sign(self.target_e());
-        self.v.gamma = wrap(th + LAUNCH_LEAD_RAD * fwd);
-        self.v.phi = 0.0;
-        // The ramp starts at the rotor's speed when it turns the commanded way, else at zero:
-        // a backward-turning rotor is braked at once. It never runs faster than the hand-over
-        // speed.
-        self.v.omega_ol = fwd * min2(max2(w * fwd, 0.0), self.handover);
-        self.v.ol_dir = sign(self.v.omega_ol);
-        self.v.launch = true;
-        self.v.amp = cfg.startup.if_current_a;
-        self.v.at_speed = 0;
-        self.health.reset(w);
-        self.state = State::OpenLoop;
+        let omega_ol = fwd * min2(max2(w * fwd, 0.0), self.handover);
+        let gamma = wrap(th + LAUNCH_LEAD_RAD * fwd);
+        self.enter_launched(cfg, gamma, omega_ol, sign(omega_ol), w);
     }
 
     /// The launch of an interior motor (`SALIENT_KICK_TAU_S`'s note): from the observer's
@@ -1045,10 +1037,8 @@ impl Sequencer {
         reseed: &mut impl FnMut(Seed),
     ) {
         let (mut th, mut w) = (est.theta_rad, est.omega_e_rad_s);
-        let [f0, f1] = self.v.e_first;
         let [l0, l1] = self.v.e_last;
-        let dir = if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 };
-        let th_emf = wrap(atan2(l1, l0) - dir * FRAC_PI_2);
+        let th_emf = wrap(atan2(l1, l0) - self.emf_direction() * FRAC_PI_2);
         if wrap(th - th_emf).abs() > FRAC_PI_2 {
             th = wrap(th + PI);
             w = -w;
@@ -1058,10 +1048,26 @@ impl Sequencer {
                 sigma_theta: LAUNCH_SIGMA,
             });
         }
-        self.v.gamma = wrap(th + SALIENT_LAUNCH_LEAD_RAD * sign(self.target_e()));
+        let gamma = wrap(th + SALIENT_LAUNCH_LEAD_RAD * sign(self.target_e()));
+        let omega_ol = limit(w, -self.handover, self.handover);
+        self.enter_launched(cfg, gamma, omega_ol, sign(w), w);
+    }
+
+    /// The direction of rotation (`+-1`) the back-EMF's turn from the coast's first block to
+    /// its last one gives.
+    fn emf_direction(&self) -> f32 {
+        let [f0, f1] = self.v.e_first;
+        let [l0, l1] = self.v.e_last;
+        if f0 * l1 - f1 * l0 >= 0.0 { 1.0 } else { -1.0 }
+    }
+
+    /// I/f after a launch: the vector at `gamma`, the ramp at `omega_ol` toward `ol_dir`, the
+    /// health monitor restarted at the rotor's speed `w`.
+    fn enter_launched(&mut self, cfg: &FocConfig, gamma: f32, omega_ol: f32, ol_dir: f32, w: f32) {
+        self.v.gamma = gamma;
         self.v.phi = 0.0;
-        self.v.omega_ol = limit(w, -self.handover, self.handover);
-        self.v.ol_dir = sign(w);
+        self.v.omega_ol = omega_ol;
+        self.v.ol_dir = ol_dir;
         self.v.launch = true;
         self.v.amp = cfg.startup.if_current_a;
         self.v.at_speed = 0;
