@@ -858,13 +858,23 @@ fn suite(opts: SuiteOptions, motors: &[SuiteMotor], out: &Path) -> Result<ExitCo
     } else {
         run_suite_motors(&opts, motors)?
     };
-    let md = report.to_markdown();
+    write_table(out, "suite", &report.to_markdown(), &report)
+}
+
+/// A table command's outputs: the Markdown `md` printed and written to `out/{stem}.md`, and
+/// `value` as pretty JSON to `out/{stem}.json`.
+fn write_table(
+    out: &Path,
+    stem: &str,
+    md: &str,
+    value: &impl serde::Serialize,
+) -> Result<ExitCode, SimError> {
     print!("{md}");
     std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
-    let md_path = out.join("suite.md");
-    std::fs::write(&md_path, &md).map_err(|e| out_err(&md_path, e))?;
-    let json_path = out.join("suite.json");
-    let json = serde_json::to_string_pretty(&report).map_err(|e| out_err(&json_path, e))?;
+    let md_path = out.join(format!("{stem}.md"));
+    std::fs::write(&md_path, md).map_err(|e| out_err(&md_path, e))?;
+    let json_path = out.join(format!("{stem}.json"));
+    let json = serde_json::to_string_pretty(value).map_err(|e| out_err(&json_path, e))?;
     std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
     println!("\noutputs: {} {}", md_path.display(), json_path.display());
     Ok(ExitCode::SUCCESS)
@@ -890,16 +900,7 @@ fn low_speed_command(motors: &[SuiteMotor], hold: f64, out: &Path) -> Result<Exi
     for &m in motors {
         rows.push(run_motor(m, &SPEEDS_PCT, hold)?);
     }
-    let md = to_markdown(&rows);
-    print!("{md}");
-    std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
-    let md_path = out.join("lowspeed.md");
-    std::fs::write(&md_path, &md).map_err(|e| out_err(&md_path, e))?;
-    let json_path = out.join("lowspeed.json");
-    let json = serde_json::to_string_pretty(&rows).map_err(|e| out_err(&json_path, e))?;
-    std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
-    println!("\noutputs: {} {}", md_path.display(), json_path.display());
-    Ok(ExitCode::SUCCESS)
+    write_table(out, "lowspeed", &to_markdown(&rows), &rows)
 }
 
 /// Arguments of `pmsm-sim tune` (the command line's subcommand).
