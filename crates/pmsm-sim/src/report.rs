@@ -6,6 +6,17 @@ use crate::metrics::{
     CONVERGED_DEG, LOW_SPEED_FRACTION, ObserverMetrics, RAMP_SETTLE_S, RunMetrics, SETTLE_S,
 };
 
+/// The head of one block of [`table`] after a blank line: its title with the `unit` and
+/// `value` column heads, an optional note line, and the rule.
+fn block_header(out: &mut String, title: &str, note: Option<&str>, width: usize) {
+    let _ = writeln!(out);
+    let _ = writeln!(out, "{title:<40} {:<10} {:>14}", "unit", "value");
+    if let Some(n) = note {
+        let _ = writeln!(out, "{n}");
+    }
+    let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+}
+
 /// The metrics as a plain aligned text table.
 pub fn table(m: &RunMetrics) -> String {
     let mut out = String::new();
@@ -98,18 +109,11 @@ pub fn table(m: &RunMetrics) -> String {
         let _ = writeln!(out, "seed filter dropped at {why}");
     }
     if let Some(c) = &m.controller_observer_closed_loop {
-        let _ = writeln!(out);
-        let _ = writeln!(
-            out,
-            "{:<40} {:<10} {:>14}",
-            "foc EKF after the hand-over", "unit", "value"
-        );
-        let _ = writeln!(
-            out,
+        let note = format!(
             "(the loops run on its angle; |w_e| >= {:.0} % of rated)",
             LOW_SPEED_FRACTION * 100.0
         );
-        let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+        block_header(&mut out, "foc EKF after the hand-over", Some(&note), width);
         for (name, unit, v) in [
             ("window length", "s", format!("{:.4}", c.window_s)),
             (
@@ -141,10 +145,8 @@ pub fn table(m: &RunMetrics) -> String {
             let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
         }
     }
-    let _ = writeln!(out);
     let d = &m.drive;
-    let _ = writeln!(out, "{:<40} {:<10} {:>14}", "drive", "unit", "value");
-    let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+    block_header(&mut out, "drive", None, width);
     let opt = |x: f64, prec: usize| {
         if x.is_finite() {
             format!("{x:.prec$}")
@@ -213,9 +215,7 @@ pub fn table(m: &RunMetrics) -> String {
         let _ = writeln!(out, "{name:<40} {unit:<10} {v:>14}");
     }
     if let Some(st) = &m.startup {
-        let _ = writeln!(out);
-        let _ = writeln!(out, "{:<40} {:<10} {:>14}", "start-up", "unit", "value");
-        let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+        block_header(&mut out, "start-up", None, width);
         let both = |rpm: f64, pct: f64| {
             if rpm.is_finite() {
                 format!("{rpm:.1} ({pct:.2} %)")
@@ -263,13 +263,7 @@ pub fn table(m: &RunMetrics) -> String {
         }
     }
     if let Some(r) = &m.reversal {
-        let _ = writeln!(out);
-        let _ = writeln!(
-            out,
-            "{:<40} {:<10} {:>14}",
-            "speed reversal", "unit", "value"
-        );
-        let _ = writeln!(out, "{}", "-".repeat(width.max(67)));
+        block_header(&mut out, "speed reversal", None, width);
         let rows = [
             ("reversals", "", format!("{}", r.count)),
             ("first one starts", "s", format!("{:.4}", r.first_start_s)),
