@@ -15,17 +15,19 @@
 //! figures are pmsm-sim's reversal metrics ([`pmsm_sim::metrics::ReversalMetrics`]);
 //! `cargo test --release -p pmsm-sim --test reversal -- --nocapture` prints the table.
 
+use pmsm_sim::lowspeed::preset_name;
 use pmsm_sim::metrics::RunMetrics;
 use pmsm_sim::profile::{LoadTerm, Profile};
 use pmsm_sim::scenario::{ControllerKind, RPM_PER_RAD_S, ReversalMode, Scenario};
 use pmsm_sim::sim;
+use pmsm_sim::suite::SuiteMotor;
 
-/// The three surface reference motors: (name, preset).
-const MOTORS: [(&str, &str); 3] = [
-    ("servo", "default"),
-    ("industrial_2k2", "industrial-2k2"),
-    ("small_fast", "drone"),
-];
+/// The three surface reference motors: (name, simulator preset).
+fn motors() -> impl Iterator<Item = (&'static str, &'static str)> {
+    SuiteMotor::SURFACE
+        .into_iter()
+        .map(|m| (m.name(), preset_name(m)))
+}
 
 /// Goals: time outside closed loop, s, and the worst tracking error, % of rated speed.
 const OUTSIDE_MAX_S: f64 = 0.030;
@@ -77,7 +79,7 @@ fn reversal_under_rated_load_stays_in_closed_loop() {
     );
     println!("|---|---|---|---|---|---|---|---|");
     let mut misses = vec![];
-    for (motor, preset) in MOTORS {
+    for (motor, preset) in motors() {
         for (mode, slower) in [
             (ReversalMode::ClosedLoop, 1.0),
             (ReversalMode::ClosedLoop, 4.0),

@@ -16,17 +16,19 @@
 //! with `foc` sensorless in place of the preset's controller, the preset's loads and a speed
 //! command of rated speed from t = 0.
 
+use pmsm_sim::lowspeed::preset_name;
 use pmsm_sim::metrics::StartupMetrics;
 use pmsm_sim::profile::Profile;
 use pmsm_sim::scenario::{ControllerKind, Scenario};
 use pmsm_sim::sim;
+use pmsm_sim::suite::SuiteMotor;
 
-/// The three surface reference motors: (name, preset).
-const MOTORS: [(&str, &str); 3] = [
-    ("servo", "default"),
-    ("industrial_2k2", "industrial-2k2"),
-    ("small_fast", "drone"),
-];
+/// The three surface reference motors: (name, simulator preset).
+fn motors() -> impl Iterator<Item = (&'static str, &'static str)> {
+    SuiteMotor::SURFACE
+        .into_iter()
+        .map(|m| (m.name(), preset_name(m)))
+}
 
 /// Goals, % of rated speed.
 const BACKWARD_MAX_PCT: f64 = 1.0;
@@ -118,7 +120,7 @@ fn grid(dseed: u64) -> Vec<Cell> {
     );
     println!("|---|---|---|---|---|---|");
     let mut cells = vec![];
-    for (motor, preset) in MOTORS {
+    for (motor, preset) in motors() {
         for k in 0..12 {
             let theta0_deg = f64::from(k) * 30.0 - 180.0;
             let sc = scenario(preset, theta0_deg.to_radians(), dseed);
@@ -147,7 +149,7 @@ fn grid(dseed: u64) -> Vec<Cell> {
         "| motor | worst backward (% rated) | worst ramp deviation (% rated) | highest hand-over speed (% rated) | latest hand-over (s) |"
     );
     println!("|---|---|---|---|---|");
-    for (motor, _) in MOTORS {
+    for (motor, _) in motors() {
         let m: Vec<&Cell> = cells.iter().filter(|c| c.motor == motor).collect();
         let worst = |f: &dyn Fn(&Cell) -> f64| m.iter().map(|c| f(c)).fold(0.0_f64, f64::max);
         println!(
