@@ -13,6 +13,7 @@ pub mod lowspeed;
 pub mod mcap_log;
 pub mod metrics;
 pub mod observer;
+mod pipeline;
 pub mod plant;
 pub mod plot;
 pub mod profile;

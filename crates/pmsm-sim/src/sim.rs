@@ -46,6 +46,7 @@ use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
 use crate::metrics::{MetricsAccumulator, RunMetrics};
 use crate::observer::{Observer, ObserverEstimate};
+use crate::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
 use crate::plant::{Plant, PlantState};
 use crate::profile::load_torque_nm;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
@@ -187,6 +188,10 @@ pub struct RunOptions<'a> {
     /// d-axis saturation of the plant ([`crate::plant::DSaturation`]; `None`, the default:
     /// the linear plant of every scenario).
     pub d_saturation: Option<crate::plant::DSaturation>,
+    /// Step the run's own observers (the default EKF, the seed filter) on the calling thread
+    /// instead of a thread of their own, pipelined (the default); the results are
+    /// the same bit for bit (`pmsm-sim bench` times both).
+    pub inline_observers: bool,
 }
 
 /// Runs a scenario with a full trace; an early end (non-finite, observer failure) is an
@@ -290,12 +295,22 @@ pub fn run_with_side_observers(
     // Injected faults (`[[faults]]`; none: not built, the loop unchanged).
     let mut faults = FaultInjector::new(&scenario.faults, &scenario.fault_context());
     // The run's own observers: the default EKF (its failure ends the run) and the seed's
-    // filter (a comparison only: dropped when it fails).
-    let mut observer: Box<dyn Observer> = Box::new(PmsmObserver::new(&scenario.observer_config())?);
-    let mut seed_filter: Option<Box<dyn Observer>> = if scenario.observer.seed_filter {
-        Some(Box::new(PmsmObserver::new(&scenario.seed_filter_config())?))
+    // filter (a comparison only: dropped when it fails). Nothing in the loop depends on them:
+    // they step pipelined on a thread of their own ([`crate::pipeline`]), and each period's
+    // sample is handed on (metrics, side observers, sinks, trace) once their estimates are
+    // in it.
+    let observers = RunObservers {
+        observer: PmsmObserver::new(&scenario.observer_config())?,
+        seed_filter: if scenario.observer.seed_filter {
+            Some(PmsmObserver::new(&scenario.seed_filter_config())?)
+        } else {
+            None
+        },
+    };
+    let mut pipeline = if opts.inline_observers {
+        ObserverPipeline::inline(observers)
     } else {
-        None
+        ObserverPipeline::threaded(observers)
     };
     let sensored = controller.sensored();
 
@@ -309,7 +324,65 @@ pub fn run_with_side_observers(
     let delay = scenario.inverter.delay;
     let mut seed_filter_failure = None;
     let mut side_est = Vec::with_capacity(side.len());
+    // How the loop ended (interrupt, non-finite) and how the hand-on ended (observer or
+    // sink failure, at an earlier or the same period: it takes precedence).
     let mut end = RunEnd::Completed;
+    let mut hand_end: Option<RunEnd> = None;
+    let record_trace = opts.record_trace;
+    let sinks = &mut opts.sinks;
+    // One period, complete, in order: what a sequential run does after its observers' steps.
+    let mut hand_on = |r: Ready<'_>| -> bool {
+        let (sample, input, seed_filter_error) = match r {
+            Ready::ObserverFailed { k, error } => {
+                hand_end = Some(RunEnd::ObserverFailed {
+                    k,
+                    t_s: k as f64 * ts,
+                    error,
+                });
+                return false;
+            }
+            Ready::Period {
+                sample,
+                input,
+                seed_filter_error,
+            } => (sample, input, seed_filter_error),
+        };
+        if let Some(error) = seed_filter_error {
+            seed_filter_failure = Some(FilterFailure { k: input.k, error });
+            acc.drop_seed_filter();
+        }
+        side_est.clear();
+        side_est.extend(side.iter_mut().map(|o| o.step(input.u_prev, input.i_ab_a)));
+        let Some(sample) = sample else {
+            return true;
+        };
+        acc.push(sample);
+        for (o, r) in side.iter_mut().zip(&side_est) {
+            o.record(
+                sample,
+                r.map(|e| ObserverSample::from_controller(&e, &sample.truth)),
+            );
+        }
+        let mut sink_error = None;
+        for sink in sinks.iter_mut() {
+            if let Err(message) = sink.record(sample) {
+                sink_error = Some(message);
+                break;
+            }
+        }
+        if record_trace {
+            samples.push(*sample);
+        }
+        if let Some(message) = sink_error {
+            hand_end = Some(RunEnd::SinkFailed {
+                k: sample.k,
+                t_s: sample.t_s,
+                message,
+            });
+            return false;
+        }
+        true
+    };
     let start = Instant::now();
     for k in 0..n {
         let kk = k as u64;
@@ -338,31 +411,14 @@ pub fn run_with_side_observers(
             None => (sensor.measure(i_abc_true), inverter.u_dc_at(t)),
         };
         let i_ab_meas = meas.i_ab_a.to_array();
-
-        let est = match observer.step(u_prev, i_ab_meas) {
-            Ok(e) => e,
-            Err(error) => {
-                end = RunEnd::ObserverFailed {
-                    k: kk,
-                    t_s: t,
-                    error,
-                };
-                break;
-            }
+        // The observers' step of this period, (u[k-1], i[k]) scored against the truth at t_k.
+        let obs_input = ObserverInput {
+            k: kk,
+            u_prev,
+            i_ab_a: i_ab_meas,
+            theta_e_rad: state.theta_e_rad,
+            omega_e_rad_s: omega_e,
         };
-        // The seed filter is only a comparison: if it fails, it is dropped, not the run.
-        let seed_est = match seed_filter.as_mut().map(|f| f.step(u_prev, i_ab_meas)) {
-            Some(Ok(e)) => Some(e),
-            Some(Err(error)) => {
-                seed_filter = None;
-                seed_filter_failure = Some(FilterFailure { k: kk, error });
-                acc.drop_seed_filter();
-                None
-            }
-            None => None,
-        };
-        side_est.clear();
-        side_est.extend(side.iter_mut().map(|o| o.step(u_prev, i_ab_meas)));
 
         let speed_ref_rpm = scenario.speed_ref_rpm.at(t);
         let out = controller.tick(&ControllerInput {
@@ -384,6 +440,8 @@ pub fn run_with_side_observers(
                 quantity: "controller duties",
                 value: d,
             };
+            // The observers stepped in this period before the controller ticked.
+            pipeline.push(obs_input, None, &mut hand_on);
             break;
         }
         let duties = out.duties.map(|d| d.clamp(0.0, 1.0));
@@ -417,8 +475,9 @@ pub fn run_with_side_observers(
                 i_ab_a: i_ab_meas,
                 u_dc_v: u_dc,
             },
-            observer: ObserverSample::from_controller(&est, &truth),
-            seed_filter: seed_est.map(|e| ObserverSample::from_controller(&e, &truth)),
+            // Filled in by the pipeline with the observers' estimates.
+            observer: ObserverSample::default(),
+            seed_filter: None,
             controller_observer: out
                 .telemetry
                 .estimate
@@ -436,29 +495,8 @@ pub fn run_with_side_observers(
                 u_dc_v: u_dc,
             },
         };
-        acc.push(&sample);
-        for (o, r) in side.iter_mut().zip(&side_est) {
-            o.record(
-                &sample,
-                r.map(|e| ObserverSample::from_controller(&e, &truth)),
-            );
-        }
-        let mut sink_error = None;
-        for sink in opts.sinks.iter_mut() {
-            if let Err(message) = sink.record(&sample) {
-                sink_error = Some(message);
-                break;
-            }
-        }
-        if opts.record_trace {
-            samples.push(sample);
-        }
-        if let Some(message) = sink_error {
-            end = RunEnd::SinkFailed {
-                k: kk,
-                t_s: t,
-                message,
-            };
+        if !pipeline.push(obs_input, Some(sample), &mut hand_on) {
+            // The hand-on ended the run (observer or sink failure): `hand_end` says where.
             break;
         }
 
@@ -492,6 +530,12 @@ pub fn run_with_side_observers(
         {
             p(k + 1, n);
         }
+    }
+    // The periods still in the pipeline.
+    pipeline.finish(&mut hand_on);
+    drop(pipeline);
+    if let Some(e) = hand_end {
+        end = e;
     }
     let wall_time_s = start.elapsed().as_secs_f64();
     if let Some(p) = opts.progress.as_mut() {
