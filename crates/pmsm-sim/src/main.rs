@@ -571,37 +571,64 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
     let (pb, json) = (LogEncoding::Protobuf, LogEncoding::Json);
     // One untimed run first: page faults, caches and the CPU's clock settle.
     sim::run_with(&base, RunOptions::default())?;
-    let configs: [(&str, bool, Option<LogOptions>); 7] = [
-        ("no seed filter, no log", false, None),
-        ("seed filter, no log (--no-log)", true, None),
+    // (name, seed filter, log, observers inline on the simulating thread)
+    let configs: [(&str, bool, Option<LogOptions>, bool); 10] = [
+        ("no seed filter, no log", false, None, false),
+        ("seed filter, no log (--no-log)", true, None, false),
+        (
+            "  the same, observers inline (sequential)",
+            true,
+            None,
+            true,
+        ),
         (
             "no seed filter, MCAP protobuf",
             false,
             log(LogCompression::None, pb),
+            false,
         ),
         (
             "seed filter, MCAP protobuf (the default run)",
             true,
             log(LogCompression::None, pb),
+            false,
+        ),
+        (
+            "  the same, observers inline (sequential)",
+            true,
+            log(LogCompression::None, pb),
+            true,
         ),
         (
             "seed filter, MCAP protobuf lz4",
             true,
             log(LogCompression::Lz4, pb),
+            false,
         ),
         (
             "seed filter, MCAP protobuf zstd",
             true,
             log(LogCompression::Zstd, pb),
+            false,
         ),
         (
             "seed filter, MCAP JSON zstd",
             true,
             log(LogCompression::Zstd, json),
+            false,
+        ),
+        (
+            "no seed filter, no log, observers inline",
+            false,
+            None,
+            true,
         ),
     ];
+    // Simulating thread's CPU per period without the log, with the seed filter: observers
+    // inline, and pipelined on their own thread.
     let mut no_log_ns = None;
-    for (name, seed_filter, log) in configs {
+    let mut no_log_piped_ns = None;
+    for (name, seed_filter, log, inline_observers) in configs {
         let mut sc = base.clone();
         sc.observer.seed_filter = seed_filter;
         let mut walls = Vec::with_capacity(runs);
@@ -624,6 +651,7 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
                 &sc,
                 RunOptions {
                     sinks,
+                    inline_observers,
                     ..RunOptions::default()
                 },
             )?;
@@ -649,7 +677,12 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
         }
         let w = median(walls);
         if seed_filter && log.is_none() {
-            no_log_ns = Some(median(cpu_thread.clone()) * 1e9 / sc.periods() as f64);
+            let ns = Some(median(cpu_thread.clone()) * 1e9 / sc.periods() as f64);
+            if inline_observers {
+                no_log_ns = ns;
+            } else {
+                no_log_piped_ns = ns;
+            }
         }
         let mb = if log.is_some() {
             format!("{:.2}", size as f64 / 1e6 / sc.duration_s)
@@ -667,12 +700,12 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
         );
     }
     let _ = std::fs::remove_file(&mcap_path);
-    components(&base, runs, no_log_ns);
+    components(&base, runs, no_log_ns, no_log_piped_ns);
     Ok(ExitCode::SUCCESS)
 }
 
 /// Median time per call of the loop's parts, on the scenario's own trajectory.
-fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>) {
+fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>, piped_ns: Option<f64>) {
     use ekf_core::PmsmObserver;
     use pmsm_sim::plant::{Plant, PlantState};
     use pmsm_sim::sensors::CurrentSensor;
@@ -835,8 +868,15 @@ fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>) {
             "rest of the no-log loop (record, metrics, ...)"
         );
         println!(
-            "  ({no_log:.0} CPU ns per period without the log, with the seed filter: the parts \
-             above with the EKF step twice, the simulator's and the seed filter's)"
+            "  ({no_log:.0} CPU ns per period without the log, with the seed filter, observers \
+             inline: the parts above with the EKF step twice, the simulator's and the seed \
+             filter's)"
+        );
+    }
+    if let Some(piped) = piped_ns {
+        println!(
+            "  ({piped:.0} CPU ns per period on the simulating thread with the observers \
+             pipelined on their own thread: the EKF steps leave it)"
         );
     }
 }
