@@ -226,6 +226,7 @@ impl ObserverPipeline {
     /// estimates). When a batch is full, hands it over, and hands on (`f`, in order) the
     /// periods whose estimates are back; `f` returning `false` stops the hand-on (the run
     /// ends there). Returns `false` once the run is to end.
+    #[inline]
     pub fn push(
         &mut self,
         input: ObserverInput,
@@ -237,6 +238,12 @@ impl ObserverPipeline {
         if self.inputs.len() < BATCH {
             return true;
         }
+        self.batch_full(f)
+    }
+
+    /// The current batch is full: hands it over, merges what is back.
+    #[inline(never)]
+    fn batch_full(&mut self, f: &mut dyn FnMut(Ready<'_>) -> bool) -> bool {
         self.send();
         // Merge what is back; wait only when too many batches are on their way.
         while !self.stopped && !self.waiting.is_empty() {
