@@ -120,7 +120,7 @@ struct Job {
 /// Where the observers step.
 enum Worker {
     /// On the caller's thread, at each hand-over (the stepped batches wait in the queue).
-    Inline(RunObservers, VecDeque<Job>),
+    Inline(Box<RunObservers>, VecDeque<Job>),
     /// On a thread of their own.
     Thread {
         jobs: Option<Sender<Job>>,
@@ -168,7 +168,7 @@ pub(crate) struct ObserverPipeline {
 impl ObserverPipeline {
     /// Observers stepped on the caller's thread.
     pub fn inline(observers: RunObservers) -> Self {
-        Self::with(Worker::Inline(observers, VecDeque::new()))
+        Self::with(Worker::Inline(Box::new(observers), VecDeque::new()))
     }
 
     /// Observers stepped on a thread of their own (inline when no thread can be spawned).
