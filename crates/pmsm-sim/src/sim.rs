@@ -14,7 +14,12 @@
 //!    does not know it), so uncompensated dead time shows up as observer error, as on a bench. The estimate is compared
 //!    with the true `th(t_k)`, `w_e(t_k)`. The run's observers (the default EKF and the seed's
 //!    filter) and any extra ones ([`SideObserver`], [`run_with_side_observers`]: the suite's)
-//!    are all [`Observer`]s and step on the same inputs, in that order.
+//!    are all [`Observer`]s and step on the same inputs, in that order. Nothing in the loop
+//!    depends on them: the run's two step on a thread of their own, pipelined a few batches of
+//!    periods behind the loop, and each period's [`Sample`] is handed on (metrics, side
+//!    observers, sinks, trace) in order once their estimates are in it; the extra ones step
+//!    right before their period is handed on ([`RunOptions::inline_observers`]: all on the
+//!    calling thread; the results are the same bit for bit).
 //! 3. The controller ticks with `i[k]`, the measured bus and the speed reference (a sensored
 //!    controller also gets the true angle and speed) and returns duties `d[k]`; an estimate
 //!    of its own observer (`foc`'s `f32` EKF, which has stepped with its own record of the
@@ -30,6 +35,9 @@
 //! A run ends early, with everything recorded so far intact, when the plant state or the
 //! controller's duties go non-finite (naming the quantity and the time), when the observer
 //! fails, when the sink (the MCAP log) fails, or when the interrupt flag (Ctrl-C) is set.
+//! (An observer's or a sink's failure is found when its period is handed on, up to a few
+//! batches after the loop simulated it: the periods simulated since are dropped, so the
+//! outputs are those of a run that stopped there.)
 //! [`run_with`] reports how it ended in [`RunOutput::end`]; [`run`] turns an abnormal end
 //! into an error.
 
