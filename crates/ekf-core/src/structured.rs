@@ -314,10 +314,12 @@ pub(crate) fn correct_unchecked<T: Float>(
     let (r00, r01, r11) = (r[(0, 0)], r[(0, 1)], r[(1, 1)]);
     let (s00, s01, s11) = (p00 + r00, p01 + r01, p11 + r11);
     let det = s00 * s11 - s01 * s01;
-    if !(det.is_finite() && det > T::zero()) {
+    let inv_det = T::one() / det;
+    // `det` finite and positive, tested as `det > 0` and `1 / det > 0` (`+inf` has the inverse
+    // 0, NaN fails both): two comparisons of the FPU instead of a classification of the bits.
+    if !(det > T::zero() && inv_det > T::zero()) {
         return Err(EkfError::SingularInnovation);
     }
-    let inv_det = T::one() / det;
     let (i00, i01, i11) = (s11 * inv_det, -s01 * inv_det, s00 * inv_det);
     let y0 = z[0] - x[0];
     let y1 = z[1] - x[1];
