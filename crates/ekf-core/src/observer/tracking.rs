@@ -646,11 +646,7 @@ impl<T: Float> Tracker<T> {
     #[inline(always)]
     fn check_sum(&self, s: &TrackerStep<T>, psi: T) -> T {
         let x = &s.x;
-        psi + self.rs
-            + s.c_pp
-            + (x[0] + x[1])
-            + (x[2] + x[3])
-            + (s.sum_psi + s.sum_iq + s.sum_w)
+        psi + self.rs + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
     }
 
     /// Whether the slow work is due (a full window, or the deviations to refresh).
