@@ -565,7 +565,9 @@ impl<T: Float> PmsmObserver<T> {
                     let (step, psi, sum) = t.correct(&slow.k, s, &post);
                     // Both sums finite in one test (`v - v` is 0 for a finite `v`, NaN
                     // otherwise): the state's results and the tracker's.
-                    if (post.sum - post.sum) + (sum - sum) != T::zero() {
+                    #[allow(clippy::eq_op)]
+                    let finite = (post.sum - post.sum) + (sum - sum) == T::zero();
+                    if !finite {
                         return self.refused(EkfError::NonFiniteResult, i);
                     }
                     (post, Some((step, psi)))
