@@ -181,7 +181,7 @@ use model::Discrete;
 use safeguards::{
     BranchState, Events, GateState, HealthState, Verdict, gate_accepted_high, gate_verdict,
 };
-use tracking::{Tracker, TrackerSlow};
+use tracking::{Tracker, TrackerSlow, TrackerStep};
 
 /// Whether the angle estimate can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -427,12 +427,11 @@ impl<T: Float> PmsmObserver<T> {
     fn prior<const TRACK: bool, const S: bool>(
         &self,
         u_prev: [T; 2],
-    ) -> (Vector4<T>, Sym4<T>, Option<Tracker<T>>) {
+    ) -> (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>) {
         let q = self.model.q_sym();
         match (&self.tracker, &self.slow) {
             (Some(tr), Some(slow)) if TRACK => {
                 let k = &slow.k;
-                let mut tr = *tr;
                 let tracked = self.p.p33 <= self.angle_var_limit;
                 let trusted = self.locked;
                 let active = tr.should_track(k, tracked, self.x[2], self.p.p22);
@@ -488,7 +487,11 @@ impl<T: Float> PmsmObserver<T> {
             (true, true) => self.prior::<true, true>(u_prev),
             (false, true) => self.prior::<false, true>(u_prev),
         };
-        if !(finite(x.as_slice()) && p.all_finite() && tm.is_none_or(|t| t.finite())) {
+        let tracker_finite = match (&tm, &self.tracker) {
+            (Some(s), Some(t)) => t.finite_with(s, t.psi),
+            _ => true,
+        };
+        if !(finite(x.as_slice()) && p.all_finite() && tracker_finite) {
             if self.refused_resets() {
                 self.events = Events::default();
                 self.self_reset(None);
@@ -501,8 +504,8 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = p;
-        if tm.is_some() {
-            self.tracker = tm;
+        if let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+            t.commit(s, t.psi);
             self.tracker_housekeeping();
         }
         self.events = Events::default();
@@ -519,9 +522,15 @@ impl<T: Float> PmsmObserver<T> {
             return Err(EkfError::NonFiniteMeasurement);
         }
         match (self.tracker.is_some(), self.model.discrete().salient) {
-            (true, false) => self.correct_prior::<true, false>(self.x, self.p, self.tracker, i),
+            (true, false) => {
+                let tm = self.tracker.map(|t| t.as_step());
+                self.correct_prior::<true, false>(self.x, self.p, tm, i)
+            }
             (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, i),
-            (true, true) => self.correct_prior::<true, true>(self.x, self.p, self.tracker, i),
+            (true, true) => {
+                let tm = self.tracker.map(|t| t.as_step());
+                self.correct_prior::<true, true>(self.x, self.p, tm, i)
+            }
             (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, i),
         }
     }
@@ -533,7 +542,7 @@ impl<T: Float> PmsmObserver<T> {
         &mut self,
         xm: Vector4<T>,
         pm: Sym4<T>,
-        tm: Option<Tracker<T>>,
+        tm: Option<TrackerStep<T>>,
         i: [T; 2],
     ) -> Result<Estimate<T>, EkfError> {
         // Common path first: every test below is one comparison on good data; the rare
@@ -543,7 +552,7 @@ impl<T: Float> PmsmObserver<T> {
         // applied only once the step has succeeded (a refused step changes nothing).
         let mut verdict = Verdict::Low;
         let gate = &self.gate;
-        let outcome = structured::correct(&self.model, &xm, &pm, i, |nis| match gate {
+        let outcome = structured::correct_unchecked(&self.model, &xm, &pm, i, |nis| match gate {
             Some(g) if nis > g.threshold => {
                 verdict = gate_verdict(g, tracking);
                 verdict == Verdict::Reject
@@ -551,19 +560,31 @@ impl<T: Float> PmsmObserver<T> {
             _ => false,
         });
         let (post, tn) = match outcome {
-            Ok(Outcome::Updated(post)) => match (&tm, &self.slow) {
-                (Some(t), Some(slow)) if TRACK => match t.correct(&slow.k, &post) {
-                    Some(tn) => (post, Some(tn)),
-                    None => return self.refused(EkfError::NonFiniteResult, i),
-                },
-                _ => (post, None),
+            Ok(Outcome::Updated(post)) => match (&tm, &self.tracker, &self.slow) {
+                (Some(s), Some(t), Some(slow)) if TRACK => {
+                    let (step, psi, sum) = t.correct(&slow.k, s, &post);
+                    // Both sums finite in one test (`v - v` is 0 for a finite `v`, NaN
+                    // otherwise): the state's results and the tracker's.
+                    #[allow(clippy::eq_op)]
+                    let finite = (post.sum - post.sum) + (sum - sum) == T::zero();
+                    if !finite {
+                        return self.refused(EkfError::NonFiniteResult, i);
+                    }
+                    (post, Some((step, psi)))
+                }
+                _ => {
+                    if !post.sum.is_finite() {
+                        return self.refused(EkfError::NonFiniteResult, i);
+                    }
+                    (post, None)
+                }
             },
             Ok(Outcome::Skipped(c)) => {
                 // Rejected by the gate: the step is the prediction only.
                 self.x = xm;
                 self.p = pm;
-                if TRACK && tm.is_some() {
-                    self.tracker = tm;
+                if TRACK && let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+                    t.commit(s, t.psi);
                     self.tracker_housekeeping();
                 }
                 self.last = c;
@@ -581,8 +602,8 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = post.p;
-        if TRACK && tn.is_some() {
-            self.tracker = tn;
+        if TRACK && let (Some((s, psi)), Some(t)) = (&tn, &mut self.tracker) {
+            t.commit(s, *psi);
             self.tracker_housekeeping();
         }
         self.last = c;

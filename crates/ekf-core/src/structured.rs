@@ -229,17 +229,17 @@ fn predict_cov_salient<T: Float>(
     }
 }
 
-/// `true` when the sum of the values is finite: false for any NaN or infinity (they
-/// propagate through a sum), and also, conservatively, when finite values are so large that
-/// their sum overflows. One test instead of one per value; four partial sums keep the
-/// dependency chain short.
+/// The sum of the values, finite only when they all are: NaN and infinities propagate
+/// through a sum (and, conservatively, finite values so large that their sum overflows make
+/// it infinite). One test instead of one per value; four partial sums keep the dependency
+/// chain short.
 #[inline(always)]
-fn sum_is_finite<T: Float, const N: usize>(v: &[T; N]) -> bool {
+pub(crate) fn check_sum<T: Float, const N: usize>(v: &[T; N]) -> T {
     let mut acc = [T::zero(); 4];
     for (i, x) in v.iter().enumerate() {
         acc[i % 4] += *x;
     }
-    ((acc[0] + acc[1]) + (acc[2] + acc[3])).is_finite()
+    (acc[0] + acc[1]) + (acc[2] + acc[3])
 }
 
 /// Result of a correction.
@@ -256,6 +256,9 @@ pub(crate) struct Posterior<T: Float> {
     pub inv_s: (T, T, T),
     /// The gain `K` (rows `i_a, i_b, w, th`).
     pub k: [[T; 2]; 4],
+    /// [`check_sum`] of the results (state, NIS, `P`): finite when they all are. Checked by
+    /// [`correct`]; [`correct_unchecked`]'s caller checks it.
+    pub sum: T,
 }
 
 /// What [`correct`] did.
@@ -279,6 +282,22 @@ pub(crate) fn correct<T: Float>(
     z: [T; 2],
     skip: impl FnOnce(T) -> bool,
 ) -> Result<Outcome<T>, EkfError> {
+    match correct_unchecked(model, x, p, z, skip) {
+        Ok(Outcome::Updated(post)) if !post.sum.is_finite() => Err(EkfError::NonFiniteResult),
+        r => r,
+    }
+}
+
+/// [`correct`] without the finiteness check of the results: the caller tests
+/// [`Posterior::sum`] (with its own values' test: one branch for both).
+#[inline(always)]
+pub(crate) fn correct_unchecked<T: Float>(
+    model: &PmsmModel<T>,
+    x: &Vector4<T>,
+    p: &Sym4<T>,
+    z: [T; 2],
+    skip: impl FnOnce(T) -> bool,
+) -> Result<Outcome<T>, EkfError> {
     let Sym4 {
         p00,
         p01,
@@ -295,10 +314,12 @@ pub(crate) fn correct<T: Float>(
     let (r00, r01, r11) = (r[(0, 0)], r[(0, 1)], r[(1, 1)]);
     let (s00, s01, s11) = (p00 + r00, p01 + r01, p11 + r11);
     let det = s00 * s11 - s01 * s01;
-    if !(det.is_finite() && det > T::zero()) {
+    let inv_det = T::one() / det;
+    // `det` finite and positive, tested as `det > 0` and `1 / det > 0` (`+inf` has the inverse
+    // 0, NaN fails both): two comparisons of the FPU instead of a classification of the bits.
+    if !(det > T::zero() && inv_det > T::zero()) {
         return Err(EkfError::SingularInnovation);
     }
-    let inv_det = T::one() / det;
     let (i00, i01, i11) = (s11 * inv_det, -s01 * inv_det, s00 * inv_det);
     let y0 = z[0] - x[0];
     let y1 = z[1] - x[1];
@@ -352,12 +373,10 @@ pub(crate) fn correct<T: Float>(
             (s00, s01, s11),
         ),
     };
-    if !sum_is_finite(&[
+    let sum = check_sum(&[
         xn[0], xn[1], xn[2], xn[3], nis, pn.p00, pn.p01, pn.p02, pn.p03, pn.p11, pn.p12, pn.p13,
         pn.p22, pn.p23, pn.p33,
-    ]) {
-        return Err(EkfError::NonFiniteResult);
-    }
+    ]);
     Ok(Outcome::Updated(Posterior {
         x: xn,
         p: pn,
@@ -365,6 +384,7 @@ pub(crate) fn correct<T: Float>(
         dth,
         inv_s: (i00, i01, i11),
         k: [[k00, k01], [k10, k11], [k20, k21], [k30, k31]],
+        sum,
     }))
 }
 

@@ -284,6 +284,31 @@ pub(super) struct Tracker<T> {
     pub since_sigma: u32,
 }
 
+/// The fields of a [`Tracker`] that a step changes (all but `psi`, returned beside it by the
+/// correction, and the values changed only by the slow work): the step's prior, then its
+/// posterior, committed only when the step succeeds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct TrackerStep<T> {
+    pub x: [T; 4],
+    pub c_pp: T,
+    pub active: bool,
+    pub settled: u32,
+    pub w_lp: T,
+    pub sum_psi: T,
+    pub sum_iq: T,
+    pub sum_w: T,
+    pub n: u32,
+    pub since_sigma: u32,
+}
+
+/// The activity test's verdict for a step and its running values (committed with the step).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Activity<T> {
+    pub active: bool,
+    pub w_lp: T,
+    pub settled: u32,
+}
+
 /// The slow part of the tracking: constants, and the split filter (changed in place at the
 /// end of a window, after a step has been committed).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -425,27 +450,37 @@ impl<T: Float> Tracker<T> {
     /// and the flux would absorb the lag). Counts the settling time.
     #[inline(always)]
     pub fn should_track(
-        &mut self,
+        &self,
         k: &TrackerConstants<T>,
         angle_tracking: bool,
         w: T,
         w_var: T,
-    ) -> bool {
+    ) -> Activity<T> {
         let w2 = w * w;
         // Steady speed: within 1 % plus three of its standard deviations of its low-pass
         // (time constant 64 samples).
-        self.w_lp += (w - self.w_lp) * to_t::<T>(1.0 / 64.0);
-        let dw = w - self.w_lp;
+        let w_lp = self.w_lp + (w - self.w_lp) * to_t::<T>(1.0 / 64.0);
+        let dw = w - w_lp;
         let steady = dw * dw <= w_var * to_t(9.0) + w2 * to_t(1e-4);
         if !(angle_tracking && steady && w2 >= k.min_speed2 && w_var * to_t(25.0) <= w2) {
-            self.settled = 0;
-            return false;
+            return Activity {
+                active: false,
+                w_lp,
+                settled: 0,
+            };
         }
         if self.settled < k.settle_samples {
-            self.settled += 1;
-            return false;
+            return Activity {
+                active: false,
+                w_lp,
+                settled: self.settled + 1,
+            };
         }
-        true
+        Activity {
+            active: true,
+            w_lp,
+            settled: self.settled,
+        }
     }
 
     /// The tracker's part of the prediction (module docs): returns the prior tracker and
@@ -460,17 +495,28 @@ impl<T: Float> Tracker<T> {
         t: &TransitionTerms<T>,
         x: &Vector4<T>,
         pm: &mut Sym4<T>,
-        active: bool,
-    ) -> Self {
+        a: Activity<T>,
+    ) -> TrackerStep<T> {
         let since_sigma = self.since_sigma + 1;
+        let Activity {
+            active,
+            w_lp,
+            settled,
+        } = a;
         if !active {
             // Frozen: the flux is a known constant for this step (the 4-state filter
             // exactly, at the frozen value); its correlation with the state is dropped.
-            return Self {
+            return TrackerStep {
                 x: [T::zero(); 4],
+                c_pp: self.c_pp,
                 active,
+                settled,
+                w_lp,
+                sum_psi: self.sum_psi,
+                sum_iq: self.sum_iq,
+                sum_w: self.sum_w,
+                n: self.n,
                 since_sigma,
-                ..*self
             };
         }
         let d = disc.decay;
@@ -500,9 +546,11 @@ impl<T: Float> Tracker<T> {
         pm.p03 += g0 * xm[3];
         pm.p12 += g1 * xm[2];
         pm.p13 += g1 * xm[3];
-        Self {
+        TrackerStep {
             x: xm,
             active,
+            settled,
+            w_lp,
             // Process noise, not above the ceiling (the variance stays bounded).
             c_pp: if c < k.var0_psi { c + k.q_psi } else { c },
             // One sample of the split filter's window: the flux, i_q and w at the start of
@@ -512,20 +560,26 @@ impl<T: Float> Tracker<T> {
             sum_w: self.sum_w + x[2],
             n: self.n + 1,
             since_sigma,
-            ..*self
         }
     }
 
-    /// The tracker's part of the correction of the prior `self` with the posterior `post` of
-    /// the state (its gain and `S^-1`). `None` if a result is not finite.
+    /// The tracker's part of the correction of the prior `prior` (this tracker's step) with
+    /// the posterior `post` of the state (its gain and `S^-1`): the corrected step and flux,
+    /// and a sum of the tracker's values that is finite when they all are (0 when frozen: no
+    /// test); the caller tests it with the state's.
     #[inline(always)]
-    pub fn correct(&self, k: &TrackerConstants<T>, post: &Posterior<T>) -> Option<Self> {
-        if !self.active {
-            return Some(*self);
+    pub fn correct(
+        &self,
+        k: &TrackerConstants<T>,
+        prior: &TrackerStep<T>,
+        post: &Posterior<T>,
+    ) -> (TrackerStep<T>, T, T) {
+        if !prior.active {
+            return (*prior, self.psi, T::zero());
         }
         let (i00, i01, i11) = post.inv_s;
         let y = &post.correction.innovation;
-        let xm = &self.x;
+        let xm = &prior.x;
         let (l0, l1) = (xm[0], xm[1]);
         let k4 = &post.k;
         let x = [
@@ -536,16 +590,63 @@ impl<T: Float> Tracker<T> {
         ];
         let (kp0, kp1) = (l0 * i00 + l1 * i01, l0 * i01 + l1 * i11);
         let psi = clamp(self.psi + kp0 * y[0] + kp1 * y[1], k.psi_min, k.psi_max);
-        let c = self.c_pp - (kp0 * l0 + kp1 * l1);
+        let c = prior.c_pp - (kp0 * l0 + kp1 * l1);
         // Rounding must not leave the variance non-positive.
         let floor = T::default_epsilon() * k.var0_psi;
-        let next = Self {
+        let next = TrackerStep {
             x,
-            psi,
             c_pp: if c > floor { c } else { floor },
-            ..*self
+            ..*prior
         };
-        next.finite().then_some(next)
+        (next, psi, self.check_sum(&next, psi))
+    }
+
+    /// The changing fields of this tracker as a step (for a correction without prediction).
+    #[inline(always)]
+    pub fn as_step(&self) -> TrackerStep<T> {
+        TrackerStep {
+            x: self.x,
+            c_pp: self.c_pp,
+            active: self.active,
+            settled: self.settled,
+            w_lp: self.w_lp,
+            sum_psi: self.sum_psi,
+            sum_iq: self.sum_iq,
+            sum_w: self.sum_w,
+            n: self.n,
+            since_sigma: self.since_sigma,
+        }
+    }
+
+    /// Commits a step (and its flux): the tracker's other fields do not change in a step.
+    #[inline(always)]
+    pub fn commit(&mut self, s: &TrackerStep<T>, psi: T) {
+        self.psi = psi;
+        self.x = s.x;
+        self.c_pp = s.c_pp;
+        self.active = s.active;
+        self.settled = s.settled;
+        self.w_lp = s.w_lp;
+        self.sum_psi = s.sum_psi;
+        self.sum_iq = s.sum_iq;
+        self.sum_w = s.sum_w;
+        self.n = s.n;
+        self.since_sigma = s.since_sigma;
+    }
+
+    /// All values of this tracker with the step `s` and flux `psi` committed finite (one
+    /// test on a sum).
+    #[inline(always)]
+    pub fn finite_with(&self, s: &TrackerStep<T>, psi: T) -> bool {
+        self.check_sum(s, psi).is_finite()
+    }
+
+    /// The sum of this tracker's values with the step `s` and flux `psi` committed: finite
+    /// when they all are (NaN and infinities propagate; conservatively, an overflow too).
+    #[inline(always)]
+    fn check_sum(&self, s: &TrackerStep<T>, psi: T) -> T {
+        let x = &s.x;
+        psi + self.rs + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
     }
 
     /// Whether the slow work is due (a full window, or the deviations to refresh).
@@ -584,18 +685,6 @@ impl<T: Float> Tracker<T> {
         self.sum_iq = T::zero();
         self.sum_w = T::zero();
         self.n = 0;
-    }
-
-    /// All values finite (one test on a sum).
-    pub fn finite(&self) -> bool {
-        let x = &self.x;
-        (self.psi
-            + self.rs
-            + self.c_pp
-            + (x[0] + x[1])
-            + (x[2] + x[3])
-            + (self.sum_psi + self.sum_iq + self.sum_w))
-            .is_finite()
     }
 
     /// After a branch flip (`w = -w`): the speed row of `X` changes sign; the window
