@@ -206,6 +206,9 @@ const COAST_INJECTION: f32 = 0.15;
 const COAST_RIPPLE: f32 = 0.1;
 /// Coast: turns of the injected current vector per back-EMF block.
 const COAST_INJECTION_TURNS: f32 = 4.0;
+/// Coast (surface motors): the speed the back-EMF's turn gives and the speed its magnitude
+/// gives must agree within this factor before the coast launches (module docs).
+const COAST_SPEED_AGREEMENT: f32 = 2.0;
 /// Lead of the launched current vector over the rotor's angle, rad el.
 const LAUNCH_LEAD_RAD: f32 = 0.5;
 /// Interior motors keep the start this module had before the coast current and the launch
@@ -682,7 +685,10 @@ impl Sequencer {
                             self.v.e_n = 0;
                         }
                     }
-                    if self.v.coast_int.abs() >= COAST_TURN_RAD && self.v.e_blocks >= 2 {
+                    if self.v.coast_int.abs() >= COAST_TURN_RAD
+                        && self.v.e_blocks >= 2
+                        && (self.salient || self.coast_consistent(cfg))
+                    {
                         reframe = Some(self.align_frame());
                         if self.salient {
                             self.launch_from_observer(cfg, est, reseed);
@@ -989,6 +995,19 @@ impl Sequencer {
         let phi = limit(-k * (w_hat - w_ramp), -self.phi_max, self.phi_max);
         self.v.gamma = wrap(self.v.gamma + (phi - self.v.phi));
         self.v.phi = phi;
+    }
+
+    /// The coast's evidence is a rotation (surface motors): the speed the back-EMF's turn
+    /// from the first block to the last one gives and the speed the last block's magnitude
+    /// gives agree within [`COAST_SPEED_AGREEMENT`]. Noise on a slow rotor turns the block
+    /// means far faster than the rotor does.
+    fn coast_consistent(&self, cfg: &FocConfig) -> bool {
+        let [l0, l1] = self.v.e_last;
+        let w_mag = sqrt(l0 * l0 + l1 * l1) * self.inv_psi;
+        let t = self.v.e_blocks.saturating_sub(1) as f32 * self.block_ticks as f32 * cfg.ts_s;
+        let w_turn = self.v.coast_int.abs();
+        // `w_turn / t` and `w_mag` within the factor, without a division.
+        w_mag * t <= COAST_SPEED_AGREEMENT * w_turn && w_turn <= COAST_SPEED_AGREEMENT * w_mag * t
     }
 
     /// The control frame of the alignment.
