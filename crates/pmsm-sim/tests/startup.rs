@@ -241,8 +241,8 @@ fn damped_start_over_three_motors_and_twelve_rotor_angles() {
 /// without a wrong launch (a regression guard, not the goal): every cell hands over at 3 %
 /// of rated speed without a fault, never turns backwards faster than 5 % of rated speed
 /// and stays within 5 % of the ramp. Measured: worst backward 3.93 % (industrial_2k2 from
-/// 60 deg, seed + 2; the goal's 1 % is missed on 17 of these 144 cells, 20 before, all by the kick's
-/// late detection), worst ramp deviation 3.06 %. Before the coast checked that the speed of
+/// 60 deg, seed + 2; the goal's 1 % is missed on 17 of these 144 cells, 20 before), worst
+/// ramp deviation 3.06 %. Before the coast checked that the speed of
 /// the back-EMF's turn and of its magnitude agree, noise launched industrial_2k2 the wrong
 /// way on three of them: 10.8 % (30 deg, seed + 2), 11.4 % (30 deg) and 12.7 % with 13.6 %
 /// ramp deviation (-90 deg, seed + 4).
