@@ -236,3 +236,32 @@ fn damped_start_over_three_motors_and_twelve_rotor_angles() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+/// The same grid on four more noise seeds (the presets' + 2 to + 5): the start stays
+/// without a wrong launch (a regression guard, not the goal): every cell hands over at 3 %
+/// of rated speed without a fault, never turns backwards faster than 5 % of rated speed
+/// and stays within 5 % of the ramp. Measured: worst backward 3.93 % (industrial_2k2 from
+/// 60 deg, seed + 2; the goal's 1 % is missed on 17 of these 144 cells, 20 before), worst
+/// ramp deviation 3.06 %. Before the coast checked that the speed of
+/// the back-EMF's turn and of its magnitude agree, noise launched industrial_2k2 the wrong
+/// way on three of them: 10.8 % (30 deg, seed + 2), 11.4 % (30 deg) and 12.7 % with 13.6 %
+/// ramp deviation (-90 deg, seed + 4).
+#[test]
+fn damped_start_without_a_wrong_launch_on_four_more_noise_seeds() {
+    let mut failures = vec![];
+    for dseed in 2..6 {
+        for c in grid(dseed) {
+            let m = c.misses(5.0, 5.0, HANDOVER_MAX_PCT);
+            if !m.is_empty() {
+                failures.push(format!(
+                    "{} (seed + {}) from {:.0} deg: {}",
+                    c.motor,
+                    c.dseed,
+                    c.theta0_deg,
+                    m.join(", ")
+                ));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
