@@ -183,7 +183,7 @@ use ekf_core::MotorParams;
 
 use crate::config::{ComputationDelay, FocConfig, Mode};
 use crate::transforms::{AlphaBeta, Dq};
-use crate::trig::{add_angles, at_most, sin_cos, sin_cos_small, wrap};
+use crate::trig::{add_angles, at_most, max2, sin_cos, sin_cos_small, wrap};
 
 /// Which [`HfiConfig`] field is wrong.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1008,6 +1008,9 @@ pub(crate) struct HfiDrive {
     omega_o_lp: f32,
     /// Gain of that low-pass per tick.
     lp_gain: f32,
+    /// Whether the observer's weight follows the faster of HFI's speed and the observer's
+    /// low-passed speed (a long carrier period: [`HFI_PERIOD_ANGLE_RAD`]).
+    weight_on_faster: bool,
 }
 
 /// The virtual rotor sensor HFI gives the speed loop in [`HfiPhase::Tracking`].
@@ -1037,6 +1040,11 @@ impl HfiDrive {
             accel: 0.0,
             omega_o_lp: 0.0,
             lp_gain: crate::trig::min2(cfg.pll_bandwidth_rad_s * foc.ts_s, 1.0),
+            weight_on_faster: cfg.blend_high_rad_s
+                * 2.0
+                * f32::from(cfg.half_period_ticks)
+                * foc.ts_s
+                > HFI_PERIOD_ANGLE_RAD,
         }
     }
 
@@ -1140,7 +1148,13 @@ impl HfiDrive {
             self.tracker.set_load(self.accel);
         }
         let mut lam = if self.injecting {
-            let w_abs = self.tracker.omega().abs();
+            // With a long carrier period HFI's speed lags the rotor's at the top of the band
+            // (module docs, "Hand-over band"): the weight follows the faster estimate.
+            let w_abs = if self.weight_on_faster {
+                max2(self.tracker.omega().abs(), self.omega_o_lp.abs())
+            } else {
+                self.tracker.omega().abs()
+            };
             observer_weight(w_abs, c.blend_low_rad_s, c.blend_high_rad_s)
         } else {
             1.0
@@ -1183,6 +1197,13 @@ impl HfiDrive {
         (carrier, i_loop)
     }
 }
+
+/// Electrical angle (rad) the rotor may turn in one carrier period at the top of the blend
+/// band (`blend_high_rad_s 2 N Ts`) before the observer's weight follows the faster of HFI's
+/// speed and the observer's low-passed speed instead of HFI's alone (module docs, "Hand-over
+/// band"): 0.05 rad (2.9 deg). The industrial IPM of the tests turns 0.12 rad (`N = 7`), the
+/// traction IPM 0.016 rad (`N = 2` at 20 kHz).
+pub const HFI_PERIOD_ANGLE_RAD: f32 = 0.05;
 
 /// Observer weight in the control angle for an electrical speed magnitude `w` (linear from
 /// `lo` to `hi`).
