@@ -393,6 +393,11 @@ fn reversal(name: &str) -> (f64, f64) {
 
 /// [`reversal`] with the preset's current limit and ADC full scale replaced (A).
 fn reversal_with(name: &str, limits: Option<(f64, f64)>) -> (f64, f64) {
+    reversal_seeded(name, limits, None)
+}
+
+/// [`reversal_with`] on the noise seed `seed` (`None`: the preset's, or `HFI_SEED`).
+fn reversal_seeded(name: &str, limits: Option<(f64, f64)>, seed: Option<u64>) -> (f64, f64) {
     let mut sc0 = Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"));
     if let Some((limit, adc)) = limits {
         sc0.controller.current_limit_a = limit;
@@ -416,6 +421,9 @@ fn reversal_with(name: &str, limits: Option<(f64, f64)>) -> (f64, f64) {
         (2.7, -n_rpm),
     ];
     let mut sc = job(name, profile, load, -2.0, 2.7);
+    if let Some(seed) = seed {
+        sc.seed = seed;
+    }
     if let Some((limit, adc)) = limits {
         sc.controller.current_limit_a = limit;
         sc.sensors.adc_full_scale_a = adc;
@@ -509,4 +517,49 @@ fn traction_ipm_reverses_with_the_presets_sizing() {
     let (max, track) = reversal("traction-ipm");
     assert!(max < 15.0, "angle error {max} deg");
     assert!(track < 0.08 * 3000.0, "speed error {track} rpm");
+}
+
+/// The reversal over the noise seeds 1-8; returns the seeds outside the bounds (angle where
+/// HFI has a say < 15 deg el., worst speed error < `track_max` rpm), with their numbers.
+fn seed_sweep(
+    name: &str,
+    limits: Option<(f64, f64)>,
+    track_max: f64,
+) -> Vec<(u64, f64, f64)> {
+    let mut bad = Vec::new();
+    for seed in 1..=8 {
+        let (max, track) = reversal_seeded(name, limits, Some(seed));
+        println!("{name}: seed {seed}: max {max:.2} deg el., worst speed error {track:.1} rpm");
+        if !(max < 15.0 && track < track_max) {
+            bad.push((seed, max, track));
+        }
+    }
+    bad
+}
+
+/// Robustness over the noise (issue 14 item 4): the reversal of the two tests above that
+/// pass on every seed, the industrial IPM and the traction IPM at 180 A / 300 A, each on the
+/// noise seeds 1-8 (16 runs, about 12 s in release).
+///
+/// Max angle error where HFI has a say / worst speed error (deg el. / rpm), seeds 1-8:
+/// industrial 9.2 / 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35, 11.6 / 30, 11.7 / 43,
+/// 12.9 / 45 (before the weight followed the faster speed estimate: 11.3, 12.7, 8.9,
+/// **16.4**, 14.0, 11.0, 11.6, 14.7 deg); traction at 180 A 1.8-2.9 deg, 23-29 rpm.
+#[test]
+fn reversal_passes_on_noise_seeds_1_to_8() {
+    let bad = seed_sweep("industrial-ipm", None, 0.05 * 1500.0);
+    assert!(bad.is_empty(), "industrial-ipm: seeds out of bounds {bad:?}");
+    let bad = seed_sweep("traction-ipm", Some((180.0, 300.0)), 0.08 * 3000.0);
+    assert!(bad.is_empty(), "traction-ipm 180 A: seeds out of bounds {bad:?}");
+}
+
+/// The traction IPM at the preset's sizing over the noise seeds 1-8: fails on seed 5 (the
+/// observer diverges inside the blend band during the first acceleration, the carrier goes
+/// off on HFI's speed while the observer is 44 deg off, and comes back seeded from it;
+/// 1302 rpm worst speed error). Ignored until that is fixed (issue 14 item 4).
+#[test]
+#[ignore = "fails on seed 5 (issue 14 item 4)"]
+fn traction_ipm_presets_sizing_passes_on_noise_seeds_1_to_8() {
+    let bad = seed_sweep("traction-ipm", None, 0.08 * 3000.0);
+    assert!(bad.is_empty(), "traction-ipm: seeds out of bounds {bad:?}");
 }
