@@ -119,7 +119,9 @@
 //!   [`State::Align`] meanwhile. Then closed loop at once (no I/f ramp);
 //! - **closed loop**: the sequencer runs its sensored path (speed loop, stop, stall check) on
 //!   a virtual sensor: the HFI angle and speed blended with the observer's, the observer's
-//!   weight rising linearly with HFI's speed from `blend_low_rad_s` to `blend_high_rad_s`.
+//!   weight rising linearly with HFI's speed from `blend_low_rad_s` to `blend_high_rad_s`
+//!   (with a long carrier period, the faster of HFI's and the observer's low-passed speed:
+//!   [`crate::hfi`], "Hand-over band").
 //!   Above `blend_high` the carrier is off and the angle is the observer's alone; it comes
 //!   back on below 80 % of it, the tracker seeded from the observer (angle, speed, and the
 //!   load as the drive's torque). When the observer's weight leaves zero it is re-seeded from

@@ -134,6 +134,27 @@
 //! and the decision is then a coin toss (a real motor saturates by several percent at rated
 //! current; the simulator's plant has an optional saturation model for this test).
 //!
+//! # Hand-over band
+//!
+//! From `blend_low_rad_s` to `blend_high_rad_s` the control angle is HFI's plus the observer's
+//! weight times the observer's difference from it, the weight linear in the speed magnitude
+//! (0 at the bottom, 1 at the top; the carrier goes off above the top, by HFI's speed, and
+//! comes back below 80 % of it, by the observer's low-passed speed). The speed the weight
+//! follows is HFI's own tracked speed: the observer's is noisiest at the bottom of its range
+//! and would feed back into its own weight. With a long carrier period, where the rotor turns
+//! more than [`HFI_PERIOD_ANGLE_RAD`] (0.05 rad el.) per carrier period at the top of the band
+//! (`blend_high 2 N Ts`), the weight follows the faster of HFI's speed and the observer's
+//! low-passed speed instead. Measured on the industrial IPM of the tests (`N = 7` at 10 kHz:
+//! 0.12 rad per period at the top of its 43-87 rad/s band) over the reversal on noise seeds 1,
+//! 4 and 7: HFI's angle error is within 2 deg RMS below 50 rad/s el. and 6-18 deg RMS above
+//! it (its speed lags the rotor's by up to 20 rad/s el. while the speed grows), where the
+//! observer is within 2 deg; every seed's largest error sat there (1.87-1.92 s, rotor at
+//! -55 to -84 rad/s el., HFI's speed stuck near -58, weight 0.32-0.47 from that lagging
+//! speed, HFI 19-26 deg off, the observer within 3 deg). Following the faster estimate gives
+//! the observer the weight of the rotor's actual speed there. The traction IPM (`N = 2` at
+//! 20 kHz, 0.016 rad per period) keeps HFI's speed: its observer is the weak side inside the
+//! band (module docs of `pmsm-sim`'s `tests/hfi.rs`).
+//!
 //! # Current feedback and voltage
 //!
 //! While the carrier is on, the current loops see the mean of the last two samples (the
@@ -183,7 +204,7 @@ use ekf_core::MotorParams;
 
 use crate::config::{ComputationDelay, FocConfig, Mode};
 use crate::transforms::{AlphaBeta, Dq};
-use crate::trig::{add_angles, at_most, sin_cos, sin_cos_small, wrap};
+use crate::trig::{add_angles, at_most, max2, sin_cos, sin_cos_small, wrap};
 
 /// Which [`HfiConfig`] field is wrong.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1008,6 +1029,9 @@ pub(crate) struct HfiDrive {
     omega_o_lp: f32,
     /// Gain of that low-pass per tick.
     lp_gain: f32,
+    /// Whether the observer's weight follows the faster of HFI's speed and the observer's
+    /// low-passed speed (a long carrier period: [`HFI_PERIOD_ANGLE_RAD`]).
+    weight_on_faster: bool,
 }
 
 /// The virtual rotor sensor HFI gives the speed loop in [`HfiPhase::Tracking`].
@@ -1037,6 +1061,11 @@ impl HfiDrive {
             accel: 0.0,
             omega_o_lp: 0.0,
             lp_gain: crate::trig::min2(cfg.pll_bandwidth_rad_s * foc.ts_s, 1.0),
+            weight_on_faster: cfg.blend_high_rad_s
+                * 2.0
+                * f32::from(cfg.half_period_ticks)
+                * foc.ts_s
+                > HFI_PERIOD_ANGLE_RAD,
         }
     }
 
@@ -1117,8 +1146,10 @@ impl HfiDrive {
 
     /// The blended control angle and speed (observer estimate `theta_o`, `omega_o`):
     /// carrier on below `blend_high` (back on below 80 % of it, the tracker seeded from the
-    /// observer), observer weight linear in `|w|` from `blend_low` to `blend_high`, the
-    /// observer re-seeded from HFI when its weight leaves zero.
+    /// observer), observer weight linear in `|w|` from `blend_low` to `blend_high` (`w` HFI's
+    /// speed, or the faster of it and the observer's low-passed speed with a long carrier
+    /// period: module docs, "Hand-over band"), the observer re-seeded from HFI when its
+    /// weight leaves zero.
     #[inline]
     pub fn blend(&mut self, theta_o: f32, omega_o: f32) -> Blend {
         let c = &self.cfg;
@@ -1140,7 +1171,13 @@ impl HfiDrive {
             self.tracker.set_load(self.accel);
         }
         let mut lam = if self.injecting {
-            let w_abs = self.tracker.omega().abs();
+            // With a long carrier period HFI's speed lags the rotor's at the top of the band
+            // (module docs, "Hand-over band"): the weight follows the faster estimate.
+            let w_abs = if self.weight_on_faster {
+                max2(self.tracker.omega().abs(), self.omega_o_lp.abs())
+            } else {
+                self.tracker.omega().abs()
+            };
             observer_weight(w_abs, c.blend_low_rad_s, c.blend_high_rad_s)
         } else {
             1.0
@@ -1183,6 +1220,13 @@ impl HfiDrive {
         (carrier, i_loop)
     }
 }
+
+/// Electrical angle (rad) the rotor may turn in one carrier period at the top of the blend
+/// band (`blend_high_rad_s 2 N Ts`) before the observer's weight follows the faster of HFI's
+/// speed and the observer's low-passed speed instead of HFI's alone (module docs, "Hand-over
+/// band"): 0.05 rad (2.9 deg). The industrial IPM of the tests turns 0.12 rad (`N = 7`), the
+/// traction IPM 0.016 rad (`N = 2` at 20 kHz).
+pub const HFI_PERIOD_ANGLE_RAD: f32 = 0.05;
 
 /// Observer weight in the control angle for an electrical speed magnitude `w` (linear from
 /// `lo` to `hi`).

@@ -393,6 +393,11 @@ fn reversal(name: &str) -> (f64, f64) {
 
 /// [`reversal`] with the preset's current limit and ADC full scale replaced (A).
 fn reversal_with(name: &str, limits: Option<(f64, f64)>) -> (f64, f64) {
+    reversal_seeded(name, limits, None)
+}
+
+/// [`reversal_with`] on the noise seed `seed` (`None`: the preset's, or `HFI_SEED`).
+fn reversal_seeded(name: &str, limits: Option<(f64, f64)>, seed: Option<u64>) -> (f64, f64) {
     let mut sc0 = Scenario::preset(name).unwrap_or_else(|e| panic!("{e}"));
     if let Some((limit, adc)) = limits {
         sc0.controller.current_limit_a = limit;
@@ -416,6 +421,9 @@ fn reversal_with(name: &str, limits: Option<(f64, f64)>) -> (f64, f64) {
         (2.7, -n_rpm),
     ];
     let mut sc = job(name, profile, load, -2.0, 2.7);
+    if let Some(seed) = seed {
+        sc.seed = seed;
+    }
     if let Some((limit, adc)) = limits {
         sc.controller.current_limit_a = limit;
         sc.sensors.adc_full_scale_a = adc;
@@ -469,11 +477,15 @@ fn reversal_with(name: &str, limits: Option<(f64, f64)>) -> (f64, f64) {
 /// ~0.6, the EKF up to 27 deg off at 240 rpm) and at 100-250 rpm, where HFI's own error grows
 /// with the half period (mean +3 deg).
 ///
-/// Over the noise seeds 1-8 (`HFI_SEED=n`), max angle error / worst speed error: 12.1 / 42,
-/// 12.7 / 37, 10.5 / 44, **16.4** / 44, 14.0 / 35, 11.0 / 28, 11.6 / 43, 14.7 / 45 deg el. /
-/// rpm: 7 of 8 within the bounds (5 of 8 before the observer's parameter tracking was frozen
-/// under HFI and the carrier's return was decided on the observer's low-passed speed; the
-/// preset's seed is 7).
+/// Over the noise seeds 1-8 (`HFI_SEED=n`, and [`reversal_passes_on_noise_seeds_1_to_8`]),
+/// max angle error / worst speed error: 9.2 / 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35,
+/// 11.6 / 30, 11.7 / 43, 12.9 / 45 deg el. / rpm: 8 of 8 within the bounds, since the
+/// observer's weight follows the faster of HFI's speed and the observer's low-passed speed
+/// on this long carrier period (`foc::hfi`, "Hand-over band"). Before it: 11.3, 12.7, 8.9,
+/// **16.4**, 14.0, 11.0, 11.6, 14.7 deg (7 of 8; every seed's largest error at 1.87-1.92 s,
+/// HFI 19-26 deg off with its speed lagging the rotor's, the observer within 3 deg); 5 of 8
+/// before the observer's parameter tracking was frozen under HFI and the carrier's return
+/// was decided on the observer's low-passed speed. The preset's seed is 7.
 #[test]
 fn industrial_ipm_reverses_through_zero_under_rated_load() {
     let (max, track) = reversal("industrial-ipm");
@@ -503,10 +515,67 @@ fn traction_ipm_reverses_through_zero_under_rated_load() {
 /// runs to -860 rpm before the drive recovers (1302 rpm worst speed error). 2 of 8 passed
 /// before the fixes, and the preset's seed 9 narrowly (9.3 deg, 183 rpm; now 4.6 deg, 26 rpm). A weight
 /// cut when the observer parts from HFI by more than 20 deg was tried and made every motor
-/// worse (the control angle jumps by the cut weight's share of the error).
+/// worse (the control angle jumps by the cut weight's share of the error). Also tried on
+/// seeds 1-8 and reverted (issue 14 item 4): re-seeding the observer from HFI whenever it
+/// parts from it by more than 20 deg inside the band (seeds 5 and 8 fail: the observer
+/// diverges again within milliseconds of each re-seed, and the industrial motor gets worse,
+/// its HFI being the one off there); keeping the carrier on until the observer agrees within
+/// 20 deg (seed 5 still fails, 796 rpm); that and re-seeding at the top of the band (882
+/// rpm); coasting the tracker while the carrier is off and resuming from its own angle after
+/// a short gap (seed 7 fails instead); the carrier's amplitude at 16 or 19 V instead of 22 V
+/// (HFI loses the axis on most seeds). The outcome moves between seeds with any change, so
+/// seed 5 is a symptom of a band where this sizing's observer is too weak; see
+/// [`traction_ipm_presets_sizing_passes_on_noise_seeds_1_to_8`] (ignored).
 #[test]
 fn traction_ipm_reverses_with_the_presets_sizing() {
     let (max, track) = reversal("traction-ipm");
     assert!(max < 15.0, "angle error {max} deg");
     assert!(track < 0.08 * 3000.0, "speed error {track} rpm");
+}
+
+/// The reversal over the noise seeds 1-8; returns the seeds outside the bounds (angle where
+/// HFI has a say < 15 deg el., worst speed error < `track_max` rpm), with their numbers.
+fn seed_sweep(name: &str, limits: Option<(f64, f64)>, track_max: f64) -> Vec<(u64, f64, f64)> {
+    let mut bad = Vec::new();
+    for seed in 1..=8 {
+        let (max, track) = reversal_seeded(name, limits, Some(seed));
+        println!("{name}: seed {seed}: max {max:.2} deg el., worst speed error {track:.1} rpm");
+        if !(max < 15.0 && track < track_max) {
+            bad.push((seed, max, track));
+        }
+    }
+    bad
+}
+
+/// Robustness over the noise (issue 14 item 4): the reversal of the two tests above that
+/// pass on every seed, the industrial IPM and the traction IPM at 180 A / 300 A, each on the
+/// noise seeds 1-8 (16 runs, about 12 s in release).
+///
+/// Max angle error where HFI has a say / worst speed error (deg el. / rpm), seeds 1-8:
+/// industrial 9.2 / 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35, 11.6 / 30, 11.7 / 43,
+/// 12.9 / 45 (before the weight followed the faster speed estimate: 11.3, 12.7, 8.9,
+/// **16.4**, 14.0, 11.0, 11.6, 14.7 deg); traction at 180 A 1.8-2.9 deg, 23-29 rpm.
+#[test]
+fn reversal_passes_on_noise_seeds_1_to_8() {
+    let bad = seed_sweep("industrial-ipm", None, 0.05 * 1500.0);
+    assert!(
+        bad.is_empty(),
+        "industrial-ipm: seeds out of bounds {bad:?}"
+    );
+    let bad = seed_sweep("traction-ipm", Some((180.0, 300.0)), 0.08 * 3000.0);
+    assert!(
+        bad.is_empty(),
+        "traction-ipm 180 A: seeds out of bounds {bad:?}"
+    );
+}
+
+/// The traction IPM at the preset's sizing over the noise seeds 1-8: fails on seed 5 (the
+/// observer diverges inside the blend band during the first acceleration, the carrier goes
+/// off on HFI's speed while the observer is 44 deg off, and comes back seeded from it;
+/// 1302 rpm worst speed error). Ignored until that is fixed (issue 14 item 4).
+#[test]
+#[ignore = "fails on seed 5 (issue 14 item 4)"]
+fn traction_ipm_presets_sizing_passes_on_noise_seeds_1_to_8() {
+    let bad = seed_sweep("traction-ipm", None, 0.08 * 3000.0);
+    assert!(bad.is_empty(), "traction-ipm: seeds out of bounds {bad:?}");
 }
