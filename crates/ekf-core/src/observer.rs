@@ -844,7 +844,7 @@ impl<T: Float> PmsmObserver<T> {
                     t.rs,
                     t.rs_sigma,
                     t.winding_temperature_c(&slow.k),
-                    t.active,
+                    t.s.active,
                 ),
                 _ => (
                     self.nominal.0,
@@ -926,7 +926,9 @@ impl<T: Float> PmsmObserver<T> {
     /// `[i_a, i_b, w_e, theta]` and its variance (`None` when tracking is off). The cross-
     /// covariance is zero while the tracking is frozen.
     pub fn flux_covariance(&self) -> Option<(Vector4<T>, T)> {
-        self.tracker.as_ref().map(|t| (Vector4::from(t.x), t.c_pp))
+        self.tracker
+            .as_ref()
+            .map(|t| (Vector4::from(t.s.x), t.s.c_pp))
     }
 
     /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.
@@ -958,7 +960,7 @@ impl<T: Float> PmsmObserver<T> {
         t.rs = rs_ohm;
         t.restart(slow, false);
         if let Some(s) = &mut slow.split {
-            s.anchor(psi_f_wb, rs_ohm, t.c_pp, &k);
+            s.anchor(psi_f_wb, rs_ohm, t.s.c_pp, &k);
         }
         self.refresh_rs_constants();
         Ok(())

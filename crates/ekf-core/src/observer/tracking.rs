@@ -261,6 +261,18 @@ pub(super) struct Tracker<T> {
     pub psi: T,
     /// `Rs` used by the model, ohm (the split filter's, or the configured one).
     pub rs: T,
+    /// Reported standard deviations of `psi_f` and `Rs` (refreshed every 64 steps).
+    pub psi_sigma: T,
+    pub rs_sigma: T,
+    /// The fields a step changes (the flux aside).
+    pub s: TrackerStep<T>,
+}
+
+/// The fields of a [`Tracker`] that a step changes (all but `psi`, returned beside it by the
+/// correction, and the values changed only by the slow work): the step's prior, then its
+/// posterior, committed only when the step succeeds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct TrackerStep<T> {
     /// Cross-covariance `X` of `[i_a, i_b, w, th]` with `psi_f`.
     pub x: [T; 4],
     /// Variance of `psi_f`.
@@ -277,27 +289,7 @@ pub(super) struct Tracker<T> {
     pub sum_iq: T,
     pub sum_w: T,
     pub n: u32,
-    /// Reported standard deviations of `psi_f` and `Rs` (refreshed every 64 steps) and the
-    /// steps since.
-    pub psi_sigma: T,
-    pub rs_sigma: T,
-    pub since_sigma: u32,
-}
-
-/// The fields of a [`Tracker`] that a step changes (all but `psi`, returned beside it by the
-/// correction, and the values changed only by the slow work): the step's prior, then its
-/// posterior, committed only when the step succeeds.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct TrackerStep<T> {
-    pub x: [T; 4],
-    pub c_pp: T,
-    pub active: bool,
-    pub settled: u32,
-    pub w_lp: T,
-    pub sum_psi: T,
-    pub sum_iq: T,
-    pub sum_w: T,
-    pub n: u32,
+    /// Steps since the reported deviations were refreshed.
     pub since_sigma: u32,
 }
 
@@ -423,22 +415,24 @@ impl<T: Float> Tracker<T> {
         let tracker = Self {
             psi: psi0,
             rs: rs0,
-            x: [T::zero(); 4],
-            c_pp: k.var0_psi,
-            active: false,
-            settled: 0,
-            w_lp: T::zero(),
-            sum_psi: T::zero(),
-            sum_iq: T::zero(),
-            sum_w: T::zero(),
-            n: 0,
             psi_sigma: k.var0_psi.sqrt(),
             rs_sigma: if split.is_some() {
                 k.var0_rs.sqrt()
             } else {
                 T::zero()
             },
-            since_sigma: 0,
+            s: TrackerStep {
+                x: [T::zero(); 4],
+                c_pp: k.var0_psi,
+                active: false,
+                settled: 0,
+                w_lp: T::zero(),
+                sum_psi: T::zero(),
+                sum_iq: T::zero(),
+                sum_w: T::zero(),
+                n: 0,
+                since_sigma: 0,
+            },
         };
         (tracker, TrackerSlow { k, split })
     }
@@ -459,7 +453,7 @@ impl<T: Float> Tracker<T> {
         let w2 = w * w;
         // Steady speed: within 1 % plus three of its standard deviations of its low-pass
         // (time constant 64 samples).
-        let w_lp = self.w_lp + (w - self.w_lp) * to_t::<T>(1.0 / 64.0);
+        let w_lp = self.s.w_lp + (w - self.s.w_lp) * to_t::<T>(1.0 / 64.0);
         let dw = w - w_lp;
         let steady = dw * dw <= w_var * to_t(9.0) + w2 * to_t(1e-4);
         if !(angle_tracking && steady && w2 >= k.min_speed2 && w_var * to_t(25.0) <= w2) {
@@ -469,17 +463,17 @@ impl<T: Float> Tracker<T> {
                 settled: 0,
             };
         }
-        if self.settled < k.settle_samples {
+        if self.s.settled < k.settle_samples {
             return Activity {
                 active: false,
                 w_lp,
-                settled: self.settled + 1,
+                settled: self.s.settled + 1,
             };
         }
         Activity {
             active: true,
             w_lp,
-            settled: self.settled,
+            settled: self.s.settled,
         }
     }
 
@@ -497,7 +491,7 @@ impl<T: Float> Tracker<T> {
         pm: &mut Sym4<T>,
         a: Activity<T>,
     ) -> TrackerStep<T> {
-        let since_sigma = self.since_sigma + 1;
+        let since_sigma = self.s.since_sigma + 1;
         let Activity {
             active,
             w_lp,
@@ -508,22 +502,22 @@ impl<T: Float> Tracker<T> {
             // exactly, at the frozen value); its correlation with the state is dropped.
             return TrackerStep {
                 x: [T::zero(); 4],
-                c_pp: self.c_pp,
+                c_pp: self.s.c_pp,
                 active,
                 settled,
                 w_lp,
-                sum_psi: self.sum_psi,
-                sum_iq: self.sum_iq,
-                sum_w: self.sum_w,
-                n: self.n,
+                sum_psi: self.s.sum_psi,
+                sum_iq: self.s.sum_iq,
+                sum_w: self.s.sum_w,
+                n: self.s.n,
                 since_sigma,
             };
         }
         let d = disc.decay;
         // Jacobian column of psi_f (current rows): the EMF term per weber.
         let (g0, g1) = (t.ea_psi, t.eb_psi);
-        let c = self.c_pp;
-        let xo = &self.x;
+        let c = self.s.c_pp;
+        let xo = &self.s.x;
         // X- = Phi4 X + Gamma c.
         let (x0, x1) = if S {
             // Full current block of a salient motor.
@@ -555,10 +549,10 @@ impl<T: Float> Tracker<T> {
             c_pp: if c < k.var0_psi { c + k.q_psi } else { c },
             // One sample of the split filter's window: the flux, i_q and w at the start of
             // the period (the posterior the prediction starts from).
-            sum_psi: self.sum_psi + self.psi,
-            sum_iq: self.sum_iq + (x[1] * t.cos_th - x[0] * t.sin_th),
-            sum_w: self.sum_w + x[2],
-            n: self.n + 1,
+            sum_psi: self.s.sum_psi + self.psi,
+            sum_iq: self.s.sum_iq + (x[1] * t.cos_th - x[0] * t.sin_th),
+            sum_w: self.s.sum_w + x[2],
+            n: self.s.n + 1,
             since_sigma,
         }
     }
@@ -604,34 +598,14 @@ impl<T: Float> Tracker<T> {
     /// The changing fields of this tracker as a step (for a correction without prediction).
     #[inline(always)]
     pub fn as_step(&self) -> TrackerStep<T> {
-        TrackerStep {
-            x: self.x,
-            c_pp: self.c_pp,
-            active: self.active,
-            settled: self.settled,
-            w_lp: self.w_lp,
-            sum_psi: self.sum_psi,
-            sum_iq: self.sum_iq,
-            sum_w: self.sum_w,
-            n: self.n,
-            since_sigma: self.since_sigma,
-        }
+        self.s
     }
 
     /// Commits a step (and its flux): the tracker's other fields do not change in a step.
     #[inline(always)]
     pub fn commit(&mut self, s: &TrackerStep<T>, psi: T) {
         self.psi = psi;
-        self.x = s.x;
-        self.c_pp = s.c_pp;
-        self.active = s.active;
-        self.settled = s.settled;
-        self.w_lp = s.w_lp;
-        self.sum_psi = s.sum_psi;
-        self.sum_iq = s.sum_iq;
-        self.sum_w = s.sum_w;
-        self.n = s.n;
-        self.since_sigma = s.since_sigma;
+        self.s = *s;
     }
 
     /// All values of this tracker with the step `s` and flux `psi` committed finite (one
@@ -652,7 +626,7 @@ impl<T: Float> Tracker<T> {
     /// Whether the slow work is due (a full window, or the deviations to refresh).
     #[inline(always)]
     pub fn housekeeping_due(&self, k: &TrackerConstants<T>) -> bool {
-        self.n >= k.window || self.since_sigma >= 64
+        self.s.n >= k.window || self.s.since_sigma >= 64
     }
 
     /// The slow work after a committed step: the split filter's update at the end of a
@@ -661,36 +635,37 @@ impl<T: Float> Tracker<T> {
     #[inline(never)]
     pub fn housekeeping(&mut self, slow: &mut TrackerSlow<T>) {
         let k = &slow.k;
-        if self.n >= k.window {
-            let (sum_psi, sum_iq, sum_w, n) = (self.sum_psi, self.sum_iq, self.sum_w, self.n);
+        if self.s.n >= k.window {
+            let (sum_psi, sum_iq, sum_w, n) =
+                (self.s.sum_psi, self.s.sum_iq, self.s.sum_w, self.s.n);
             self.clear_window();
             if let Some(s) = &mut slow.split {
                 let before = *s;
-                match s.update(self.rs, self.c_pp, (sum_psi, sum_iq, sum_w, n), k) {
+                match s.update(self.rs, self.s.c_pp, (sum_psi, sum_iq, sum_w, n), k) {
                     Some(rs) if s.finite() => self.rs = rs,
                     Some(_) => *s = before,
                     None => {}
                 }
             }
         }
-        if self.since_sigma >= 64 {
-            self.since_sigma = 0;
-            self.psi_sigma = self.c_pp.sqrt();
+        if self.s.since_sigma >= 64 {
+            self.s.since_sigma = 0;
+            self.psi_sigma = self.s.c_pp.sqrt();
             self.rs_sigma = slow.split.map_or(T::zero(), |s| s.c11.sqrt());
         }
     }
 
     fn clear_window(&mut self) {
-        self.sum_psi = T::zero();
-        self.sum_iq = T::zero();
-        self.sum_w = T::zero();
-        self.n = 0;
+        self.s.sum_psi = T::zero();
+        self.s.sum_iq = T::zero();
+        self.s.sum_w = T::zero();
+        self.s.n = 0;
     }
 
     /// After a branch flip (`w = -w`): the speed row of `X` changes sign; the window
     /// restarts.
     pub fn flip_speed(&mut self) {
-        self.x[2] = -self.x[2];
+        self.s.x[2] = -self.s.x[2];
         self.clear_window();
     }
 
@@ -708,9 +683,9 @@ impl<T: Float> Tracker<T> {
         };
         self.psi = keep(self.psi, k.psi0, k.psi_min, k.psi_max);
         self.rs = keep(self.rs, k.rs0, k.rs_min, k.rs_max);
-        self.x = [T::zero(); 4];
-        if covariance || !self.c_pp.is_finite() {
-            self.c_pp = k.var0_psi;
+        self.s.x = [T::zero(); 4];
+        if covariance || !self.s.c_pp.is_finite() {
+            self.s.c_pp = k.var0_psi;
         }
         if let Some(s) = &mut slow.split {
             s.psi = keep(s.psi, k.psi0, k.psi_min, k.psi_max);
@@ -722,9 +697,9 @@ impl<T: Float> Tracker<T> {
             }
         }
         self.clear_window();
-        self.active = false;
-        self.settled = 0;
-        self.since_sigma = 64;
+        self.s.active = false;
+        self.s.settled = 0;
+        self.s.since_sigma = 64;
         self.housekeeping(slow);
     }
 
