@@ -535,6 +535,99 @@ impl<T: Float> PmsmObserver<T> {
         }
     }
 
+    /// Fuses an external measurement of the rotor angle `theta_rad` (rad el., e.g. from
+    /// high-frequency injection) of variance `variance_rad2` (rad^2) into the current
+    /// estimate: one scalar Kalman correction with `H = [0 0 0 1]`, after a
+    /// [`step`](Self::step) and before the next.
+    ///
+    /// ```text
+    /// y = wrap(theta - th),  S = P33 + r,  k = P[:, 3] / S
+    /// x += k y  (angle wrapped),  P -= P[:, 3] P[3, :] / S   (P33 = P33 r / S)
+    /// ```
+    ///
+    /// With the parameter tracking active the flux takes its share too (its
+    /// cross-covariance with the angle over `S`; clamped to its range like a step's); frozen,
+    /// that cross-covariance is zero and nothing of the tracking changes. The innovation gate,
+    /// the branch check and the lock are not involved; the covariance health check runs after
+    /// it (a reset as after [`predict`](Self::predict)). Returns the new estimate.
+    ///
+    /// Refused, nothing changed: a non-finite angle or variance, or a variance not above zero
+    /// ([`EkfError::NonFiniteMeasurement`]), or a non-finite result
+    /// ([`EkfError::NonFiniteResult`]).
+    pub fn correct_angle(&mut self, theta_rad: T, variance_rad2: T) -> Result<Estimate<T>, EkfError> {
+        let z = T::zero();
+        if !(theta_rad.is_finite() && variance_rad2.is_finite() && variance_rad2 > z) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        let p = &self.p;
+        let s = p.p33 + variance_rad2;
+        let inv_s = T::one() / s;
+        let y = wrap_angle(theta_rad - self.x[3]);
+        // The angle's column of P and the gain.
+        let c = [p.p03, p.p13, p.p23, p.p33];
+        let k = [c[0] * inv_s, c[1] * inv_s, c[2] * inv_s, c[3] * inv_s];
+        let mut x = self.x;
+        for (xi, ki) in x.iter_mut().zip(&k) {
+            *xi += *ki * y;
+        }
+        x[3] = wrap_angle(x[3]);
+        let pn = Sym4 {
+            p00: p.p00 - k[0] * c[0],
+            p01: p.p01 - k[0] * c[1],
+            p02: p.p02 - k[0] * c[2],
+            // `P03 - P03 P33 / S = P03 r / S`: the forms that cannot change sign.
+            p03: c[0] * variance_rad2 * inv_s,
+            p11: p.p11 - k[1] * c[1],
+            p12: p.p12 - k[1] * c[2],
+            p13: c[1] * variance_rad2 * inv_s,
+            p22: p.p22 - k[2] * c[2],
+            p23: c[2] * variance_rad2 * inv_s,
+            p33: c[3] * variance_rad2 * inv_s,
+        };
+        // The flux (tracking active): its cross-covariance `X` with the state.
+        let tn = match (&self.tracker, &self.slow) {
+            (Some(t), Some(slow)) if t.s.active => {
+                let kx = &slow.k;
+                let l = t.s.x[3];
+                let kp = l * inv_s;
+                let xn = [
+                    t.s.x[0] - k[0] * l,
+                    t.s.x[1] - k[1] * l,
+                    t.s.x[2] - k[2] * l,
+                    l * variance_rad2 * inv_s,
+                ];
+                let cpp = t.s.c_pp - kp * l;
+                let floor = T::default_epsilon() * kx.var0_psi;
+                let psi = t.psi + kp * y;
+                let psi = if psi < kx.psi_min {
+                    kx.psi_min
+                } else if psi > kx.psi_max {
+                    kx.psi_max
+                } else {
+                    psi
+                };
+                Some((xn, if cpp > floor { cpp } else { floor }, psi))
+            }
+            _ => None,
+        };
+        let tracker_finite = tn.is_none_or(|(xn, cpp, psi)| finite(&xn) && (cpp + psi).is_finite());
+        if !(finite(x.as_slice()) && pn.all_finite() && tracker_finite) {
+            return Err(EkfError::NonFiniteResult);
+        }
+        self.x = x;
+        self.p = pn;
+        if let (Some((xn, cpp, psi)), Some(t)) = (tn, &mut self.tracker) {
+            t.s.x = xn;
+            t.s.c_pp = cpp;
+            t.psi = psi;
+        }
+        // The step's events stay reported (a reset below adds its own).
+        if self.unhealthy(&self.x, &self.p) {
+            self.self_reset(None);
+        }
+        Ok(self.estimate())
+    }
+
     /// Correction of the prior `(xm, pm)` with the currents `i`, innovation gate, branch check
     /// and covariance health (module docs).
     #[inline(always)]

@@ -827,6 +827,16 @@ impl Foc {
                 reframe_from: None,
             }
         } else {
+            // HFI's angle fused into the observer while HFI has a say (module [`crate::hfi`],
+            // "Hand-over band"); the observer keeps its estimate if refused.
+            let mut est = *est;
+            if observer_ok
+                && let Some(var) = h.fusion_variance()
+                && let Ok(e) = self.observer.correct_angle(h.tracker.theta(), var)
+            {
+                est = e;
+            }
+            let est = &est;
             let b = h.blend(est.theta_rad, est.omega_e_rad_s);
             if let Some((theta, omega)) = b.reseed {
                 let seed = Seed {

@@ -306,7 +306,14 @@ pub struct HfiConfig {
     /// Run the polarity test (`false`: the angle the loop settles on is taken as it is,
     /// which is right only if the rotor's d axis is known to be within 90 deg of the start).
     pub detect_polarity: bool,
+    /// Fusion of HFI's angle into the observer (module docs, "Hand-over band"): standard
+    /// deviation of HFI's angle as a per-tick measurement of the observer's angle at observer
+    /// weight 0, rad el. (the variance grows as `1 / (1 - weight)`); 0 turns the fusion off.
+    pub fusion_sigma_rad: f32,
 }
+
+/// Default [`HfiConfig::fusion_sigma_rad`], rad el.
+pub const HFI_FUSION_SIGMA_RAD: f32 = 0.1;
 
 /// Peak angle error (rad el.) of the tracking loop after a step `a` of the load's acceleration,
 /// times `w_n^2 / a` (triple pole at `-w_n`).
@@ -446,6 +453,13 @@ impl HfiConfig {
             settle_time_s: 0.06,
             pulse_time_s: 0.02,
             detect_polarity: true,
+            // With a long carrier period HFI is the weak side at the top of the band (module
+            // docs, "Hand-over band"): no fusion.
+            fusion_sigma_rad: if h * 2.0 * f32::from(n) * cfg.ts_s > HFI_PERIOD_ANGLE_RAD {
+                0.0
+            } else {
+                HFI_FUSION_SIGMA_RAD
+            },
         };
         c.validate(cfg, u_dc_nominal_v)?;
         Ok(c)
@@ -1141,6 +1155,20 @@ impl HfiDrive {
                 self.phase = HfiPhase::Tracking;
                 None
             }
+        }
+    }
+
+    /// The variance (rad^2) with which HFI's angle is fused into the observer this tick
+    /// (module docs, "Hand-over band"): while tracking with the carrier on and the observer's
+    /// weight below 1, `fusion_sigma^2 / (1 - weight)` (the last tick's weight); `None`
+    /// otherwise or with the fusion off.
+    #[inline]
+    pub fn fusion_variance(&self) -> Option<f32> {
+        let s = self.cfg.fusion_sigma_rad;
+        if self.phase == HfiPhase::Tracking && self.injecting && self.weight < 1.0 && s > 0.0 {
+            Some(s * s / (1.0 - self.weight))
+        } else {
+            None
         }
     }
 

@@ -119,6 +119,9 @@ fn run(sc: &Scenario) -> Run {
     if let Ok(x) = std::env::var("HFI_V") {
         hfi.injection_v = x.parse().unwrap_or(0.0);
     }
+    if let Ok(x) = std::env::var("HFI_FUSE") {
+        hfi.fusion_sigma_rad = x.parse().unwrap_or(0.0);
+    }
     drive
         .foc_mut()
         .enable_hfi(&hfi, u_dc)
@@ -539,7 +542,10 @@ fn seed_sweep(name: &str, limits: Option<(f64, f64)>, track_max: f64) -> Vec<(u6
     let mut bad = Vec::new();
     for seed in 1..=8 {
         let (max, track) = reversal_seeded(name, limits, Some(seed));
-        println!("{name}: seed {seed}: max {max:.2} deg el., worst speed error {track:.1} rpm");
+        let sizing = limits.map_or("preset's sizing".to_string(), |(l, a)| format!("{l} A / {a} A"));
+        println!(
+            "{name} ({sizing}): seed {seed}: max {max:.2} deg el., worst speed error {track:.1} rpm"
+        );
         if !(max < 15.0 && track < track_max) {
             bad.push((seed, max, track));
         }
