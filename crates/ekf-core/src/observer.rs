@@ -554,7 +554,11 @@ impl<T: Float> PmsmObserver<T> {
     /// Refused, nothing changed: a non-finite angle or variance, or a variance not above zero
     /// ([`EkfError::NonFiniteMeasurement`]), or a non-finite result
     /// ([`EkfError::NonFiniteResult`]).
-    pub fn correct_angle(&mut self, theta_rad: T, variance_rad2: T) -> Result<Estimate<T>, EkfError> {
+    pub fn correct_angle(
+        &mut self,
+        theta_rad: T,
+        variance_rad2: T,
+    ) -> Result<Estimate<T>, EkfError> {
         let z = T::zero();
         if !(theta_rad.is_finite() && variance_rad2.is_finite() && variance_rad2 > z) {
             return Err(EkfError::NonFiniteMeasurement);

@@ -227,6 +227,8 @@ pub enum HfiField {
     PulseTime,
     /// The current sensors' noise given to [`HfiConfig::with_current_noise`].
     CurrentNoise,
+    /// [`HfiConfig::fusion_sigma_rad`] (finite, 0 or more).
+    FusionSigma,
 }
 
 /// Why HFI was refused.
@@ -313,7 +315,7 @@ pub struct HfiConfig {
 }
 
 /// Default [`HfiConfig::fusion_sigma_rad`], rad el.
-pub const HFI_FUSION_SIGMA_RAD: f32 = 0.1;
+pub const HFI_FUSION_SIGMA_RAD: f32 = 0.03;
 
 /// Peak angle error (rad el.) of the tracking loop after a step `a` of the load's acceleration,
 /// times `w_n^2 / a` (triple pole at `-w_n`).
@@ -511,6 +513,9 @@ impl HfiConfig {
         }
         if !(self.pulse_time_s >= 20.0 * cfg.ts_s && self.pulse_time_s <= 60.0) {
             return Err(HfiError::OutOfRange(F::PulseTime));
+        }
+        if !(self.fusion_sigma_rad.is_finite() && self.fusion_sigma_rad >= 0.0) {
+            return Err(HfiError::OutOfRange(F::FusionSigma));
         }
         Ok(())
     }
@@ -1587,6 +1592,53 @@ mod tests {
             );
             assert!(result.1 > 1.05 || result.1 < 1.0 / 1.05, "{result:?}");
         }
+    }
+
+    #[test]
+    fn fusion_is_on_with_a_short_carrier_period_and_fades_with_the_weight() {
+        // The traction IPM at 20 kHz (short carrier period): on; the industrial IPM at 10 kHz
+        // with the simulator's sizing (`N = 4`, band top 87 rad/s: 0.07 rad per carrier
+        // period, its HFI the weak side at the top of the band): off.
+        let mut tr = FocConfig::new(MotorParams::traction_ipm(), 5e-5, 48.0);
+        tr.current_limit_a = 250.0;
+        let h = HfiConfig::new(&tr, 48.0).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(h.fusion_sigma_rad, HFI_FUSION_SIGMA_RAD, "{h:?}");
+        let mut d = HfiDrive::new(&tr, &h);
+        assert!(!d.weight_on_faster);
+        let mut ind = ipm();
+        ind.current_limit_a = 12.0;
+        ind.startup.handover_speed_rad_s = 87.0;
+        let long = HfiConfig::new(&ind, 540.0).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(long.fusion_sigma_rad, 0.0, "{long:?}");
+        assert!(HfiDrive::new(&ind, &long).weight_on_faster);
+        // Not while the standstill test runs.
+        assert_eq!(d.fusion_variance(), None);
+        d.phase = HfiPhase::Tracking;
+        let v0 = HFI_FUSION_SIGMA_RAD * HFI_FUSION_SIGMA_RAD;
+        assert_eq!(d.fusion_variance(), Some(v0));
+        d.weight = 0.75;
+        let v = d.fusion_variance().unwrap_or(0.0);
+        assert!((v - 4.0 * v0).abs() < 1e-6 * v0, "{v}");
+        d.weight = 1.0;
+        assert_eq!(d.fusion_variance(), None);
+        d.weight = 0.5;
+        d.injecting = false;
+        assert_eq!(d.fusion_variance(), None);
+        d.injecting = true;
+        d.cfg.fusion_sigma_rad = 0.0;
+        assert_eq!(d.fusion_variance(), None);
+        // Checked: finite and not negative.
+        for x in [-0.1, f32::NAN, f32::INFINITY] {
+            let mut bad = h;
+            bad.fusion_sigma_rad = x;
+            assert_eq!(
+                bad.validate(&tr, 48.0),
+                Err(HfiError::OutOfRange(HfiField::FusionSigma))
+            );
+        }
+        let mut off = h;
+        off.fusion_sigma_rad = 0.0;
+        assert_eq!(off.validate(&tr, 48.0), Ok(()));
     }
 
     #[test]

@@ -9,7 +9,8 @@
 //! the noise seed, `HFI_NOISE` the current noise (A), `HFI_DT` the dead time (s), `HFI_CBW`
 //! the current-loop bandwidth (Hz), `HFI_TH0` the hold's start angle (rad), `HFI_NOTRACK`
 //! turns the observer's online `psi_f`/`Rs` tracking off, `HFI_DUMP=prefix` writes a CSV per
-//! run.
+//! run, `HFI_FUSE` sets the standard deviation of HFI's angle fused into the observer (rad,
+//! where the defaults fuse), `HFI_SEEDS=a-b` the seeds of the sweeps.
 //!
 //! The plant gets the simulator's optional d-axis saturation (`RunOptions::d_saturation`:
 //! `Ld` falls by 20 % at `+current_limit`, nothing for negative `i_d`), which the polarity
@@ -119,7 +120,9 @@ fn run(sc: &Scenario) -> Run {
     if let Ok(x) = std::env::var("HFI_V") {
         hfi.injection_v = x.parse().unwrap_or(0.0);
     }
-    if let Ok(x) = std::env::var("HFI_FUSE") {
+    if let Ok(x) = std::env::var("HFI_FUSE")
+        && hfi.fusion_sigma_rad > 0.0
+    {
         hfi.fusion_sigma_rad = x.parse().unwrap_or(0.0);
     }
     drive
@@ -540,9 +543,19 @@ fn traction_ipm_reverses_with_the_presets_sizing() {
 /// HFI has a say < 15 deg el., worst speed error < `track_max` rpm), with their numbers.
 fn seed_sweep(name: &str, limits: Option<(f64, f64)>, track_max: f64) -> Vec<(u64, f64, f64)> {
     let mut bad = Vec::new();
-    for seed in 1..=8 {
+    // Diagnostics: `HFI_SEEDS=a-b` sweeps other seeds.
+    let (first, last) = std::env::var("HFI_SEEDS")
+        .ok()
+        .and_then(|x| {
+            let (a, b) = x.split_once('-')?;
+            Some((a.parse().ok()?, b.parse().ok()?))
+        })
+        .unwrap_or((1, 8));
+    for seed in first..=last {
         let (max, track) = reversal_seeded(name, limits, Some(seed));
-        let sizing = limits.map_or("preset's sizing".to_string(), |(l, a)| format!("{l} A / {a} A"));
+        let sizing = limits.map_or("preset's sizing".to_string(), |(l, a)| {
+            format!("{l} A / {a} A")
+        });
         println!(
             "{name} ({sizing}): seed {seed}: max {max:.2} deg el., worst speed error {track:.1} rpm"
         );
