@@ -131,7 +131,11 @@
 //!   period, their voltage limit is lowered by the carrier's amplitude, and the observer is
 //!   fed the fundamental (the carrier's voltage out of its input, the carrier's predicted
 //!   current out of the sample); the speed loop's torque command is fed forward to the
-//!   tracking loop.
+//!   tracking loop;
+//! - while HFI has a say (carrier on, observer weight below 1) and the carrier period is short,
+//!   HFI's angle is also fused into the observer after its step, as a measurement of its angle
+//!   whose variance grows as the weight rises ([`crate::hfi`], "Hand-over band"); the blend
+//!   takes the corrected observer angle and speed, the telemetry the step's estimate.
 //!
 //! # Cost
 //!
@@ -828,16 +832,17 @@ impl Foc {
             }
         } else {
             // HFI's angle fused into the observer while HFI has a say (module [`crate::hfi`],
-            // "Hand-over band"); the observer keeps its estimate if refused.
-            let mut est = *est;
+            // "Hand-over band"); the observer keeps its estimate if refused. (The tick's
+            // telemetry keeps the step's estimate.)
+            let (mut theta_o, mut omega_o) = (est.theta_rad, est.omega_e_rad_s);
             if observer_ok
                 && let Some(var) = h.fusion_variance()
-                && let Ok(e) = self.observer.correct_angle(h.tracker.theta(), var)
+                && self.observer.correct_angle(h.tracker.theta(), var).is_ok()
             {
-                est = e;
+                let x = self.observer.state();
+                (theta_o, omega_o) = (x[3], x[2]);
             }
-            let est = &est;
-            let b = h.blend(est.theta_rad, est.omega_e_rad_s);
+            let b = h.blend(theta_o, omega_o);
             if let Some((theta, omega)) = b.reseed {
                 let seed = Seed {
                     theta,
