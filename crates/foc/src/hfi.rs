@@ -166,17 +166,19 @@
 //! the bottom of the band, gone at the top, so that the observer arrives at the carrier's
 //! switch-off where HFI is, its speed consistent with it. Measured on the traction IPM at the
 //! preset's sizing (250 A, ADC 400 A) over the reversal of `tests/hfi.rs`, noise seeds 1-24:
-//! 21 of 24 within the bounds without it (seeds 5, 19, 24: the observer drifts off in the
-//! band, 1282-1515 rpm speed error), 24 of 24 with it (max 9.0 deg el., 52 rpm). Other
-//! values of `sigma_f` (seeds 1-8; 9-24 too from 0.01 to 0.1): 0.0003, 0.003, 0.07, 0.15, 0.2
-//! pass 1-8; 0.05 and 0.1 pass all 24 (0.1 at 14.99 deg on seed 22, the bound is 15); 0.001
-//! fails seed 2, 0.01 seed 14, 0.02 seed 11 (25 deg, about 500 rpm each: the observer, about
-//! as sure of its angle as of HFI's, puts the carrier's switch-off transient into its speed,
-//! +208 rad/s el. within a tick on seed 2, and the speed loop drops the torque), 0.3 seed 1
-//! (2102 rpm). Off with a
-//! long carrier period (the same test as the weight's above): there HFI is the weak side at
-//! the top of the band, and fusing it (0.1 rad) took the industrial IPM from 8 to 4 of
-//! seeds 1-8 within 15 deg.
+//! 21 of 24 within the bounds without it (seeds 5, 19, 24 at 1302, 1515, 1282 rpm speed
+//! error; on seed 5 the observer drifts off inside the band, `tests/hfi.rs`), 24 of 24 with
+//! it (max 9.0 deg el., 35 rpm); at 180 A with a 300 A ADC 24 of 24 (max 3.5 deg, 30 rpm;
+//! seeds 1-8 passed before too). Other values of `sigma_f` (measured with an earlier rounding
+//! of the same update, on which 0.03 passed all 24 as well; seeds 1-8, and 9-24 from 0.01 to
+//! 0.1): 0.0003, 0.003, 0.07, 0.15, 0.2 pass 1-8; 0.05 and 0.1 pass all 24 (0.1 at 14.99 deg
+//! on seed 22, the bound is 15); 0.001 fails seed 2, 0.01 seed 14, 0.02 seed 11 (23-27 deg,
+//! 474-536 rpm; on the one looked at, seed 2 at 0.001, the observer puts the carrier's
+//! switch-off transient into its speed, +208 rad/s el. within a tick, and the speed loop
+//! drops the torque), 0.3 seed 1 (2102 rpm). Off with a long carrier
+//! period (the same test as the weight's above): there HFI is the weak side at the top of
+//! the band, and fusing it (0.1 rad) took the industrial IPM from 8 to 4 of seeds 1-8
+//! within 15 deg.
 //!
 //! # Current feedback and voltage
 //!
