@@ -95,6 +95,20 @@ pub(crate) fn to_vec(arr: &RealArray<'_>, name: &str) -> PyResult<Vec<f64>> {
     Ok(out)
 }
 
+/// Copies the elements of `arr`, row-major, into `dst` (of the same length; the rest of
+/// the longer one is left). A C-contiguous array is copied as one slice.
+pub(crate) fn copy_into(arr: &RealArray<'_>, dst: &mut [f64]) {
+    let a = arr.as_array();
+    match a.as_slice() {
+        Some(s) if s.len() == dst.len() => dst.copy_from_slice(s),
+        _ => {
+            for (d, x) in dst.iter_mut().zip(a.iter()) {
+                *d = *x;
+            }
+        }
+    }
+}
+
 /// An `(N, 2)` real array (not copied); ValueError naming the argument for another shape.
 pub(crate) fn rows2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<RealArray<'py>> {
     let arr = real_array(obj, name)?;

@@ -15,7 +15,7 @@ use ekf_core::{
 };
 use std::sync::{Mutex, PoisonError};
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods, ToPyArray};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -429,54 +429,71 @@ const PREFAULT_MIN_ROWS: usize = 1 << 16;
 /// Rows per block handed from the page-mapping thread to the filter.
 const PREFAULT_BLOCK_ROWS: usize = 1 << 14;
 
-/// `run`'s loop over freshly allocated output arrays, with their first writes (page faults
-/// and the kernel's zeroing, about a third of a step's time per row) moved to a second
-/// thread. That thread takes the blocks of rows in order, maps their pages, and hands each
-/// block to the filter through a channel, so each block is written by one thread at a time;
-/// the filter's results do not depend on it. Without a second thread (spawn refused) the loop
-/// runs alone, as in [`Observer::run`].
-fn run_prefaulted(
+/// Where `run`'s loop writes its rows: straight into the columns, or into the blocks that
+/// the page-mapping thread of [`map_ahead`] hands over in row order.
+enum Sink<'a> {
+    Direct(Columns<'a>),
+    Mapped(std::sync::mpsc::Receiver<Columns<'a>>),
+}
+
+/// Starts the page-mapping thread on freshly allocated output columns: it takes the blocks
+/// of rows in order, maps their pages (the page faults and the kernel's zeroing: about a
+/// tenth of a step's time per row), and hands each block to the filter through a channel,
+/// so each block is written by one thread at a time; the filter's results do not depend on
+/// it. Started before the inputs are copied, it has mapped the first blocks when the filter
+/// starts. Without a second thread (spawn refused) the columns are written directly.
+fn map_ahead<'scope, 'a: 'scope>(
+    s: &'scope std::thread::Scope<'scope, '_>,
+    cols: Columns<'a>,
+) -> Sink<'a> {
+    use std::sync::mpsc::channel;
+    let (to_mapper, whole) = channel::<Columns<'a>>();
+    let (to_filter, mapped) = channel::<Columns<'a>>();
+    let mapper = std::thread::Builder::new()
+        .name("pyfoc-prefault".into())
+        .spawn_scoped(s, move || {
+            let Ok(mut rest) = whole.recv() else { return };
+            while rest.len() > 0 {
+                let (mut b, r) = rest.split(PREFAULT_BLOCK_ROWS);
+                rest = r;
+                b.prefault();
+                if to_filter.send(b).is_err() {
+                    return;
+                }
+            }
+        });
+    if mapper.is_err() {
+        return Sink::Direct(cols);
+    }
+    // The mapper waits on this channel; a refused send gives the columns back.
+    match to_mapper.send(cols) {
+        Ok(()) => Sink::Mapped(mapped),
+        Err(e) => Sink::Direct(e.0),
+    }
+}
+
+/// `run`'s loop over the rows of `u`, `i` into `sink`; returns the last row's voltage.
+fn run_sink(
     obs: &mut Observer,
     mut prev: [f64; 2],
     u: &[f64],
     i: &[f64],
-    mut cols: Columns<'_>,
+    sink: Sink<'_>,
 ) -> [f64; 2] {
-    use std::sync::mpsc::channel;
-    std::thread::scope(|s| {
-        let (to_mapper, whole) = channel::<Columns<'_>>();
-        let (to_filter, mapped) = channel::<Columns<'_>>();
-        let mapper = std::thread::Builder::new()
-            .name("pyfoc-prefault".into())
-            .spawn_scoped(s, move || {
-                let Ok(mut rest) = whole.recv() else { return };
-                while rest.len() > 0 {
-                    let (mut b, r) = rest.split(PREFAULT_BLOCK_ROWS);
-                    rest = r;
-                    b.prefault();
-                    if to_filter.send(b).is_err() {
-                        return;
-                    }
-                }
-            });
-        if mapper.is_err() {
-            return obs.run(prev, u, i, &mut cols);
+    match sink {
+        Sink::Direct(mut cols) => obs.run(prev, u, i, &mut cols),
+        Sink::Mapped(blocks) => {
+            // Blocks arrive in row order; a panic of the mapper (it has no panicking
+            // operation) would end the channel early and resurface from the thread scope.
+            let mut k0 = 0;
+            for mut b in blocks {
+                let k1 = k0 + b.len();
+                prev = obs.run(prev, &u[2 * k0..2 * k1], &i[2 * k0..2 * k1], &mut b);
+                k0 = k1;
+            }
+            prev
         }
-        // The mapper waits on this channel; a refused send gives the columns back.
-        if let Err(e) = to_mapper.send(cols) {
-            cols = e.0;
-            return obs.run(prev, u, i, &mut cols);
-        }
-        // Blocks arrive in row order; a panic of the mapper (it has no panicking operation)
-        // would end the channel early and resurface from `scope`.
-        let mut k0 = 0;
-        for mut b in mapped {
-            let k1 = k0 + b.len();
-            prev = obs.run(prev, &u[2 * k0..2 * k1], &i[2 * k0..2 * k1], &mut b);
-            k0 = k1;
-        }
-        prev
-    })
+    }
 }
 
 /// `run`'s output arrays: the [`OUTPUTS`] columns and the status codes.
@@ -484,6 +501,13 @@ type OutArrays<'py> = (
     [Bound<'py, PyArray1<f64>>; OUTPUTS.len()],
     Bound<'py, PyArray1<i8>>,
 );
+
+/// `run`'s outputs: a caller's arrays (and their dict), or fresh ones (the float columns as
+/// the rows of one array, and the status codes).
+enum Outs<'py> {
+    Given(OutArrays<'py>, Bound<'py, PyDict>),
+    Fresh(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<i8>>),
+}
 
 /// The output arrays of `run` in a caller's `out` dict, checked: each present, of its dtype,
 /// one-dimensional of length `n`, C-contiguous, writable, and no two overlapping (all of
@@ -707,7 +731,7 @@ impl Ekf {
             )));
         }
         let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
-        let given = out.as_ref().map(|d| out_arrays(d, n)).transpose()?;
+        let given = out.map(|d| out_arrays(&d, n).map(|a| (a, d))).transpose()?;
         // The copies of both inputs and the output columns, probed at once.
         let out_bytes = if given.is_some() {
             0
@@ -716,45 +740,75 @@ impl Ekf {
         };
         convert::ensure_memory(n as u128 * (32 + out_bytes), "run")?;
         // Private copies of the inputs (no other thread can change them while the GIL is
-        // released) and the output arrays, all allocated by numpy.
-        // (In row-major order: a Fortran-ordered input is rearranged first.)
-        let c_copy = |a: &convert::RealArray<'py>| a.as_array().as_standard_layout().to_pyarray(py);
-        let (u, i) = (c_copy(&u), c_copy(&i));
-        let (u, i) = (u.readonly(), i.readonly());
-        let (u, i) = (contiguous(u.as_slice())?, contiguous(i.as_slice())?);
-        let fresh = given.is_none();
-        let (values, status) = given.unwrap_or_else(|| {
-            (
-                core::array::from_fn(|_| PyArray1::zeros(py, n, false)),
+        // released), row-major, in one numpy allocation: the rows of `u_ab`, then those of
+        // `i_ab`. Copied below with the GIL held, while the page-mapping thread starts.
+        let inputs = PyArray1::<f64>::zeros(py, 4 * n, false);
+        let mut inputs_rw = inputs.readwrite();
+        let (u_copy, i_copy) = contiguous(inputs_rw.as_slice_mut())?.split_at_mut(2 * n);
+        // Fresh outputs: the float columns are the rows of one (len(OUTPUTS), N) array (one
+        // allocation, which the kernel backs with 2 MiB pages nearly whole: half the cost
+        // of the first writes to separate 8 MB arrays, whose unaligned ends are 4 KiB pages),
+        // handed out as its row views; the status codes are a second array.
+        let outs = match given {
+            Some((arrays, d)) => Outs::Given(arrays, d),
+            None => Outs::Fresh(
+                PyArray2::<f64>::zeros(py, [OUTPUTS.len(), n], false),
                 PyArray1::<i8>::zeros(py, n, false),
-            )
-        });
+            ),
+        };
         {
-            // `out_arrays` checked that these borrows succeed (writable, not shared).
-            let mut rw = values.each_ref().map(|a| a.readwrite());
-            let mut st = status.readwrite();
+            // The write borrows (`out_arrays` checked that those of given arrays succeed:
+            // writable, not shared), alive while the filter writes through `cols`.
+            let mapped = matches!(outs, Outs::Fresh(..)) && n >= PREFAULT_MIN_ROWS;
+            let mut given_rw = match &outs {
+                Outs::Given((v, _), _) => Some(v.each_ref().map(|a| a.readwrite())),
+                Outs::Fresh(..) => None,
+            };
+            let mut fresh_rw = match &outs {
+                Outs::Fresh(v, _) => Some(v.readwrite()),
+                Outs::Given(..) => None,
+            };
+            let mut status_rw = match &outs {
+                Outs::Given((_, st), _) | Outs::Fresh(_, st) => st.readwrite(),
+            };
             let mut cols = Columns {
                 values: Default::default(),
-                status: contiguous(st.as_slice_mut())?,
+                status: contiguous(status_rw.as_slice_mut())?,
             };
-            for (dst, r) in cols.values.iter_mut().zip(rw.iter_mut()) {
-                *dst = contiguous(r.as_slice_mut())?;
+            if let Some(rw) = &mut given_rw {
+                for (dst, r) in cols.values.iter_mut().zip(rw.iter_mut()) {
+                    *dst = contiguous(r.as_slice_mut())?;
+                }
             }
-            self.with(py, move |inner| {
-                let prev = u_prev.unwrap_or(inner.u_last);
-                inner.u_last = if fresh && n >= PREFAULT_MIN_ROWS {
-                    run_prefaulted(&mut inner.observer, prev, u, i, cols)
+            if let Some(rw) = &mut fresh_rw {
+                let mut rest = contiguous(rw.as_slice_mut())?;
+                for dst in cols.values.iter_mut() {
+                    (*dst, rest) = rest.split_at_mut(n.min(rest.len()));
+                }
+            }
+            std::thread::scope(|s| {
+                // The page-mapping thread starts first, and maps while the inputs are copied.
+                let sink = if mapped {
+                    map_ahead(s, cols)
                 } else {
-                    inner.observer.run(prev, u, i, &mut cols)
+                    Sink::Direct(cols)
                 };
+                convert::copy_into(&u, u_copy);
+                convert::copy_into(&i, i_copy);
+                let (u, i) = (&*u_copy, &*i_copy);
+                self.with(py, move |inner| {
+                    let prev = u_prev.unwrap_or(inner.u_last);
+                    inner.u_last = run_sink(&mut inner.observer, prev, u, i, sink);
+                });
             });
         }
-        if let Some(d) = out {
-            return Ok(d);
-        }
+        let (values, status) = match outs {
+            Outs::Given(_, d) => return Ok(d),
+            Outs::Fresh(values, status) => (values, status),
+        };
         let out = PyDict::new(py);
-        for (name, col) in OUTPUTS.iter().zip(values) {
-            out.set_item(name, col)?;
+        for (k, name) in OUTPUTS.iter().enumerate() {
+            out.set_item(name, values.get_item(k)?)?;
         }
         out.set_item("status", status)?;
         Ok(out)
