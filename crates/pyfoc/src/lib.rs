@@ -740,11 +740,11 @@ impl Ekf {
         };
         convert::ensure_memory(n as u128 * (32 + out_bytes), "run")?;
         // Private copies of the inputs (no other thread can change them while the GIL is
-        // released), row-major, in one numpy allocation: the rows of `u_ab`, then those of
-        // `i_ab`. Copied below with the GIL held, while the page-mapping thread starts.
-        let inputs = PyArray1::<f64>::zeros(py, 4 * n, false);
-        let mut inputs_rw = inputs.readwrite();
-        let (u_copy, i_copy) = contiguous(inputs_rw.as_slice_mut())?.split_at_mut(2 * n);
+        // released), row-major: the rows of `u_ab`, then those of `i_ab`, in one vector,
+        // copied below with the GIL held while the page-mapping thread starts. (A vector, not
+        // a numpy array: numpy would zero it first, and the allocator recycles its memory
+        // from one call to the next where it would hand numpy fresh pages to fault in.)
+        let mut inputs = convert::try_vec::<f64>(4 * n, "u_ab, i_ab")?;
         // Fresh outputs: the float columns are the rows of one (len(OUTPUTS), N) array (one
         // allocation, which the kernel backs with 2 MiB pages nearly whole: half the cost
         // of the first writes to separate 8 MB arrays, whose unaligned ends are 4 KiB pages),
@@ -793,9 +793,9 @@ impl Ekf {
                 } else {
                     Sink::Direct(cols)
                 };
-                convert::copy_into(&u, u_copy);
-                convert::copy_into(&i, i_copy);
-                let (u, i) = (&*u_copy, &*i_copy);
+                convert::extend_with(&mut inputs, &u);
+                convert::extend_with(&mut inputs, &i);
+                let (u, i) = inputs.split_at(2 * n);
                 self.with(py, move |inner| {
                     let prev = u_prev.unwrap_or(inner.u_last);
                     inner.u_last = run_sink(&mut inner.observer, prev, u, i, sink);
