@@ -353,9 +353,10 @@ impl Ekf {
 }
 
 /// Output columns of `run`, written in place: one slice per [`OUTPUTS`] name, and the status
-/// codes, all of one length. They are the data of arrays `run` has just allocated through
-/// numpy (which asks the kernel for huge pages for large arrays: the first write to 80 bytes
-/// per row of fresh memory is the largest cost of `run` after the steps themselves).
+/// codes, all of one length: the rows of the `(len(OUTPUTS), N)` array and the status array
+/// `run` has just allocated through numpy (which asks the kernel for 2 MiB pages for large
+/// arrays: the first write to 73 bytes per row of fresh memory, the kernel zeroing it, is
+/// the largest cost of `run` after the steps themselves), or a caller's `out` arrays.
 struct Columns<'a> {
     values: [&'a mut [f64]; OUTPUTS.len()],
     status: &'a mut [i8],
