@@ -497,6 +497,141 @@ fn run_sink(
     }
 }
 
+/// A block of rows for [`run_pipelined`]'s filter: its inputs (copied) and output columns.
+struct Block<'a> {
+    u: &'a [f64],
+    i: &'a [f64],
+    cols: Columns<'a>,
+}
+
+impl Block<'_> {
+    /// The block with the pages of its output columns mapped if `map` (fresh columns).
+    fn mapped(mut self, map: bool) -> Self {
+        if map {
+            self.cols.prefault();
+        }
+        self
+    }
+}
+
+/// [`run_pipelined`]'s helper copies and maps one block in this many (and two) first, and
+/// hands them to the filter before it copies the others: enough rows to filter while it
+/// copies the rest (a block's copy takes about a twentieth of its filtering).
+const PIPELINE_LEAD_PER: usize = 8;
+
+/// `run` over a long record on two threads. The inputs must be private copies before the
+/// filter runs without the GIL (another Python thread could change the caller's arrays);
+/// here a helper thread copies them block by block, and maps the pages of fresh output
+/// columns (`map_pages`), while this thread, which holds the GIL until the helper has copied
+/// the last block, already filters the first blocks. The GIL is then released for the rest.
+/// The lock of the filter is taken without waiting: should another call hold it (or the
+/// helper not start), the columns are returned untouched for the sequential path.
+fn run_pipelined<'a>(
+    py: Python<'_>,
+    lock: &Mutex<EkfInner>,
+    u: &convert::RealArray<'_>,
+    i: &convert::RealArray<'_>,
+    u_prev: Option<[f64; 2]>,
+    cols: Columns<'a>,
+    map_pages: bool,
+) -> Option<Columns<'a>> {
+    use numpy::ndarray::{Axis, Slice};
+    use std::sync::TryLockError;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::mpsc::channel;
+    let n = cols.len();
+    let (Ok(u), Ok(i)) = (
+        u.as_array().into_dimensionality::<numpy::Ix2>(),
+        i.as_array().into_dimensionality::<numpy::Ix2>(),
+    ) else {
+        return Some(cols);
+    };
+    if u.nrows() != n || i.nrows() != n {
+        return Some(cols);
+    }
+    // Copies, block by block: the rows of `u` then those of `i` (numpy's zeroed allocation
+    // of fresh pages, zeroed by the kernel when the helper first writes them).
+    let copies = PyArray1::<f64>::zeros(py, 4 * n, false);
+    let Ok(mut copies_rw) = copies.try_readwrite() else {
+        return Some(cols);
+    };
+    let Ok(copies) = copies_rw.as_slice_mut() else {
+        return Some(cols);
+    };
+    let copied = AtomicBool::new(false);
+    let lead = n.div_ceil(PREFAULT_BLOCK_ROWS) / PIPELINE_LEAD_PER + 2;
+    std::thread::scope(|s| {
+        let (to_helper, job) = channel::<Columns<'a>>();
+        let (to_filter, blocks) = channel::<Block<'_>>();
+        let copied = &copied;
+        let helper = std::thread::Builder::new()
+            .name("pyfoc-copy".into())
+            .spawn_scoped(s, move || {
+                let Ok(mut rest) = job.recv() else { return };
+                let mut ready = Vec::new();
+                let mut k0 = 0;
+                for chunk in copies.chunks_mut(4 * PREFAULT_BLOCK_ROWS) {
+                    let m = chunk.len() / 4;
+                    let (cols, r) = rest.split(m);
+                    rest = r;
+                    let (cu, ci) = chunk.split_at_mut(2 * m);
+                    for (dst, src) in [(&mut *cu, &u), (&mut *ci, &i)] {
+                        let rows = src.slice_axis(Axis(0), Slice::from(k0..k0 + m));
+                        match rows.as_slice() {
+                            Some(x) => dst.copy_from_slice(x),
+                            None => dst.iter_mut().zip(rows.iter()).for_each(|(d, x)| *d = *x),
+                        }
+                    }
+                    k0 += m;
+                    let b = Block { u: cu, i: ci, cols };
+                    // The lead blocks go at once (mapped), the others once all are copied.
+                    if k0 < n && k0 <= lead * PREFAULT_BLOCK_ROWS {
+                        if to_filter.send(b.mapped(map_pages)).is_err() {
+                            return;
+                        }
+                    } else {
+                        ready.push(b);
+                    }
+                }
+                copied.store(true, Ordering::Release);
+                for b in ready {
+                    if to_filter.send(b.mapped(map_pages)).is_err() {
+                        return;
+                    }
+                }
+            });
+        if helper.is_err() {
+            return Some(cols);
+        }
+        let mut guard = match lock.try_lock() {
+            Ok(g) => g,
+            Err(TryLockError::Poisoned(p)) => p.into_inner(),
+            Err(TryLockError::WouldBlock) => return Some(cols),
+        };
+        // The helper waits on this channel; a refused send gives the columns back.
+        if let Err(e) = to_helper.send(cols) {
+            return Some(e.0);
+        }
+        let inner = &mut *guard;
+        let mut prev = u_prev.unwrap_or(inner.u_last);
+        let obs = &mut inner.observer;
+        // With the GIL, while the helper reads the caller's arrays.
+        while !copied.load(Ordering::Acquire) {
+            let Ok(mut b) = blocks.recv() else { break };
+            prev = obs.run(prev, b.u, b.i, &mut b.cols);
+        }
+        // Without it for the rest. Blocks arrive in row order; a panic of the helper (it has
+        // no panicking operation) would end the channel early and resurface from `scope`.
+        inner.u_last = py.detach(move || {
+            for mut b in blocks {
+                prev = obs.run(prev, b.u, b.i, &mut b.cols);
+            }
+            prev
+        });
+        None
+    })
+}
+
 /// `run`'s output arrays: the [`OUTPUTS`] columns and the status codes.
 type OutArrays<'py> = (
     [Bound<'py, PyArray1<f64>>; OUTPUTS.len()],
@@ -740,12 +875,6 @@ impl Ekf {
             Columns::ROW_BYTES
         };
         convert::ensure_memory(n as u128 * (32 + out_bytes), "run")?;
-        // Private copies of the inputs (no other thread can change them while the GIL is
-        // released), row-major: the rows of `u_ab`, then those of `i_ab`, in one vector,
-        // copied below with the GIL held while the page-mapping thread starts. (A vector, not
-        // a numpy array: numpy would zero it first, and the allocator recycles its memory
-        // from one call to the next where it would hand numpy fresh pages to fault in.)
-        let mut inputs = convert::try_vec::<f64>(4 * n, "u_ab, i_ab")?;
         // Fresh outputs: the float columns are the rows of one (len(OUTPUTS), N) array (one
         // allocation, which the kernel backs with 2 MiB pages nearly whole: half the cost
         // of the first writes to separate 8 MB arrays, whose unaligned ends are 4 KiB pages),
@@ -760,6 +889,7 @@ impl Ekf {
         {
             // The write borrows (`out_arrays` checked that those of given arrays succeed:
             // writable, not shared), alive while the filter writes through `cols`.
+            // Fresh output pages are mapped ahead of the filter, on a second thread.
             let mapped = matches!(outs, Outs::Fresh(..)) && n >= PREFAULT_MIN_ROWS;
             let mut given_rw = match &outs {
                 Outs::Given((v, _), _) => Some(v.each_ref().map(|a| a.readwrite())),
@@ -787,21 +917,31 @@ impl Ekf {
                     (*dst, rest) = rest.split_at_mut(n.min(rest.len()));
                 }
             }
-            std::thread::scope(|s| {
-                // The page-mapping thread starts first, and maps while the inputs are copied.
-                let sink = if mapped {
-                    map_ahead(s, cols)
-                } else {
-                    Sink::Direct(cols)
-                };
-                convert::extend_with(&mut inputs, &u);
-                convert::extend_with(&mut inputs, &i);
-                let (u, i) = inputs.split_at(2 * n);
-                self.with(py, move |inner| {
-                    let prev = u_prev.unwrap_or(inner.u_last);
-                    inner.u_last = run_sink(&mut inner.observer, prev, u, i, sink);
+            // Long runs: copied, mapped and filtered block by block on two threads
+            // ([`run_pipelined`]); else, or should that not start, in sequence.
+            let cols = if n >= PREFAULT_MIN_ROWS {
+                run_pipelined(py, &self.inner, &u, &i, u_prev, cols, mapped)
+            } else {
+                Some(cols)
+            };
+            if let Some(cols) = cols {
+                let mut inputs = convert::try_vec::<f64>(4 * n, "u_ab, i_ab")?;
+                std::thread::scope(|s| {
+                    // The page-mapping thread starts first, and maps while the inputs are copied.
+                    let sink = if mapped {
+                        map_ahead(s, cols)
+                    } else {
+                        Sink::Direct(cols)
+                    };
+                    convert::extend_with(&mut inputs, &u);
+                    convert::extend_with(&mut inputs, &i);
+                    let (u, i) = inputs.split_at(2 * n);
+                    self.with(py, move |inner| {
+                        let prev = u_prev.unwrap_or(inner.u_last);
+                        inner.u_last = run_sink(&mut inner.observer, prev, u, i, sink);
+                    });
                 });
-            });
+            }
         }
         let (values, status) = match outs {
             Outs::Given(_, d) => return Ok(d),
