@@ -499,12 +499,18 @@ fn run_sink(
 
 /// A block of rows for [`run_pipelined`]'s filter: its inputs (copied) and output columns.
 struct Block<'a> {
-    u: &'a [f64],
-    i: &'a [f64],
+    /// The block's rows of `u_ab`, then those of `i_ab`.
+    inputs: Vec<f64>,
     cols: Columns<'a>,
 }
 
 impl Block<'_> {
+    /// Filters the block's rows from `prev`; returns the last row's voltage.
+    fn run(&mut self, obs: &mut Observer, prev: [f64; 2]) -> [f64; 2] {
+        let (u, i) = self.inputs.split_at(self.inputs.len() / 2);
+        obs.run(prev, u, i, &mut self.cols)
+    }
+
     /// The block with the pages of its output columns mapped if `map` (fresh columns).
     fn mapped(mut self, map: bool) -> Self {
         if map {
@@ -549,15 +555,17 @@ fn run_pipelined<'a>(
     if u.nrows() != n || i.nrows() != n {
         return Some(cols);
     }
-    // Copies, block by block: the rows of `u` then those of `i` (numpy's zeroed allocation
-    // of fresh pages, zeroed by the kernel when the helper first writes them).
-    let copies = PyArray1::<f64>::zeros(py, 4 * n, false);
-    let Ok(mut copies_rw) = copies.try_readwrite() else {
-        return Some(cols);
-    };
-    let Ok(copies) = copies_rw.as_slice_mut() else {
-        return Some(cols);
-    };
+    // The copies, one vector per block (the rows of `u`, then those of `i`), allocated here
+    // (fallibly; on failure the sequential path raises MemoryError) and filled by the helper:
+    // their fresh pages are faulted in on that thread, and nothing zeroes them first.
+    let mut bufs = Vec::new();
+    for k0 in (0..n).step_by(PREFAULT_BLOCK_ROWS) {
+        let m = PREFAULT_BLOCK_ROWS.min(n - k0);
+        match convert::try_vec::<f64>(4 * m, "u_ab, i_ab") {
+            Ok(v) => bufs.push(v),
+            Err(_) => return Some(cols),
+        }
+    }
     let copied = AtomicBool::new(false);
     let lead = n.div_ceil(PREFAULT_BLOCK_ROWS) / PIPELINE_LEAD_PER + 2;
     std::thread::scope(|s| {
@@ -570,20 +578,19 @@ fn run_pipelined<'a>(
                 let Ok(mut rest) = job.recv() else { return };
                 let mut ready = Vec::new();
                 let mut k0 = 0;
-                for chunk in copies.chunks_mut(4 * PREFAULT_BLOCK_ROWS) {
-                    let m = chunk.len() / 4;
+                for mut inputs in bufs {
+                    let m = PREFAULT_BLOCK_ROWS.min(n - k0);
                     let (cols, r) = rest.split(m);
                     rest = r;
-                    let (cu, ci) = chunk.split_at_mut(2 * m);
-                    for (dst, src) in [(&mut *cu, &u), (&mut *ci, &i)] {
+                    for src in [&u, &i] {
                         let rows = src.slice_axis(Axis(0), Slice::from(k0..k0 + m));
                         match rows.as_slice() {
-                            Some(x) => dst.copy_from_slice(x),
-                            None => dst.iter_mut().zip(rows.iter()).for_each(|(d, x)| *d = *x),
+                            Some(x) => inputs.extend_from_slice(x),
+                            None => inputs.extend(rows.iter().copied()),
                         }
                     }
                     k0 += m;
-                    let b = Block { u: cu, i: ci, cols };
+                    let b = Block { inputs, cols };
                     // The lead blocks go at once (mapped), the others once all are copied.
                     if k0 < n && k0 <= lead * PREFAULT_BLOCK_ROWS {
                         if to_filter.send(b.mapped(map_pages)).is_err() {
@@ -618,13 +625,13 @@ fn run_pipelined<'a>(
         // With the GIL, while the helper reads the caller's arrays.
         while !copied.load(Ordering::Acquire) {
             let Ok(mut b) = blocks.recv() else { break };
-            prev = obs.run(prev, b.u, b.i, &mut b.cols);
+            prev = b.run(obs, prev);
         }
         // Without it for the rest. Blocks arrive in row order; a panic of the helper (it has
         // no panicking operation) would end the channel early and resurface from `scope`.
         inner.u_last = py.detach(move || {
             for mut b in blocks {
-                prev = obs.run(prev, b.u, b.i, &mut b.cols);
+                prev = b.run(obs, prev);
             }
             prev
         });
