@@ -511,11 +511,9 @@ impl Block<'_> {
         obs.run(prev, u, i, &mut self.cols)
     }
 
-    /// The block with the pages of its output columns mapped if `map` (fresh columns).
-    fn mapped(mut self, map: bool) -> Self {
-        if map {
-            self.cols.prefault();
-        }
+    /// The block with the pages of its (fresh) output columns mapped.
+    fn mapped(mut self) -> Self {
+        self.cols.prefault();
         self
     }
 }
@@ -527,8 +525,8 @@ const PIPELINE_LEAD_PER: usize = 8;
 
 /// `run` over a long record on two threads. The inputs must be private copies before the
 /// filter runs without the GIL (another Python thread could change the caller's arrays);
-/// here a helper thread copies them block by block, and maps the pages of fresh output
-/// columns (`map_pages`), while this thread, which holds the GIL until the helper has copied
+/// here a helper thread copies them block by block, and maps the pages of the fresh output
+/// columns (zero-filled arrays `run` has just allocated), while this thread, which holds the GIL until the helper has copied
 /// the last block, already filters the first blocks. The GIL is then released for the rest.
 /// The lock of the filter is taken without waiting: should another call hold it (or the
 /// helper not start), the columns are returned untouched for the sequential path.
@@ -539,7 +537,6 @@ fn run_pipelined<'a>(
     i: &convert::RealArray<'_>,
     u_prev: Option<[f64; 2]>,
     cols: Columns<'a>,
-    map_pages: bool,
 ) -> Option<Columns<'a>> {
     use numpy::ndarray::{Axis, Slice};
     use std::sync::TryLockError;
@@ -593,7 +590,7 @@ fn run_pipelined<'a>(
                     let b = Block { inputs, cols };
                     // The lead blocks go at once (mapped), the others once all are copied.
                     if k0 < n && k0 <= lead * PREFAULT_BLOCK_ROWS {
-                        if to_filter.send(b.mapped(map_pages)).is_err() {
+                        if to_filter.send(b.mapped()).is_err() {
                             return;
                         }
                     } else {
@@ -602,7 +599,7 @@ fn run_pipelined<'a>(
                 }
                 copied.store(true, Ordering::Release);
                 for b in ready {
-                    if to_filter.send(b.mapped(map_pages)).is_err() {
+                    if to_filter.send(b.mapped()).is_err() {
                         return;
                     }
                 }
@@ -924,10 +921,12 @@ impl Ekf {
                     (*dst, rest) = rest.split_at_mut(n.min(rest.len()));
                 }
             }
-            // Long runs: copied, mapped and filtered block by block on two threads
-            // ([`run_pipelined`]); else, or should that not start, in sequence.
-            let cols = if n >= PREFAULT_MIN_ROWS {
-                run_pipelined(py, &self.inner, &u, &i, u_prev, cols, mapped)
+            // Long runs into fresh outputs: copied, mapped and filtered block by block on two
+            // threads ([`run_pipelined`]); else, or should that not start, in sequence. (Into
+            // a caller's `out`, only the copy, 4 % of the steps, would move: not worth a
+            // thread the filter may have to wait for on a busy machine.)
+            let cols = if mapped {
+                run_pipelined(py, &self.inner, &u, &i, u_prev, cols)
             } else {
                 Some(cols)
             };
