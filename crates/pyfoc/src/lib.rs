@@ -891,10 +891,10 @@ impl Ekf {
             ),
         };
         {
-            // The write borrows (`out_arrays` checked that those of given arrays succeed:
-            // writable, not shared), alive while the filter writes through `cols`.
             // Fresh output pages are mapped ahead of the filter, on a second thread.
             let mapped = matches!(outs, Outs::Fresh(..)) && n >= PREFAULT_MIN_ROWS;
+            // The write borrows (`out_arrays` checked that those of given arrays succeed:
+            // writable, not shared), alive while the filter writes through `cols`.
             let mut given_rw = match &outs {
                 Outs::Given((v, _), _) => Some(v.each_ref().map(|a| a.readwrite())),
                 Outs::Fresh(..) => None,
