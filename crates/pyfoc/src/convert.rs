@@ -85,14 +85,20 @@ pub(crate) fn real_array<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<R
 
 /// The elements of `arr`, row-major, copied into a fallibly allocated vector.
 pub(crate) fn to_vec(arr: &RealArray<'_>, name: &str) -> PyResult<Vec<f64>> {
+    let mut out = try_vec::<f64>(arr.len(), name)?;
+    extend_with(&mut out, arr);
+    Ok(out)
+}
+
+/// Appends the elements of `arr`, row-major, to `v` (which should have the room: the
+/// callers reserve it fallibly first).
+pub(crate) fn extend_with(v: &mut Vec<f64>, arr: &RealArray<'_>) {
     let a = arr.as_array();
-    let mut out = try_vec::<f64>(a.len(), name)?;
     // ndarray's slice exists for the C (row-major) layout only; any other is read by index.
     match a.as_slice() {
-        Some(s) => out.extend_from_slice(s),
-        None => out.extend(a.iter().copied()),
+        Some(s) => v.extend_from_slice(s),
+        None => v.extend(a.iter().copied()),
     }
-    Ok(out)
 }
 
 /// An `(N, 2)` real array (not copied); ValueError naming the argument for another shape.

@@ -15,7 +15,7 @@ use ekf_core::{
 };
 use std::sync::{Mutex, PoisonError};
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods, ToPyArray};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -353,9 +353,10 @@ impl Ekf {
 }
 
 /// Output columns of `run`, written in place: one slice per [`OUTPUTS`] name, and the status
-/// codes, all of one length. They are the data of arrays `run` has just allocated through
-/// numpy (which asks the kernel for huge pages for large arrays: the first write to 80 bytes
-/// per row of fresh memory is the largest cost of `run` after the steps themselves).
+/// codes, all of one length: the rows of the `(len(OUTPUTS), N)` array and the status array
+/// `run` has just allocated through numpy (which asks the kernel for 2 MiB pages for large
+/// arrays: the first write to 73 bytes per row of fresh memory, the kernel zeroing it, is
+/// the largest cost of `run` after the steps themselves), or a caller's `out` arrays.
 struct Columns<'a> {
     values: [&'a mut [f64]; OUTPUTS.len()],
     status: &'a mut [i8],
@@ -429,53 +430,209 @@ const PREFAULT_MIN_ROWS: usize = 1 << 16;
 /// Rows per block handed from the page-mapping thread to the filter.
 const PREFAULT_BLOCK_ROWS: usize = 1 << 14;
 
-/// `run`'s loop over freshly allocated output arrays, with their first writes (page faults
-/// and the kernel's zeroing, about a third of a step's time per row) moved to a second
-/// thread. That thread takes the blocks of rows in order, maps their pages, and hands each
-/// block to the filter through a channel, so each block is written by one thread at a time;
-/// the filter's results do not depend on it. Without a second thread (spawn refused) the loop
-/// runs alone, as in [`Observer::run`].
-fn run_prefaulted(
+/// Where `run`'s loop writes its rows: straight into the columns, or into the blocks that
+/// the page-mapping thread of [`map_ahead`] hands over in row order.
+enum Sink<'a> {
+    Direct(Columns<'a>),
+    Mapped(std::sync::mpsc::Receiver<Columns<'a>>),
+}
+
+/// Starts the page-mapping thread on freshly allocated output columns: it takes the blocks
+/// of rows in order, maps their pages (the page faults and the kernel's zeroing: about a
+/// tenth of a step's time per row), and hands each block to the filter through a channel,
+/// so each block is written by one thread at a time; the filter's results do not depend on
+/// it. Started before the inputs are copied, it has mapped the first blocks when the filter
+/// starts. Without a second thread (spawn refused) the columns are written directly.
+fn map_ahead<'scope, 'a: 'scope>(
+    s: &'scope std::thread::Scope<'scope, '_>,
+    cols: Columns<'a>,
+) -> Sink<'a> {
+    use std::sync::mpsc::channel;
+    let (to_mapper, whole) = channel::<Columns<'a>>();
+    let (to_filter, mapped) = channel::<Columns<'a>>();
+    let mapper = std::thread::Builder::new()
+        .name("pyfoc-prefault".into())
+        .spawn_scoped(s, move || {
+            let Ok(mut rest) = whole.recv() else { return };
+            while rest.len() > 0 {
+                let (mut b, r) = rest.split(PREFAULT_BLOCK_ROWS);
+                rest = r;
+                b.prefault();
+                if to_filter.send(b).is_err() {
+                    return;
+                }
+            }
+        });
+    if mapper.is_err() {
+        return Sink::Direct(cols);
+    }
+    // The mapper waits on this channel; a refused send gives the columns back.
+    match to_mapper.send(cols) {
+        Ok(()) => Sink::Mapped(mapped),
+        Err(e) => Sink::Direct(e.0),
+    }
+}
+
+/// `run`'s loop over the rows of `u`, `i` into `sink`; returns the last row's voltage.
+fn run_sink(
     obs: &mut Observer,
     mut prev: [f64; 2],
     u: &[f64],
     i: &[f64],
-    mut cols: Columns<'_>,
+    sink: Sink<'_>,
 ) -> [f64; 2] {
+    match sink {
+        Sink::Direct(mut cols) => obs.run(prev, u, i, &mut cols),
+        Sink::Mapped(blocks) => {
+            // Blocks arrive in row order; a panic of the mapper (it has no panicking
+            // operation) would end the channel early and resurface from the thread scope.
+            let mut k0 = 0;
+            for mut b in blocks {
+                let k1 = k0 + b.len();
+                prev = obs.run(prev, &u[2 * k0..2 * k1], &i[2 * k0..2 * k1], &mut b);
+                k0 = k1;
+            }
+            prev
+        }
+    }
+}
+
+/// A block of rows for [`run_pipelined`]'s filter: its inputs (copied) and output columns.
+struct Block<'a> {
+    /// The block's rows of `u_ab`, then those of `i_ab`.
+    inputs: Vec<f64>,
+    cols: Columns<'a>,
+}
+
+impl Block<'_> {
+    /// Filters the block's rows from `prev`; returns the last row's voltage.
+    fn run(&mut self, obs: &mut Observer, prev: [f64; 2]) -> [f64; 2] {
+        let (u, i) = self.inputs.split_at(self.inputs.len() / 2);
+        obs.run(prev, u, i, &mut self.cols)
+    }
+
+    /// The block with the pages of its (fresh) output columns mapped.
+    fn mapped(mut self) -> Self {
+        self.cols.prefault();
+        self
+    }
+}
+
+/// [`run_pipelined`]'s helper copies and maps one block in this many (and two) first, and
+/// hands them to the filter before it copies the others: enough rows to filter while it
+/// copies the rest (a block's copy takes about a twentieth of its filtering).
+const PIPELINE_LEAD_PER: usize = 8;
+
+/// `run` over a long record on two threads. The inputs must be private copies before the
+/// filter runs without the GIL (another Python thread could change the caller's arrays);
+/// here a helper thread copies them block by block, and maps the pages of the fresh output
+/// columns (zero-filled arrays `run` has just allocated), while this thread, which holds the GIL until the helper has copied
+/// the last block, already filters the first blocks. The GIL is then released for the rest.
+/// The lock of the filter is taken without waiting: should another call hold it (or the
+/// helper not start), the columns are returned untouched for the sequential path.
+fn run_pipelined<'a>(
+    py: Python<'_>,
+    lock: &Mutex<EkfInner>,
+    u: &convert::RealArray<'_>,
+    i: &convert::RealArray<'_>,
+    u_prev: Option<[f64; 2]>,
+    cols: Columns<'a>,
+) -> Option<Columns<'a>> {
+    use numpy::ndarray::{Axis, Slice};
+    use std::sync::TryLockError;
+    use std::sync::atomic::{AtomicBool, Ordering};
     use std::sync::mpsc::channel;
+    let n = cols.len();
+    let (Ok(u), Ok(i)) = (
+        u.as_array().into_dimensionality::<numpy::Ix2>(),
+        i.as_array().into_dimensionality::<numpy::Ix2>(),
+    ) else {
+        return Some(cols);
+    };
+    if u.nrows() != n || i.nrows() != n {
+        return Some(cols);
+    }
+    // The copies, one vector per block (the rows of `u`, then those of `i`), allocated here
+    // (fallibly; on failure the sequential path raises MemoryError) and filled by the helper:
+    // their fresh pages are faulted in on that thread, and nothing zeroes them first.
+    let mut bufs = Vec::new();
+    for k0 in (0..n).step_by(PREFAULT_BLOCK_ROWS) {
+        let m = PREFAULT_BLOCK_ROWS.min(n - k0);
+        match convert::try_vec::<f64>(4 * m, "u_ab, i_ab") {
+            Ok(v) => bufs.push(v),
+            Err(_) => return Some(cols),
+        }
+    }
+    let copied = AtomicBool::new(false);
+    let lead = n.div_ceil(PREFAULT_BLOCK_ROWS) / PIPELINE_LEAD_PER + 2;
     std::thread::scope(|s| {
-        let (to_mapper, whole) = channel::<Columns<'_>>();
-        let (to_filter, mapped) = channel::<Columns<'_>>();
-        let mapper = std::thread::Builder::new()
-            .name("pyfoc-prefault".into())
+        let (to_helper, job) = channel::<Columns<'a>>();
+        let (to_filter, blocks) = channel::<Block<'_>>();
+        let copied = &copied;
+        let helper = std::thread::Builder::new()
+            .name("pyfoc-copy".into())
             .spawn_scoped(s, move || {
-                let Ok(mut rest) = whole.recv() else { return };
-                while rest.len() > 0 {
-                    let (mut b, r) = rest.split(PREFAULT_BLOCK_ROWS);
+                let Ok(mut rest) = job.recv() else { return };
+                let mut ready = Vec::new();
+                let mut k0 = 0;
+                for mut inputs in bufs {
+                    let m = PREFAULT_BLOCK_ROWS.min(n - k0);
+                    let (cols, r) = rest.split(m);
                     rest = r;
-                    b.prefault();
-                    if to_filter.send(b).is_err() {
+                    for src in [&u, &i] {
+                        let rows = src.slice_axis(Axis(0), Slice::from(k0..k0 + m));
+                        match rows.as_slice() {
+                            Some(x) => inputs.extend_from_slice(x),
+                            None => inputs.extend(rows.iter().copied()),
+                        }
+                    }
+                    k0 += m;
+                    let b = Block { inputs, cols };
+                    // The lead blocks go at once (mapped), the others once all are copied.
+                    if k0 < n && k0 <= lead * PREFAULT_BLOCK_ROWS {
+                        if to_filter.send(b.mapped()).is_err() {
+                            return;
+                        }
+                    } else {
+                        ready.push(b);
+                    }
+                }
+                copied.store(true, Ordering::Release);
+                for b in ready {
+                    if to_filter.send(b.mapped()).is_err() {
                         return;
                     }
                 }
             });
-        if mapper.is_err() {
-            return obs.run(prev, u, i, &mut cols);
+        if helper.is_err() {
+            return Some(cols);
         }
-        // The mapper waits on this channel; a refused send gives the columns back.
-        if let Err(e) = to_mapper.send(cols) {
-            cols = e.0;
-            return obs.run(prev, u, i, &mut cols);
+        let mut guard = match lock.try_lock() {
+            Ok(g) => g,
+            Err(TryLockError::Poisoned(p)) => p.into_inner(),
+            Err(TryLockError::WouldBlock) => return Some(cols),
+        };
+        // The helper waits on this channel; a refused send gives the columns back.
+        if let Err(e) = to_helper.send(cols) {
+            return Some(e.0);
         }
-        // Blocks arrive in row order; a panic of the mapper (it has no panicking operation)
-        // would end the channel early and resurface from `scope`.
-        let mut k0 = 0;
-        for mut b in mapped {
-            let k1 = k0 + b.len();
-            prev = obs.run(prev, &u[2 * k0..2 * k1], &i[2 * k0..2 * k1], &mut b);
-            k0 = k1;
+        let inner = &mut *guard;
+        let mut prev = u_prev.unwrap_or(inner.u_last);
+        let obs = &mut inner.observer;
+        // With the GIL, while the helper reads the caller's arrays.
+        while !copied.load(Ordering::Acquire) {
+            let Ok(mut b) = blocks.recv() else { break };
+            prev = b.run(obs, prev);
         }
-        prev
+        // Without it for the rest. Blocks arrive in row order; a panic of the helper (it has
+        // no panicking operation) would end the channel early and resurface from `scope`.
+        inner.u_last = py.detach(move || {
+            for mut b in blocks {
+                prev = b.run(obs, prev);
+            }
+            prev
+        });
+        None
     })
 }
 
@@ -484,6 +641,13 @@ type OutArrays<'py> = (
     [Bound<'py, PyArray1<f64>>; OUTPUTS.len()],
     Bound<'py, PyArray1<i8>>,
 );
+
+/// `run`'s outputs: a caller's arrays (and their dict), or fresh ones (the float columns as
+/// the rows of one array, and the status codes).
+enum Outs<'py> {
+    Given(OutArrays<'py>, Bound<'py, PyDict>),
+    Fresh(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<i8>>),
+}
 
 /// The output arrays of `run` in a caller's `out` dict, checked: each present, of its dtype,
 /// one-dimensional of length `n`, C-contiguous, writable, and no two overlapping (all of
@@ -707,7 +871,7 @@ impl Ekf {
             )));
         }
         let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
-        let given = out.as_ref().map(|d| out_arrays(d, n)).transpose()?;
+        let given = out.map(|d| out_arrays(&d, n).map(|a| (a, d))).transpose()?;
         // The copies of both inputs and the output columns, probed at once.
         let out_bytes = if given.is_some() {
             0
@@ -715,46 +879,83 @@ impl Ekf {
             Columns::ROW_BYTES
         };
         convert::ensure_memory(n as u128 * (32 + out_bytes), "run")?;
-        // Private copies of the inputs (no other thread can change them while the GIL is
-        // released) and the output arrays, all allocated by numpy.
-        // (In row-major order: a Fortran-ordered input is rearranged first.)
-        let c_copy = |a: &convert::RealArray<'py>| a.as_array().as_standard_layout().to_pyarray(py);
-        let (u, i) = (c_copy(&u), c_copy(&i));
-        let (u, i) = (u.readonly(), i.readonly());
-        let (u, i) = (contiguous(u.as_slice())?, contiguous(i.as_slice())?);
-        let fresh = given.is_none();
-        let (values, status) = given.unwrap_or_else(|| {
-            (
-                core::array::from_fn(|_| PyArray1::zeros(py, n, false)),
+        // Fresh outputs: the float columns are the rows of one (len(OUTPUTS), N) array (one
+        // allocation, which the kernel backs with 2 MiB pages nearly whole: half the cost
+        // of the first writes to separate 8 MB arrays, whose unaligned ends are 4 KiB pages),
+        // handed out as its row views; the status codes are a second array.
+        let outs = match given {
+            Some((arrays, d)) => Outs::Given(arrays, d),
+            None => Outs::Fresh(
+                PyArray2::<f64>::zeros(py, [OUTPUTS.len(), n], false),
                 PyArray1::<i8>::zeros(py, n, false),
-            )
-        });
+            ),
+        };
         {
-            // `out_arrays` checked that these borrows succeed (writable, not shared).
-            let mut rw = values.each_ref().map(|a| a.readwrite());
-            let mut st = status.readwrite();
+            // Fresh output pages are mapped ahead of the filter, on a second thread.
+            let mapped = matches!(outs, Outs::Fresh(..)) && n >= PREFAULT_MIN_ROWS;
+            // The write borrows (`out_arrays` checked that those of given arrays succeed:
+            // writable, not shared), alive while the filter writes through `cols`.
+            let mut given_rw = match &outs {
+                Outs::Given((v, _), _) => Some(v.each_ref().map(|a| a.readwrite())),
+                Outs::Fresh(..) => None,
+            };
+            let mut fresh_rw = match &outs {
+                Outs::Fresh(v, _) => Some(v.readwrite()),
+                Outs::Given(..) => None,
+            };
+            let mut status_rw = match &outs {
+                Outs::Given((_, st), _) | Outs::Fresh(_, st) => st.readwrite(),
+            };
             let mut cols = Columns {
                 values: Default::default(),
-                status: contiguous(st.as_slice_mut())?,
+                status: contiguous(status_rw.as_slice_mut())?,
             };
-            for (dst, r) in cols.values.iter_mut().zip(rw.iter_mut()) {
-                *dst = contiguous(r.as_slice_mut())?;
+            if let Some(rw) = &mut given_rw {
+                for (dst, r) in cols.values.iter_mut().zip(rw.iter_mut()) {
+                    *dst = contiguous(r.as_slice_mut())?;
+                }
             }
-            self.with(py, move |inner| {
-                let prev = u_prev.unwrap_or(inner.u_last);
-                inner.u_last = if fresh && n >= PREFAULT_MIN_ROWS {
-                    run_prefaulted(&mut inner.observer, prev, u, i, cols)
-                } else {
-                    inner.observer.run(prev, u, i, &mut cols)
-                };
-            });
+            if let Some(rw) = &mut fresh_rw {
+                let mut rest = contiguous(rw.as_slice_mut())?;
+                for dst in cols.values.iter_mut() {
+                    (*dst, rest) = rest.split_at_mut(n.min(rest.len()));
+                }
+            }
+            // Long runs into fresh outputs: copied, mapped and filtered block by block on two
+            // threads ([`run_pipelined`]); else, or should that not start, in sequence. (Into
+            // a caller's `out`, only the copy, 4 % of the steps, would move: not worth a
+            // thread the filter may have to wait for on a busy machine.)
+            let cols = if mapped {
+                run_pipelined(py, &self.inner, &u, &i, u_prev, cols)
+            } else {
+                Some(cols)
+            };
+            if let Some(cols) = cols {
+                let mut inputs = convert::try_vec::<f64>(4 * n, "u_ab, i_ab")?;
+                std::thread::scope(|s| {
+                    // The page-mapping thread starts first, and maps while the inputs are copied.
+                    let sink = if mapped {
+                        map_ahead(s, cols)
+                    } else {
+                        Sink::Direct(cols)
+                    };
+                    convert::extend_with(&mut inputs, &u);
+                    convert::extend_with(&mut inputs, &i);
+                    let (u, i) = inputs.split_at(2 * n);
+                    self.with(py, move |inner| {
+                        let prev = u_prev.unwrap_or(inner.u_last);
+                        inner.u_last = run_sink(&mut inner.observer, prev, u, i, sink);
+                    });
+                });
+            }
         }
-        if let Some(d) = out {
-            return Ok(d);
-        }
+        let (values, status) = match outs {
+            Outs::Given(_, d) => return Ok(d),
+            Outs::Fresh(values, status) => (values, status),
+        };
         let out = PyDict::new(py);
-        for (name, col) in OUTPUTS.iter().zip(values) {
-            out.set_item(name, col)?;
+        for (k, name) in OUTPUTS.iter().enumerate() {
+            out.set_item(name, values.get_item(k)?)?;
         }
         out.set_item("status", status)?;
         Ok(out)

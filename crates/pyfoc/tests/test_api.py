@@ -141,6 +141,48 @@ def test_long_run_equals_short_runs(dtype):
         np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), one[key])
 
 
+def test_long_run_reads_any_layout_and_writes_out_like_fresh():
+    # A long run (2^16 rows and more) into fresh outputs copies its inputs block by block on
+    # a helper thread while the filter starts; every input layout, a given u_prev, an out=
+    # dict and a filter whose lock another call holds (both in sequence) give the same rows.
+    n = 70_001
+    u, i, _ = record(n)
+    make = lambda: pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)  # noqa: E731
+    ref = make().run(u, i, u_prev=[1.0, -2.0])
+    wide_u, wide_i = np.repeat(u, 2, axis=0), np.repeat(i, 2, axis=0)
+    layouts = [
+        (np.asfortranarray(u), np.asfortranarray(i)),
+        (wide_u[::2], wide_i[::2]),  # strided views
+        (u[::-1][::-1], i.copy()),
+        (u.tolist(), np.ascontiguousarray(i.T).T),  # nested lists; a transposed view
+    ]
+    for uu, ii in layouts:
+        got = make().run(uu, ii, u_prev=[1.0, -2.0])
+        for key in ref:
+            np.testing.assert_array_equal(got[key], ref[key])
+    out = {k: np.full_like(v, -1) for k, v in ref.items()}
+    ekf = make()
+    assert ekf.run(u, i, u_prev=[1.0, -2.0], out=out) is out
+    for key in ref:
+        np.testing.assert_array_equal(out[key], ref[key])
+    np.testing.assert_array_equal(ekf.u_last, u[-1])
+    # Fresh float outputs are row views of one array; writing one leaves the others.
+    assert ref["theta"].base is not None and ref["theta"].base is ref["omega"].base
+    before = ref["omega"].copy()
+    ref["theta"][:] = 0.0
+    np.testing.assert_array_equal(ref["omega"], before)
+    # Two long runs on one filter at once: serialized, equal to two in sequence.
+    shared, seq = make(), make()
+    threads = [threading.Thread(target=lambda: shared.run(u, i)) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    seq.run(u, i)
+    seq.run(u, i)
+    np.testing.assert_array_equal(shared.state, seq.state)
+
+
 def test_bad_out_raises_and_leaves_filter_and_arrays_alone():
     u, i, _ = record(100)
     ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
