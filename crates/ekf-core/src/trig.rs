@@ -20,15 +20,6 @@
 
 use crate::{Float, to_t, wrap_angle};
 
-/// `pi/2` in two parts: the first has 8 significant bits, so `k * PIO2_A` is exact for
-/// `|k| < 2^16`; the second is the rest rounded to `f32` (`pi/2 - A - B = 2.6e-12`).
-const PIO2_A: f32 = 1.570_312_5;
-const PIO2_B: f32 = 4.838_268e-4;
-
-/// `1.5 * 2^23`: `q + ROUND` rounds `q` (`|q| < 2^22`) to the nearest integer (ties to even),
-/// held in the low bits of the sum's mantissa, and `(q + ROUND) - ROUND` is that integer.
-const ROUND: f32 = 12_582_912.0;
-
 /// Minimax kernels on `[-pi/4, pi/4]` (coefficients as rounded to `f32`):
 /// `sin r = r + r^3 (S1 + r^2 (S2 + r^2 S3))` (truncation 2.5e-9) and
 /// `cos r = 1 + r^2 (-1/2 + r^2 (C2 + r^2 (C3 + r^2 C4)))` (truncation 4.8e-10).
@@ -39,21 +30,75 @@ const C2: f32 = 0.041_666_646;
 const C3: f32 = -0.001_388_736_4;
 const C4: f32 = 2.443_808_6e-5;
 
-/// `f32` bits of `|x| = 32` shifted left by one (the sign out): arguments up to this size are
-/// reduced directly, larger ones (and non-finite ones) go to the cold path.
-const DIRECT_LIMIT_BITS: u32 = 0x4200_0000 << 1;
+/// `2^23 + 21`: `q + ROUND` (`q = x 2/pi`, `-21.5 < q < 2^23 - 21`) rounds `q + 21` to the
+/// nearest integer (ties to even) and holds it, as `2^23 + k + 21`, in the sum's bits:
+/// `bits - 0x4B00_0000 = k + 21`, the row of [`ROWS`].
+const ROUND: f32 = 8_388_629.0;
+/// `f32` bits of `2^23`.
+const ROUND_BASE_BITS: u32 = 0x4B00_0000;
+/// `k + K_OFFSET` indexes [`ROWS`] (`k = round(x 2/pi)`).
+const K_OFFSET: i32 = 21;
+/// Rows for `k = -21 ..= 20`: every `|x| <= 32` (`|k| <= 20`) and the NaN of a non-finite
+/// argument fall in the table or out of it by one integer comparison.
+const ROW_COUNT: usize = 42;
 
-/// `(cos k pi/2, sin k pi/2)` for `k mod 4`: the quadrant's exact rotation.
-const QUADRANT: [(f32, f32); 4] = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)];
+/// One quarter turn `k`: `hi + lo = k pi/2` (`hi` rounded to `f32`, `lo` the rest rounded to
+/// `f32`, `|k pi/2 - hi - lo| < 2e-15`) and `(cos k pi/2, sin k pi/2)` (0 and +-1: exact).
+#[derive(Clone, Copy)]
+struct Row {
+    hi: f32,
+    lo: f32,
+    cos_q: f32,
+    sin_q: f32,
+}
+
+/// The rows, computed at compile time in `f64` (`k pi/2` there is within 4e-15 of exact).
+static ROWS: [Row; ROW_COUNT] = rows();
+
+const fn rows() -> [Row; ROW_COUNT] {
+    let mut out = [Row {
+        hi: 0.0,
+        lo: 0.0,
+        cos_q: 1.0,
+        sin_q: 0.0,
+    }; ROW_COUNT];
+    let mut i = 0;
+    while i < ROW_COUNT {
+        let k = i as i32 - K_OFFSET;
+        let angle = k as f64 * core::f64::consts::FRAC_PI_2;
+        let hi = angle as f32;
+        let lo = (angle - hi as f64) as f32;
+        let (cos_q, sin_q) = match k.rem_euclid(4) {
+            0 => (1.0, 0.0),
+            1 => (0.0, 1.0),
+            2 => (-1.0, 0.0),
+            _ => (0.0, -1.0),
+        };
+        out[i] = Row {
+            hi,
+            lo,
+            cos_q,
+            sin_q,
+        };
+        i += 1;
+    }
+    out
+}
+
+/// The row of `x`: `None` for `|x| > 32.2` or so (out of the table) and for NaN and infinities.
+#[inline(always)]
+fn row_of(x: f32) -> Option<&'static Row> {
+    let t = x * core::f32::consts::FRAC_2_PI + ROUND;
+    ROWS.get(t.to_bits().wrapping_sub(ROUND_BASE_BITS) as usize)
+}
 
 /// `(sin x, cos x)` in pure `f32` arithmetic (module docs give method and error).
 #[inline]
 pub fn sin_cos_f32(x: f32) -> (f32, f32) {
-    // One integer comparison: `|x| <= 32`, false for NaN and infinities.
-    if x.to_bits() << 1 > DIRECT_LIMIT_BITS {
-        return sin_cos_far(x);
+    match row_of(x) {
+        Some(row) => sin_cos_row(x, row),
+        None => sin_cos_far(x),
     }
-    sin_cos_reduced(x)
 }
 
 /// Large or non-finite arguments: wrapped to `[-pi, pi)` first; NaN for NaN and infinities.
@@ -63,24 +108,23 @@ fn sin_cos_far(x: f32) -> (f32, f32) {
     if !x.is_finite() {
         return (f32::NAN, f32::NAN);
     }
-    sin_cos_reduced(wrap_angle(x))
+    let w = wrap_angle(x);
+    match row_of(w) {
+        Some(row) => sin_cos_row(w, row),
+        None => (f32::NAN, f32::NAN),
+    }
 }
 
-/// The kernel for `|x| <= 32` (module docs): no branch.
+/// The kernel for `x` in the table's range (module docs): no branch.
 #[inline(always)]
-fn sin_cos_reduced(x: f32) -> (f32, f32) {
-    let t = x * core::f32::consts::FRAC_2_PI + ROUND;
-    let kf = t - ROUND;
-    // The low bits of `t`'s mantissa are `k` (two's complement, the offset 2^22 is 0 mod 4).
-    let quadrant = (t.to_bits() & 3) as usize;
-    // x - k A is exact (k A is, and Sterbenz); k B is rounded.
-    let r = (x - kf * PIO2_A) - kf * PIO2_B;
+fn sin_cos_row(x: f32, row: &Row) -> (f32, f32) {
+    // x - hi is exact (a multiple of 2^-24 below 1 in magnitude); lo is rounded once.
+    let r = (x - row.hi) - row.lo;
     let r2 = r * r;
     let s = r + (r * r2) * (S1 + r2 * (S2 + r2 * S3));
     let c = 1.0 + r2 * (-0.5 + r2 * (C2 + r2 * (C3 + r2 * C4)));
     // Rotate by k quarter turns; the products with 0 and +-1 are exact.
-    let (qc, qs) = QUADRANT[quadrant];
-    (s * qc + c * qs, c * qc - s * qs)
+    (s * row.cos_q + c * row.sin_q, c * row.cos_q - s * row.sin_q)
 }
 
 /// `pi/2` in three parts for the `f64` reduction: the first two have 33 significant bits (so
