@@ -35,75 +35,44 @@
 
 use crate::{Float, to_t, wrap_angle};
 
-/// Minimax kernels on `[-pi/4, pi/4]` (coefficients as rounded to `f32`):
-/// `sin r = r + r^3 (S1 + r^2 (S2 + r^2 S3))` (truncation 2.5e-9) and
-/// `cos r = 1 + r^2 (-1/2 + r^2 (C2 + r^2 (C3 + r^2 C4)))` (truncation 4.8e-10).
-const S1: f32 = -0.166_666_51;
-const S2: f32 = 0.008_331_979;
-const S3: f32 = -0.000_194_956_36;
-const C2: f32 = 0.041_666_646;
-const C3: f32 = -0.001_388_736_4;
-const C4: f32 = 2.443_808_6e-5;
+mod table;
 
-/// `2^23 + 21`: `q + ROUND` (`q = x 2/pi`, `-21.5 < q < 2^23 - 21`) rounds `q + 21` to the
-/// nearest integer (ties to even) and holds it, as `2^23 + k + 21`, in the sum's bits:
-/// `bits - 0x4B00_0000 = k + 21`, the row of [`ROWS`].
-const ROUND: f32 = 8_388_629.0;
+/// Kernels on `|r| <= pi/32 + 4e-4` (minimax, coefficients as rounded to `f32`):
+/// `sin r = r + S1 r^3` (truncation 1.0e-8) and `cos r - 1 = r^2 (-1/2 + C2 r^2)` (1.4e-10).
+const S1: f32 = -0.166_596_31;
+const C2: f32 = 0.041_654_6;
+
+/// `2^23 + OFFSET`: `q + ROUND` (`q = x 16/pi`, `q > -OFFSET - 1/2`) rounds `q` to the nearest
+/// integer `j` (ties to even) and holds `j + OFFSET` in the low bits of the sum:
+/// `bits - 0x4B00_0000` is the row.
+const ROUND: f32 = 8_388_608.0 + table::OFFSET as f32;
 /// `f32` bits of `2^23`.
 const ROUND_BASE_BITS: u32 = 0x4B00_0000;
-/// `k + K_OFFSET` indexes [`ROWS`] (`k = round(x 2/pi)`).
-const K_OFFSET: i32 = 21;
-/// Rows for `k = -21 ..= 20`: every `|x| <= 32` (`|k| <= 20`) and the NaN of a non-finite
-/// argument fall in the table or out of it by one integer comparison.
-const ROW_COUNT: usize = 42;
 
-/// One quarter turn `k`: `hi + lo = k pi/2` (`hi` rounded to `f32`, `lo` the rest rounded to
-/// `f32`, `|k pi/2 - hi - lo| < 1e-13`) and `(cos k pi/2, sin k pi/2)` (0 and +-1: exact).
-#[derive(Clone, Copy)]
-struct Row {
-    hi: f32,
-    lo: f32,
-    cos_q: f32,
-    sin_q: f32,
-}
+/// The rows `[hi, sin hi, cos hi, 0]`, `hi` within 4e-4 of `j pi/16` (module `table`).
+static ROWS: [[f32; 4]; table::ROW_BITS.len()] = rows();
 
-/// The rows, computed at compile time in `f64` (`k pi/2` there is within 4e-15 of exact).
-static ROWS: [Row; ROW_COUNT] = rows();
-
-const fn rows() -> [Row; ROW_COUNT] {
-    let mut out = [Row {
-        hi: 0.0,
-        lo: 0.0,
-        cos_q: 1.0,
-        sin_q: 0.0,
-    }; ROW_COUNT];
+const fn rows() -> [[f32; 4]; table::ROW_BITS.len()] {
+    let mut out = [[0.0; 4]; table::ROW_BITS.len()];
     let mut i = 0;
-    while i < ROW_COUNT {
-        let k = i as i32 - K_OFFSET;
-        let angle = k as f64 * core::f64::consts::FRAC_PI_2;
-        let hi = angle as f32;
-        let lo = (angle - hi as f64) as f32;
-        let (cos_q, sin_q) = match k.rem_euclid(4) {
-            0 => (1.0, 0.0),
-            1 => (0.0, 1.0),
-            2 => (-1.0, 0.0),
-            _ => (0.0, -1.0),
-        };
-        out[i] = Row {
-            hi,
-            lo,
-            cos_q,
-            sin_q,
-        };
+    while i < out.len() {
+        let b = table::ROW_BITS[i];
+        out[i] = [
+            f32::from_bits(b[0]),
+            f32::from_bits(b[1]),
+            f32::from_bits(b[2]),
+            0.0,
+        ];
         i += 1;
     }
     out
 }
 
-/// The row of `x`: `None` for `|x| > 32.2` or so (out of the table) and for NaN and infinities.
+/// The row of `x`: `None` beyond `|x| = 32.3` or so (out of the table) and for NaN and
+/// infinities.
 #[inline(always)]
-fn row_of(x: f32) -> Option<&'static Row> {
-    let t = x * core::f32::consts::FRAC_2_PI + ROUND;
+fn row_of(x: f32) -> Option<&'static [f32; 4]> {
+    let t = x * (16.0 / core::f32::consts::PI) + ROUND;
     ROWS.get(t.to_bits().wrapping_sub(ROUND_BASE_BITS) as usize)
 }
 
@@ -132,14 +101,16 @@ fn sin_cos_far(x: f32) -> (f32, f32) {
 
 /// The kernel for `x` in the table's range (module docs): no branch.
 #[inline(always)]
-fn sin_cos_row(x: f32, row: &Row) -> (f32, f32) {
-    // x - hi is exact (a multiple of 2^-24 below 1 in magnitude); lo is rounded once.
-    let r = (x - row.hi) - row.lo;
+fn sin_cos_row(x: f32, row: &[f32; 4]) -> (f32, f32) {
+    let [hi, sh, ch, _] = *row;
+    // Exact: x and hi are multiples of the smaller one's ulp, |r| is below both.
+    let r = x - hi;
     let r2 = r * r;
-    let s = r + (r * r2) * (S1 + r2 * (S2 + r2 * S3));
-    let c = 1.0 + r2 * (-0.5 + r2 * (C2 + r2 * (C3 + r2 * C4)));
-    // Rotate by k quarter turns; the products with 0 and +-1 are exact.
-    (s * row.cos_q + c * row.sin_q, c * row.cos_q - s * row.sin_q)
+    let s = r + (r * r2) * S1;
+    let cm1 = r2 * (-0.5 + r2 * C2);
+    // sin(hi + r) = sin hi + (sin hi (cos r - 1) + cos hi sin r), and likewise the cosine: the
+    // corrections are below 0.1, so their rounding errors are small against the final one.
+    (sh + (sh * cm1 + ch * s), ch + (ch * cm1 - sh * s))
 }
 
 /// `pi/2` in three parts for the `f64` reduction: the first two have 33 significant bits (so
