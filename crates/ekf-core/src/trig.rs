@@ -3,35 +3,39 @@
 //! Without `std`, `f32::sin_cos` in `nalgebra` goes to `libm::sincosf`, which computes in `f64`
 //! (musl's design): on a Cortex-M4F, whose FPU is single precision only, that is software
 //! floating point, about 2250 instructions per call. [`sin_cos_f32`] stays in `f32`, with no
-//! branch for `|x| <= 32` (the observer's angles are wrapped to `[-pi, pi)`):
+//! branch for `|x| <= 32` (the observer's angles are wrapped to `[-pi, pi)`), from a table of
+//! accurate values (Gal's method) and short corrections:
 //!
 //! ```text
-//! k = round(x 2/pi)   (adding 2^23 + 21; the sum's bits minus those of 2^23 are k + 21,
-//!                      the row of a 42-row table, k = -21 ..= 20: out of the table = far path)
-//! r = (x - hi_k) - lo_k,  hi_k + lo_k = k pi/2   (x - hi_k exact; |k pi/2 - hi - lo| < 1e-13)
-//! sin r = r + r^3 (S1 + r^2 (S2 + r^2 S3))                minimax, truncation < 2.5e-9
-//! cos r = 1 + r^2 (-1/2 + r^2 (C2 + r^2 (C3 + r^2 C4)))    minimax, truncation < 5e-10
-//! (sin x, cos x) = (sin r, cos r) rotated by k quarter turns (0, +-1 from the same row: exact)
+//! j = round(x 16/pi)  (adding 2^23 + 164: the sum's bits minus those of 2^23 are j + 164, the
+//!                      row of a 329-row table, j = -164 ..= 164; out of it = far path)
+//! row j: hi, sin hi, cos hi   hi an f32 within 4e-4 of j pi/16 chosen so that its sine and
+//!                             cosine are within 2.5e-9 of f32 values (scripts/gen-trig-table.py)
+//! r = x - hi                  exact in f32;  |r| <= pi/32 + 4e-4
+//! sin r     = r + S1 r^3               minimax, truncation 1.0e-8
+//! cos r - 1 = r^2 (-1/2 + C2 r^2)      minimax, truncation 1.4e-10
+//! sin x = sin hi + (sin hi (cos r - 1) + cos hi sin r)
+//! cos x = cos hi + (cos hi (cos r - 1) - sin hi sin r)
 //! ```
 //!
-//! The row holds `hi`, `lo` and the quarter turn's `(cos, sin)`: one index computed from the
-//! rounding sum serves as the range check (one unsigned comparison, false for NaN, infinities
-//! and `|x|` beyond about 32.2) and replaces the Cody-Waite products `k A`, `k B` and the
-//! quadrant's `k mod 4` of the previous kernel (whose results differ from these by one ulp at
-//! about 1 % of the points, from the rounding of `r`). Maximum error against `f64` sin/cos: 8.58e-8 over `|x| <= 32`
-//! (dense grids and every `f32` near each `k pi/4`, `tests::matches_f64_within_8_6e_8`),
-//! about 1.4 ulp of 1; `|s^2 + c^2 - 1| <= 1.46e-7`. Larger arguments are wrapped to
-//! `[-pi, pi)` first (a cold path). A non-finite argument gives NaN (the filter then rejects
-//! the step); nothing panics.
+//! The index computed from the rounding sum is also the range check (one unsigned comparison,
+//! false for NaN, infinities and `|x|` beyond 32.3). The corrections are below 0.1, so the
+//! error is essentially the final addition's rounding: maximum error against `f64` sin/cos
+//! 4.89e-8 (0.8 ulp of 1) over every `f32` of `[-32, 32]` (`tests::exhaustive_max_error`,
+//! ignored by default; 4.66e-8 on the dense grids of `tests::matches_f64_within_4_9e_8`), and
+//! `|s^2 + c^2 - 1| <= 1.02e-7` there; the quarter-turn kernel this replaces (Cody-Waite reduction to `[-pi/4, pi/4]`,
+//! degree 7 / 8 minimax kernels, rotation by the quadrant) had 8.6e-8. Larger arguments are
+//! wrapped to `[-pi, pi)` first (a cold path). A non-finite argument gives NaN (the filter then
+//! rejects the step); nothing panics. The table takes 5.3 KB of flash (16-byte rows: the index
+//! is one shift).
 //!
-//! Cost on the Cortex-M4F (`cargo bench -p benches --bench cortex_m4`, line `sin_cos_f32`): 41
-//! instructions (was 46); the measuring closure's path runs 44 (the meter subtracts its own
-//! frame): 2 constant loads and one multiply-add for `k`, 4 integer instructions for the row
-//! and the range check, 3 for the row's address, 4 loads of the row, 2 subtractions, 2
-//! multiplies for `r^2`, `r^3`, 7 multiply-adds and 8 constants (6 loads, 2 immediates) for
-//! the kernels, 4 multiplies for the rotation; the closure's frame (the far path is a call),
-//! argument load and result store are the other 7. Each constant costs one instruction: LLVM
-//! does not merge the loads into one `vldm` (it allocates even-numbered registers first).
+//! Cost on the Cortex-M4F (`cargo bench -p benches --bench cortex_m4`, line `sin_cos_f32`): 32
+//! instructions (was 46); the measuring closure's path runs 35 (the meter subtracts its own
+//! frame): 2 constant loads and one multiply-add for `j`, 4 integer instructions for the index
+//! and the range check, 3 for the row's address, 3 loads of the row, 1 subtraction, 2
+//! multiplies for `r^2`, `r^3`, 2 for `sin r` (a load, a multiply-add), 4 for `cos r - 1` (a
+//! load, an immediate, a multiply-add, a multiply), 6 for the two results; the closure's frame
+//! (the far path is a call), argument load and result store are the other 7.
 
 use crate::{Float, to_t, wrap_angle};
 
@@ -248,7 +252,7 @@ mod tests {
     use super::sin_cos_f32;
 
     #[test]
-    fn matches_f64_within_8_6e_8_on_8_pi() {
+    fn matches_f64_within_4_9e_8_on_8_pi() {
         let mut worst = 0.0f64;
         for i in -200_000..=200_000 {
             let x = i as f32 * (8.0 * core::f32::consts::PI / 200_000.0);
@@ -258,7 +262,7 @@ mod tests {
                 .max((f64::from(s) - xd.sin()).abs())
                 .max((f64::from(c) - xd.cos()).abs());
         }
-        assert!(worst < 8.6e-8, "max error {worst:e}");
+        assert!(worst < 4.9e-8, "max error {worst:e}");
         // Large arguments are wrapped first; results stay on the unit circle.
         for x in [1e3f32, -7.7e4, 3.0e7, f32::MAX] {
             let (s, c) = sin_cos_f32(x);
@@ -271,7 +275,7 @@ mod tests {
     /// points) and the whole direct range `[-32, 32]` (4 * 10^6 points), also on the unit
     /// circle; plus every `f32` near the quadrant boundaries `k pi/4`.
     #[test]
-    fn matches_f64_within_8_6e_8() {
+    fn matches_f64_within_4_9e_8() {
         let err = |x: f32| {
             let (s, c) = sin_cos_f32(x);
             let xd = f64::from(x);
@@ -302,12 +306,23 @@ mod tests {
                 x = x.next_up();
             }
         }
+        // The table's row boundaries (j + 1/2) pi/16.
+        for j in -163..163 {
+            let mut x = ((f64::from(j) + 0.5) * core::f64::consts::PI / 16.0) as f32;
+            for _ in 0..64 {
+                x = x.next_down();
+            }
+            for _ in 0..128 {
+                take(x);
+                x = x.next_up();
+            }
+        }
         println!(
             "sin_cos_f32: max abs error {:e}, max |s^2 + c^2 - 1| {:e}",
             worst.0, worst.1
         );
-        assert!(worst.0 < 8.6e-8, "max error {:e}", worst.0);
-        assert!(worst.1 < 1.5e-7, "off the unit circle by {:e}", worst.1);
+        assert!(worst.0 < 4.9e-8, "max error {:e}", worst.0);
+        assert!(worst.1 < 1.05e-7, "off the unit circle by {:e}", worst.1);
         // Non-finite in, NaN out (both); the far path wraps and keeps the accuracy.
         for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
             let (s, c) = sin_cos_f32(x);
@@ -316,47 +331,82 @@ mod tests {
         for x in [32.5f32, -40.0, 1e4, -3.3e5] {
             let (s, c) = sin_cos_f32(x);
             let w = f64::from(super::wrap_angle(x));
-            assert!((f64::from(s) - w.sin()).abs() < 8.6e-8, "{x}");
-            assert!((f64::from(c) - w.cos()).abs() < 8.6e-8, "{x}");
+            assert!((f64::from(s) - w.sin()).abs() < 4.9e-8, "{x}");
+            assert!((f64::from(c) - w.cos()).abs() < 4.9e-8, "{x}");
         }
     }
 
-    /// The table: `hi + lo` is `k pi/2` within 1e-13, `hi` has the `f32` of `k pi/2`, the
-    /// quarter turn is exact; the rounding sum picks the row of the nearest `k` up to the
-    /// table's ends (every `|x| <= 32` in it, just beyond out of it); `x - hi` is exact.
+    /// Every `f32` of `[-32, 32]` (about 2.2e9 arguments; a minute or two in release):
+    /// `cargo test -p ekf-core --release --lib trig::tests::exhaustive -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "exhaustive, slow"]
+    fn exhaustive_max_error() {
+        let mut worst = (0.0f64, 0.0f32);
+        let mut x = 0.0f32;
+        while x <= 32.0 {
+            for v in [x, -x] {
+                let (s, c) = sin_cos_f32(v);
+                let (rs, rc) = f64::from(v).sin_cos();
+                let e = (f64::from(s) - rs).abs().max((f64::from(c) - rc).abs());
+                if e > worst.0 {
+                    worst = (e, v);
+                }
+            }
+            x = x.next_up();
+        }
+        println!(
+            "sin_cos_f32 over every f32 of [-32, 32]: max abs error {:e} at {}",
+            worst.0, worst.1
+        );
+        assert!(worst.0 < 4.9e-8, "max error {:e} at {}", worst.0, worst.1);
+    }
+
+    /// The table: `hi` within 4e-4 of `j pi/16`, its sine and cosine within 2.5e-9; the
+    /// rounding sum picks the row of the nearest `j` up to the table's ends (every
+    /// `|x| <= 32` in it, beyond `32.3` out of it), so `|r| = |x - hi| <= pi/32 + 4e-4` (the
+    /// kernels' fitted range), and `x - hi` is exact (dense grid and every `f32` within 64
+    /// ulp of each row's boundary `(j + 1/2) pi/16`).
     #[test]
     fn rows_and_range() {
-        use super::{K_OFFSET, ROWS, row_of};
+        use super::{ROWS, row_of, table::OFFSET};
+        let step = core::f64::consts::PI / 16.0;
         for (i, row) in ROWS.iter().enumerate() {
-            let k = i as i32 - K_OFFSET;
-            let angle = f64::from(k) * core::f64::consts::FRAC_PI_2;
-            assert_eq!(row.hi, angle as f32, "{k}");
-            let rest = (angle - f64::from(row.hi) - f64::from(row.lo)).abs();
-            assert!(rest < 1e-13, "{k}: {rest:e}");
-            let (c, s) = (f64::from(row.cos_q), f64::from(row.sin_q));
-            assert_eq!((c, s), (angle.cos().round(), angle.sin().round()), "{k}");
+            let j = f64::from(i as i32 - OFFSET);
+            let [hi, sh, ch, pad] = row.map(f64::from);
+            assert!((hi - j * step).abs() <= 4e-4, "{j}: {hi}");
+            assert!((hi.sin() - sh).abs() <= 2.5e-9, "{j}: sin {sh}");
+            assert!((hi.cos() - ch).abs() <= 2.5e-9, "{j}: cos {ch}");
+            assert_eq!(pad, 0.0);
         }
-        let index = |x: f32| {
-            row_of(x).map(|r| {
-                (r as *const super::Row as usize - ROWS.as_ptr() as usize)
-                    / core::mem::size_of::<super::Row>()
-            })
+        assert_eq!(ROWS[OFFSET as usize], [0.0, 0.0, 1.0, 0.0]);
+        let check = |x: f32| {
+            let row = row_of(x).unwrap_or_else(|| panic!("{x} is in the table"));
+            let hi = row[0];
+            let r = f64::from(x) - f64::from(hi);
+            assert!(
+                r.abs() <= core::f64::consts::PI / 32.0 + 4.1e-4,
+                "{x}: r {r}"
+            );
+            assert_eq!(f64::from(x - hi), r, "{x}: x - hi inexact");
         };
         for i in -3_200_000..=3_200_000 {
-            let x = i as f32 * 1e-5;
-            let i = index(x).expect("|x| <= 32 is in the table");
-            let k = i as i32 - K_OFFSET;
-            // The nearest quarter turn up to the rounding of x 2/pi (one ulp of x at most
-            // near the ends), so |r| <= pi/4 + 4e-6: within the kernels' fitted range.
-            let r = f64::from(x) - f64::from(k) * core::f64::consts::FRAC_PI_2;
-            assert!(r.abs() <= core::f64::consts::FRAC_PI_4 + 4e-6, "{x}: k {k}");
-            // x - hi is exact.
-            let hi = ROWS[i].hi;
-            assert_eq!(f64::from(x - hi), f64::from(x) - f64::from(hi), "{x}");
+            check(i as f32 * 1e-5);
+        }
+        for j in -OFFSET..OFFSET {
+            let mut x = ((f64::from(j) + 0.5) * step) as f32;
+            for _ in 0..64 {
+                x = x.next_down();
+            }
+            for _ in 0..128 {
+                if x.abs() <= 32.0 {
+                    check(x);
+                }
+                x = x.next_up();
+            }
         }
         for x in [
-            34.0f32,
-            -34.5,
+            32.5f32,
+            -32.5,
             1e9,
             -1e30,
             f32::MAX,
