@@ -3,57 +3,90 @@
 //! Without `std`, `f32::sin_cos` in `nalgebra` goes to `libm::sincosf`, which computes in `f64`
 //! (musl's design): on a Cortex-M4F, whose FPU is single precision only, that is software
 //! floating point, about 2250 instructions per call. [`sin_cos_f32`] stays in `f32`, with no
-//! branch for `|x| <= 32` (the observer's angles are wrapped to `[-pi, pi)`):
+//! branch for `|x| <= 32` (the observer's angles are wrapped to `[-pi, pi)`), from a table of
+//! accurate values (Gal's method) and short corrections:
 //!
 //! ```text
-//! k = round(x 2/pi)   (adding and subtracting 1.5 * 2^23; k mod 4 read from the sum's bits)
-//! r = (x - k A) - k B,  A + B = pi/2   (Cody-Waite, k A exact)          |r| <= pi/4
-//! sin r = r + r^3 (S1 + r^2 (S2 + r^2 S3))                minimax, truncation < 2.5e-9
-//! cos r = 1 + r^2 (-1/2 + r^2 (C2 + r^2 (C3 + r^2 C4)))    minimax, truncation < 5e-10
-//! (sin x, cos x) = (sin r, cos r) rotated by k quarter turns (a 4-entry table of 0, +-1: exact)
+//! j = round(x 16/pi)  (adding 2^23 + 164: the sum's bits minus those of 2^23 are j + 164, the
+//!                      row of a 329-row table, j = -164 ..= 164; out of it = far path)
+//! row j: hi, sin hi, cos hi   hi an f32 within 4e-4 of j pi/16 chosen so that its sine and
+//!                             cosine are within 2.5e-9 of f32 values (scripts/gen-trig-table.py)
+//! r = x - hi                  exact in f32;  |r| <= pi/32 + 4e-4
+//! sin r     = r + S1 r^3               minimax, truncation 1.0e-8
+//! cos r - 1 = r^2 (-1/2 + C2 r^2)      minimax, truncation 1.4e-10
+//! sin x = sin hi + (sin hi (cos r - 1) + cos hi sin r)
+//! cos x = cos hi + (cos hi (cos r - 1) - sin hi sin r)
 //! ```
 //!
-//! Maximum error against `f64` sin/cos: below 1e-7 for `|x| <= 8 pi` (measured 6.0e-8 on
-//! a grid of 400 001 points, `tests::matches_f64_within_1e_7`), i.e. about one ulp. Larger
-//! arguments are wrapped to `[-pi, pi)` first (a cold path). A non-finite argument gives NaN
-//! (the filter then rejects the step); nothing panics.
+//! The index computed from the rounding sum is also the range check (one unsigned comparison,
+//! false for NaN, infinities and `|x|` beyond 32.3). The corrections are below 0.1, so the
+//! error is essentially the final addition's rounding: maximum error against `f64` sin/cos
+//! 4.89e-8 (0.8 ulp of 1) over every `f32` of `[-32, 32]` (`tests::exhaustive_max_error`,
+//! ignored by default; 4.66e-8 on the dense grids of `tests::matches_f64_within_4_9e_8`), and
+//! `|s^2 + c^2 - 1| <= 1.02e-7` there; the quarter-turn kernel this replaces (Cody-Waite reduction to `[-pi/4, pi/4]`,
+//! degree 7 / 8 minimax kernels, rotation by the quadrant) had 8.6e-8. Larger arguments are
+//! wrapped to `[-pi, pi)` first (a cold path). A non-finite argument gives NaN (the filter then
+//! rejects the step); nothing panics. The table takes 5.3 KB of flash (16-byte rows: the index
+//! is one shift).
+//!
+//! Cost on the Cortex-M4F (`cargo bench -p benches --bench cortex_m4`, line `sin_cos_f32`): 32
+//! instructions (was 46); the measuring closure's path runs 35 (the meter subtracts its own
+//! frame): 2 constant loads and one multiply-add for `j`, 4 integer instructions for the index
+//! and the range check, 3 for the row's address, 3 loads of the row, 1 subtraction, 2
+//! multiplies for `r^2`, `r^3`, 2 for `sin r` (a load, a multiply-add), 4 for `cos r - 1` (a
+//! load, an immediate, a multiply-add, a multiply), 6 for the two results; the closure's frame
+//! (the far path is a call), argument load and result store are the other 7.
 
 use crate::{Float, to_t, wrap_angle};
 
-/// `pi/2` in two parts: the first has 8 significant bits, so `k * PIO2_A` is exact for
-/// `|k| < 2^16`; the second is the rest rounded to `f32` (`pi/2 - A - B = 2.6e-12`).
-const PIO2_A: f32 = 1.570_312_5;
-const PIO2_B: f32 = 4.838_268e-4;
+mod table;
 
-/// `1.5 * 2^23`: `q + ROUND` rounds `q` (`|q| < 2^22`) to the nearest integer (ties to even),
-/// held in the low bits of the sum's mantissa, and `(q + ROUND) - ROUND` is that integer.
-const ROUND: f32 = 12_582_912.0;
+/// Kernels on `|r| <= pi/32 + 4e-4` (minimax, coefficients as rounded to `f32`):
+/// `sin r = r + S1 r^3` (truncation 1.0e-8) and `cos r - 1 = r^2 (-1/2 + C2 r^2)` (1.4e-10).
+const S1: f32 = -0.166_596_31;
+const C2: f32 = 0.041_654_6;
 
-/// Minimax kernels on `[-pi/4, pi/4]` (coefficients as rounded to `f32`):
-/// `sin r = r + r^3 (S1 + r^2 (S2 + r^2 S3))` (truncation 2.5e-9) and
-/// `cos r = 1 + r^2 (-1/2 + r^2 (C2 + r^2 (C3 + r^2 C4)))` (truncation 4.8e-10).
-const S1: f32 = -0.166_666_51;
-const S2: f32 = 0.008_331_979;
-const S3: f32 = -0.000_194_956_36;
-const C2: f32 = 0.041_666_646;
-const C3: f32 = -0.001_388_736_4;
-const C4: f32 = 2.443_808_6e-5;
+/// `2^23 + OFFSET`: `q + ROUND` (`q = x 16/pi`, `q > -OFFSET - 1/2`) rounds `q` to the nearest
+/// integer `j` (ties to even) and holds `j + OFFSET` in the low bits of the sum:
+/// `bits - 0x4B00_0000` is the row.
+const ROUND: f32 = 8_388_608.0 + table::OFFSET as f32;
+/// `f32` bits of `2^23`.
+const ROUND_BASE_BITS: u32 = 0x4B00_0000;
 
-/// `f32` bits of `|x| = 32` shifted left by one (the sign out): arguments up to this size are
-/// reduced directly, larger ones (and non-finite ones) go to the cold path.
-const DIRECT_LIMIT_BITS: u32 = 0x4200_0000 << 1;
+/// The rows `[hi, sin hi, cos hi, 0]`, `hi` within 4e-4 of `j pi/16` (module `table`).
+static ROWS: [[f32; 4]; table::ROW_BITS.len()] = rows();
 
-/// `(cos k pi/2, sin k pi/2)` for `k mod 4`: the quadrant's exact rotation.
-const QUADRANT: [(f32, f32); 4] = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)];
+const fn rows() -> [[f32; 4]; table::ROW_BITS.len()] {
+    let mut out = [[0.0; 4]; table::ROW_BITS.len()];
+    let mut i = 0;
+    while i < out.len() {
+        let b = table::ROW_BITS[i];
+        out[i] = [
+            f32::from_bits(b[0]),
+            f32::from_bits(b[1]),
+            f32::from_bits(b[2]),
+            0.0,
+        ];
+        i += 1;
+    }
+    out
+}
+
+/// The row of `x`: `None` beyond `|x| = 32.3` or so (out of the table) and for NaN and
+/// infinities.
+#[inline(always)]
+fn row_of(x: f32) -> Option<&'static [f32; 4]> {
+    let t = x * (16.0 / core::f32::consts::PI) + ROUND;
+    ROWS.get(t.to_bits().wrapping_sub(ROUND_BASE_BITS) as usize)
+}
 
 /// `(sin x, cos x)` in pure `f32` arithmetic (module docs give method and error).
 #[inline]
 pub fn sin_cos_f32(x: f32) -> (f32, f32) {
-    // One integer comparison: `|x| <= 32`, false for NaN and infinities.
-    if x.to_bits() << 1 > DIRECT_LIMIT_BITS {
-        return sin_cos_far(x);
+    match row_of(x) {
+        Some(row) => sin_cos_row(x, row),
+        None => sin_cos_far(x),
     }
-    sin_cos_reduced(x)
 }
 
 /// Large or non-finite arguments: wrapped to `[-pi, pi)` first; NaN for NaN and infinities.
@@ -63,24 +96,25 @@ fn sin_cos_far(x: f32) -> (f32, f32) {
     if !x.is_finite() {
         return (f32::NAN, f32::NAN);
     }
-    sin_cos_reduced(wrap_angle(x))
+    let w = wrap_angle(x);
+    match row_of(w) {
+        Some(row) => sin_cos_row(w, row),
+        None => (f32::NAN, f32::NAN),
+    }
 }
 
-/// The kernel for `|x| <= 32` (module docs): no branch.
+/// The kernel for `x` in the table's range (module docs): no branch.
 #[inline(always)]
-fn sin_cos_reduced(x: f32) -> (f32, f32) {
-    let t = x * core::f32::consts::FRAC_2_PI + ROUND;
-    let kf = t - ROUND;
-    // The low bits of `t`'s mantissa are `k` (two's complement, the offset 2^22 is 0 mod 4).
-    let quadrant = (t.to_bits() & 3) as usize;
-    // x - k A is exact (k A is, and Sterbenz); k B is rounded.
-    let r = (x - kf * PIO2_A) - kf * PIO2_B;
+fn sin_cos_row(x: f32, row: &[f32; 4]) -> (f32, f32) {
+    let [hi, sh, ch, _] = *row;
+    // Exact: x and hi are multiples of the smaller one's ulp, |r| is below both.
+    let r = x - hi;
     let r2 = r * r;
-    let s = r + (r * r2) * (S1 + r2 * (S2 + r2 * S3));
-    let c = 1.0 + r2 * (-0.5 + r2 * (C2 + r2 * (C3 + r2 * C4)));
-    // Rotate by k quarter turns; the products with 0 and +-1 are exact.
-    let (qc, qs) = QUADRANT[quadrant];
-    (s * qc + c * qs, c * qc - s * qs)
+    let s = r + (r * r2) * S1;
+    let cm1 = r2 * (-0.5 + r2 * C2);
+    // sin(hi + r) = sin hi + (sin hi (cos r - 1) + cos hi sin r), and likewise the cosine: the
+    // corrections are below 0.1, so their rounding errors are small against the final one.
+    (sh + (sh * cm1 + ch * s), ch + (ch * cm1 - sh * s))
 }
 
 /// `pi/2` in three parts for the `f64` reduction: the first two have 33 significant bits (so
@@ -218,7 +252,7 @@ mod tests {
     use super::sin_cos_f32;
 
     #[test]
-    fn matches_f64_within_1_2e_7() {
+    fn matches_f64_within_4_9e_8_on_8_pi() {
         let mut worst = 0.0f64;
         for i in -200_000..=200_000 {
             let x = i as f32 * (8.0 * core::f32::consts::PI / 200_000.0);
@@ -228,7 +262,7 @@ mod tests {
                 .max((f64::from(s) - xd.sin()).abs())
                 .max((f64::from(c) - xd.cos()).abs());
         }
-        assert!(worst < 1.2e-7, "max error {worst:e}");
+        assert!(worst < 4.9e-8, "max error {worst:e}");
         // Large arguments are wrapped first; results stay on the unit circle.
         for x in [1e3f32, -7.7e4, 3.0e7, f32::MAX] {
             let (s, c) = sin_cos_f32(x);
@@ -241,7 +275,7 @@ mod tests {
     /// points) and the whole direct range `[-32, 32]` (4 * 10^6 points), also on the unit
     /// circle; plus every `f32` near the quadrant boundaries `k pi/4`.
     #[test]
-    fn matches_f64_within_1e_7() {
+    fn matches_f64_within_4_9e_8() {
         let err = |x: f32| {
             let (s, c) = sin_cos_f32(x);
             let xd = f64::from(x);
@@ -272,12 +306,23 @@ mod tests {
                 x = x.next_up();
             }
         }
+        // The table's row boundaries (j + 1/2) pi/16.
+        for j in -163..163 {
+            let mut x = ((f64::from(j) + 0.5) * core::f64::consts::PI / 16.0) as f32;
+            for _ in 0..64 {
+                x = x.next_down();
+            }
+            for _ in 0..128 {
+                take(x);
+                x = x.next_up();
+            }
+        }
         println!(
             "sin_cos_f32: max abs error {:e}, max |s^2 + c^2 - 1| {:e}",
             worst.0, worst.1
         );
-        assert!(worst.0 < 1e-7, "max error {:e}", worst.0);
-        assert!(worst.1 < 2.5e-7, "off the unit circle by {:e}", worst.1);
+        assert!(worst.0 < 4.9e-8, "max error {:e}", worst.0);
+        assert!(worst.1 < 1.05e-7, "off the unit circle by {:e}", worst.1);
         // Non-finite in, NaN out (both); the far path wraps and keeps the accuracy.
         for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY, -f32::NAN] {
             let (s, c) = sin_cos_f32(x);
@@ -286,9 +331,91 @@ mod tests {
         for x in [32.5f32, -40.0, 1e4, -3.3e5] {
             let (s, c) = sin_cos_f32(x);
             let w = f64::from(super::wrap_angle(x));
-            assert!((f64::from(s) - w.sin()).abs() < 1e-7, "{x}");
-            assert!((f64::from(c) - w.cos()).abs() < 1e-7, "{x}");
+            assert!((f64::from(s) - w.sin()).abs() < 4.9e-8, "{x}");
+            assert!((f64::from(c) - w.cos()).abs() < 4.9e-8, "{x}");
         }
+    }
+
+    /// Every `f32` of `[-32, 32]` (about 2.2e9 arguments; a minute or two in release):
+    /// `cargo test -p ekf-core --release --lib trig::tests::exhaustive -- --ignored --nocapture`.
+    #[test]
+    #[ignore = "exhaustive, slow"]
+    fn exhaustive_max_error() {
+        let mut worst = (0.0f64, 0.0f32);
+        let mut x = 0.0f32;
+        while x <= 32.0 {
+            for v in [x, -x] {
+                let (s, c) = sin_cos_f32(v);
+                let (rs, rc) = f64::from(v).sin_cos();
+                let e = (f64::from(s) - rs).abs().max((f64::from(c) - rc).abs());
+                if e > worst.0 {
+                    worst = (e, v);
+                }
+            }
+            x = x.next_up();
+        }
+        println!(
+            "sin_cos_f32 over every f32 of [-32, 32]: max abs error {:e} at {}",
+            worst.0, worst.1
+        );
+        assert!(worst.0 < 4.9e-8, "max error {:e} at {}", worst.0, worst.1);
+    }
+
+    /// The table: `hi` within 4e-4 of `j pi/16`, its sine and cosine within 2.5e-9; the
+    /// rounding sum picks the row of the nearest `j` up to the table's ends (every
+    /// `|x| <= 32` in it, beyond `32.3` out of it), so `|r| = |x - hi| <= pi/32 + 4e-4` (the
+    /// kernels' fitted range), and `x - hi` is exact (dense grid and every `f32` within 64
+    /// ulp of each row's boundary `(j + 1/2) pi/16`).
+    #[test]
+    fn rows_and_range() {
+        use super::{ROWS, row_of, table::OFFSET};
+        let step = core::f64::consts::PI / 16.0;
+        for (i, row) in ROWS.iter().enumerate() {
+            let j = f64::from(i as i32 - OFFSET);
+            let [hi, sh, ch, pad] = row.map(f64::from);
+            assert!((hi - j * step).abs() <= 4e-4, "{j}: {hi}");
+            assert!((hi.sin() - sh).abs() <= 2.5e-9, "{j}: sin {sh}");
+            assert!((hi.cos() - ch).abs() <= 2.5e-9, "{j}: cos {ch}");
+            assert_eq!(pad, 0.0);
+        }
+        assert_eq!(ROWS[OFFSET as usize], [0.0, 0.0, 1.0, 0.0]);
+        let check = |x: f32| {
+            let row = row_of(x).unwrap_or_else(|| panic!("{x} is in the table"));
+            let hi = row[0];
+            let r = f64::from(x) - f64::from(hi);
+            assert!(
+                r.abs() <= core::f64::consts::PI / 32.0 + 4.1e-4,
+                "{x}: r {r}"
+            );
+            assert_eq!(f64::from(x - hi), r, "{x}: x - hi inexact");
+        };
+        for i in -3_200_000..=3_200_000 {
+            check(i as f32 * 1e-5);
+        }
+        for j in -OFFSET..OFFSET {
+            let mut x = ((f64::from(j) + 0.5) * step) as f32;
+            for _ in 0..64 {
+                x = x.next_down();
+            }
+            for _ in 0..128 {
+                if x.abs() <= 32.0 {
+                    check(x);
+                }
+                x = x.next_up();
+            }
+        }
+        for x in [
+            32.5f32,
+            -32.5,
+            1e9,
+            -1e30,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+        ] {
+            assert!(row_of(x).is_none(), "{x}");
+        }
+        assert!(row_of(f32::NAN).is_none() && row_of(-f32::NAN).is_none());
     }
 
     /// The `f64` kernel against the standard library's (itself within 1 ulp): at most one ulp
