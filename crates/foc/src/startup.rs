@@ -86,7 +86,7 @@
 //!
 //! **Limits (measured, issue 14 item 1).** The goal of at most 1 % of rated speed backwards
 //! is missed at the kick on industrial_2k2 from 150 deg with the presets' noise seeds and
-//! the next ones (1.13 %, 1.09 %), and on seeds + 2 to + 5 on 8 of 144 cells (small_fast
+//! the next ones (1.13 %, 1.09 %; and from 90 deg on the next ones, 1.00 %, just above), and on seeds + 2 to + 5 on 8 of 144 cells (small_fast
 //! up to 1.76 % from -180 deg, industrial_2k2 up to 1.60 %); without the flux detectors
 //! (the observer's speed alone) it was missed on 8 cells of the first 72 (servo 1.29 %
 //! from -180 deg; industrial_2k2 up to 1.76 % and 2.33 %) and 17 of the 144 (up to
