@@ -487,7 +487,7 @@ impl HfiConfig {
             detect_polarity: true,
             // With a long carrier period HFI is the weak side at the top of the band (module
             // docs, "Hand-over band"): no fusion.
-            fusion_sigma_rad: if h * 2.0 * f32::from(n) * cfg.ts_s > HFI_PERIOD_ANGLE_RAD {
+            fusion_sigma_rad: if long_carrier_period(h, n, cfg.ts_s) {
                 0.0
             } else {
                 HFI_FUSION_SIGMA_RAD
@@ -1110,11 +1110,11 @@ impl HfiDrive {
             accel: 0.0,
             omega_o_lp: 0.0,
             lp_gain: crate::trig::min2(cfg.pll_bandwidth_rad_s * foc.ts_s, 1.0),
-            weight_on_faster: cfg.blend_high_rad_s
-                * 2.0
-                * f32::from(cfg.half_period_ticks)
-                * foc.ts_s
-                > HFI_PERIOD_ANGLE_RAD,
+            weight_on_faster: long_carrier_period(
+                cfg.blend_high_rad_s,
+                cfg.half_period_ticks,
+                foc.ts_s,
+            ),
         }
     }
 
@@ -1290,6 +1290,16 @@ impl HfiDrive {
 /// band"): 0.05 rad (2.9 deg). The industrial IPM of the tests turns 0.12 rad (`N = 7`), the
 /// traction IPM 0.016 rad (`N = 2` at 20 kHz).
 pub const HFI_PERIOD_ANGLE_RAD: f32 = 0.05;
+
+/// Whether the carrier period is long (module docs, "Hand-over band"): the rotor turns more
+/// than [`HFI_PERIOD_ANGLE_RAD`] per carrier period (`2 N Ts`, `N = half_period_ticks`) at
+/// the top of the blend band `blend_high_rad_s`. HFI is then the weak side there: its angle
+/// is not fused into the observer ([`HfiConfig::new`]'s default `fusion_sigma_rad`) and the
+/// observer's weight follows the faster of the two speeds.
+#[inline]
+pub fn long_carrier_period(blend_high_rad_s: f32, half_period_ticks: u8, ts_s: f32) -> bool {
+    blend_high_rad_s * 2.0 * f32::from(half_period_ticks) * ts_s > HFI_PERIOD_ANGLE_RAD
+}
 
 /// Observer weight in the control angle for an electrical speed magnitude `w` (linear from
 /// `lo` to `hi`).
