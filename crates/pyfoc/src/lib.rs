@@ -559,10 +559,10 @@ fn run_pipelined<'a>(
     if u.nrows() != n || i.nrows() != n {
         return Some(cols);
     }
-    // The copies, one vector per block (the rows of `u`, then those of `i`), allocated here
-    // (fallibly; on failure the sequential path raises MemoryError) and filled by the helper:
-    // their fresh pages are faulted in on that thread, and nothing zeroes them first.
-    // Spare vectors of earlier calls first ([`pool`]): pages already mapped.
+    // The copies, one vector per block (the rows of `u`, then those of `i`), taken here and
+    // filled by the helper: the spare vectors of earlier calls first ([`pool`]: pages
+    // already mapped), the others allocated fallibly (on failure the sequential path raises
+    // MemoryError), whose fresh pages are faulted in on the helper's thread.
     let nblocks = n.div_ceil(PREFAULT_BLOCK_ROWS);
     let Some(bufs) = pool::take_blocks(nblocks, 4 * PREFAULT_BLOCK_ROWS.min(n)) else {
         return Some(cols);

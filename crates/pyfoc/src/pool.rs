@@ -12,7 +12,8 @@
 //!   columns) when nothing else references them, that is when the caller has dropped every
 //!   array (and view) of that result; a result kept alive is never written again. The
 //!   references are counted by Python, so a buffer is reused only when its previous result
-//!   is unreachable: no `unsafe` here.
+//!   is unreachable (a weak reference does not count: it may see the array reused, where it
+//!   would otherwise be dead); no `unsafe` here.
 //! - Input copies: the block vectors of the pipelined path (2^14 rows each) and the single
 //!   vector of the sequential path are given back here at the end of the call and taken by
 //!   the next.
@@ -29,7 +30,7 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 /// Largest output pair (float columns and status codes) kept for reuse: 256 MiB, the
 /// outputs of 3.6 million rows.
 pub(crate) const OUTPUT_POOL_MAX_BYTES: usize = 256 << 20;
-/// Largest total of input copies kept for reuse: 128 MiB, the copies of 4.1 million rows.
+/// Largest total of input copies kept for reuse: 128 MiB, the copies of 4.2 million rows.
 pub(crate) const INPUT_POOL_MAX_BYTES: usize = 128 << 20;
 
 /// The last fresh outputs of `run`, kept for the next: the float64 `(len(OUTPUTS), M)` array
