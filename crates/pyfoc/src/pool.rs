@@ -75,7 +75,9 @@ pub(crate) fn take_outputs<'py>(py: Python<'py>, len: usize, n: usize) -> Option
     let o = lock(&OUTPUTS).take()?;
     let (values, status) = (o.values.into_bound(py), o.status.into_bound(py));
     // The pool's reference is now ours: one each means no result, view or other object
-    // refers to them (a view of a column refers to the 2-D array).
+    // refers to them (a view of a column refers to the 2-D array), and none can appear
+    // while this thread holds the GIL (an abi3 module does not load on free-threaded
+    // CPython, where this count would not be final).
     if refs(&values) != 1 || refs(&status) != 1 {
         return None;
     }
