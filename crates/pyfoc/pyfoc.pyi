@@ -22,6 +22,7 @@ __all__ = [
     "tune_qr",
     "tune_qr_mcap",
     "suite",
+    "clear_buffer_pool",
     "SimulationError",
     "PyfocError",
     "ConfigError",
@@ -326,3 +327,11 @@ def suite(*, short: bool = False, seed: int = 1, ideal: bool = False) -> dict[st
     flux + PLL baseline and the default EKF side by side. Returns the report as a dict
     (`motors`, `steady`, `transients`, `checks`, ...) plus `markdown` (the printed tables) and
     `all_pass`. SimulationError if a run fails. Releases the GIL."""
+
+def clear_buffer_pool() -> int:
+    """Drops the buffers `Ekf.run` keeps for reuse and returns the bytes they held: the output
+    arrays of the last fresh result (pyfoc's reference to them; their memory is freed once
+    no result or view uses it) and the spare copies of inputs. `run` hands a dropped result's
+    memory to the next call of the same or a somewhat smaller length (already mapped: no page
+    faults, no zeroing by the kernel); at most 256 MiB of outputs and 128 MiB of input copies
+    stay held after the results are gone. Later calls fill the pool again."""

@@ -20,10 +20,11 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::sync::PyOnceLock;
-use pyo3::types::{PyDict, PyModule};
+use pyo3::types::{PyDict, PyModule, PySlice};
 
 mod convert;
 mod identify;
+mod pool;
 mod simulate;
 mod suite;
 mod tune;
@@ -511,9 +512,12 @@ impl Block<'_> {
         obs.run(prev, u, i, &mut self.cols)
     }
 
-    /// The block with the pages of its (fresh) output columns mapped.
-    fn mapped(mut self) -> Self {
-        self.cols.prefault();
+    /// The block, with the pages of its output columns mapped if `prefault` (fresh columns;
+    /// reused ones are mapped already).
+    fn mapped(mut self, prefault: bool) -> Self {
+        if prefault {
+            self.cols.prefault();
+        }
         self
     }
 }
@@ -525,11 +529,13 @@ const PIPELINE_LEAD_PER: usize = 8;
 
 /// `run` over a long record on two threads. The inputs must be private copies before the
 /// filter runs without the GIL (another Python thread could change the caller's arrays);
-/// here a helper thread copies them block by block, and maps the pages of the fresh output
-/// columns (zero-filled arrays `run` has just allocated), while this thread, which holds the GIL until the helper has copied
-/// the last block, already filters the first blocks. The GIL is then released for the rest.
-/// The lock of the filter is taken without waiting: should another call hold it (or the
-/// helper not start), the columns are returned untouched for the sequential path.
+/// here a helper thread copies them block by block (into the [`pool`]'s spare vectors when
+/// it has them), and maps the pages of the fresh output columns if `prefault` (zero-filled
+/// arrays `run` has just allocated, not reused ones), while this thread, which holds the GIL
+/// until the helper has copied the last block, already filters the first blocks. The GIL is
+/// then released for the rest; the block vectors go back to the pool at the end. The lock of
+/// the filter is taken without waiting: should another call hold it (or the helper not
+/// start), the columns are returned untouched for the sequential path.
 fn run_pipelined<'a>(
     py: Python<'_>,
     lock: &Mutex<EkfInner>,
@@ -537,6 +543,7 @@ fn run_pipelined<'a>(
     i: &convert::RealArray<'_>,
     u_prev: Option<[f64; 2]>,
     cols: Columns<'a>,
+    prefault: bool,
 ) -> Option<Columns<'a>> {
     use numpy::ndarray::{Axis, Slice};
     use std::sync::TryLockError;
@@ -552,20 +559,22 @@ fn run_pipelined<'a>(
     if u.nrows() != n || i.nrows() != n {
         return Some(cols);
     }
-    // The copies, one vector per block (the rows of `u`, then those of `i`), allocated here
-    // (fallibly; on failure the sequential path raises MemoryError) and filled by the helper:
-    // their fresh pages are faulted in on that thread, and nothing zeroes them first.
-    let mut bufs = Vec::new();
-    for k0 in (0..n).step_by(PREFAULT_BLOCK_ROWS) {
-        let m = PREFAULT_BLOCK_ROWS.min(n - k0);
-        match convert::try_vec::<f64>(4 * m, "u_ab, i_ab") {
-            Ok(v) => bufs.push(v),
-            Err(_) => return Some(cols),
-        }
+    // The copies, one vector per block (the rows of `u`, then those of `i`), taken here and
+    // filled by the helper: the spare vectors of earlier calls first ([`pool`]: pages
+    // already mapped), the others allocated fallibly (on failure the sequential path raises
+    // MemoryError), whose fresh pages are faulted in on the helper's thread.
+    let nblocks = n.div_ceil(PREFAULT_BLOCK_ROWS);
+    let Some(bufs) = pool::take_blocks(nblocks, 4 * PREFAULT_BLOCK_ROWS.min(n)) else {
+        return Some(cols);
+    };
+    // The vectors of the filtered blocks, given back to the pool at the end.
+    let mut spent: Vec<Vec<f64>> = Vec::new();
+    if spent.try_reserve_exact(nblocks).is_err() {
+        return Some(cols);
     }
     let copied = AtomicBool::new(false);
     let lead = n.div_ceil(PREFAULT_BLOCK_ROWS) / PIPELINE_LEAD_PER + 2;
-    std::thread::scope(|s| {
+    let ran = std::thread::scope(|s| {
         let (to_helper, job) = channel::<Columns<'a>>();
         let (to_filter, blocks) = channel::<Block<'_>>();
         let copied = &copied;
@@ -590,7 +599,7 @@ fn run_pipelined<'a>(
                     let b = Block { inputs, cols };
                     // The lead blocks go at once (mapped), the others once all are copied.
                     if k0 < n && k0 <= lead * PREFAULT_BLOCK_ROWS {
-                        if to_filter.send(b.mapped()).is_err() {
+                        if to_filter.send(b.mapped(prefault)).is_err() {
                             return;
                         }
                     } else {
@@ -599,7 +608,7 @@ fn run_pipelined<'a>(
                 }
                 copied.store(true, Ordering::Release);
                 for b in ready {
-                    if to_filter.send(b.mapped()).is_err() {
+                    if to_filter.send(b.mapped(prefault)).is_err() {
                         return;
                     }
                 }
@@ -619,21 +628,34 @@ fn run_pipelined<'a>(
         let inner = &mut *guard;
         let mut prev = u_prev.unwrap_or(inner.u_last);
         let obs = &mut inner.observer;
+        let spent = &mut spent;
+        let mut run = move |mut b: Block<'_>, prev: [f64; 2]| {
+            let next = b.run(obs, prev);
+            // Within the capacity reserved above: no allocation here.
+            if spent.len() < spent.capacity() {
+                spent.push(b.inputs);
+            }
+            next
+        };
         // With the GIL, while the helper reads the caller's arrays.
         while !copied.load(Ordering::Acquire) {
-            let Ok(mut b) = blocks.recv() else { break };
-            prev = b.run(obs, prev);
+            let Ok(b) = blocks.recv() else { break };
+            prev = run(b, prev);
         }
         // Without it for the rest. Blocks arrive in row order; a panic of the helper (it has
         // no panicking operation) would end the channel early and resurface from `scope`.
         inner.u_last = py.detach(move || {
-            for mut b in blocks {
-                prev = b.run(obs, prev);
+            for b in blocks {
+                prev = run(b, prev);
             }
             prev
         });
         None
-    })
+    });
+    if ran.is_none() {
+        pool::give_blocks(spent);
+    }
+    ran
 }
 
 /// `run`'s output arrays: the [`OUTPUTS`] columns and the status codes.
@@ -643,10 +665,11 @@ type OutArrays<'py> = (
 );
 
 /// `run`'s outputs: a caller's arrays (and their dict), or fresh ones (the float columns as
-/// the rows of one array, and the status codes).
+/// the rows of one array, and the status codes; `true` when taken from the [`pool`], whose
+/// arrays may be longer than the run: their first `N` values are the output).
 enum Outs<'py> {
     Given(OutArrays<'py>, Bound<'py, PyDict>),
-    Fresh(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<i8>>),
+    Fresh(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<i8>>, bool),
 }
 
 /// The output arrays of `run` in a caller's `out` dict, checked: each present, of its dtype,
@@ -883,16 +906,24 @@ impl Ekf {
         // allocation, which the kernel backs with 2 MiB pages nearly whole: half the cost
         // of the first writes to separate 8 MB arrays, whose unaligned ends are 4 KiB pages),
         // handed out as its row views; the status codes are a second array.
+        // They are the last call's arrays when nothing refers to those any more and the size
+        // fits ([`pool`]): memory already mapped, which nobody needs to zero.
         let outs = match given {
             Some((arrays, d)) => Outs::Given(arrays, d),
-            None => Outs::Fresh(
-                PyArray2::<f64>::zeros(py, [OUTPUTS.len(), n], false),
-                PyArray1::<i8>::zeros(py, n, false),
-            ),
+            None => match pool::take_outputs(py, OUTPUTS.len(), n) {
+                Some((values, status)) => Outs::Fresh(values, status, true),
+                None => Outs::Fresh(
+                    PyArray2::<f64>::zeros(py, [OUTPUTS.len(), n], false),
+                    PyArray1::<i8>::zeros(py, n, false),
+                    false,
+                ),
+            },
         };
         {
-            // Fresh output pages are mapped ahead of the filter, on a second thread.
-            let mapped = matches!(outs, Outs::Fresh(..)) && n >= PREFAULT_MIN_ROWS;
+            // Long runs into fresh outputs are pipelined ([`run_pipelined`]); new output
+            // pages (not reused ones) are mapped ahead of the filter, on a second thread.
+            let pipelined = matches!(outs, Outs::Fresh(..)) && n >= PREFAULT_MIN_ROWS;
+            let prefault = pipelined && matches!(outs, Outs::Fresh(.., false));
             // The write borrows (`out_arrays` checked that those of given arrays succeed:
             // writable, not shared), alive while the filter writes through `cols`.
             let mut given_rw = match &outs {
@@ -900,15 +931,17 @@ impl Ekf {
                 Outs::Fresh(..) => None,
             };
             let mut fresh_rw = match &outs {
-                Outs::Fresh(v, _) => Some(v.readwrite()),
+                Outs::Fresh(v, ..) => Some(v.readwrite()),
                 Outs::Given(..) => None,
             };
             let mut status_rw = match &outs {
-                Outs::Given((_, st), _) | Outs::Fresh(_, st) => st.readwrite(),
+                Outs::Given((_, st), _) | Outs::Fresh(_, st, _) => st.readwrite(),
             };
+            // The first `n` values of each (a reused array may be longer).
+            let status = contiguous(status_rw.as_slice_mut())?;
             let mut cols = Columns {
                 values: Default::default(),
-                status: contiguous(status_rw.as_slice_mut())?,
+                status: status.split_at_mut(n.min(status.len())).0,
             };
             if let Some(rw) = &mut given_rw {
                 for (dst, r) in cols.values.iter_mut().zip(rw.iter_mut()) {
@@ -916,25 +949,28 @@ impl Ekf {
                 }
             }
             if let Some(rw) = &mut fresh_rw {
+                let m = rw.shape()[1];
                 let mut rest = contiguous(rw.as_slice_mut())?;
                 for dst in cols.values.iter_mut() {
-                    (*dst, rest) = rest.split_at_mut(n.min(rest.len()));
+                    let (row, r) = rest.split_at_mut(m.min(rest.len()));
+                    rest = r;
+                    *dst = row.split_at_mut(n.min(row.len())).0;
                 }
             }
             // Long runs into fresh outputs: copied, mapped and filtered block by block on two
             // threads ([`run_pipelined`]); else, or should that not start, in sequence. (Into
             // a caller's `out`, only the copy, 4 % of the steps, would move: not worth a
             // thread the filter may have to wait for on a busy machine.)
-            let cols = if mapped {
-                run_pipelined(py, &self.inner, &u, &i, u_prev, cols)
+            let cols = if pipelined {
+                run_pipelined(py, &self.inner, &u, &i, u_prev, cols, prefault)
             } else {
                 Some(cols)
             };
             if let Some(cols) = cols {
-                let mut inputs = convert::try_vec::<f64>(4 * n, "u_ab, i_ab")?;
+                let mut inputs = pool::take_whole(4 * n, "u_ab, i_ab")?;
                 std::thread::scope(|s| {
                     // The page-mapping thread starts first, and maps while the inputs are copied.
-                    let sink = if mapped {
+                    let sink = if prefault {
                         map_ahead(s, cols)
                     } else {
                         Sink::Direct(cols)
@@ -947,17 +983,28 @@ impl Ekf {
                         inner.u_last = run_sink(&mut inner.observer, prev, u, i, sink);
                     });
                 });
+                pool::give_whole(inputs);
             }
         }
         let (values, status) = match outs {
             Outs::Given(_, d) => return Ok(d),
-            Outs::Fresh(values, status) => (values, status),
+            Outs::Fresh(values, status, _) => (values, status),
         };
+        pool::keep_outputs(&values, &status);
         let out = PyDict::new(py);
-        for (k, name) in OUTPUTS.iter().enumerate() {
-            out.set_item(name, values.get_item(k)?)?;
+        if values.shape()[1] == n {
+            for (k, name) in OUTPUTS.iter().enumerate() {
+                out.set_item(name, values.get_item(k)?)?;
+            }
+            out.set_item("status", status)?;
+        } else {
+            // A longer reused pair: views of the first `n` values.
+            let first = PySlice::new(py, 0, n as isize, 1);
+            for (k, name) in OUTPUTS.iter().enumerate() {
+                out.set_item(name, values.get_item((k, &first))?)?;
+            }
+            out.set_item("status", status.get_item(&first)?)?;
         }
-        out.set_item("status", status)?;
         Ok(out)
     }
 
@@ -1085,6 +1132,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tune::tune_qr_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(suite::suite, m)?)?;
     m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
+    m.add_function(wrap_pyfunction!(pool::clear_buffer_pool, m)?)?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;
