@@ -27,10 +27,27 @@
 //!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere (`J = inertia_kg_m2`) and `d`
 //!    (6 ms) the delay of the detection. From rest the speed grows as `c r t^2 / 2`; seen `d`
 //!    late it has gained `c r t d`, which this `r` keeps below `w_k` (so the rotor moves at
-//!    most `2 w_k`, in either direction, before the push stops). Motion = the observer's
-//!    speed, low-pass filtered (1 ms), exceeds `w_k` for 5 ticks (whatever the observer's
+//!    most `2 w_k`, in either direction, before the push stops). Motion = for 5 ticks, the
+//!    observer's speed, low-pass filtered (1 ms), exceeds `w_k` (whatever the observer's
 //!    status: at standstill its angle may be 90 deg off and it reports `Uncertain` until
-//!    long after the rotor moves; a false alarm is caught by the coast).
+//!    long after the rotor moves; a false alarm is caught by the coast), or, on a surface
+//!    motor, one of two detectors that need no angle does. Both read the flux
+//!    `x = int(u - R i) dt - L i` (the voltage of the observer's step, `i` the kick's
+//!    current reference: no sensor noise), taken from the moment the kick current is twice
+//!    the dead-time compensation's linear band (below it the compensation's error drifts
+//!    the flux along the kick vector by about 0.01 Wb on industrial_2k2, more than a slow
+//!    rotor's; above it the drift stays within about 0.5 mWb) and after 5 ms of it: (a) the
+//!    flux's slope (two cascaded 1.5 ms low-pass filters) over `psi_f`, the rotor's speed,
+//!    at least `w_k`; (b) a matched fit of the whole path, `x = c + A P(t)` per axis with
+//!    `Q` the integral of the kick current and `P` that of `Q` (a rotor that started at rest
+//!    under the fixed vector turns as `P`), whose speed `|A| Q / psi_f` is at least `w_k`
+//!    with `|A|` at least 5 sigma of its noise (chi-square 25). The fit reads the slow
+//!    start of a rotor; the slope the rotor at the dead point, which starts late and fast
+//!    (the fit, whose model assumes motion from the start, read 0.6 `w_k` there at 1.9
+//!    `w_k`). After a false alarm the rotor may be crawling, not at rest, and both are off
+//!    until the next start (kept on there, they re-detected a rotor crawling below `w_k`,
+//!    whose coasts never saw the 0.5 rad turn, until the second step ran it away: 37-73 %
+//!    backward on industrial_2k2).
 //! 2. **Coast.** The current is cut to a small vector (at most 15 % of the alignment
 //!    current, and small enough that its torque swings the speed by at most a tenth of
 //!    `w_k`) that turns 4 times per 5 ms block: no net torque, whatever the rotor's angle.
@@ -146,7 +163,9 @@
 //! angle drifts where the back-EMF vanishes.
 //!
 //! Cost: the damping is a multiply-add and a clamp per I/f tick; the kick and coast add a
-//! filter, sums and the injected vector's turn (four multiplies) during the alignment only,
+//! filter, sums and the injected vector's turn (four multiplies) during the alignment only
+//! (the kick's flux detectors on a surface motor: about 30 multiply-adds, a square root
+//! and three divisions per tick, a second square root when the slope does not decide),
 //! and an `atan2` per 5 ms block of the coast (the speed agreement: two square roots and
 //! a few multiplies, on the coast's ticks once the turn is reached).
 //!
@@ -233,6 +252,20 @@ const KICK_TAU_S: f32 = 0.001;
 const KICK_DELAY_S: f32 = 0.006;
 /// Ticks in a row the filtered speed must exceed the kick speed.
 const MOVING_TICKS: u16 = 5;
+/// Kick (surface motors): the chi-square of the fitted flux path against its noise that
+/// shows motion ([`KickFit`]).
+const KICK_FIT_CHI2: f32 = 25.0;
+/// Kick (surface motors): the time constant of the flux's two low-pass filters
+/// ([`KickFit`]), s.
+const KICK_SLOPE_TAU_S: f32 = 0.0015;
+/// Kick (surface motors): the fit starts once the kick current is this many times the
+/// dead-time compensation's linear band.
+const KICK_FIT_BAND: f32 = 2.0;
+/// Kick (surface motors): samples of the fit before it or the slope decides, s.
+const KICK_FIT_MIN_S: f32 = 0.005;
+/// Kick: the kick speed doubles after a coast that saw the rotor stop, at most this many
+/// times.
+const KICK_BOOST_MAX: u8 = 3;
 /// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
 const COAST_S: f32 = 0.15;
 /// The coast ends once the back-EMF has turned this much from its first block, rad
@@ -391,6 +424,45 @@ struct Vars {
     e_blocks: u32,
     /// Coast: the unit vector of the injected current, in the alignment's frame.
     inj: [f32; 2],
+    /// Kick (surface motors): the detectors of motion from the flux ([`KickFit`]).
+    fit: KickFit,
+    /// Coast (surface motors): the rotor moved and stopped (its back-EMF fell below half the
+    /// kick speed's).
+    stopped: bool,
+    /// Kick: coasts that ended with the rotor stopped; the kick speed doubles with each.
+    boost: u8,
+}
+
+/// The kick's detectors of motion on a surface motor (module docs). From the flux
+/// `x = int(u - R i) dt - L i` along the kick (since the kick current left the dead-time
+/// compensation's linear band): the least-squares fit of `x = c + A P(t)` per axis, `Q` the
+/// integral of the kick's current since the kick began and `P` the integral of `Q` (a rotor
+/// that started at rest under a fixed current vector turns as `P`); `|A| Q / psi_f` is the
+/// rotor's speed, whatever its angle. And the flux's slope, `|dx/dt| / psi_f`, from two
+/// cascaded low-pass filters.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct KickFit {
+    /// Off: the kick's start is not a rotor at rest (after a false alarm).
+    off: bool,
+    /// Samples of the fit.
+    n: f32,
+    /// The kick vector's unit vector (cosine, sine).
+    g: [f32; 2],
+    /// `Q`, the integral of the kick's current, A s.
+    q: f32,
+    /// `P`, the integral of `Q` since the fit began, A s^2.
+    p: f32,
+    /// The flux integral `int(u - R i) dt` since the fit began, Wb.
+    flux: [f32; 2],
+    /// Sums of `P`, `P^2`, and per axis of the flux `x`, `P x`, `x^2`.
+    sp: f32,
+    spp: f32,
+    sf: [f32; 2],
+    spf: [f32; 2],
+    sff: [f32; 2],
+    /// The flux low-pass filtered once and twice ([`KICK_SLOPE_TAU_S`]), Wb.
+    lp1: [f32; 2],
+    lp2: [f32; 2],
 }
 
 /// The state machine (module docs): state, speed loop, health monitor.
@@ -433,6 +505,10 @@ pub(crate) struct Sequencer {
     inv_psi: f32,
     /// Coast: the back-EMF of half the kick speed, V.
     e_min: f32,
+    /// Kick: samples of the flux before its detectors decide.
+    kick_fit_min: f32,
+    /// Kick: weight of the new sample in the flux's low-pass filters.
+    slope_filter: f32,
     // Parts.
     health: HealthMonitor,
     speed_pi: Pi,
@@ -505,6 +581,8 @@ impl Sequencer {
             inj_step: [inj_s, inj_c],
             inv_psi: 1.0 / cfg.motor.psi_f_wb,
             e_min: 0.5 * kick_speed * cfg.motor.psi_f_wb,
+            kick_fit_min: ticks(KICK_FIT_MIN_S, ts).max(3) as f32,
+            slope_filter: min2(ts / KICK_SLOPE_TAU_S, 1.0),
             k_damp: 2.0 * st.damping_ratio / wn,
             phi_max: FRAC_PI_2,
             kick_speed,
@@ -722,12 +800,16 @@ impl Sequencer {
                             let [l0, l1] = mean;
                             let e_min = self.e_min * self.e_min;
                             if !self.salient {
-                                self.v.coast_int =
-                                    if f0 * f0 + f1 * f1 >= e_min && l0 * l0 + l1 * l1 >= e_min {
-                                        atan2(f0 * l1 - f1 * l0, f0 * l0 + f1 * l1)
-                                    } else {
-                                        0.0
-                                    };
+                                let (e_f, e_l) = (f0 * f0 + f1 * f1, l0 * l0 + l1 * l1);
+                                self.v.coast_int = if e_f >= e_min && e_l >= e_min {
+                                    atan2(f0 * l1 - f1 * l0, f0 * l0 + f1 * l1)
+                                } else {
+                                    0.0
+                                };
+                                // A rotor that moved and stopped (friction): the coast
+                                // cannot see its turn.
+                                self.v.stopped =
+                                    self.v.e_blocks >= 2 && e_f >= e_min && e_l < e_min;
                             }
                             self.v.e_sum = [0.0; 2];
                             self.v.e_n = 0;
@@ -743,23 +825,38 @@ impl Sequencer {
                         } else {
                             self.launch(cfg, reseed);
                         }
-                    } else if self.v.coast > self.coast_ticks {
+                    } else if self.v.coast > self.coast_ticks || self.v.stopped {
                         // A false alarm (the rotor did not turn): back to the alignment.
+                        // A rotor that stopped is at rest again: the flux detectors stay
+                        // on, and the next detection waits for twice the speed, which
+                        // coasts farther against the friction.
+                        let stopped = self.v.stopped;
+                        self.v.stopped = false;
+                        if stopped && self.v.boost < KICK_BOOST_MAX {
+                            self.v.boost += 1;
+                        }
                         self.v.coast = 0;
                         self.v.moving = 0;
                         self.v.w_f = 0.0;
                         self.v.e_sum = [0.0; 2];
                         self.v.e_n = 0;
                         self.v.e_blocks = 0;
+                        self.v.fit = KickFit {
+                            off: !stopped,
+                            ..KickFit::default()
+                        };
                     }
                 } else {
                     let i_align = cfg.startup.align_current_a;
+                    let fit = !self.salient
+                        && self.kick_speed > 0.0
+                        && self.kick_fit(cfg, input.u_ab, self.v.amp);
                     self.v.amp = min2(self.v.amp + self.align_step, i_align);
                     self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
                     self.v.coast_int = 0.0;
                     let seen = self.kick_speed > 0.0
                         && (!self.salient || est.status == Status::Tracking)
-                        && self.v.w_f.abs() >= self.kick_speed
+                        && (fit || self.v.w_f.abs() >= self.kick_threshold())
                         && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {
                         self.v.moving.saturating_add(1)
@@ -778,6 +875,10 @@ impl Sequencer {
                             self.v.timer = 0;
                             self.v.amp = 0.0;
                             self.v.gamma = wrap(self.v.gamma + FRAC_PI_2);
+                            self.v.fit = KickFit {
+                                off: self.v.fit.off,
+                                ..KickFit::default()
+                            };
                         }
                     }
                 }
@@ -1043,6 +1144,87 @@ impl Sequencer {
         let phi = limit(-k * (w_hat - w_ramp), -self.phi_max, self.phi_max);
         self.v.gamma = wrap(self.v.gamma + (phi - self.v.phi));
         self.v.phi = phi;
+    }
+
+    /// The kick's detectors of motion on a surface motor ([`KickFit`], module docs): adds
+    /// this tick's sample, the voltage `u` applied over the last period under the kick
+    /// current `i` of the last tick, and tells whether the rotor is seen moving: the flux's
+    /// slope, or the fit's speed `|A| Q / psi_f` with `|A|` at least [`KICK_FIT_CHI2`]
+    /// (chi-square, 2 degrees of freedom) against its noise, at least the kick speed.
+    fn kick_fit(&mut self, cfg: &FocConfig, u: [f32; 2], i: f32) -> bool {
+        let ts = cfg.ts_s;
+        let w_k = self.kick_threshold();
+        let f = &mut self.v.fit;
+        if f.off {
+            return false;
+        }
+        f.q += i * ts;
+        // The fit starts once the dead-time compensation is out of its linear band: below,
+        // its error drifts the flux along the kick vector by far more than a slow rotor.
+        if i < KICK_FIT_BAND * cfg.dead_time_band() {
+            return false;
+        }
+        if f.n == 0.0 {
+            let (s, c) = sin_cos(self.v.gamma);
+            f.g = [c, s];
+        } else {
+            f.p += f.q * ts;
+        }
+        let p = f.p;
+        f.n += 1.0;
+        f.sp += p;
+        f.spp += p * p;
+        let (rs, ls) = (cfg.motor.rs_ohm, cfg.motor.ld_h);
+        let kf = self.slope_filter;
+        let mut slope2 = 0.0;
+        for (k, &uk) in u.iter().enumerate() {
+            f.flux[k] += (uk - rs * i * f.g[k]) * ts;
+            let x = f.flux[k] - ls * i * f.g[k];
+            f.sf[k] += x;
+            f.spf[k] += p * x;
+            f.sff[k] += x * x;
+            // The flux's slope (the back-EMF) from two cascaded low-pass filters.
+            if f.n == 1.0 {
+                f.lp1[k] = x;
+                f.lp2[k] = x;
+            }
+            f.lp1[k] += (x - f.lp1[k]) * kf;
+            f.lp2[k] += (f.lp1[k] - f.lp2[k]) * kf;
+            let d = f.lp1[k] - f.lp2[k];
+            slope2 += d * d;
+        }
+        if f.n < self.kick_fit_min {
+            return false;
+        }
+        let w_slope = sqrt(slope2) * self.inv_psi / KICK_SLOPE_TAU_S;
+        if w_slope >= w_k {
+            return true;
+        }
+        // The fit of `c + A P` per axis, from the centered sums.
+        let inv_n = 1.0 / f.n;
+        let cpp = f.spp - f.sp * f.sp * inv_n;
+        if cpp <= 0.0 {
+            return false;
+        }
+        let mut cpf2 = 0.0;
+        let mut cff = 0.0;
+        for k in 0..2 {
+            let cpf = f.spf[k] - f.sp * f.sf[k] * inv_n;
+            cpf2 += cpf * cpf;
+            cff += f.sff[k] - f.sf[k] * f.sf[k] * inv_n;
+        }
+        // `|A|^2 = cpf2 / cpp^2`; the residual's variance per sample `sigma^2`; the
+        // chi-square of `|A|` against its variance `sigma^2 / cpp` is `|A|^2 cpp / sigma^2`.
+        let a2 = cpf2 / (cpp * cpp);
+        let sigma2 = max2((cff - cpf2 / cpp) / (2.0 * (f.n - 2.0)), 0.0);
+        let w = sqrt(a2) * f.q * self.inv_psi;
+        w >= w_k && a2 * cpp >= KICK_FIT_CHI2 * sigma2
+    }
+
+    /// The speed the kick takes as motion: the kick speed, doubled after each coast that
+    /// saw the rotor stop (friction).
+    fn kick_threshold(&self) -> f32 {
+        self.kick_speed * f32::from(1u8 << self.v.boost)
     }
 
     /// The coast's evidence is a rotation (surface motors): the speed the back-EMF's turn
