@@ -267,7 +267,7 @@ const KICK_FIT_MIN_S: f32 = 0.005;
 /// times.
 const KICK_BOOST_MAX: u8 = 3;
 /// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
-const COAST_S: f32 = 0.15;
+const COAST_S: f32 = 0.3;
 /// The coast ends once the back-EMF has turned this much from its first block, rad
 /// el.
 const COAST_TURN_RAD: f32 = 0.5;
@@ -809,7 +809,7 @@ impl Sequencer {
                                 // A rotor that moved and stopped (friction): the coast
                                 // cannot see its turn.
                                 self.v.stopped =
-                                    self.v.e_blocks >= 2 && e_f >= e_min && e_l < e_min;
+                                    self.v.e_blocks >= 2 && e_f >= e_min && 4.0 * e_l < e_min;
                             }
                             self.v.e_sum = [0.0; 2];
                             self.v.e_n = 0;
