@@ -254,7 +254,7 @@ const KICK_DELAY_S: f32 = 0.006;
 const MOVING_TICKS: u16 = 5;
 /// Kick (surface motors): the chi-square of the fitted flux path against its noise that
 /// shows motion ([`KickFit`]).
-const KICK_FIT_CHI2: f32 = 25.0;
+const KICK_FIT_CHI2: f32 = 64.0;
 /// Kick (surface motors): the time constant of the flux's two low-pass filters
 /// ([`KickFit`]), s.
 const KICK_SLOPE_TAU_S: f32 = 0.0015;
@@ -266,6 +266,9 @@ const KICK_FIT_MIN_S: f32 = 0.005;
 /// Kick: the kick speed doubles after a coast that saw the rotor stop, at most this many
 /// times.
 const KICK_BOOST_MAX: u8 = 3;
+/// Kick (surface motors): the observer's filtered speed counts as motion from this many
+/// times its RMS at standstill.
+const KICK_NOISE_K: f32 = 1.5;
 /// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
 const COAST_S: f32 = 0.3;
 /// The coast ends once the back-EMF has turned this much from its first block, rad
@@ -426,6 +429,9 @@ struct Vars {
     inj: [f32; 2],
     /// Kick (surface motors): the detectors of motion from the flux ([`KickFit`]).
     fit: KickFit,
+    /// Kick: sum of the squared filtered observer speed over the kick's first settling
+    /// time, (rad/s)^2.
+    w_noise: f32,
     /// Coast (surface motors): the rotor moved and stopped (its back-EMF fell below half the
     /// kick speed's).
     stopped: bool,
@@ -854,9 +860,18 @@ impl Sequencer {
                     self.v.amp = min2(self.v.amp + self.align_step, i_align);
                     self.v.w_f += (est.omega_e_rad_s - self.v.w_f) * self.kick_filter;
                     self.v.coast_int = 0.0;
+                    // The observer's speed noise at standstill, over the kick's first
+                    // settling time (the current still small, the rotor at rest).
+                    if self.v.timer <= self.coast_settle_ticks {
+                        self.v.w_noise += self.v.w_f * self.v.w_f;
+                        #[cfg(feature = "std")]
+                        if self.v.timer == self.coast_settle_ticks {
+                            std::eprintln!("DBG noise {}", self.observer_threshold() / self.kick_threshold());
+                        }
+                    }
                     let seen = self.kick_speed > 0.0
                         && (!self.salient || est.status == Status::Tracking)
-                        && (fit || self.v.w_f.abs() >= self.kick_threshold())
+                        && (fit || self.v.w_f.abs() >= self.observer_threshold())
                         && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {
                         self.v.moving.saturating_add(1)
@@ -873,6 +888,7 @@ impl Sequencer {
                             reframe = Some(self.align_frame());
                             self.v.second = true;
                             self.v.timer = 0;
+                            self.v.w_noise = 0.0;
                             self.v.amp = 0.0;
                             self.v.gamma = wrap(self.v.gamma + FRAC_PI_2);
                             self.v.fit = KickFit {
@@ -1198,6 +1214,8 @@ impl Sequencer {
         }
         let w_slope = sqrt(slope2) * self.inv_psi / KICK_SLOPE_TAU_S;
         if w_slope >= w_k {
+            #[cfg(feature = "std")]
+            std::eprintln!("DBG slope {w_slope} wk {w_k} n {}", f.n);
             return true;
         }
         // The fit of `c + A P` per axis, from the centered sums.
@@ -1218,13 +1236,30 @@ impl Sequencer {
         let a2 = cpf2 / (cpp * cpp);
         let sigma2 = max2((cff - cpf2 / cpp) / (2.0 * (f.n - 2.0)), 0.0);
         let w = sqrt(a2) * f.q * self.inv_psi;
-        w >= w_k && a2 * cpp >= KICK_FIT_CHI2 * sigma2
+        let hit = w >= w_k && a2 * cpp >= KICK_FIT_CHI2 * sigma2;
+        #[cfg(feature = "std")]
+        if hit {
+            std::eprintln!("DBG fit w {w} wk {w_k} chi2 {} n {}", a2 * cpp / sigma2, f.n);
+        }
+        hit
     }
 
     /// The speed the kick takes as motion: the kick speed, doubled after each coast that
     /// saw the rotor stop (friction).
     fn kick_threshold(&self) -> f32 {
         self.kick_speed * f32::from(1u8 << self.v.boost)
+    }
+
+    /// The speed of the observer that the kick takes as motion: the kick threshold, or on
+    /// a surface motor [`KICK_NOISE_K`] times the RMS of its filtered speed over the
+    /// kick's first settling time, whichever is larger.
+    fn observer_threshold(&self) -> f32 {
+        let w = self.kick_threshold();
+        if self.salient {
+            return w;
+        }
+        let n = self.coast_settle_ticks.max(1) as f32;
+        max2(w, KICK_NOISE_K * sqrt(self.v.w_noise / n))
     }
 
     /// The coast's evidence is a rotation (surface motors): the speed the back-EMF's turn
