@@ -260,15 +260,15 @@ const KICK_FIT_CHI2: f32 = 64.0;
 const KICK_SLOPE_TAU_S: f32 = 0.0015;
 /// Kick (surface motors): the fit starts once the kick current is this many times the
 /// dead-time compensation's linear band.
-const KICK_FIT_BAND: f32 = 2.0;
+const KICK_FIT_BAND: f32 = 1.5;
 /// Kick (surface motors): samples of the fit before it or the slope decides, s.
-const KICK_FIT_MIN_S: f32 = 0.005;
+const KICK_FIT_MIN_S: f32 = 0.003;
 /// Kick: the kick speed doubles after a coast that saw the rotor stop, at most this many
 /// times.
 const KICK_BOOST_MAX: u8 = 3;
 /// Kick (surface motors): the observer's filtered speed counts as motion from this many
 /// times its RMS at standstill.
-const KICK_NOISE_K: f32 = 1.5;
+const KICK_NOISE_K: f32 = 1.4;
 /// Longest coast; a coast that sees no turn of the rotor in this time was a false alarm, s.
 const COAST_S: f32 = 0.3;
 /// The coast ends once the back-EMF has turned this much from its first block, rad
@@ -864,10 +864,6 @@ impl Sequencer {
                     // settling time (the current still small, the rotor at rest).
                     if self.v.timer <= self.coast_settle_ticks {
                         self.v.w_noise += self.v.w_f * self.v.w_f;
-                        #[cfg(feature = "std")]
-                        if self.v.timer == self.coast_settle_ticks {
-                            std::eprintln!("DBG noise {}", self.observer_threshold() / self.kick_threshold());
-                        }
                     }
                     let seen = self.kick_speed > 0.0
                         && (!self.salient || est.status == Status::Tracking)
@@ -1214,8 +1210,6 @@ impl Sequencer {
         }
         let w_slope = sqrt(slope2) * self.inv_psi / KICK_SLOPE_TAU_S;
         if w_slope >= w_k {
-            #[cfg(feature = "std")]
-            std::eprintln!("DBG slope {w_slope} wk {w_k} n {}", f.n);
             return true;
         }
         // The fit of `c + A P` per axis, from the centered sums.
@@ -1236,12 +1230,7 @@ impl Sequencer {
         let a2 = cpf2 / (cpp * cpp);
         let sigma2 = max2((cff - cpf2 / cpp) / (2.0 * (f.n - 2.0)), 0.0);
         let w = sqrt(a2) * f.q * self.inv_psi;
-        let hit = w >= w_k && a2 * cpp >= KICK_FIT_CHI2 * sigma2;
-        #[cfg(feature = "std")]
-        if hit {
-            std::eprintln!("DBG fit w {w} wk {w_k} chi2 {} n {}", a2 * cpp / sigma2, f.n);
-        }
-        hit
+        w >= w_k && a2 * cpp >= KICK_FIT_CHI2 * sigma2
     }
 
     /// The speed the kick takes as motion: the kick speed, doubled after each coast that
