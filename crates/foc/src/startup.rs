@@ -53,9 +53,9 @@
 //!    reads the slow start of a rotor; the slope the rotor at the dead point, which starts
 //!    late and fast. Measured on the grid of 72 start-ups (below): from twice the band and
 //!    after 5 ms the servo reached 1.04 % from 120 deg (the rotor passed `w_k` before the
-//!    fit had its data); from the band itself the servo reached 1.56 % (1.94 % on seed
-//!    + 2), the default job closed its loop at 0.33 s instead of 0.23 s and with Coulomb
-//!    friction alone at 0.80 s. After a false alarm (a coast that timed out) the
+//!    fit had its data); from the band itself the servo reached 1.56 % (1.94 % on the
+//!    seeds + 2), the default job closed its loop at 0.33 s instead of 0.23 s and with
+//!    Coulomb friction alone at 0.80 s. After a false alarm (a coast that timed out) the
 //!    rotor may be crawling, not at rest, and both flux detectors are off until the next
 //!    step (kept on there, they re-detected a crawling rotor until the second step ran it
 //!    away: 37-73 % backward on industrial_2k2); after a coast that saw the rotor stop
