@@ -140,7 +140,7 @@
 //! current and the launch above (sized and tested on the surface motors) broke on them:
 //! measured, the field-weakening presets stalled and the traction motor lost its observer.
 //! There the coast has no current and ends once the observer's integrated speed has turned
-//! 0.5 rad, the kick needs the observer's `Tracking` status and a 4 ms filter, and the
+//! 0.5 rad (a false alarm after 0.15 s), the kick needs the observer's `Tracking` status and a 4 ms filter, and the
 //! launch starts from the observer's estimate (moved to the other branch when it lies more
 //! than 90 deg from the back-EMF's angle), with a 1 rad lead and the ramp at its speed.
 //!
