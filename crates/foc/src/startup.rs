@@ -118,7 +118,10 @@
 //! On the noise seeds + 2 to + 5 (144 more) 7 start-ups still exceed it, all on small_fast
 //! (1.06-1.42 %, from -180 deg, the dead point of the first vector, and 0 / 30 deg),
 //! where the flux detectors rarely fire first (`psi_f` 6 mWb) and the observer still
-//! detects (17 of 144 before, up to 3.93 %). With Coulomb friction the goal is missed by
+//! detects (17 of 144 before, up to 3.93 %), and where the rotor keeps speeding up during
+//! the coast: from -180 deg on seed + 5 it was at 0.86 % at the detection and 1.42 % at
+//! the launch, under a mean true q current of -19 mA over the coast (the servo's: 0.5 mA;
+//! not the injected current: at half its amplitude -17.5 mA; its source is not found). With Coulomb friction the goal is missed by
 //! design: the doubled `w_k` above (the default job with realistic sensing: 2.03 %;
 //! friction alone 1.32 %, closed loop at 0.49 s). Tried on the grid and dropped, each
 //! shuffling the misses among the cells with the noise instead of removing them: a
