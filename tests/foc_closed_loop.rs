@@ -326,21 +326,24 @@ fn dead_time_setting_reaches_foc() {
 ///
 /// | quantity | measured | before foc compensated dead time | asserted |
 /// |---|---|---|---|
-/// | hand-over / closed loop | 0.3028 / 0.3228 s | 0.3334 / 0.3534 s | closed loop < 0.6 s |
-/// | speed error 2000 rpm, no load: mean / max | -0.24 / 2.97 rpm | -17.5 / 19.8 | < 2 / < 6 |
-/// | rated load step: dip | 110.0 rpm | 128.2 | < 150 |
-/// | speed error 2000 rpm, 1.5 N m: mean / max | -0.13 / 2.30 rpm | -18.1 / 20.4 | < 2 / < 6 |
-/// | speed error -1000 rpm, 1.5 N m: mean / max | +0.06 / 2.01 rpm | -21.1 / 23.0 | < 2 / < 6 |
-/// | foc observer after hand-over: RMS / max / mean | 0.172 / 0.779 / +0.000 deg el. | 1.77 / 9.70 / +1.15 | < 0.4 / < 1.5 / < 0.15 |
-/// | peak current | 2.67 A | 2.80 A | < 4.5 A |
+/// | hand-over / closed loop | 0.2675 / 0.2875 s | 0.3334 / 0.3534 s | closed loop < 0.6 s |
+/// | speed error 2000 rpm, no load: mean / max | +0.15 / 2.72 rpm | -17.5 / 19.8 | < 2 / < 6 |
+/// | rated load step: dip | 110.9 rpm | 128.2 | < 150 |
+/// | speed error 2000 rpm, 1.5 N m: mean / max | -0.02 / 2.54 rpm | -18.1 / 20.4 | < 2 / < 6 |
+/// | speed error -1000 rpm, 1.5 N m: mean / max | -0.07 / 2.24 rpm | -21.1 / 23.0 | < 2 / < 6 |
+/// | foc observer after hand-over: RMS / max / mean | 0.168 / 0.789 / -0.001 deg el. | 1.77 / 9.70 / +1.15 | < 0.4 / < 1.5 / < 0.15 |
+/// | peak current | 2.58 A | 2.80 A | < 4.5 A |
 ///
 /// With the dead time compensated, the sensor errors and the ripple are what is left: about
 /// twice the default's observer error and speed ripple. The start (`foc::startup`'s kick with
-/// its flux detectors, issue 14 item 1) turns the rotor 2.03 % of rated speed backwards
-/// here: the Coulomb friction stops a rotor detected at the kick speed within its coast,
-/// and the kick speed doubles (the start's own grid, without friction, stays within 1 %).
-/// With the flux detectors and no such rule this job coasted until 0.89 s and closed its
-/// loop at 1.0 s.
+/// its flux detectors, issue 14 item 1) turns the rotor 1.41 % of rated speed backwards
+/// here: the Coulomb friction (and the offsets' current) stops a rotor detected at the
+/// kick speed within its coast, twice, and the kick speed grows 1.5 times with each stop
+/// (the next coast launches from a 0.2 rad turn; the start's own grid, without friction,
+/// stays within 1 %). With the kick speed doubled at each stop and the 0.5 rad turn: 2.03 %,
+/// closed loop at 0.3228 s (speed errors -0.24 / 2.97, -0.13 / 2.30, +0.06 / 2.01 rpm, dip
+/// 110.0 rpm, observer 0.172 / 0.779 / +0.000 deg, peak 2.67 A); with the flux detectors
+/// and no such rule this job coasted until 0.89 s and closed its loop at 1.0 s.
 #[test]
 fn sensorless_job_with_realistic_sensing() {
     let mut sc = preset("default");
