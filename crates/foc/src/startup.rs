@@ -156,7 +156,18 @@
 //! it gave during the detection's delay (servo 1.36 %, industrial_2k2 2.14 %, the
 //! realistic job launched the wrong way, 46 %); the injected current's ripple halved (0.05
 //! `w_k`: small_fast at most 1.35 %, but the dead-time error of the smaller current
-//! launched the realistic job the wrong way, 15 %). Tried on the grid and dropped, each
+//! launched the realistic job the wrong way, 15 %); the first step's current capped at
+//! `(k / d)^2 / c` so that the dead point's growth over the delay `e^(k)` stays small
+//! (`k` 0.4 / 0.3 / 0.2: 5 / 3 / 0 small_fast misses on the seeds + 2 to + 5, but the
+//! servo 1.14 % at `k` 0.3 and small_fast 1.22 % on seed + 1 at 0.2). Not taken but worth
+//! a look: a smaller kick speed (`pmsm-sim`'s default for its scenarios, 0.6 % of rated
+//! speed): at 0.5 % the grid's worst is servo 0.82 / 0.94 %, industrial_2k2 0.73 / 0.75
+//! %, small_fast 0.78 / 1.26 % (the presets' seeds and the next / + 2 to + 5), 2 of the
+//! 144 above 1 % (small_fast from -180 deg, 1.08 and 1.26 %), the realistic job 1.37 %
+//! with its loop closed at 0.26 s; but at 0.45 % the observer's noise starts false alarms
+//! (servo 2.14 %, industrial_2k2 3.15 %, small_fast 2.68 %), and on 12 variants of the
+//! realistic job (rotor angles, seeds) friction alone reached 1.53 % (1.17 % at 0.6 %) and
+//! the offsets alone closed one loop at 0.81 s (0.34 s). Tried on the grid and dropped, each
 //! shuffling the misses among the cells with the noise instead of removing them: a
 //! back-EMF detector `u - R i - L di/dt` over 1 ms (industrial_2k2: 1-5 times the back-EMF
 //! of `w_k` in noise, false alarms and runaways up to 72 %); the flux across the kick
