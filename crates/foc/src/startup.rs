@@ -92,8 +92,9 @@
 //!    stops, the third coast from 1.40 % launched at 0.2 rad). On that job from 4 rotor
 //!    angles (1 rad, the preset's, + 0 / 90 / 180 / -90 deg) and 3 noise seeds (12 runs)
 //!    the worst backward speed went from 2.96 % to 1.82 % (mean 1.24 to 0.81 %; friction
-//!    alone 2.83 to 1.17 %, the offsets alone 1.57 to 1.29 %: their current brakes the
-//!    coasting rotor too) and the latest closed loop from 0.32 to 0.31 s. Measured and
+//!    alone 2.83 to 1.17 %, the sensing errors alone 1.57 to 1.29 %: the offsets' current
+//!    brakes the coasting rotor too) and the latest closed loop from 0.32 to 0.31 s.
+//!    Measured and
 //!    dropped: `w_k` doubled with a 0.25 rad turn (worst still 2.96 %); a turn of
 //!    0.15 rad (no backward speed changed); the kick current restarted from zero after a
 //!    stop (the job 1.51 %, small_fast from 30 deg on seed + 5 1.47 %). With the stop
@@ -149,7 +150,7 @@
 //! 1.5 times its noise (0.05 / 0.15 A) 5 / 14 cells exceed 1 %, up to 1.24 / 1.81 %.
 //! With Coulomb friction the goal is missed by
 //! design: the larger `w_k` above (the default job with realistic sensing: 1.41 %;
-//! friction alone 1.03 %, closed loop at 0.23 s; the offsets alone 1.29 %). Tried on the
+//! friction alone 1.03 %, closed loop at 0.23 s; the sensing errors alone 1.29 %). Tried on the
 //! small_fast misses and dropped: the coast's blocks after 4 ms instead of 10 (-180 deg
 //! on seed + 2 1.07 %, + 5 1.39 %, 6 misses left, industrial_2k2 1.04 % from 120 deg on
 //! seed + 2); the kick vector reversed for 2 ms at the detection, to take back the speed
@@ -167,7 +168,7 @@
 //! with its loop closed at 0.26 s; but at 0.45 % the observer's noise starts false alarms
 //! (servo 2.14 %, industrial_2k2 3.15 %, small_fast 2.68 %), and on 12 variants of the
 //! realistic job (rotor angles, seeds) friction alone reached 1.53 % (1.17 % at 0.6 %) and
-//! the offsets alone closed one loop at 0.81 s (0.34 s). Tried on the grid and dropped, each
+//! the sensing errors alone closed one loop at 0.81 s (0.34 s). Tried on the grid and dropped, each
 //! shuffling the misses among the cells with the noise instead of removing them: a
 //! back-EMF detector `u - R i - L di/dt` over 1 ms (industrial_2k2: 1-5 times the back-EMF
 //! of `w_k` in noise, false alarms and runaways up to 72 %); the flux across the kick
