@@ -421,6 +421,8 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         }
     };
 
+    // The observers' thread only where each busy thread has a core (`sim::pipeline_pays`).
+    let inline_observers = !sim::pipeline_pays(log.is_some());
     let mut sinks: Vec<&mut dyn SampleSink> = Vec::new();
     if let Some(l) = log.as_mut() {
         sinks.push(l);
@@ -435,6 +437,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
             sinks,
             interrupt: Some(&INTERRUPTED),
             progress: Some(&mut progress),
+            inline_observers,
             ..RunOptions::default()
         },
     )?;
@@ -571,10 +574,18 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
     let (pb, json) = (LogEncoding::Protobuf, LogEncoding::Json);
     // One untimed run first: page faults, caches and the CPU's clock settle.
     sim::run_with(&base, RunOptions::default())?;
-    // (name, seed filter, log, observers inline on the simulating thread)
+    // (name, seed filter, log, observers inline on the simulating thread). `pmsm-sim run`
+    // (the default run: seed filter, MCAP protobuf) and `--no-log` pipeline the observers
+    // where `sim::pipeline_pays` says so, and step them inline otherwise: their rows are
+    // the pipelined or the inline ones accordingly (printed below the table).
     let configs: [(&str, bool, Option<LogOptions>, bool); 10] = [
         ("no seed filter, no log", false, None, false),
-        ("seed filter, no log (--no-log)", true, None, false),
+        (
+            "seed filter, no log, observers pipelined",
+            true,
+            None,
+            false,
+        ),
         (
             "  the same, observers inline (sequential)",
             true,
@@ -588,7 +599,7 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             false,
         ),
         (
-            "seed filter, MCAP protobuf (the default run)",
+            "seed filter, MCAP protobuf, observers pipelined",
             true,
             log(LogCompression::None, pb),
             false,
@@ -699,6 +710,20 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
             per(cpu_all),
         );
     }
+    let mode = |log| {
+        if sim::pipeline_pays(log) {
+            "pipelined"
+        } else {
+            "inline"
+        }
+    };
+    println!(
+        "(on this machine's {} core(s) `pmsm-sim run` steps the observers {} with the log (the \
+         default run) and {} with --no-log)",
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+        mode(true),
+        mode(false),
+    );
     let _ = std::fs::remove_file(&mcap_path);
     components(&base, runs, no_log_ns, no_log_piped_ns);
     Ok(ExitCode::SUCCESS)

@@ -202,6 +202,18 @@ pub struct RunOptions<'a> {
     pub inline_observers: bool,
 }
 
+/// Whether the run's observers should step on a thread of their own
+/// ([`RunOptions::inline_observers`] `false`) on this machine: only when every busy thread gets
+/// a core, the simulating thread, the observers' and, with `log_thread`, the MCAP log's writer
+/// ([`crate::mcap_log`]). With fewer cores the threads take turns on them and the
+/// hand-over between them costs more than it saves: on the 2-core VM of the README, the
+/// default run with its log ran 127x real time pipelined against 158x inline (`pmsm-sim
+/// bench`, medians of 7), while without the log the pipeline wins (229x against 215x).
+pub fn pipeline_pays(log_thread: bool) -> bool {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    cores >= 2 + usize::from(log_thread)
+}
+
 /// Runs a scenario with a full trace; an early end (non-finite, observer failure) is an
 /// error.
 pub fn run(scenario: &Scenario) -> Result<RunOutput, SimError> {
