@@ -7,6 +7,16 @@ import pytest
 
 import pyfoc
 
+
+def run_threads(*targets):
+    """Runs each callable on a thread of its own, all at once, and waits for every one."""
+    threads = [threading.Thread(target=t) for t in targets]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+
+
 SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
 
 
@@ -173,11 +183,7 @@ def test_long_run_reads_any_layout_and_writes_out_like_fresh():
     np.testing.assert_array_equal(ref["omega"], before)
     # Two long runs on one filter at once: serialized, equal to two in sequence.
     shared, seq = make(), make()
-    threads = [threading.Thread(target=lambda: shared.run(u, i)) for _ in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[lambda: shared.run(u, i)] * 2)
     seq.run(u, i)
     seq.run(u, i)
     np.testing.assert_array_equal(shared.state, seq.state)
@@ -311,11 +317,7 @@ def test_threads_each_get_a_result():
         except Exception as e:  # noqa: BLE001 - collected and asserted below
             errors.append(e)
 
-    threads = [threading.Thread(target=work) for _ in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[work] * 4)
     assert not errors and len(results) == 4 and len(set(results)) == 1
     # One filter shared by threads: each call gets a result or a Python exception, no crash.
     shared = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
@@ -328,11 +330,7 @@ def test_threads_each_get_a_result():
         except RuntimeError as e:
             outcomes.append(type(e).__name__)
 
-    threads = [threading.Thread(target=share) for _ in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[share] * 4)
     assert len(outcomes) == 4 and "ok" in outcomes
 
 

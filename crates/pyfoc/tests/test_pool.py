@@ -3,14 +3,13 @@ nothing refers to that result any more. Reused arrays must give the same numbers
 the caller's own `out=` arrays (which never touches the pool), and a result, or any view of
 it, that is still alive must never be written by a later call."""
 import gc
-import threading
 import warnings
 
 import numpy as np
 import pytest
 
 import pyfoc
-from test_api import SERVO, record
+from test_api import SERVO, record, run_threads
 
 LONG = 100_000  # pipelined (>= 2^16 rows) and pooled
 SHORT = 30_000  # sequential path
@@ -197,9 +196,5 @@ def test_threads_sharing_the_pool():
         except Exception as e:  # noqa: BLE001 - collected and asserted below
             errors.append(e)
 
-    threads = [threading.Thread(target=work, args=(k,)) for k in range(4)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[lambda k=k: work(k) for k in range(4)])
     assert not errors, errors

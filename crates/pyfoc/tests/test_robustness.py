@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import pyfoc
+from test_api import run_threads
 
 SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
 TS = 1e-4
@@ -338,11 +339,7 @@ def test_one_shared_ekf_from_many_threads():
         except Exception as e:  # noqa: BLE001
             errors.append(e)
 
-    threads = [threading.Thread(target=runner) for _ in range(4)] + [threading.Thread(target=poker) for _ in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[runner] * 4, *[poker] * 2)
     assert not errors, errors
     assert len(outs) == 4
     assert np.all(np.isfinite(shared.state))
@@ -351,11 +348,7 @@ def test_one_shared_ekf_from_many_threads():
 def test_serialized_runs_equal_sequential_runs():
     u, i = good(3000)
     shared = ekf()
-    threads = [threading.Thread(target=lambda: shared.run(u, i)) for _ in range(3)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[lambda: shared.run(u, i)] * 3)
     seq = ekf()
     for _ in range(3):
         seq.run(u, i)
@@ -403,11 +396,7 @@ def test_many_threads_many_filters_and_tuners():
         except Exception as e:  # noqa: BLE001
             errors.append(e)
 
-    threads = [threading.Thread(target=work, args=(k,)) for k in range(8)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
+    run_threads(*[lambda k=k: work(k) for k in range(8)])
     assert not errors and len(results) == 8
 
 
