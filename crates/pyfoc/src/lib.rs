@@ -306,10 +306,23 @@ fn run_rows<T: Float + Into<f64>>(
     i: &[f64],
     cols: &mut Columns,
 ) -> [f64; 2] {
-    let rows = u.chunks_exact(2).zip(i.chunks_exact(2));
-    for (k, (uk, ik)) in rows.enumerate() {
-        cols.set(k, &step_row(o, prev, [ik[0], ik[1]]));
-        prev = [uk[0], uk[1]];
+    // The inputs and every column cut to the rows filtered here (`run` gives all of them
+    // one length), so that the loop's stores need no bounds check of their own: ten per
+    // row otherwise.
+    let n = cols.values.iter().map(|c| c.len()).fold(
+        cols.status.len().min(u.len() / 2).min(i.len() / 2),
+        usize::min,
+    );
+    let (u, i) = (&u[..2 * n], &i[..2 * n]);
+    let mut values = cols.values.each_mut().map(|c| &mut c[..n]);
+    let status = &mut cols.status[..n];
+    for k in 0..n {
+        let r = step_row(o, prev, [i[2 * k], i[2 * k + 1]]);
+        for (col, v) in values.iter_mut().zip(r.values) {
+            col[k] = v;
+        }
+        status[k] = r.status as i8;
+        prev = [u[2 * k], u[2 * k + 1]];
     }
     prev
 }
@@ -366,20 +379,6 @@ struct Columns<'a> {
 impl Columns<'_> {
     /// Bytes per row.
     const ROW_BYTES: u128 = (OUTPUTS.len() * 8 + 1) as u128;
-
-    /// Stores row `k` (ignored past the end, which `run` never reaches: its input and these
-    /// columns have one length).
-    #[inline(always)]
-    fn set(&mut self, k: usize, r: &Row) {
-        for (col, v) in self.values.iter_mut().zip(r.values) {
-            if let Some(x) = col.get_mut(k) {
-                *x = v;
-            }
-        }
-        if let Some(x) = self.status.get_mut(k) {
-            *x = r.status as i8;
-        }
-    }
 }
 
 impl<'a> Columns<'a> {
