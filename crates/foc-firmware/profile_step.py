@@ -3,7 +3,7 @@
 
 Usage (from the workspace root; CARGO_TARGET_DIR as for cargo, default target/):
 
-    python3 crates/foc-firmware/profile_step.py [default|untracked]
+    python3 crates/foc-firmware/profile_step.py [default|untracked|seed]
 
 Builds foc-firmware with EKF_PROFILE=<config> (the firmware then runs 1500 steps of that
 observer and exits), runs it under QEMU with `-d in_asm,exec,nochain`, takes the instructions
@@ -105,6 +105,7 @@ def main():
         return re.sub(r"<.*?>", "", f).replace("ekf_core::", "")
 
     inner, path, cls = collections.Counter(), collections.Counter(), collections.Counter()
+    fp = collections.Counter()
     for a, c in cnt.items():
         ek = [name(f) for f in chains.get(a, []) if "ekf_core" in f]
         inner[ek[0] if ek else "?"] += c
@@ -114,6 +115,7 @@ def main():
                     ops.get(a, "?"))
         if op in ("vadd", "vsub", "vmul", "vmla", "vmls", "vnmul", "vdiv", "vneg", "vabs"):
             k = "FP arithmetic"
+            fp[op] += c
         elif op in ("vcmp", "vcmpe", "vmrs"):
             k = "FP compare"
         elif op in ("vldr", "ldr", "ldrb", "ldrh", "ldrd", "ldm", "vldm", "pop", "vpop"):
@@ -129,7 +131,8 @@ def main():
         cls[k] += c
     print(f"{which}: {len(out)} instructions in the last step")
     for title, table in (("by ekf-core function (innermost inlined frame)", inner),
-                         ("by path below step", path), ("by instruction class", cls)):
+                         ("by path below step", path), ("by instruction class", cls),
+                         ("FP arithmetic by mnemonic (vmla/vmls: a multiply and an add)", fp)):
         print(f"--- {title}")
         for k, c in table.most_common():
             print(f"{c:5d}  {k}")

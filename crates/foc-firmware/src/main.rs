@@ -98,7 +98,7 @@ struct Variant {
 }
 
 fn run() -> Result<(), &'static str> {
-    // Built with `EKF_PROFILE=default` (or `untracked`) in the environment, the firmware only
+    // Built with `EKF_PROFILE=default` (or `untracked`, `seed`) in the environment, the firmware only
     // runs 1500 steps of that observer and exits: the run `profile_step.py` traces.
     if let Some(which) = option_env!("EKF_PROFILE") {
         return profile_run(which);
@@ -312,14 +312,17 @@ fn run() -> Result<(), &'static str> {
     }
 }
 
-/// 1500 steps of the default observer (`which == "untracked"`: without the tracking) on the
-/// synthetic run, for an execution trace (`crates/foc-firmware/profile_step.py`).
+/// 1500 steps of the default observer (`which == "untracked"`: without the tracking;
+/// `"seed"`: `ObserverConfig::seed`) on the synthetic run, for an execution trace
+/// (`crates/foc-firmware/profile_step.py`).
 fn profile_run(which: &str) -> Result<(), &'static str> {
     let mut data = [Sample::default(); SAMPLES];
     synth::generate(&mut data);
     let mut cfg = ObserverConfig::new(MotorParams::servo(), TS_S);
     if which == "untracked" {
         cfg.parameter_tracking = None;
+    } else if which == "seed" {
+        cfg = ObserverConfig::seed(MotorParams::servo(), TS_S);
     }
     let mut obs = PmsmObserver::new(&cfg).map_err(|_| "invalid observer config")?;
     let mut u_prev = [0.0; 2];
