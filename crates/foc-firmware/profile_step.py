@@ -23,6 +23,28 @@ import tempfile
 TARGET = "thumbv7em-none-eabihf"
 
 
+def mnemonic(op):
+    """The mnemonic without its condition and size suffixes (`vmla.f32` -> `vmla`)."""
+    return re.sub(r"(eq|ne|gt|ge|lt|le|ls|hi|mi|pl|hs|lo)?(\.f32|\.w|\.s32)*$", "", op)
+
+
+def insn_class(op):
+    """The class of a Thumb-2 / VFP mnemonic (see `mnemonic`) in the cost maps' tables."""
+    if op in ("vadd", "vsub", "vmul", "vmla", "vmls", "vnmul", "vdiv", "vneg", "vabs"):
+        return "FP arithmetic"
+    if op in ("vcmp", "vcmpe", "vmrs"):
+        return "FP compare"
+    if op in ("vldr", "ldr", "ldrb", "ldrh", "ldrd", "ldm", "vldm", "pop", "vpop"):
+        return "load"
+    if op in ("vstr", "str", "strb", "strh", "strd", "stm", "vstm", "push", "vpush"):
+        return "store"
+    if op in ("vmov", "mov", "movs", "movw", "movt", "mvn"):
+        return "move"
+    if op.startswith("b") or op.startswith("it") or op in ("cmp", "tst", "cbz", "cbnz"):
+        return "branch / IT / compare"
+    return "integer, other"
+
+
 def main():
     which = sys.argv[1] if len(sys.argv) > 1 else "default"
     env = dict(os.environ, EKF_PROFILE=which)
@@ -111,23 +133,10 @@ def main():
         inner[ek[0] if ek else "?"] += c
         outer = list(reversed(ek))
         path[" > ".join(outer[1:3]) if len(outer) > 1 else (outer[0] if outer else "?")] += c
-        op = re.sub(r"(eq|ne|gt|ge|lt|le|ls|hi|mi|pl|hs|lo)?(\.f32|\.w|\.s32)*$", "",
-                    ops.get(a, "?"))
-        if op in ("vadd", "vsub", "vmul", "vmla", "vmls", "vnmul", "vdiv", "vneg", "vabs"):
-            k = "FP arithmetic"
+        op = mnemonic(ops.get(a, "?"))
+        k = insn_class(op)
+        if k == "FP arithmetic":
             fp[op] += c
-        elif op in ("vcmp", "vcmpe", "vmrs"):
-            k = "FP compare"
-        elif op in ("vldr", "ldr", "ldrb", "ldrh", "ldrd", "ldm", "vldm", "pop", "vpop"):
-            k = "load"
-        elif op in ("vstr", "str", "strb", "strh", "strd", "stm", "vstm", "push", "vpush"):
-            k = "store"
-        elif op in ("vmov", "mov", "movs", "movw", "movt", "mvn"):
-            k = "move"
-        elif op.startswith("b") or op.startswith("it") or op in ("cmp", "tst", "cbz", "cbnz"):
-            k = "branch / IT / compare"
-        else:
-            k = "integer, other"
         cls[k] += c
     print(f"{which}: {len(out)} instructions in the last step")
     for title, table in (("by ekf-core function (innermost inlined frame)", inner),

@@ -14,7 +14,8 @@ is attributed to that function's line). Instructions of the observer step
 (`PmsmObserver::step` and everything it calls) are summed apart, whatever file they come from.
 
 Prints per-tick means: the total (it includes the measurement frame, which the meter's count
-subtracts), the observer step, and the rest by source file and by source line. Standard
+subtracts), the observer step, and the rest by source file and by source line; and both by
+instruction class (`profile_step.insn_class`). Standard
 library only; needs `qemu-system-arm` and `llvm-objdump` (rustup's llvm-tools).
 """
 
@@ -26,6 +27,8 @@ import sys
 import tempfile
 import threading
 
+from profile_step import insn_class, mnemonic  # same directory
+
 
 def llvm_objdump():
     sysroot = subprocess.run(["rustc", "--print", "sysroot"], capture_output=True, text=True,
@@ -36,14 +39,14 @@ def llvm_objdump():
 
 
 def line_table(elf):
-    """addr -> (function, 'file:line'), and function name -> (start, end)."""
+    """addr -> (function, 'file:line', mnemonic), and function name -> (start, end)."""
     out = subprocess.run([llvm_objdump(), "-d", "-l", "-C", "--no-show-raw-insn", elf],
                          capture_output=True, text=True, check=True).stdout
     where = {}
     funcs = {}
     func, src, start, last = None, "?", None, None
     fhead = re.compile(r"^([0-9a-f]+) <(.*)>:$")
-    insn = re.compile(r"^\s+([0-9a-f]+):\s")
+    insn = re.compile(r"^\s+([0-9a-f]+):\s+(\S+)")
     for line in out.splitlines():
         m = fhead.match(line)
         if m:
@@ -57,7 +60,7 @@ def line_table(elf):
         m = insn.match(line)
         if m and func is not None:
             a = int(m.group(1), 16)
-            where[a] = (func, src)
+            where[a] = (func, src, mnemonic(m.group(2)))
             last = a
     if func is not None and start is not None:
         funcs[func] = (start, last + 4)
@@ -109,6 +112,8 @@ def main():
         obs = 0
         by_src = collections.Counter()
         by_func = collections.Counter()
+        # Instruction classes of the observer step and of the rest.
+        cls_obs, cls_rest = collections.Counter(), collections.Counter()
         exec_re = re.compile(r"^Trace \d+: \S+ \[[0-9a-f]+/([0-9a-f]+)/([0-9a-f]+)/([0-9a-f]+)\]")
         asm_re = re.compile(r"^0x([0-9a-f]+):\s")
         with open(fifo) as log:
@@ -140,11 +145,14 @@ def main():
                     addrs = blocks.get(key, [pc])
                     if in_obs:
                         obs += len(addrs)
+                        for a in addrs:
+                            cls_obs[insn_class(where.get(a, ("?", "?", "?"))[2])] += 1
                     else:
                         for a in addrs:
-                            f, s = where.get(a, ("?", "?"))
+                            f, s, op = where.get(a, ("?", "?", "?"))
                             by_src[short(s)] += 1
                             by_func[f] += 1
+                            cls_rest[insn_class(op)] += 1
                     continue
                 if line.startswith("IN:"):
                     cur = []
@@ -170,6 +178,9 @@ def main():
     print("\nrest by function (instructions per tick):")
     for f, n in by_func.most_common(25):
         print(f"  {n / ticks:8.1f}  {f}")
+    print("\nby instruction class (instructions per tick): observer step / rest")
+    for k in sorted(set(cls_obs) | set(cls_rest), key=lambda k: -(cls_obs[k] + cls_rest[k])):
+        print(f"  {cls_obs[k] / ticks:8.1f}  {cls_rest[k] / ticks:8.1f}  {k}")
     print("\nrest by source line (instructions per tick, >= 1):")
     for s, n in sorted(by_src.items()):
         if n / ticks >= 1.0:
