@@ -152,9 +152,10 @@ def test_long_run_equals_short_runs(dtype):
 
 
 def test_long_run_reads_any_layout_and_writes_out_like_fresh():
-    # A long run (2^16 rows and more) into fresh outputs copies its inputs block by block on
-    # a helper thread while the filter starts; every input layout, a given u_prev, an out=
-    # dict and a filter whose lock another call holds (both in sequence) give the same rows.
+    # A long run (2^16 rows and more), into fresh outputs or an out= dict, copies its inputs
+    # block by block on a helper thread while the filter starts; every input layout, a given
+    # u_prev, an out= dict and a filter whose lock another call holds (both in sequence) give
+    # the same rows.
     n = 70_001
     u, i, _ = record(n)
     make = lambda: pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)  # noqa: E731
