@@ -960,7 +960,7 @@ impl Ekf {
             // Long runs: copied (and, into fresh outputs, mapped) and filtered block by block
             // on two threads ([`run_pipelined`]); else, or should that not start, in
             // sequence. Into a caller's `out` only the copy moves (about 4 % of the steps):
-            // streamed runs `run / steps` 1.09 / 1.11 (f64 / f32) against 1.10 / 1.14 in
+            // streamed runs `run / steps` 1.09 / 1.11 (f64 / f32) against 1.10 / 1.15 in
             // sequence, on a quiet 2-core machine; a busy one can make the filter wait.
             let cols = if pipelined {
                 run_pipelined(py, &self.inner, &u, &i, u_prev, cols, prefault)
