@@ -226,17 +226,17 @@ const OUTPUTS: [&str; 9] = [
 ];
 
 /// The values of [`OUTPUTS`] for an estimate, in f64.
-fn outputs<T: Float + Into<f64>>(e: &Estimate<T>) -> [f64; OUTPUTS.len()] {
+fn outputs<T: Float>(e: &Estimate<T>) -> [T; OUTPUTS.len()] {
     [
-        e.theta_rad.into(),
-        e.omega_e_rad_s.into(),
-        e.omega_mech_rad_s.into(),
-        e.i_alpha_a.into(),
-        e.i_beta_a.into(),
-        e.nis.into(),
-        e.psi_f_wb.into(),
-        e.rs_ohm.into(),
-        e.winding_temperature_c.into(),
+        e.theta_rad,
+        e.omega_e_rad_s,
+        e.omega_mech_rad_s,
+        e.i_alpha_a,
+        e.i_beta_a,
+        e.nis,
+        e.psi_f_wb,
+        e.rs_ohm,
+        e.winding_temperature_c,
     ]
 }
 
@@ -261,8 +261,8 @@ impl Observer {
     /// the precision per call, so the loop itself is the observer's step and the stores.
     fn run(&mut self, prev: [f64; 2], u: &[f64], i: &[f64], cols: &mut Columns) -> [f64; 2] {
         match self {
-            Observer::F64(o) => run_rows(o, prev, u, i, cols),
-            Observer::F32(o) => run_rows(o, prev, u, i, cols),
+            Observer::F64(o) => run_rows::<f64, false>(o, prev, u, i, cols),
+            Observer::F32(o) => run_rows::<f32, true>(o, prev, u, i, cols),
         }
     }
 
@@ -282,24 +282,45 @@ impl Observer {
     }
 }
 
-/// One step of a filter in either precision, as an output row.
+/// One step of a filter in either precision: the output values in its precision and the
+/// status.
 #[inline(always)]
-fn step_row<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: [f64; 2], i: [f64; 2]) -> Row {
+fn step_values<T: Float>(
+    o: &mut PmsmObserver<T>,
+    u: [f64; 2],
+    i: [f64; 2],
+) -> ([T; OUTPUTS.len()], RowStatus) {
     let c = |v: f64| T::from_subset(&v);
     match o.step(u.map(c), i.map(c)) {
-        Ok(e) => Row {
-            values: outputs(&e),
-            status: RowStatus::of(e.status),
-        },
-        Err(_) => Row {
-            values: outputs(&o.estimate()),
-            status: RowStatus::Rejected,
-        },
+        Ok(e) => (outputs(&e), RowStatus::of(e.status)),
+        Err(_) => (outputs(&o.estimate()), RowStatus::Rejected),
     }
 }
 
-/// [`Observer::run`] for one precision.
-fn run_rows<T: Float + Into<f64>>(
+/// One step of a filter in either precision, as an output row.
+#[inline(always)]
+fn step_row<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: [f64; 2], i: [f64; 2]) -> Row {
+    let (values, status) = step_values(o, u, i);
+    Row {
+        values: values.map(Into::into),
+        status,
+    }
+}
+
+/// Rows that `run`'s loop filters into a buffer before writing them to the columns.
+const BLOCK_ROWS: usize = 64;
+/// Input values of a block (two a row).
+const BLOCK_INPUTS: usize = 2 * BLOCK_ROWS;
+
+/// [`Observer::run`] for one precision. `BLOCKED` (the `f32` filter): whole blocks of
+/// [`BLOCK_ROWS`] rows are filtered into a buffer in the filter's precision, which stays in
+/// the L1 cache, and each column's block is then converted to `f64` and stored in one pass
+/// (vectorized conversions, contiguous stores); the other rows are written one by one. The
+/// same rows either way. Measured in one process, alternating (`run / steps`, medians of 10,
+/// two rounds on a quiet 2-core machine): `f32` one call 1.096 / 1.106 buffered against
+/// 1.132 / 1.125 direct, streamed into `out=` 1.119 / 1.110 against 1.152 / 1.146; `f64`
+/// (nothing to convert) 1.093 / 1.106 against 1.087 / 1.112, no gain: it stays direct.
+fn run_rows<T: Float + Into<f64>, const BLOCKED: bool>(
     o: &mut PmsmObserver<T>,
     mut prev: [f64; 2],
     u: &[f64],
@@ -316,7 +337,32 @@ fn run_rows<T: Float + Into<f64>>(
     let (u, i) = (&u[..2 * n], &i[..2 * n]);
     let mut values = cols.values.each_mut().map(|c| &mut c[..n]);
     let status = &mut cols.status[..n];
-    for k in 0..n {
+    // Whole blocks (`BLOCKED`) through the buffer, then the other rows one by one.
+    let whole = if BLOCKED { n / BLOCK_ROWS } else { 0 };
+    if BLOCKED {
+        let (u_blocks, _) = u[..2 * whole * BLOCK_ROWS].as_chunks::<BLOCK_INPUTS>();
+        let (i_blocks, _) = i[..2 * whole * BLOCK_ROWS].as_chunks::<BLOCK_INPUTS>();
+        let mut buf = [[T::zero(); BLOCK_ROWS]; OUTPUTS.len()];
+        let mut status_buf = [0i8; BLOCK_ROWS];
+        for (b, (ub, ib)) in u_blocks.iter().zip(i_blocks).enumerate() {
+            for k in 0..BLOCK_ROWS {
+                let (v, st) = step_values(o, prev, [ib[2 * k], ib[2 * k + 1]]);
+                for (col, x) in buf.iter_mut().zip(v) {
+                    col[k] = x;
+                }
+                status_buf[k] = st as i8;
+                prev = [ub[2 * k], ub[2 * k + 1]];
+            }
+            let rows = b * BLOCK_ROWS..(b + 1) * BLOCK_ROWS;
+            for (col, from) in values.iter_mut().zip(&buf) {
+                for (d, x) in col[rows.clone()].iter_mut().zip(from) {
+                    *d = (*x).into();
+                }
+            }
+            status[rows].copy_from_slice(&status_buf);
+        }
+    }
+    for k in whole * BLOCK_ROWS..n {
         let r = step_row(o, prev, [i[2 * k], i[2 * k + 1]]);
         for (col, v) in values.iter_mut().zip(r.values) {
             col[k] = v;

@@ -233,16 +233,24 @@ def test_bad_out_raises_and_leaves_filter_and_arrays_alone():
     np.testing.assert_array_equal(ekf.u_last, u_last)
 
 
-def test_step_equals_run():
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_step_equals_run(dtype):
+    # 300 rows: the float32 filter's run writes whole blocks of 64 rows through a buffer and
+    # the last 44 one by one; rejected rows inside a block (NaN current, infinite voltage).
     u, i, _ = record(300)
-    out = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4).run(u, i)
-    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4)
+    i[150] = [np.nan, 0.0]
+    u[200] = [np.inf, 0.0]
+    out = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype).run(u, i)
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=1e-4, dtype=dtype)
     u_prev = np.zeros(2)
     for k in range(len(u)):
         est = ekf.step(u_prev, i[k])
-        assert est["theta"] == out["theta"][k] and est["omega"] == out["omega"][k]
+        for key in out:
+            if key != "status":
+                np.testing.assert_array_equal(est[key], out[key][k], err_msg=f"{key}[{k}]")
         assert isinstance(est["status"], pyfoc.Status) and est["status"] == out["status"][k]
         u_prev = u[k]
+    assert np.flatnonzero(out["status"] == pyfoc.Status.REJECTED).tolist() == [150, 201]
 
 
 def test_status_is_one_int_enum_for_run_and_step():
