@@ -225,7 +225,7 @@ const OUTPUTS: [&str; 9] = [
     "winding_temperature",
 ];
 
-/// The values of [`OUTPUTS`] for an estimate, in f64.
+/// The values of [`OUTPUTS`] for an estimate, in the filter's precision.
 fn outputs<T: Float>(e: &Estimate<T>) -> [T; OUTPUTS.len()] {
     [
         e.theta_rad,
