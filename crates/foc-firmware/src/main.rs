@@ -98,8 +98,9 @@ struct Variant {
 }
 
 fn run() -> Result<(), &'static str> {
-    // Built with `EKF_PROFILE=default` (or `untracked`, `seed`) in the environment, the firmware only
-    // runs 1500 steps of that observer and exits: the run `profile_step.py` traces.
+    // Built with `EKF_PROFILE=default` (or `untracked`, `seed`) in the environment, the
+    // firmware only runs 1500 steps of that observer and exits: the run `profile_step.py`
+    // traces.
     if let Some(which) = option_env!("EKF_PROFILE") {
         return profile_run(which);
     }
