@@ -58,6 +58,9 @@ pub enum EkfError {
     SingularInnovation,
     /// The computed state or covariance was not finite (e.g. overflow); the step was discarded.
     NonFiniteResult,
+    /// The period given for an irregular step is not finite, not above zero, or longer than
+    /// [`MAX_PERIOD_FACTOR`](crate::observer::MAX_PERIOD_FACTOR) sample times.
+    InvalidPeriod,
 }
 
 impl fmt::Display for EkfError {
@@ -71,6 +74,9 @@ impl fmt::Display for EkfError {
                 "innovation covariance S = H P H^T + R is singular; step rejected"
             }
             EkfError::NonFiniteResult => "the update produced a non-finite state or covariance",
+            EkfError::InvalidPeriod => {
+                "the period is not finite, not above zero, or too long; step rejected"
+            }
         })
     }
 }

@@ -171,6 +171,9 @@ pub use model::{Discretization, PmsmModel};
 pub use safeguards::{BranchCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS};
 pub use tracking::{ParameterTracking, RsTracking};
 
+/// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
+pub const MAX_PERIOD_FACTOR: f64 = 64.0;
+
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
 use crate::ekf::{Correction, EkfError, finite};
@@ -383,6 +386,36 @@ impl<T: Float> PmsmObserver<T> {
             return host::step_avx2_fma(self, u_prev, i);
         }
         self.step_portable(u_prev, i)
+    }
+
+    /// [`step`](Self::step) over a period of `dt_s` seconds that ended at this sample (an
+    /// irregular period: a skipped or late control cycle, or a log's time stamps). When
+    /// `dt_s` equals the configured `Ts` this is `step` itself, bit for bit and at its cost;
+    /// otherwise the prediction uses the model for that period
+    /// ([`PmsmModel::with_period`]: the current decay, input gain and EMF gain over `dt_s`, the
+    /// angle advanced by `w dt_s`, `Q` scaled by `dt_s / Ts`), and the correction and the
+    /// safeguards are those of `step`.
+    ///
+    /// Refused with [`EkfError::InvalidPeriod`], state kept, when `dt_s` is not finite, not
+    /// above zero, or longer than [`MAX_PERIOD_FACTOR`] sample times (a gap that long is a
+    /// lost record: restart the observer).
+    pub fn step_dt(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) -> Result<Estimate<T>, EkfError> {
+        let ts = self.model.ts();
+        if dt_s == ts {
+            return self.step(u_prev, i);
+        }
+        if !(dt_s > T::zero() && dt_s <= ts * to_t(MAX_PERIOD_FACTOR)) {
+            return Err(EkfError::InvalidPeriod);
+        }
+        let model = self.model;
+        let cached = self.rs_constants;
+        self.model = model.with_period(dt_s);
+        // The cached constants at the tracked `Rs` are for `Ts`: recompute them for `dt_s`.
+        self.rs_constants = (cached.0, self.model.discrete_at(self.nominal.0, cached.0));
+        let out = self.step_portable(u_prev, i);
+        self.model = model;
+        self.rs_constants = cached;
+        out
     }
 
     /// [`step`](Self::step) in the portable build (the code every target runs).

@@ -125,6 +125,34 @@ impl<T: Float> PmsmModel<T> {
         }
     }
 
+    /// The same model for one period of `dt_s` seconds instead of `Ts` (an irregular period:
+    /// a skipped or late control cycle). The step's constants are those of the configured
+    /// parameters recomputed for `dt_s` (`alpha = exp(-a dt)`, the input gain, the EMF gain
+    /// `G(w)` over `dt`), and `Q` is scaled by `dt / Ts` (the process noises are random walks
+    /// whose variance grows with time). `dt_s == Ts` gives a copy of this model.
+    pub fn with_period(&self, dt_s: T) -> Self {
+        let d = &self.disc;
+        let (decay, input_gain) = match d.discretization {
+            Discretization::ForwardEuler => (T::one() - d.a * dt_s, dt_s * d.inv_ls),
+            Discretization::LagFree => {
+                let one_minus_alpha = -(-d.a * dt_s).exp_m1();
+                (T::one() - one_minus_alpha, one_minus_alpha / self.rs)
+            }
+        };
+        let scale = dt_s / d.ts;
+        Self {
+            disc: Discrete {
+                ts: dt_s,
+                decay,
+                one_minus_decay: T::one() - decay,
+                input_gain,
+                ..*d
+            },
+            q: self.q * scale,
+            ..*self
+        }
+    }
+
     /// Sample time `Ts`, s.
     pub fn ts(&self) -> T {
         self.disc.ts
