@@ -18,6 +18,7 @@ pub mod plant;
 pub mod plot;
 pub mod profile;
 pub mod record;
+pub mod replay;
 pub mod report;
 pub mod scenario;
 pub mod sensors;
