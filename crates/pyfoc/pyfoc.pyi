@@ -23,6 +23,9 @@ __all__ = [
     "tune_qr_mcap",
     "suite",
     "clear_buffer_pool",
+    "read_log",
+    "FluxObserver",
+    "LogError",
     "SimulationError",
     "PyfocError",
     "ConfigError",
@@ -55,6 +58,14 @@ class FilterError(PyfocError):
 
 class SimulationError(PyfocError):
     """The simulator could not run the scenario."""
+
+class LogError(PyfocError):
+    """A drive log or motor file could not be read. The message names the file and, for a
+    malformed CSV, the line and column; also as attributes (None where they do not apply)."""
+
+    file: str | None
+    line: int | None
+    column: int | None
 
 @final
 class Motor:
@@ -179,15 +190,62 @@ class Ekf:
         i_ab: npt.ArrayLike,
         *,
         u_prev: npt.ArrayLike | None = None,
+        dt: npt.ArrayLike | None = None,
         out: RunOutput | None = None,
     ) -> RunOutput:
         """Filter a record of shape (N, 2) each; continues from the current state (row 0 predicts
         with u_prev if given, else u_last). Releases the GIL. ``out``: a dict of the ten output
-        arrays (e.g. a previous result of the same length), written in place and returned."""
+        arrays (e.g. a previous result of the same length), written in place and returned.
+        ``dt``: shape (N,), the period that ended at each row, s (finite, > 0; ValueError
+        naming ``dt`` otherwise); without it every period is ``ts``."""
     def step(self, u_prev: npt.ArrayLike, i: npt.ArrayLike) -> StepOutput:
         """One sample: predict with u_prev, correct with i."""
     def reset(self, x: npt.ArrayLike, p: npt.ArrayLike) -> None:
         """Replace state and covariance; FilterError if not finite."""
+
+class FluxOutput(TypedDict):
+    theta: npt.NDArray[np.float64]
+    omega: npt.NDArray[np.float64]
+    omega_mech: npt.NDArray[np.float64]
+    status: npt.NDArray[np.int8]
+    """Status.TRACKING on every accepted row (no confidence measure), REJECTED otherwise."""
+
+@final
+class FluxObserver:
+    """The flux observer with PLL (ekf-core's baseline, usual tuning 0.1 / ts)."""
+
+    @property
+    def ts(self) -> float:
+        """Sample time, s."""
+    def __new__(cls, motor: Motor, ts: float) -> FluxObserver: ...
+    def run(
+        self,
+        u_ab: npt.ArrayLike,
+        i_ab: npt.ArrayLike,
+        *,
+        u_prev: npt.ArrayLike | None = None,
+        dt: npt.ArrayLike | None = None,
+    ) -> FluxOutput:
+        """Run over a record (Ekf.run's timing); ``dt`` is validated, the step is the fixed ts."""
+
+class DriveLog(TypedDict, total=False):
+    t: npt.NDArray[np.float64]
+    dt: npt.NDArray[np.float64]
+    """The period that ended at each row, s."""
+    u_ab: npt.NDArray[np.float64]
+    """Row k: the voltage held over [t_k, t_k+1)."""
+    i_ab: npt.NDArray[np.float64]
+    u_prev: npt.NDArray[np.float64]
+    """The voltage before row 0."""
+    theta_ref: npt.NDArray[np.float64]
+    omega_ref: npt.NDArray[np.float64]
+
+def read_log(
+    path: str | os.PathLike[str], *, scaling: Literal["amplitude", "power"] = "amplitude"
+) -> DriveLog:
+    """Read a drive log (CSV: t_s, dt_s, u_alpha_v, u_beta_v, i_alpha_a, i_beta_a, optional
+    theta_ref_rad, omega_ref_rad_s; or a pmsm-sim MCAP log) in pyfoc's timing; LogError
+    naming file, line and column."""
 
 def simulate(
     scenario: str | os.PathLike[str] | dict[str, Any] | None = None,

@@ -1,0 +1,267 @@
+//! Replay of recorded drives: `pyfoc.read_log` (the CSV format and the MCAP logs of
+//! `pmsm_sim::replay`), `Ekf.run(..., dt=...)`'s per-row periods, and `pyfoc.FluxObserver`
+//! (the flux + PLL baseline of `ekf_core::flux`). Thin wrappers: the reading, alignment and
+//! scaling live in `pmsm_sim::replay`.
+
+use std::sync::{Mutex, PoisonError};
+
+use ekf_core::{Float, FluxObserverConfig, PmsmObserver};
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
+use pmsm_sim::replay::{ReplayError, Scaling};
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::convert::{contiguous, fixed, path_of, rows2, to_vec, vector};
+use crate::{ConfigError, Motor, OUTPUTS, Observer, OutArrays, PyfocError, Row, RowStatus};
+
+create_exception!(
+    pyfoc,
+    LogError,
+    PyfocError,
+    "A drive log or motor file could not be read; the message names the file (and, for a \
+     malformed CSV, the line and column, also in the attributes `file`, `line`, `column`)."
+);
+
+/// A reading error as a `pyfoc.LogError` with `file`, `line`, `column` attributes (`None`
+/// where they do not apply).
+fn log_err(py: Python<'_>, e: ReplayError) -> PyErr {
+    let (file, line, column) = match &e {
+        ReplayError::Csv {
+            file, line, column, ..
+        } => (Some(file.clone()), Some(*line), Some(*column)),
+        ReplayError::Io { file, .. }
+        | ReplayError::Mcap { file, .. }
+        | ReplayError::Motor { file, .. } => (Some(file.clone()), None, None),
+        ReplayError::Output { path, .. } => (Some(path.clone()), None, None),
+        ReplayError::Inconsistent(_) | ReplayError::Config(_) => (None, None, None),
+    };
+    let err = LogError::new_err(e.to_string());
+    let v = err.value(py);
+    // Attributes on a fresh exception instance: setting them cannot fail in practice; if it
+    // did, the message still carries everything.
+    let _ = v.setattr("file", file);
+    let _ = v.setattr("line", line);
+    let _ = v.setattr("column", column);
+    err
+}
+
+/// Reads a drive log: the documented CSV (header `t_s, dt_s, u_alpha_v, u_beta_v,
+/// i_alpha_a, i_beta_a`, optional `theta_ref_rad`, `omega_ref_rad_s`) or a `pmsm-sim` MCAP
+/// log. Returns a dict of numpy arrays in pyfoc's convention: `t`, `dt` (the period that
+/// ended at row k), `u_ab` (row k held over `[t_k, t_k+1)`), `i_ab`, `u_prev` (the voltage
+/// before row 0) and, when the log has them, `theta_ref`, `omega_ref`. `scaling="power"`:
+/// the CSV was logged with the power-invariant Clarke transform (converted). Errors:
+/// `pyfoc.LogError` naming file, line and column.
+#[pyfunction]
+#[pyo3(signature = (path, *, scaling = "amplitude"))]
+pub(crate) fn read_log<'py>(
+    py: Python<'py>,
+    path: &Bound<'py, PyAny>,
+    scaling: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let path = path_of(path, "path")?;
+    let scaling = Scaling::from_name(scaling).ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "scaling must be 'amplitude' or 'power', got {scaling:?}"
+        ))
+    })?;
+    let log = py
+        .detach(|| pmsm_sim::replay::read_log(&path, scaling))
+        .map_err(|e| log_err(py, e))?;
+    let d = PyDict::new(py);
+    let flat = |v: &[[f64; 2]]| PyArray1::from_slice(py, v.as_flattened()).reshape([v.len(), 2]);
+    d.set_item("t", PyArray1::from_slice(py, &log.t_s))?;
+    d.set_item("dt", PyArray1::from_slice(py, &log.dt_s))?;
+    d.set_item("u_ab", flat(&log.u_ab)?)?;
+    d.set_item("i_ab", flat(&log.i_ab)?)?;
+    d.set_item("u_prev", PyArray1::from_slice(py, &log.u_prev))?;
+    if let Some(v) = &log.theta_ref {
+        d.set_item("theta_ref", PyArray1::from_slice(py, v))?;
+    }
+    if let Some(v) = &log.omega_ref {
+        d.set_item("omega_ref", PyArray1::from_slice(py, v))?;
+    }
+    Ok(d)
+}
+
+/// The `dt=` argument of a `run`: `(n,)`, every value finite and `> 0`; ValueError naming
+/// `dt` otherwise.
+pub(crate) fn periods(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<f64>> {
+    let arr = vector(obj, "dt", Some(n))?;
+    let v = to_vec(&arr, "dt")?;
+    if let Some(k) = v.iter().position(|d| !(d.is_finite() && *d > 0.0)) {
+        return Err(PyValueError::new_err(format!(
+            "dt[{k}] = {}: every period must be finite and > 0 s",
+            v[k]
+        )));
+    }
+    Ok(v)
+}
+
+/// One step with the period that ended at this row.
+#[inline]
+fn step_row_dt<T: Float + Into<f64>>(
+    o: &mut PmsmObserver<T>,
+    u: [f64; 2],
+    i: [f64; 2],
+    _dt: f64,
+) -> Row {
+    // TODO(step_dt): `o.step_dt(u, i, dt)` once ekf-core has it; until then the nominal Ts.
+    crate::step_row(o, u, i)
+}
+
+impl Observer {
+    /// `run` with per-row periods: a plain loop (row `k` predicts with `u[k-1]`, `prev` for
+    /// row 0, over `dt[k]`); returns the rows and the last row's voltage.
+    pub(crate) fn run_dt(
+        &mut self,
+        mut prev: [f64; 2],
+        u: &[f64],
+        i: &[f64],
+        dt: &[f64],
+    ) -> (Vec<Row>, [f64; 2]) {
+        let mut rows = Vec::with_capacity(dt.len());
+        for ((uk, ik), &d) in u.chunks_exact(2).zip(i.chunks_exact(2)).zip(dt) {
+            let ik = [ik[0], ik[1]];
+            rows.push(match self {
+                Observer::F64(o) => step_row_dt(o, prev, ik, d),
+                Observer::F32(o) => step_row_dt(o, prev, ik, d),
+            });
+            prev = [uk[0], uk[1]];
+        }
+        (rows, prev)
+    }
+}
+
+/// `Ekf.run`'s outputs from rows: into a caller's `out` arrays (returned), or fresh arrays.
+pub(crate) fn rows_to_dict<'py>(
+    py: Python<'py>,
+    rows: &[Row],
+    given: Option<(OutArrays<'py>, Bound<'py, PyDict>)>,
+) -> PyResult<Bound<'py, PyDict>> {
+    match given {
+        Some(((values, status), d)) => {
+            for (k, a) in values.iter().enumerate() {
+                let mut rw = a.readwrite();
+                let s = contiguous(rw.as_slice_mut())?;
+                for (dst, r) in s.iter_mut().zip(rows) {
+                    *dst = r.values[k];
+                }
+            }
+            let mut rw = status.readwrite();
+            let s = contiguous(rw.as_slice_mut())?;
+            for (dst, r) in s.iter_mut().zip(rows) {
+                *dst = r.status as i8;
+            }
+            Ok(d)
+        }
+        None => {
+            let d = PyDict::new(py);
+            for (k, name) in OUTPUTS.iter().enumerate() {
+                let col: Vec<f64> = rows.iter().map(|r| r.values[k]).collect();
+                d.set_item(name, PyArray1::from_vec(py, col))?;
+            }
+            let st: Vec<i8> = rows.iter().map(|r| r.status as i8).collect();
+            d.set_item("status", PyArray1::from_vec(py, st))?;
+            Ok(d)
+        }
+    }
+}
+
+/// The flux observer with PLL (`ekf_core::FluxObserver`, the usual tuning: observer gain and
+/// PLL bandwidth `0.1 / ts`): the baseline the EKF is compared against.
+/// `FluxObserver(motor, ts)`; `ConfigError` for invalid parameters.
+#[pyclass(frozen, module = "pyfoc")]
+pub(crate) struct FluxObserver {
+    inner: Mutex<FluxInner>,
+    /// Sample time, s.
+    #[pyo3(get)]
+    ts: f64,
+}
+
+struct FluxInner {
+    obs: ekf_core::FluxObserver<f64>,
+    u_last: [f64; 2],
+}
+
+#[pymethods]
+impl FluxObserver {
+    #[new]
+    fn new(motor: &Motor, ts: f64) -> PyResult<Self> {
+        let cfg = FluxObserverConfig::new(motor.params::<f64>(), ts);
+        let obs =
+            ekf_core::FluxObserver::new(&cfg).map_err(|e| ConfigError::new_err(e.to_string()))?;
+        Ok(Self {
+            inner: Mutex::new(FluxInner {
+                obs,
+                u_last: [0.0; 2],
+            }),
+            ts,
+        })
+    }
+
+    /// Runs the observer over a record (same timing as `Ekf.run`); returns a dict of `(N,)`
+    /// float64 arrays `theta`, `omega`, `omega_mech` and an int8 array `status`
+    /// (`Status.TRACKING` on every accepted row: the baseline has no confidence measure;
+    /// `Status.REJECTED` for a non-finite row, whose outputs repeat the previous estimate).
+    /// Continues from the current state; row 0 predicts with `u_prev` if given, else the
+    /// last row of the previous `run` (zero for a new observer). `dt`: `(N,)` periods that
+    /// ended at each row, validated (finite, > 0); the baseline steps with its fixed `ts`.
+    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, dt = None))]
+    fn run<'py>(
+        &self,
+        py: Python<'py>,
+        u_ab: &Bound<'py, PyAny>,
+        i_ab: &Bound<'py, PyAny>,
+        u_prev: Option<&Bound<'py, PyAny>>,
+        dt: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let u = rows2(u_ab, "u_ab")?;
+        let i = rows2(i_ab, "i_ab")?;
+        let n = u.shape()[0];
+        if n != i.shape()[0] {
+            return Err(PyValueError::new_err(format!(
+                "u_ab and i_ab must have the same length, got {n} and {}",
+                i.shape()[0]
+            )));
+        }
+        let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        if let Some(dt) = dt {
+            periods(dt, n)?;
+        }
+        crate::convert::ensure_memory(n as u128 * 64, "run")?;
+        let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
+        let out = py.detach(|| {
+            let mut g = self.inner.lock().unwrap_or_else(PoisonError::into_inner);
+            let mut prev = u_prev.unwrap_or(g.u_last);
+            let mut cols = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
+            let mut st = vec![0i8; n];
+            for (k, (uk, ik)) in u.chunks_exact(2).zip(i.chunks_exact(2)).enumerate() {
+                let (e, s) = match g.obs.step(prev, [ik[0], ik[1]]) {
+                    Ok(e) => (e, RowStatus::Tracking),
+                    Err(_) => (g.obs.estimate(), RowStatus::Rejected),
+                };
+                cols[0][k] = e.theta_rad;
+                cols[1][k] = e.omega_e_rad_s;
+                cols[2][k] = e.omega_mech_rad_s;
+                st[k] = s as i8;
+                prev = [uk[0], uk[1]];
+            }
+            g.u_last = prev;
+            (cols, st)
+        });
+        let (cols, st) = out;
+        let d = PyDict::new(py);
+        for (name, c) in ["theta", "omega", "omega_mech"].into_iter().zip(cols) {
+            d.set_item(name, PyArray1::from_vec(py, c))?;
+        }
+        d.set_item("status", PyArray1::from_vec(py, st))?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!("FluxObserver(ts={})", self.ts)
+    }
+}
