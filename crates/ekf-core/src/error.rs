@@ -43,6 +43,14 @@ pub enum Param {
     HealthMaxSpeed,
     /// Divergence level of the covariance health check, `CovarianceHealth::divergence_nis`.
     HealthDivergenceNis,
+    /// Fast mean of the consistency check, `ConsistencyCheck::fast_samples` (at least 1).
+    ConsistencyFastSamples,
+    /// Baseline of the consistency check, `ConsistencyCheck::slow_samples` (at least 1).
+    ConsistencySlowSamples,
+    /// Limit of the consistency check, `ConsistencyCheck::ratio`.
+    ConsistencyRatio,
+    /// Ceiling of the consistency check's baseline, `ConsistencyCheck::max_baseline`.
+    ConsistencyMaxBaseline,
     /// Initial standard deviation of the tracked flux, `ParameterTracking::psi_f_sigma0`.
     TrackingPsiSigma,
     /// Initial standard deviation of the tracked resistance, `ParameterTracking::rs_sigma0`.
@@ -136,6 +144,10 @@ impl fmt::Display for Param {
             Param::HealthCurrentFactor => "covariance_health.current_factor",
             Param::HealthMaxSpeed => "covariance_health.max_w_ts_rad",
             Param::HealthDivergenceNis => "covariance_health.divergence_nis",
+            Param::ConsistencyFastSamples => "consistency.fast_samples",
+            Param::ConsistencySlowSamples => "consistency.slow_samples",
+            Param::ConsistencyRatio => "consistency.ratio",
+            Param::ConsistencyMaxBaseline => "consistency.max_baseline",
             Param::TrackingPsiSigma => "parameter_tracking.psi_f_sigma0",
             Param::TrackingRsSigma => "parameter_tracking.rs_sigma0",
             Param::TrackingPsiWalk => "parameter_tracking.psi_f_walk_per_sqrt_s",

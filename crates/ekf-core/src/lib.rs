@@ -25,8 +25,9 @@ pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, 
 pub use motor::{MAX_SALIENCY_RATIO, MIN_SALIENCY_RATIO, MotorKind, MotorParams};
 pub use noise::NoiseCovariances;
 pub use observer::{
-    BranchCheck, CovarianceHealth, Discretization, Estimate, InnovationGate, ObserverConfig,
-    ObserverCounters, ParameterTracking, PmsmModel, PmsmObserver, RsTracking, Status, default_p0,
+    BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization, Estimate, InnovationGate,
+    ObserverConfig, ObserverCounters, ParameterTracking, PmsmModel, PmsmObserver, RsTracking,
+    Status, default_p0,
 };
 
 /// Re-export of the `nalgebra` this crate is built on, for its matrix types.

@@ -2,7 +2,10 @@
 
 use nalgebra::{Cholesky, Matrix4, SMatrix, Vector4};
 
-use super::{BranchCheck, CovarianceHealth, Discretization, InnovationGate, ParameterTracking};
+use super::{
+    BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization, InnovationGate,
+    ParameterTracking,
+};
 use crate::ekf::{CovarianceUpdate, all_finite};
 use crate::motor::positive;
 use crate::{ConfigError, Float, Matrix, MotorParams, NoiseCovariances, Param, to_t};
@@ -35,6 +38,11 @@ pub struct ObserverConfig<T: Float> {
     pub innovation_gate: Option<InnovationGate<T>>,
     /// Covariance health check with self-reset; `None` turns it off.
     pub covariance_health: Option<CovarianceHealth<T>>,
+    /// Innovation consistency: the status reads
+    /// [`Status::Uncertain`](super::Status::Uncertain) while the recent innovations are far
+    /// out of line with the noise seen before (module docs, "Consistency"); `None` turns it
+    /// off (the status then reflects the covariance alone).
+    pub consistency: Option<ConsistencyCheck<T>>,
     /// Online tracking of `psi_f` and `Rs` (module [`tracking`](super::tracking) docs);
     /// `None` turns it off (the configured values are used as they are).
     pub parameter_tracking: Option<ParameterTracking<T>>,
@@ -59,6 +67,7 @@ impl<T: Float> ObserverConfig<T> {
             branch_check: Some(BranchCheck::default_for(ts_s)),
             innovation_gate: Some(InnovationGate::default()),
             covariance_health: Some(CovarianceHealth::default()),
+            consistency: Some(ConsistencyCheck::default_for(ts_s)),
             parameter_tracking: Some(ParameterTracking::default_for(ts_s)),
         }
     }
@@ -75,6 +84,7 @@ impl<T: Float> ObserverConfig<T> {
             branch_check: None,
             innovation_gate: None,
             covariance_health: None,
+            consistency: None,
             parameter_tracking: None,
             ..Self::new(motor, ts_s)
         }
@@ -112,6 +122,16 @@ impl<T: Float> ObserverConfig<T> {
         if let Some(g) = &self.innovation_gate {
             positive(g.nis_threshold, Param::GateNisThreshold)?;
             positive(g.settled_nis, Param::GateSettledNis)?;
+        }
+        if let Some(c) = &self.consistency {
+            if !(c.fast_samples >= T::one()) {
+                return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
+            }
+            if !(c.slow_samples >= T::one()) {
+                return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
+            }
+            positive(c.ratio, Param::ConsistencyRatio)?;
+            positive(c.max_baseline, Param::ConsistencyMaxBaseline)?;
         }
         if let Some(t) = &self.parameter_tracking {
             t.validate_for(self.motor.psi_f_wb, self.motor.rs_ohm, self.ts_s)?;
