@@ -25,6 +25,7 @@ use pyo3::types::{PyDict, PyModule, PySlice};
 mod convert;
 mod identify;
 mod pool;
+mod replay;
 mod simulate;
 mod suite;
 mod tune;
@@ -920,13 +921,18 @@ impl Ekf {
     /// the steps). Each array must be one-dimensional of length N, C-contiguous, writable, of
     /// the dtype above, and not shared with another output; no other thread may use them
     /// during the call. A bad `out` raises before the filter moves.
-    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, out = None))]
+    ///
+    /// `dt`: an `(N,)` array of the period that ended at each row, s (each finite and > 0,
+    /// else ValueError naming `dt`), for logs with irregular periods (skipped cycles); the
+    /// rows then run in a plain loop. Without it every period is `ts`.
+    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, dt = None, out = None))]
     fn run<'py>(
         &self,
         py: Python<'py>,
         u_ab: &Bound<'py, PyAny>,
         i_ab: &Bound<'py, PyAny>,
         u_prev: Option<&Bound<'py, PyAny>>,
+        dt: Option<&Bound<'py, PyAny>>,
         out: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = rows2(u_ab, "u_ab")?;
@@ -939,6 +945,21 @@ impl Ekf {
             )));
         }
         let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        if let Some(dt) = dt {
+            // Per-row periods: a separate, plain loop (`replay::run_dt`); the optimized
+            // path below is left as it is.
+            let dt = replay::periods(dt, n)?;
+            let given = out.map(|d| out_arrays(&d, n).map(|a| (a, d))).transpose()?;
+            convert::ensure_memory(n as u128 * (40 + Columns::ROW_BYTES), "run")?;
+            let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
+            let rows = self.with(py, move |inner| {
+                let prev = u_prev.unwrap_or(inner.u_last);
+                let (rows, last) = inner.observer.run_dt(prev, &u, &i, &dt);
+                inner.u_last = last;
+                rows
+            });
+            return replay::rows_to_dict(py, &rows, given);
+        }
         let given = out.map(|d| out_arrays(&d, n).map(|a| (a, d))).transpose()?;
         // The copies of both inputs and the output columns, probed at once.
         let out_bytes = if given.is_some() {
@@ -1180,6 +1201,9 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(suite::suite, m)?)?;
     m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
     m.add_function(wrap_pyfunction!(pool::clear_buffer_pool, m)?)?;
+    m.add_function(wrap_pyfunction!(replay::read_log, m)?)?;
+    m.add_class::<replay::FluxObserver>()?;
+    m.add("LogError", py.get_type::<replay::LogError>())?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
     m.add("ConfigError", py.get_type::<ConfigError>())?;

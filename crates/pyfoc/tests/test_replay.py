@@ -1,0 +1,197 @@
+"""Replay of recorded drives (pyfoc.read_log, Ekf.run(dt=...), pyfoc.FluxObserver) on logs the
+test makes itself: a short simulated run (its MCAP log), written again as CSV in the documented
+format with a power-invariant scaling, skipped cycles and a voltage delay. Malformed files give
+pyfoc.LogError naming file, line and column; nothing panics."""
+import numpy as np
+import pytest
+
+import pyfoc
+
+HEADER = "t_s,dt_s,u_alpha_v,u_beta_v,i_alpha_a,i_beta_a,theta_ref_rad,omega_ref_rad_s"
+SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
+TS = 100e-6
+
+
+def wrap(x):
+    return (x + np.pi) % (2 * np.pi) - np.pi
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory):
+    path = tmp_path_factory.mktemp("replay") / "run.mcap"
+    res = pyfoc.simulate("default", duration=0.3, mcap=str(path))
+    return res, pyfoc.read_log(path), path
+
+
+def write_csv(path, log, scale=1.0, drop=(), delay=0):
+    """The log as the documented CSV: row k carries the voltage of the period that ended at it."""
+    u_csv = np.vstack([log["u_prev"][None, :], log["u_ab"][:-1]])
+    u_csv = u_csv[np.maximum(np.arange(len(u_csv)) - delay, 0)]
+    dt = log["dt"].copy()
+    keep = np.ones(len(dt), bool)
+    for k in drop:
+        keep[k] = False
+        dt[k + 1] += dt[k]
+    cols = [log["t"], dt, u_csv[:, 0] * scale, u_csv[:, 1] * scale,
+            log["i_ab"][:, 0] * scale, log["i_ab"][:, 1] * scale, log["theta_ref"], log["omega_ref"]]
+    np.savetxt(path, np.column_stack(cols)[keep], delimiter=",", header=HEADER, comments="", fmt="%.17g")
+
+
+def score(theta, log, ts=TS):
+    w = np.abs(log["omega_ref"])
+    msk = w >= 0.1 * w.max()
+    for k in np.flatnonzero(log["dt"] > 1.35 * ts):
+        if k > 0:
+            msk[k:k + int(round(0.02 / ts))] = False
+    err = wrap(theta - log["theta_ref"])[msk]
+    off = np.angle(np.mean(np.exp(1j * err)))
+    return float(np.sqrt(np.mean(np.degrees(wrap(err - off)) ** 2)))
+
+
+def run(log, **kw):
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS)
+    return ekf.run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"], **kw)
+
+
+def test_mcap_log_reproduces_the_simulators_ekf(sim):
+    res, log, _ = sim
+    assert set(log) == {"t", "dt", "u_ab", "i_ab", "u_prev", "theta_ref", "omega_ref"}
+    assert log["u_ab"].shape == (len(log["t"]), 2)
+    np.testing.assert_allclose(log["dt"], TS)
+    np.testing.assert_array_equal(log["theta_ref"], res["theta"])
+    out = run(log)
+    assert np.max(np.abs(wrap(out["theta"] - res["theta_est"]))) < 1e-9
+    # Per-row periods equal to ts: the same filter.
+    out_dt = run(log, dt=log["dt"])
+    assert np.max(np.abs(wrap(out_dt["theta"] - out["theta"]))) < 1e-9
+    assert out_dt["status"].dtype == np.int8
+    assert score(out["theta"], log) < 1.0
+
+
+def test_csv_round_trip_scaling_skips_and_delay(sim, tmp_path):
+    _, log, _ = sim
+    n = len(log["t"])
+    exact = run(log)
+    rms0 = score(exact["theta"], log)
+
+    p = tmp_path / "exact.csv"
+    write_csv(p, log)
+    a = pyfoc.read_log(p)
+    np.testing.assert_array_equal(a["u_ab"][:-1], log["u_ab"][:-1])
+    np.testing.assert_array_equal(a["u_ab"][-1], log["u_ab"][-2])
+    np.testing.assert_array_equal(a["i_ab"], log["i_ab"])
+    np.testing.assert_array_equal(a["u_prev"], log["u_prev"])
+    assert abs(score(run(a, dt=a["dt"])["theta"], a) - rms0) < 1e-6
+
+    p = tmp_path / "power.csv"
+    write_csv(p, log, scale=np.sqrt(1.5))
+    pw = pyfoc.read_log(p, scaling="power")
+    np.testing.assert_allclose(pw["i_ab"], log["i_ab"], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(pw["u_ab"][:-1], log["u_ab"][:-1], rtol=1e-12, atol=1e-12)
+    assert abs(score(run(pw, dt=pw["dt"])["theta"], pw) - rms0) < 0.01
+    wrong = pyfoc.read_log(p)
+    np.testing.assert_allclose(wrong["i_ab"], log["i_ab"] * np.sqrt(1.5), rtol=1e-12, atol=1e-12)
+
+    p = tmp_path / "skips.csv"
+    write_csv(p, log, drop=(1000, 1500))
+    m = pyfoc.read_log(p)
+    assert len(m["t"]) == n - 2
+    np.testing.assert_allclose(m["dt"][[1000, 1499]], 2 * TS)
+    np.testing.assert_array_equal(m["i_ab"][1499], log["i_ab"][1501])
+    np.testing.assert_array_equal(m["u_ab"][999], log["u_ab"][1000])
+    out = run(m, dt=m["dt"])
+    assert np.all(np.isfinite(out["theta"]))
+
+    p = tmp_path / "delay.csv"
+    write_csv(p, log, delay=2)
+    d = pyfoc.read_log(p)
+    np.testing.assert_array_equal(d["u_ab"][500], log["u_ab"][498])
+    assert score(run(d, dt=d["dt"])["theta"], d) > rms0
+
+
+def test_dt_is_validated(sim):
+    _, log, _ = sim
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS)
+    u, i = log["u_ab"][:10], log["i_ab"][:10]
+    for bad in (np.full(9, TS), np.full((10, 1), TS), [TS] * 9 + [np.nan], [TS] * 9 + [0.0],
+                [TS] * 9 + [-TS], [TS] * 9 + [np.inf]):
+        with pytest.raises(ValueError, match="dt"):
+            ekf.run(u, i, dt=bad)
+    with pytest.raises(TypeError):
+        ekf.run(u, i, dt="x")
+    out = {k: np.asarray(v).copy() for k, v in ekf.run(u, i, dt=np.full(10, TS)).items()}
+    given = ekf.run(u, i, dt=np.full(10, TS), out=out)
+    assert given is out
+
+
+def test_flux_observer(sim):
+    _, log, _ = sim
+    flux = pyfoc.FluxObserver(pyfoc.Motor(**SERVO), TS)
+    out = flux.run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"], dt=log["dt"])
+    assert set(out) == {"theta", "omega", "omega_mech", "status"}
+    for k in ("theta", "omega", "omega_mech"):
+        assert out[k].shape == (len(log["t"]),) and np.all(np.isfinite(out[k]))
+    assert np.all(out["status"] == pyfoc.Status.TRACKING)
+    assert score(out["theta"], log) < 10.0
+    u = log["u_ab"][:5].copy()
+    u[2, 0] = np.nan
+    o = flux.run(u, log["i_ab"][:5])
+    assert o["status"][2] == pyfoc.Status.REJECTED and np.all(np.isfinite(o["theta"]))
+    with pytest.raises(ValueError, match="dt"):
+        flux.run(u, log["i_ab"][:5], dt=np.zeros(5))
+    with pytest.raises(pyfoc.ConfigError):
+        pyfoc.FluxObserver(pyfoc.Motor(**SERVO), -1.0)
+
+
+H6 = "t_s,dt_s,u_alpha_v,u_beta_v,i_alpha_a,i_beta_a\n"
+OK = "0,1e-4,0,0,0,0\n"
+
+
+@pytest.mark.parametrize(
+    "text,line,column",
+    [
+        ("", 1, 1),
+        (H6, 2, 1),
+        ("t_s,dt_s,u_alpha_v,u_beta_v,i_alpha_a\n0,1,0,0,0\n", 1, 6),
+        (H6 + OK + "0,1e-4,0,x,0,0\n", 3, 4),
+        (H6 + OK + "0,1e-4,0,0,0\n", 3, 6),
+        (H6 + OK + "0,1e-4,0,0,0,0,1\n", 3, 7),
+        (H6 + OK + "0,0,0,0,0,0\n", 3, 2),
+        (H6 + OK + "0,1e-4,0,0,nan,0\n", 3, 5),
+        (H6 + OK + "0,1e-4,0,0,0,-inf\n", 3, 6),
+    ],
+)
+def test_malformed_csv(tmp_path, text, line, column):
+    p = tmp_path / "bad.csv"
+    p.write_text(text)
+    with pytest.raises(pyfoc.LogError) as e:
+        pyfoc.read_log(p)
+    assert isinstance(e.value, pyfoc.PyfocError)
+    assert (e.value.line, e.value.column) == (line, column)
+    assert e.value.file == str(p)
+    assert f"line {line}, column {column}" in str(e.value) and str(p) in str(e.value)
+
+
+def test_bad_paths_and_corrupt_mcap(sim, tmp_path):
+    _, _, path = sim
+    with pytest.raises(pyfoc.LogError) as e:
+        pyfoc.read_log(tmp_path / "missing.csv")
+    assert e.value.line is None
+    with pytest.raises(ValueError, match="scaling"):
+        pyfoc.read_log(path, scaling="rms")
+    data = path.read_bytes()
+    bad = tmp_path / "bad.mcap"
+    rng = np.random.default_rng(1)
+    for cut in (9, 100, len(data) // 2, len(data) - 9):
+        bad.write_bytes(data[:cut])
+        with pytest.raises(pyfoc.LogError):
+            pyfoc.read_log(bad)
+    for _ in range(20):
+        b = bytearray(data)
+        for at in rng.integers(8, len(b) - 8, 16):
+            b[at] = int(rng.integers(0, 256))
+        bad.write_bytes(bytes(b))
+        try:
+            pyfoc.read_log(bad)
+        except pyfoc.LogError:
+            pass
