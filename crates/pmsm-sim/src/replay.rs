@@ -659,9 +659,8 @@ pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Rep
     };
     for k in 0..n {
         let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
-        // TODO(step_dt): `obs.step_dt(u_prev, log.i_ab[k], log.dt_s[k])` once ekf-core has
-        // it; until then every period is taken as the nominal `Ts`.
-        let (e, status) = match obs.step(u_prev, log.i_ab[k]) {
+        // The period that ended at this row (refused beyond 64 Ts: a rejected row).
+        let (e, status) = match obs.step_dt(u_prev, log.i_ab[k], log.dt_s[k]) {
             Ok(e) => (
                 e,
                 match e.status {

@@ -106,10 +106,17 @@ fn step_row_dt<T: Float + Into<f64>>(
     o: &mut PmsmObserver<T>,
     u: [f64; 2],
     i: [f64; 2],
-    _dt: f64,
+    dt: f64,
 ) -> Row {
-    // TODO(step_dt): `o.step_dt(u, i, dt)` once ekf-core has it; until then the nominal Ts.
-    crate::step_row(o, u, i)
+    let c = |v: f64| T::from_subset(&v);
+    let (values, status) = match o.step_dt(u.map(c), i.map(c), c(dt)) {
+        Ok(e) => (crate::outputs(&e), RowStatus::of(e.status)),
+        Err(_) => (crate::outputs(&o.estimate()), RowStatus::Rejected),
+    };
+    Row {
+        values: values.map(Into::into),
+        status,
+    }
 }
 
 impl Observer {
