@@ -371,6 +371,7 @@ mod tests {
             u_dc_v: 300.0,
             dead_time_s: 0.0,
             delay,
+            delay_periods: None,
             ripple_fraction: 0.0,
             ripple_hz: 0.0,
         });

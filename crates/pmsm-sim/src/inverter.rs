@@ -23,6 +23,26 @@
 //!   `t_k+1` and held over `[t_k+1, t_k+2)`: one period of delay, as on a real MCU that
 //!   computes during the period. Before the first computed duties arrive the inverter holds
 //!   50 % on every leg (zero voltage). With `delay = false` the duties act at once.
+//! - **Longer voltage update delay** (`delay_periods`, off by default). Real drives often
+//!   apply a voltage later than the one period a controller compensates: a PWM shadow
+//!   register loaded at the period's end or its middle, a DMA or gate-driver latency, a
+//!   computation that overruns. With `delay_periods = D` (`0 <= D <= 3`, fractional allowed)
+//!   the duties computed at `t_k` are in force over `[t_k + D Ts, t_k+1 + D Ts)`. With
+//!   `D = n + f` (`n` whole periods, `0 <= f < 1`) the period `[t_k, t_k+1)` therefore holds
+//!   two voltages:
+//!
+//!   ```text
+//!   [t_k,          t_k + f Ts): duties of tick k - n - 1
+//!   [t_k + f Ts,   t_k+1):      duties of tick k - n
+//!   ```
+//!
+//!   (one segment when `f = 0`; before a tick's duties exist, 50 % on every leg). The plant
+//!   integrates the two sub-intervals one after the other, each with its own voltage and its
+//!   own dead-time sign (the current at the sub-interval's start): exact, no averaging.
+//!   `D = 1` is `delay = true`, `D = 0` is `delay = false`. The controller is not told: the
+//!   voltage it "knows it commanded" ([`Applied::u_ab_commanded_v`], what the simulator's
+//!   observers get) stays that of `delay` (the one period `foc` compensates), so an observer
+//!   sees the extra `D - 1` periods as a model error, as on a real drive.
 //! - **DC-bus ripple.** `u_dc(t) = U_dc (1 + r sin(2 pi f_r t))`, sampled at `t_k` and held
 //!   over the period; the same value is what the controller measures.
 
@@ -48,6 +68,11 @@ pub struct InverterConfig {
     /// One period of computation delay between the sample and the duties taking effect.
     #[serde(default = "yes")]
     pub delay: bool,
+    /// Delay from the sample at `t_k` to the duties taking effect, in periods, `[0, 3]`,
+    /// fractional allowed (module docs); `None` (the default): `delay` decides (1 or 0). Needs
+    /// `delay = true` (the controller is told one period, its default compensation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_periods: Option<f64>,
     /// DC-bus ripple amplitude as a fraction of `u_dc_v` (0: none).
     #[serde(default)]
     pub ripple_fraction: f64,
@@ -91,6 +116,20 @@ impl InverterConfig {
                 ),
             ));
         }
+        if let Some(d) = self.delay_periods {
+            if !(d.is_finite() && (0.0..=MAX_DELAY_PERIODS).contains(&d)) {
+                return Err(FieldError::new(
+                    f("delay_periods"),
+                    format!("must be in [0, {MAX_DELAY_PERIODS}] periods, is {d}"),
+                ));
+            }
+            if !self.delay {
+                return Err(FieldError::new(
+                    f("delay_periods"),
+                    "needs delay = true: it replaces that one period (delay_periods = 0 for none)",
+                ));
+            }
+        }
         if !(self.ripple_fraction.is_finite() && (0.0..1.0).contains(&self.ripple_fraction)) {
             return Err(FieldError::new(
                 f("ripple_fraction"),
@@ -105,6 +144,22 @@ impl InverterConfig {
         }
         Ok(())
     }
+}
+
+/// Largest `delay_periods`.
+pub const MAX_DELAY_PERIODS: f64 = 3.0;
+
+/// Duties (and the bus voltage measured when they were computed) kept by the delay line:
+/// enough for `delay_periods` up to [`MAX_DELAY_PERIODS`].
+const HISTORY: usize = 5;
+
+/// One sub-interval of a period with `delay_periods` (module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Segment {
+    /// Length as a fraction of the period (0: the segment is empty).
+    pub fraction: f64,
+    /// Duties in force.
+    pub duties: [f64; 3],
 }
 
 /// What the inverter applies over one period.
@@ -127,6 +182,11 @@ pub struct Inverter {
     /// Duties (and the bus voltage measured when they were computed) waiting for the next
     /// period, with the delay on.
     pending: ([f64; 3], f64),
+    /// With `delay_periods`: the last [`HISTORY`] ticks' duties, by tick modulo `HISTORY`,
+    /// the ticks pushed so far, and the period's two segments.
+    history: [[f64; 3]; HISTORY],
+    pushed: u64,
+    segments: [Segment; 2],
 }
 
 impl Inverter {
@@ -136,7 +196,70 @@ impl Inverter {
             cfg,
             dead_fraction: cfg.dead_time_s / cfg.ts_s,
             pending: ([0.5; 3], cfg.u_dc_v),
+            history: [[0.5; 3]; HISTORY],
+            pushed: 0,
+            segments: [Segment {
+                fraction: 0.0,
+                duties: [0.5; 3],
+            }; 2],
         }
+    }
+
+    /// The two sub-intervals of the present period with `delay_periods` set (the first
+    /// may be empty), as scheduled by the last [`apply`](Self::apply); `None` without it (one
+    /// voltage over the whole period: [`Applied::u_ab_v`]).
+    pub fn segments(&self) -> Option<[Segment; 2]> {
+        self.cfg.delay_periods.map(|_| self.segments)
+    }
+
+    /// The stationary voltage of `duties` on the bus `u_dc_v` with the dead time for the phase
+    /// currents `i_abc_a` (module docs), V.
+    #[inline]
+    pub fn voltage(&self, duties: [f64; 3], u_dc_v: f64, i_abc_a: [f64; 3]) -> DVec2 {
+        let eff = if self.dead_fraction == 0.0 {
+            duties
+        } else {
+            let mut e = [0.0; 3];
+            for ((ex, dx), ix) in e.iter_mut().zip(duties).zip(i_abc_a) {
+                let sign = if ix > 0.0 {
+                    1.0
+                } else if ix < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                };
+                *ex = (dx - sign * self.dead_fraction).clamp(0.0, 1.0);
+            }
+            e
+        };
+        DVec2::from(clarke(eff)) * u_dc_v
+    }
+
+    /// Pushes tick `k`'s duties into the delay line and schedules period `k`'s segments.
+    fn schedule(&mut self, duties: [f64; 3], delay_periods: f64) {
+        let k = self.pushed;
+        self.history[(k % HISTORY as u64) as usize] = duties;
+        self.pushed += 1;
+        let n = delay_periods.floor();
+        let f = delay_periods - n;
+        let back = |b: u64| {
+            if b <= k {
+                self.history[((k - b) % HISTORY as u64) as usize]
+            } else {
+                [0.5; 3]
+            }
+        };
+        let n = n as u64;
+        self.segments = [
+            Segment {
+                fraction: f,
+                duties: if f > 0.0 { back(n + 1) } else { [0.5; 3] },
+            },
+            Segment {
+                fraction: 1.0 - f,
+                duties: back(n),
+            },
+        ];
     }
 
     /// The settings.
@@ -172,26 +295,29 @@ impl Inverter {
         } else {
             (duties, u_dc_meas_v)
         };
-        let eff = if self.dead_fraction == 0.0 {
-            d
-        } else {
-            let mut e = [0.0; 3];
-            for ((ex, dx), ix) in e.iter_mut().zip(d).zip(i_abc_a) {
-                let sign = if ix > 0.0 {
-                    1.0
-                } else if ix < 0.0 {
-                    -1.0
-                } else {
-                    0.0
-                };
-                *ex = (dx - sign * self.dead_fraction).clamp(0.0, 1.0);
+        let u_ab_commanded_v = DVec2::from(clarke(d)) * u_dc_cmd;
+        if let Some(dp) = self.cfg.delay_periods {
+            // The delay line: the segments' duties; `u_ab_v` here is the period's mean with
+            // the dead-time sign of the currents at `t_k` (the run loop steps the plant
+            // segment by segment with [`voltage`](Self::voltage) and records the exact mean).
+            self.schedule(duties, dp);
+            let [s0, s1] = self.segments;
+            let mut mean = [0.0; 3];
+            for (m, (a, b)) in mean.iter_mut().zip(s0.duties.iter().zip(s1.duties)) {
+                *m = s0.fraction * a + s1.fraction * b;
             }
-            e
-        };
+            let u = self.voltage(s0.duties, u_dc_v, i_abc_a) * s0.fraction
+                + self.voltage(s1.duties, u_dc_v, i_abc_a) * s1.fraction;
+            return Applied {
+                duties: mean,
+                u_ab_v: u,
+                u_ab_commanded_v,
+            };
+        }
         Applied {
             duties: d,
-            u_ab_v: DVec2::from(clarke(eff)) * u_dc_v,
-            u_ab_commanded_v: DVec2::from(clarke(d)) * u_dc_cmd,
+            u_ab_v: self.voltage(d, u_dc_v, i_abc_a),
+            u_ab_commanded_v,
         }
     }
 }
@@ -207,9 +333,54 @@ mod tests {
             u_dc_v: 300.0,
             dead_time_s: dead,
             delay,
+            delay_periods: None,
             ripple_fraction: 0.0,
             ripple_hz: 0.0,
         }
+    }
+
+    #[test]
+    fn delay_line_splits_the_period() {
+        // 1.5 periods: period k holds tick k-2's duties over its first half, k-1's over the
+        // second; 1 and 0 periods reproduce delay = true / false; 3 periods, tick k-3's.
+        let ticks: Vec<[f64; 3]> = (0..8)
+            .map(|j| [0.1 * f64::from(j), 0.5, 1.0 - 0.1 * f64::from(j)])
+            .collect();
+        for (dp, n, f) in [
+            (1.5, 1, 0.5),
+            (1.0, 1, 0.0),
+            (0.0, 0, 0.0),
+            (3.0, 3, 0.0),
+            (2.25, 2, 0.25),
+        ] {
+            let mut c = cfg(true, 0.0);
+            c.delay_periods = Some(dp);
+            assert_eq!(c.validate(), Ok(()));
+            let mut inv = Inverter::new(c);
+            for (k, d) in ticks.iter().enumerate() {
+                inv.apply(*d, 300.0, 300.0, [0.0; 3]);
+                let [s0, s1] = inv.segments().unwrap_or_else(|| panic!("no segments"));
+                let at = |b: usize| if b <= k { ticks[k - b] } else { [0.5; 3] };
+                assert_eq!(s0.fraction, f);
+                assert_eq!(s1.fraction, 1.0 - f);
+                assert_eq!(s1.duties, at(n), "{dp} {k}");
+                if f > 0.0 {
+                    assert_eq!(s0.duties, at(n + 1), "{dp} {k}");
+                }
+            }
+        }
+        let mut c = cfg(true, 0.0);
+        c.delay_periods = Some(3.5);
+        assert_eq!(
+            c.validate().map_err(|e| e.field),
+            Err("inverter.delay_periods".to_string())
+        );
+        c.delay_periods = Some(1.5);
+        c.delay = false;
+        assert_eq!(
+            c.validate().map_err(|e| e.field),
+            Err("inverter.delay_periods".to_string())
+        );
     }
 
     #[test]

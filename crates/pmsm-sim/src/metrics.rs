@@ -766,6 +766,14 @@ pub struct RunMetrics {
     pub startup: Option<StartupMetrics>,
     /// The speed reversals (`None`: the reference never changes sign).
     pub reversal: Option<ReversalMetrics>,
+    /// Control periods skipped (`[skipped_cycles]`: the controller did not tick; set by the
+    /// run loop; not written when 0).
+    #[serde(skip_serializing_if = "is_zero_u64")]
+    pub skipped_control_periods: u64,
+}
+
+fn is_zero_u64(n: &u64) -> bool {
+    *n == 0
 }
 
 /// Streaming accumulator of every metric of a run.
@@ -860,6 +868,7 @@ impl MetricsAccumulator {
             drive: self.drive.finish(ts),
             startup: self.startup.finish(),
             reversal: self.reversal.finish(ts),
+            skipped_control_periods: 0,
         }
     }
 }

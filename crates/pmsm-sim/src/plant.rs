@@ -69,6 +69,51 @@
 //! high-frequency injection (`foc::hfi`) senses; no scenario turns it on, only
 //! [`RunOptions::d_saturation`](crate::sim::RunOptions::d_saturation).
 
+//!
+//! # Optional back-EMF harmonics ([`EmfHarmonics`], off by default)
+//!
+//! A real magnet's flux linkage is not a pure sine. The 5th and 7th harmonics of the phase
+//! flux (the 3rd and its multiples cancel in a star winding with an isolated neutral) make
+//! the magnet's flux in phase `a`
+//!
+//! ```text
+//! psi_a = psi_f (cos th + k5 cos(5 th + phi5) + k7 cos(7 th + phi7))
+//! ```
+//!
+//! (phases `b`, `c` at `th -+ 2 pi / 3`): `k5`, `k7` are fractions of `psi_f`, `phi5`, `phi7`
+//! their phases. The 5th is a negative-sequence set and the 7th a positive one, so the space
+//! vector is `psi_ab = psi_f (e^{j th} + k5 e^{-j(5 th + phi5)} + k7 e^{j(7 th + phi7)})`,
+//! and in the rotor frame both appear at the 6th harmonic:
+//!
+//! ```text
+//! psi_pm,dq(th) = psi_f (1 + k5 e^{-j a5} + k7 e^{j a7}),   a5 = 6 th + phi5, a7 = 6 th + phi7
+//! ```
+//!
+//! Its motional EMF `e_dq = w_e (d psi_pm,dq / d th + j psi_pm,dq)` is
+//!
+//! ```text
+//! e_d = -w_e psi_f (5 k5 sin a5 + 7 k7 sin a7)
+//! e_q =  w_e psi_f (1 - 5 k5 cos a5 + 7 k7 cos a7)
+//! ```
+//!
+//! (in the stationary frame `j w_e psi_f (e^{j th} - 5 k5 e^{-j(5 th + phi5)} + 7 k7
+//! e^{j(7 th + phi7)})`: the EMF's 5th and 7th harmonics are `5 k5` and `7 k7` of its
+//! fundamental). The equations become
+//!
+//! ```text
+//! Ld di_d/dt = u_d - Rs i_d + w_e Lq i_q - e_d
+//! Lq di_q/dt = u_q - Rs i_q - w_e Ld i_d - e_q
+//! Te         = 1.5 p ((Ld - Lq) i_d i_q + (e_d i_d + e_q i_q) / w_e)
+//! ```
+//!
+//! The torque is the power the EMF takes, `1.5 (e_d i_d + e_q i_q)`, over the mechanical
+//! speed: the energy balance `1.5 u.i = 1.5 Rs |i|^2 + d/dt (0.75 (Ld i_d^2 + Lq i_q^2)) + Te
+//! w_mech` holds at every instant (a unit test checks it), and `(e_d i_d + e_q i_q) / w_e`
+//! needs no division (`e / w_e` is the bracket above). The torque ripple is at `6 w_e`.
+//! With harmonics set ([`MotorModel::emf_harmonics`]) the plant steps by RK4 with
+//! [`HARMONIC_SUBSTEPS`] sub-steps (the EMF turns at `6 w_e`; no closed form), Coulomb
+//! friction as in [`Plant::step_rk4`]. [`Plant::emf_ab_v`] gives the open-circuit EMF.
+
 use core::f64::consts::{PI, TAU};
 
 use ekf_core::{MotorParams, wrap_angle};
@@ -99,6 +144,93 @@ pub struct MotorModel {
     /// Coulomb (dry) friction torque, N m (0: none).
     #[serde(default)]
     pub coulomb_nm: f64,
+    /// 5th and 7th harmonics of the magnet flux (`[motor.emf_harmonics]`, module docs;
+    /// default none).
+    #[serde(default, skip_serializing_if = "EmfHarmonics::is_default")]
+    pub emf_harmonics: EmfHarmonics,
+}
+
+/// RK4 sub-steps per period of the plant with back-EMF harmonics.
+pub const HARMONIC_SUBSTEPS: u32 = 8;
+
+/// Largest harmonic amplitude accepted, fraction of `psi_f`.
+pub const MAX_HARMONIC: f64 = 0.2;
+
+/// The 5th and 7th harmonics of the magnet flux (module docs): amplitudes `h5`, `h7` as
+/// fractions of `psi_f` (the EMF's are 5 and 7 times these, as fractions of its
+/// fundamental), phases in rad (of `cos(5 th + phi5)` in phase `a`'s flux).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EmfHarmonics {
+    /// 5th-harmonic flux amplitude, fraction of `psi_f`, `[0, 0.2]`.
+    pub h5: f64,
+    /// Its phase, rad.
+    pub h5_phase_rad: f64,
+    /// 7th-harmonic flux amplitude, fraction of `psi_f`, `[0, 0.2]`.
+    pub h7: f64,
+    /// Its phase, rad.
+    pub h7_phase_rad: f64,
+}
+
+impl EmfHarmonics {
+    /// No harmonics.
+    pub const NONE: Self = Self {
+        h5: 0.0,
+        h5_phase_rad: 0.0,
+        h7: 0.0,
+        h7_phase_rad: 0.0,
+    };
+
+    /// All fields zero (the default; not written to TOML).
+    pub fn is_default(&self) -> bool {
+        *self == Self::NONE
+    }
+
+    /// Whether any harmonic is present.
+    pub fn is_on(&self) -> bool {
+        self.h5 != 0.0 || self.h7 != 0.0
+    }
+
+    /// The harmonic part of the motional EMF per electrical speed, `(e_d, e_q) / w_e` less the
+    /// fundamental `(0, psi_f)`, at the electrical angle `th` (module docs), Wb.
+    #[inline]
+    pub fn emf_per_speed(&self, psi_f_wb: f64, th: f64) -> (f64, f64) {
+        let (s6, c6) = (6.0 * th).sin_cos();
+        let (s5p, c5p) = self.h5_phase_rad.sin_cos();
+        let (s7p, c7p) = self.h7_phase_rad.sin_cos();
+        // a = 6 th + phi: sin a, cos a by the angle-addition formula.
+        let (s5, c5) = (s6 * c5p + c6 * s5p, c6 * c5p - s6 * s5p);
+        let (s7, c7) = (s6 * c7p + c6 * s7p, c6 * c7p - s6 * s7p);
+        let (a5, a7) = (5.0 * self.h5, 7.0 * self.h7);
+        (
+            -psi_f_wb * (a5 * s5 + a7 * s7),
+            psi_f_wb * (-a5 * c5 + a7 * c7),
+        )
+    }
+
+    /// Checks the amplitudes and phases; errors name `<prefix>.<field>`.
+    pub fn validate(&self, prefix: &str) -> Result<(), FieldError> {
+        for (name, v) in [("h5", self.h5), ("h7", self.h7)] {
+            if !(v.is_finite() && (0.0..=MAX_HARMONIC).contains(&v)) {
+                return Err(FieldError::new(
+                    format!("{prefix}.{name}"),
+                    format!("must be in [0, {MAX_HARMONIC}] (a fraction of psi_f), is {v}"),
+                ));
+            }
+        }
+        for (name, v) in [
+            ("h5_phase_rad", self.h5_phase_rad),
+            ("h7_phase_rad", self.h7_phase_rad),
+        ] {
+            if !v.is_finite() {
+                return Err(FieldError::new(
+                    format!("{prefix}.{name}"),
+                    format!("must be finite, is {v}"),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl MotorModel {
@@ -114,6 +246,7 @@ impl MotorModel {
             j_kg_m2: 8e-4,
             b_nm_s_rad: 1e-3,
             coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
         }
     }
 
@@ -130,6 +263,7 @@ impl MotorModel {
             j_kg_m2: 0.015,
             b_nm_s_rad: 1e-3,
             coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
         }
     }
 
@@ -146,6 +280,7 @@ impl MotorModel {
             j_kg_m2: 2e-5,
             b_nm_s_rad: 1e-6,
             coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
         }
     }
 
@@ -165,6 +300,7 @@ impl MotorModel {
             j_kg_m2: 0.012,
             b_nm_s_rad: 1e-3,
             coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
         }
     }
 
@@ -185,6 +321,7 @@ impl MotorModel {
             j_kg_m2: 2e-3,
             b_nm_s_rad: 3e-4,
             coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
         }
     }
 
@@ -317,7 +454,7 @@ impl MotorModel {
         if self.pole_pairs == 0 {
             return Err(FieldError::new("motor.pole_pairs", "must be at least 1"));
         }
-        Ok(())
+        self.emf_harmonics.validate("motor.emf_harmonics")
     }
 }
 
@@ -437,6 +574,18 @@ fn sat_derivative(
         (te - m.b_nm_s_rad * wm - fr - t_load_nm) / m.j_kg_m2,
         we,
     ]
+}
+
+/// Adds the back-EMF harmonics (module docs) to `d/dt [i_d, i_q, w_mech, th]`: `-e_d / Ld`,
+/// `-e_q / Lq` (harmonic parts) and their torque `1.5 p (e_d i_d + e_q i_q) / w_e` over `J`.
+/// With d-axis saturation the d equation divides by `Ld` (the harmonics' share; a small
+/// error where `i_d > 0` saturates).
+fn add_harmonics(m: &MotorModel, h: &EmfHarmonics, [id, iq, wm, th]: [f64; 4], d: &mut [f64; 4]) {
+    let (ed, eq) = h.emf_per_speed(m.psi_f_wb, th);
+    let we = m.p() * wm;
+    d[0] -= we * ed / m.ld_h;
+    d[1] -= we * eq / m.lq_h;
+    d[2] += 1.5 * m.p() * (ed * id + eq * iq) / m.j_kg_m2;
 }
 
 fn cmul(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
@@ -564,10 +713,34 @@ impl Plant {
 
     /// Electromagnetic torque at the present state, N m.
     pub fn torque_nm(&self) -> f64 {
-        match self.d_saturation {
-            None => self.motor.torque_nm(self.state.i_d_a, self.state.i_q_a),
-            Some(sat) => sat_torque(&self.motor, &sat, self.state.i_d_a, self.state.i_q_a),
+        let (id, iq) = (self.state.i_d_a, self.state.i_q_a);
+        let te = match self.d_saturation {
+            None => self.motor.torque_nm(id, iq),
+            Some(sat) => sat_torque(&self.motor, &sat, id, iq),
+        };
+        let h = &self.motor.emf_harmonics;
+        if h.is_on() {
+            let (ed, eq) = h.emf_per_speed(self.motor.psi_f_wb, self.state.theta_e_rad);
+            te + 1.5 * self.motor.p() * (ed * id + eq * iq)
+        } else {
+            te
         }
+    }
+
+    /// The motional back-EMF in the stationary frame at the present angle and speed,
+    /// `[e_alpha, e_beta]`, V: `(e_d + j e_q) e^{j th}` with the harmonics (module docs), the
+    /// terminal voltage of the open-circuited motor.
+    pub fn emf_ab_v(&self) -> [f64; 2] {
+        let m = &self.motor;
+        let th = self.state.theta_e_rad;
+        let (ed, eq) = if m.emf_harmonics.is_on() {
+            m.emf_harmonics.emf_per_speed(m.psi_f_wb, th)
+        } else {
+            (0.0, 0.0)
+        };
+        let w = self.omega_e_rad_s();
+        let e = DVec2::new(w * ed, w * (m.psi_f_wb + eq));
+        inverse_park(e, self.rot()).to_array()
     }
 
     /// Net accelerating torque `Te - B w - friction - T_load` for a shaft at speed `wm` with
@@ -588,8 +761,8 @@ impl Plant {
     /// Advances by `h_s` with the stationary-frame stator voltage `u_ab_v` (V) and the load
     /// torque `t_load_nm` (N m) held constant (module docs give the method).
     pub fn step(&mut self, u_ab_v: [f64; 2], t_load_nm: f64, h_s: f64) {
-        if self.d_saturation.is_some() {
-            self.step_rk4(u_ab_v, t_load_nm, h_s, 8);
+        if self.d_saturation.is_some() || self.motor.emf_harmonics.is_on() {
+            self.step_rk4(u_ab_v, t_load_nm, h_s, HARMONIC_SUBSTEPS);
             return;
         }
         let m = self.motor;
@@ -741,7 +914,9 @@ impl Plant {
 
     /// Reference integrator: classic RK4 on the dq equations over `substeps` equal sub-steps
     /// (at least one), the stationary voltage rotated into the dq frame at every stage and
-    /// Coulomb friction as `Tc sign(w)` without sticking. Slow; for tests.
+    /// Coulomb friction as `Tc sign(w)` without sticking; the d-axis saturation and the
+    /// back-EMF harmonics when set, a locked rotor held. The plant's own step with either
+    /// model; otherwise slow, for tests.
     pub fn step_rk4(&mut self, u_ab_v: [f64; 2], t_load_nm: f64, h_s: f64, substeps: u32) {
         let n = substeps.max(1);
         let h = h_s / f64::from(n);
@@ -749,22 +924,33 @@ impl Plant {
         let mut x = [s.i_d_a, s.i_q_a, s.omega_mech_rad_s, s.theta_e_rad];
         let m = self.motor;
         let sat = self.d_saturation;
+        let locked = self.locked;
         let deriv = |x: &[f64; 4]| -> [f64; 4] {
             let [id, iq, wm, th] = *x;
-            let we = m.p() * wm;
             let (sn, cs) = th.sin_cos();
             let DVec2 { x: ud, y: uq } = park(DVec2::from(u_ab_v), DVec2::new(cs, sn));
-            if let Some(sat) = sat {
-                return sat_derivative(&m, &sat, [id, iq, wm], [ud, uq], t_load_nm);
+            let mut d = if let Some(sat) = sat {
+                sat_derivative(&m, &sat, [id, iq, wm], [ud, uq], t_load_nm)
+            } else {
+                let we = m.p() * wm;
+                let te = m.torque_nm(id, iq);
+                let fr = coulomb_nm(&m, wm);
+                [
+                    (ud - m.rs_ohm * id + we * m.lq_h * iq) / m.ld_h,
+                    (uq - m.rs_ohm * iq - we * m.ld_h * id - we * m.psi_f_wb) / m.lq_h,
+                    (te - m.b_nm_s_rad * wm - fr - t_load_nm) / m.j_kg_m2,
+                    we,
+                ]
+            };
+            let h = &m.emf_harmonics;
+            if h.is_on() {
+                add_harmonics(&m, h, [id, iq, wm, th], &mut d);
             }
-            let te = m.torque_nm(id, iq);
-            let fr = coulomb_nm(&m, wm);
-            [
-                (ud - m.rs_ohm * id + we * m.lq_h * iq) / m.ld_h,
-                (uq - m.rs_ohm * iq - we * m.ld_h * id - we * m.psi_f_wb) / m.lq_h,
-                (te - m.b_nm_s_rad * wm - fr - t_load_nm) / m.j_kg_m2,
-                we,
-            ]
+            if locked {
+                d[2] = 0.0;
+                d[3] = 0.0;
+            }
+            d
         };
         let add = |a: &[f64; 4], k: &[f64; 4], f: f64| -> [f64; 4] {
             [
@@ -1029,6 +1215,64 @@ mod tests {
             sp.state().i_d_a > 1.02 * lin.state().i_d_a,
             "{:?}",
             sp.state()
+        );
+    }
+
+    #[test]
+    fn emf_harmonics_keep_the_energy_balance() {
+        // 1.5 u.i = 1.5 Rs |i|^2 + d/dt(0.75 (Ld i_d^2 + Lq i_q^2)) + Te w_mech at any state,
+        // with the harmonics' EMF in the current equations and their torque in the mechanics.
+        let mut m = MotorModel::industrial_ipm();
+        m.b_nm_s_rad = 0.0;
+        m.emf_harmonics = EmfHarmonics {
+            h5: 0.03,
+            h5_phase_rad: 0.7,
+            h7: 0.02,
+            h7_phase_rad: -2.0,
+        };
+        for (k, &(id, iq, wm, th, ud, uq)) in [
+            (-1.0, 3.0, 80.0, 0.3, -40.0, 150.0),
+            (0.5, -2.0, -30.0, 2.9, 20.0, -60.0),
+            (2.0, 1.0, 150.0, -1.7, 5.0, 200.0),
+        ]
+        .iter()
+        .enumerate()
+        {
+            let mut d = [
+                (ud - m.rs_ohm * id + m.p() * wm * m.lq_h * iq) / m.ld_h,
+                (uq - m.rs_ohm * iq - m.p() * wm * (m.ld_h * id + m.psi_f_wb)) / m.lq_h,
+                m.torque_nm(id, iq) / m.j_kg_m2,
+                m.p() * wm,
+            ];
+            add_harmonics(&m, &m.emf_harmonics, [id, iq, wm, th], &mut d);
+            let te = d[2] * m.j_kg_m2;
+            let p_in = 1.5 * (ud * id + uq * iq);
+            let p_out = 1.5 * m.rs_ohm * (id * id + iq * iq)
+                + 1.5 * (m.ld_h * id * d[0] + m.lq_h * iq * d[1])
+                + te * wm;
+            assert!(
+                (p_in - p_out).abs() < 1e-9 * p_in.abs(),
+                "{k}: {p_in} {p_out}"
+            );
+            // The plant's torque at that state is the same.
+            let plant = Plant::new(
+                m,
+                PlantState {
+                    i_d_a: id,
+                    i_q_a: iq,
+                    omega_mech_rad_s: wm,
+                    theta_e_rad: th,
+                },
+            );
+            assert!((plant.torque_nm() - te).abs() < 1e-12 * te.abs().max(1.0));
+        }
+        // The RK4 step of the plant with harmonics agrees with a much finer one.
+        let a = driven_run(m, 200.0, 3.0, 2000, 1e-4, 0);
+        let b = driven_run(m, 200.0, 3.0, 2000, 1e-4, 64);
+        let (di, dw, dth) = worst_relative(&a, &b);
+        assert!(
+            di < 1e-5 && dw < 1e-5 && dth < 1e-5,
+            "{di:e} {dw:e} {dth:e}"
         );
     }
 

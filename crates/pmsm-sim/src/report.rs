@@ -35,6 +35,14 @@ pub fn table(m: &RunMetrics) -> String {
         m.wall_time_s,
         m.real_time_factor
     );
+    if m.skipped_control_periods > 0 {
+        let _ = writeln!(
+            out,
+            "skipped control periods: {} ({:.2} %)",
+            m.skipped_control_periods,
+            100.0 * m.skipped_control_periods as f64 / m.periods.max(1) as f64
+        );
+    }
     let _ = writeln!(
         out,
         "observer window: after convergence (|e_th| < {CONVERGED_DEG} deg for the rest of the run), \

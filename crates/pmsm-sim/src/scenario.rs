@@ -290,6 +290,49 @@ impl Default for ObserverSettings {
     }
 }
 
+/// Control periods in which the controller does not run (`[skipped_cycles]`; module
+/// [`crate::sim`], "Skipped control cycles"). Default: none.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SkippedCycles {
+    /// Probability that a period is skipped, each period independently, `[0, 0.5]`.
+    pub probability: f64,
+    /// Times at which the period containing them is skipped, s (`>= 0`).
+    pub times_s: Vec<f64>,
+}
+
+impl SkippedCycles {
+    /// Whether any period can be skipped.
+    pub fn is_on(&self) -> bool {
+        self.probability > 0.0 || !self.times_s.is_empty()
+    }
+
+    /// Nothing set (not written to TOML).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Checks the settings; errors name `skipped_cycles.<field>`.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        let p = self.probability;
+        if !(p.is_finite() && (0.0..=0.5).contains(&p)) {
+            return Err(FieldError::new(
+                "skipped_cycles.probability",
+                format!("must be in [0, 0.5], is {p}"),
+            ));
+        }
+        for (i, t) in self.times_s.iter().enumerate() {
+            if !(t.is_finite() && *t >= 0.0) {
+                return Err(FieldError::new(
+                    format!("skipped_cycles.times_s[{i}]"),
+                    format!("must be finite and >= 0, is {t}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The rotor at `t = 0` (`[initial]`); the currents start at zero.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -342,6 +385,9 @@ pub struct Scenario {
     /// Injected faults (`[[faults]]`, module [`crate::faults`]; default: none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub faults: Vec<FaultSpec>,
+    /// Control periods the controller misses (`[skipped_cycles]`; default: none).
+    #[serde(default, skip_serializing_if = "SkippedCycles::is_default")]
+    pub skipped_cycles: SkippedCycles,
 }
 
 /// A problem in a TOML text, as `(field path, message)`.
@@ -612,6 +658,17 @@ impl Scenario {
             (true, false) => "one period of computation delay, NOT compensated",
             (false, true) => "compensating a computation delay the inverter does not have",
         };
+        let delay = match self.inverter.delay_periods {
+            Some(d) => format!(
+                "voltage applied {d} periods after the sample, {} compensated",
+                if self.delay_compensation() {
+                    "one"
+                } else {
+                    "none"
+                }
+            ),
+            None => delay.to_string(),
+        };
         match self.controller.kind {
             ControllerKind::Sensored => {
                 format!("sensored stand-in (f64, true angle and speed), {delay}")
@@ -671,6 +728,7 @@ impl Scenario {
         self.motor.validate()?;
         self.inverter.validate()?;
         self.sensors.validate()?;
+        self.skipped_cycles.validate()?;
         let c = &self.controller;
         positive("controller.current_limit_a", c.current_limit_a)?;
         positive("controller.current_bandwidth_hz", c.current_bandwidth_hz)?;

@@ -28,7 +28,29 @@
 //!    over `[t_k, t_k+1)`, with its dead time; the plant integrates the period with the load
 //!    torque of `(t_k, w(t_k))` held. When the controller disables the PWM, all switches
 //!    open for that period at once and the plant coasts ([`Plant::step_open`]); the observer
-//!    then gets `u = 0` for the period.
+//!    then gets `u = 0` for the period. With `inverter.delay_periods` the period holds two
+//!    voltages ([`crate::inverter`]): the plant steps over each sub-interval in turn, with
+//!    the dead-time sign of the current at its start, and the record's applied voltage is
+//!    the period's mean.
+//!
+//! # Skipped control cycles (`[skipped_cycles]`, off by default)
+//!
+//! A real controller sometimes misses a period: an interrupt held off by a higher-priority
+//! one, a computation that overruns, a lost ADC trigger. In a skipped period `k` the
+//! controller does not tick: its current sample `i[k]` is never read, the bridge holds the
+//! previous tick's duties one more period (they enter the delay line again, so with the
+//! computation delay they act in the next period, as a timer's shadow register that is not
+//! reloaded would), and the controller's voltage record, which the simulator's observers
+//! get, is that of the held duties. The ADC still converts (its sample is in the log, and
+//! the simulator's own observers, which stand for an analysis of the log, step on it); the
+//! controller's own observer has no estimate for the period (none is scored). The controller
+//! runs on the next period as if one period had passed since its last tick: the missed
+//! period is what its observer and loops see as model error. Which periods are skipped: a
+//! period with probability `probability` each (a Xoshiro256++ stream of its own, seeded from
+//! the scenario's seed: deterministic, the sensor noise unchanged), and the periods
+//! containing the times `times_s`; never period 0 (there is nothing to hold yet).
+//! [`RunMetrics::skipped_control_periods`](crate::metrics::RunMetrics::skipped_control_periods)
+//! counts them.
 //!
 //! # Stops
 //!
@@ -48,7 +70,9 @@ use ekf_core::{EkfError, PmsmObserver};
 use glam::DVec2;
 
 use crate::SimError;
-use crate::controller::{ControllerInput, DriveController, RotorFeedback, SensoredController};
+use crate::controller::{
+    ControllerInput, ControllerOutput, DriveController, RotorFeedback, SensoredController,
+};
 use crate::faults::FaultInjector;
 use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
@@ -57,7 +81,7 @@ use crate::observer::{Observer, ObserverEstimate};
 use crate::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
 use crate::plant::{Plant, PlantState};
 use crate::profile::load_torque_nm;
-use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
+use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario, SkippedCycles};
 use crate::sensors::CurrentSensor;
 
 pub use crate::record::{ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth};
@@ -214,6 +238,56 @@ pub fn pipeline_pays(log_thread: bool) -> bool {
     cores >= 2 + usize::from(log_thread)
 }
 
+/// Which control periods are skipped (module docs, "Skipped control cycles").
+#[derive(Clone, Debug)]
+pub struct CycleSkips {
+    /// `probability` as a threshold on a 53-bit uniform integer (0: no draws).
+    threshold: u64,
+    rng: rand::rngs::Xoshiro256PlusPlus,
+    /// The periods of `times_s`, sorted, and the next one to check.
+    periods: Vec<u64>,
+    next: usize,
+}
+
+/// Added to the scenario's seed for the skip stream (any constant: a stream of its own).
+const SKIP_SEED_OFFSET: u64 = 0x5c1b_c7c1_e5ee_d000;
+
+impl CycleSkips {
+    /// The skip schedule of the settings, for the PWM period `ts_s`; `None` when nothing is
+    /// ever skipped.
+    pub fn new(cfg: &SkippedCycles, seed: u64, ts_s: f64) -> Option<Self> {
+        use rand::SeedableRng;
+        if !cfg.is_on() {
+            return None;
+        }
+        let mut periods: Vec<u64> = cfg
+            .times_s
+            .iter()
+            .map(|&t| (t / ts_s + 1e-9).floor() as u64)
+            .collect();
+        periods.sort_unstable();
+        Some(Self {
+            threshold: (cfg.probability * (1u64 << 53) as f64) as u64,
+            rng: rand::rngs::Xoshiro256PlusPlus::seed_from_u64(seed.wrapping_add(SKIP_SEED_OFFSET)),
+            periods,
+            next: 0,
+        })
+    }
+
+    /// Whether period `k` is skipped; call once per period, in order (one draw per period
+    /// with a probability set, whatever the outcome).
+    pub fn skip(&mut self, k: u64) -> bool {
+        use rand::Rng;
+        let random = self.threshold > 0 && (self.rng.next_u64() >> 11) < self.threshold;
+        let mut timed = false;
+        while self.next < self.periods.len() && self.periods[self.next] <= k {
+            timed |= self.periods[self.next] == k;
+            self.next += 1;
+        }
+        k > 0 && (random || timed)
+    }
+}
+
 /// Runs a scenario with a full trace; an early end (non-finite, observer failure) is an
 /// error.
 pub fn run(scenario: &Scenario) -> Result<RunOutput, SimError> {
@@ -342,6 +416,9 @@ pub fn run_with_side_observers(
     // held back like the duties when the inverter has its computation delay.
     let mut expected_pending: Option<[f64; 2]> = None;
     let delay = scenario.inverter.delay;
+    let mut skips = CycleSkips::new(&scenario.skipped_cycles, scenario.seed, ts);
+    let mut last_out: Option<ControllerOutput> = None;
+    let mut skipped: u64 = 0;
     let mut seed_filter_failure = None;
     let mut side_est = Vec::with_capacity(side.len());
     // How the loop ended (interrupt, non-finite) and how the hand-on ended (observer or
@@ -441,18 +518,33 @@ pub fn run_with_side_observers(
         };
 
         let speed_ref_rpm = scenario.speed_ref_rpm.at(t);
-        let out = controller.tick(&ControllerInput {
-            k: kk,
-            t_s: t,
-            i_abc_a: meas.i_abc_a,
-            i_ab_a: i_ab_meas,
-            u_dc_v: u_dc,
-            speed_ref_mech_rad_s: speed_ref_rpm / RPM_PER_RAD_S,
-            rotor: sensored.then_some(RotorFeedback {
-                theta_e_rad: state.theta_e_rad,
-                omega_mech_rad_s: state.omega_mech_rad_s,
+        // A skipped period (module docs): no tick, the last output held.
+        let held = if skips.as_mut().is_some_and(|s| s.skip(kk)) {
+            last_out
+        } else {
+            None
+        };
+        let out = match held {
+            Some(o) => {
+                skipped += 1;
+                o
+            }
+            None => controller.tick(&ControllerInput {
+                k: kk,
+                t_s: t,
+                i_abc_a: meas.i_abc_a,
+                i_ab_a: i_ab_meas,
+                u_dc_v: u_dc,
+                speed_ref_mech_rad_s: speed_ref_rpm / RPM_PER_RAD_S,
+                rotor: sensored.then_some(RotorFeedback {
+                    theta_e_rad: state.theta_e_rad,
+                    omega_mech_rad_s: state.omega_mech_rad_s,
+                }),
             }),
-        });
+        };
+        if skips.is_some() {
+            last_out = Some(out);
+        }
         if let Some(&d) = out.duties.iter().find(|d| !d.is_finite()) {
             end = RunEnd::NonFinite {
                 k: kk,
@@ -486,6 +578,31 @@ pub fn run_with_side_observers(
             psi_f_wb: plant.motor().psi_f_wb,
             rs_ohm: plant.motor().rs_ohm,
         };
+
+        if let Some(f) = faults.as_mut() {
+            f.before_step(kk, &mut plant);
+        }
+        if pwm {
+            match inverter.segments() {
+                None => plant.step(applied.u_ab_v.to_array(), load, ts),
+                Some(segments) => {
+                    // The delay line: each sub-interval with its own voltage (module docs).
+                    let mut mean = DVec2::ZERO;
+                    for s in segments.iter().filter(|s| s.fraction > 0.0) {
+                        let u = inverter.voltage(s.duties, u_dc, plant.i_abc_a());
+                        plant.step(u.to_array(), load, s.fraction * ts);
+                        mean += u * s.fraction;
+                    }
+                    applied.u_ab_v = mean;
+                }
+            }
+        } else {
+            plant.step_open(load, ts);
+        }
+        if let Some(f) = faults.as_mut() {
+            f.after_step(kk, &mut plant);
+        }
+
         let sample = Sample {
             k: kk,
             t_s: t,
@@ -498,10 +615,14 @@ pub fn run_with_side_observers(
             // Filled in by the pipeline with the observers' estimates.
             observer: ObserverSample::default(),
             seed_filter: None,
-            controller_observer: out
-                .telemetry
-                .estimate
-                .map(|e| ObserverSample::from_controller(&e, &truth)),
+            controller_observer: match held {
+                // A skipped period: the controller's observer made no estimate.
+                Some(_) => None,
+                None => out
+                    .telemetry
+                    .estimate
+                    .map(|e| ObserverSample::from_controller(&e, &truth)),
+            },
             control: ControlRecord {
                 speed_ref_rpm,
                 duties,
@@ -518,18 +639,6 @@ pub fn run_with_side_observers(
         if !pipeline.push(obs_input, Some(sample), &mut hand_on) {
             // The hand-on ended the run (observer or sink failure): `hand_end` says where.
             break;
-        }
-
-        if let Some(f) = faults.as_mut() {
-            f.before_step(kk, &mut plant);
-        }
-        if pwm {
-            plant.step(applied.u_ab_v.to_array(), load, ts);
-        } else {
-            plant.step_open(load, ts);
-        }
-        if let Some(f) = faults.as_mut() {
-            f.after_step(kk, &mut plant);
         }
         // Voltage over [t_k, t_k+1) as the controller knows it: its expectation for the duties
         // now applied (those of the previous tick with the delay, these without), else the
@@ -561,12 +670,13 @@ pub fn run_with_side_observers(
     if let Some(p) = opts.progress.as_mut() {
         p(n, n);
     }
-    let metrics = acc.finish(
+    let mut metrics = acc.finish(
         scenario,
         end.describe(),
         wall_time_s,
         seed_filter_failure.map(|f| format!("sample {}: {}", f.k, f.error)),
     );
+    metrics.skipped_control_periods = skipped;
     Ok(RunOutput {
         trace: Trace { ts_s: ts, samples },
         metrics,

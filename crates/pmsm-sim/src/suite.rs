@@ -63,6 +63,22 @@
 //! after which `|e_th| < 5 deg` holds to the end of the convergence phase (`None`: not
 //! converged by then). `w_e Ts` of every row is in the tables.
 //!
+//! # Real-drive effects ([`SuiteReport::real_drive`])
+//!
+//! What real drives do and the observers' model leaves out, on the servo and the small fast
+//! motor ([`REAL_DRIVE_MOTORS`], when selected), each in a run of its own
+//! ([`RealDriveEffect`]): the voltage applied 1.5 periods after the sample instead of the one
+//! period foc and the observers assume (`inverter.delay_periods`), 5th and 7th back-EMF
+//! harmonics of 3 % and 2 % of the fundamental (`motor.emf_harmonics`: flux harmonics of
+//! 0.6 % and 0.29 % of `psi_f`), 1 % of the control periods skipped (`[skipped_cycles]`),
+//! and the same run without any (the reference). Each run: the observers converge at 50 %
+//! rated speed, the speed rises to rated, the rated load steps on, and the angle error is
+//! scored over a window at rated speed and load ([`Plan::real_drive`]). The default EKF and
+//! the baseline step on every sample with the voltage the drive believes it applied (not
+//! told of the effect); foc's own `f32` observer (foc runs sensored, its observer alongside)
+//! misses the skipped periods with its controller. No goals: the table shows what each
+//! effect costs, so that a regression shows.
+//!
 //! # Goals and limits ([`SuiteReport::checks`])
 //!
 //! The goals: the default EKF's RMS angle error at most half the baseline's in every
@@ -236,6 +252,107 @@ pub struct MismatchRow {
     pub psi_f_error_pct: Option<f64>,
     /// Mean `Rs` in use over the window against the truth, %.
     pub rs_error_pct: f64,
+}
+
+/// The motors with real-drive rows (module docs).
+pub const REAL_DRIVE_MOTORS: [SuiteMotor; 2] = [SuiteMotor::Servo, SuiteMotor::SmallFast];
+
+/// A real-drive effect (module docs, "Real-drive effects").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RealDriveEffect {
+    /// None: the reference run.
+    None,
+    /// The voltage applied 1.5 periods after the sample (`inverter.delay_periods = 1.5`).
+    VoltageDelay,
+    /// 5th and 7th back-EMF harmonics of 3 % and 2 % of the fundamental.
+    EmfHarmonics,
+    /// 1 % of the control periods skipped.
+    SkippedCycles,
+}
+
+impl RealDriveEffect {
+    /// All four, in table order.
+    pub const ALL: [RealDriveEffect; 4] = [
+        RealDriveEffect::None,
+        RealDriveEffect::VoltageDelay,
+        RealDriveEffect::EmfHarmonics,
+        RealDriveEffect::SkippedCycles,
+    ];
+
+    /// Name in the tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            RealDriveEffect::None => "none (reference)",
+            RealDriveEffect::VoltageDelay => "voltage delay 1.5 periods",
+            RealDriveEffect::EmfHarmonics => "EMF 5th 3 %, 7th 2 %",
+            RealDriveEffect::SkippedCycles => "1 % skipped cycles",
+        }
+    }
+
+    /// The scenario with the effect.
+    pub fn apply(self, sc: &mut Scenario) {
+        match self {
+            RealDriveEffect::None => {}
+            RealDriveEffect::VoltageDelay => sc.inverter.delay_periods = Some(1.5),
+            RealDriveEffect::EmfHarmonics => {
+                sc.motor.emf_harmonics = crate::plant::EmfHarmonics {
+                    h5: 0.03 / 5.0,
+                    h5_phase_rad: 0.0,
+                    h7: 0.02 / 7.0,
+                    h7_phase_rad: 0.0,
+                };
+            }
+            RealDriveEffect::SkippedCycles => sc.skipped_cycles.probability = 0.01,
+        }
+    }
+}
+
+/// Angle error over a window: RMS, max `|.|`, mean, deg el., and the samples.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct AngleStats {
+    /// Samples scored.
+    pub samples: usize,
+    /// RMS, deg el.
+    pub rms_deg: f64,
+    /// Largest `|e_th|`, deg el.
+    pub max_deg: f64,
+    /// Mean, deg el.
+    pub mean_deg: f64,
+}
+
+impl AngleStats {
+    fn of(s: &Sums) -> Self {
+        Self {
+            samples: s.n,
+            rms_deg: s.angle_rms_deg(),
+            max_deg: s.max_e,
+            mean_deg: s.angle_mean_deg(),
+        }
+    }
+}
+
+/// One real-drive run's window (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RealDriveRow {
+    /// Motor.
+    pub motor: SuiteMotor,
+    /// The effect.
+    pub effect: RealDriveEffect,
+    /// Condition of the window.
+    pub condition: String,
+    /// `w_e Ts` of the window's speed, rad.
+    pub w_ts_rad: f64,
+    /// The default EKF.
+    pub ekf: AngleStats,
+    /// The baseline (flux observer + PLL).
+    pub baseline: AngleStats,
+    /// foc's own `f32` observer (no estimate in skipped periods).
+    pub foc_observer: AngleStats,
+    /// Control periods skipped over the run.
+    pub skipped_periods: u64,
+    /// Periods of the run.
+    pub periods: usize,
 }
 
 /// Options of [`run_suite`].
@@ -476,6 +593,8 @@ pub struct SuiteReport {
     pub transients: Vec<TransientRow>,
     /// Mismatch rows (module docs), by motor, case, observer, condition.
     pub mismatch: Vec<MismatchRow>,
+    /// Real-drive rows (module docs), by motor and effect.
+    pub real_drive: Vec<RealDriveRow>,
     /// Goals and limits.
     pub checks: Vec<Check>,
 }
@@ -521,6 +640,23 @@ impl Plan {
             step_end_s,
             duration_s: w0 + window,
             speed_points: points,
+        }
+    }
+
+    /// A real-drive run (module docs): convergence at 50 % rated speed, up to rated, the
+    /// rated load step, one window at rated speed and load.
+    fn real_drive(short: bool) -> Self {
+        let (conv, window) = if short { (0.2, 0.2) } else { (0.2, 0.3) };
+        let up = conv + 0.2;
+        let step_s = up + 0.1;
+        let w0 = step_s + 0.2;
+        Self {
+            conv_end_s: conv,
+            windows: vec![("100 %, rated load", 1.0, true, w0, w0 + window)],
+            step_s,
+            step_end_s: w0,
+            duration_s: w0 + window,
+            speed_points: vec![(0.0, 0.5), (conv, 0.5), (up, 1.0)],
         }
     }
 
@@ -664,6 +800,7 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
             u_dc_v: u_dc,
             dead_time_s: if opts.ideal { 0.0 } else { dead },
             delay: true,
+            delay_periods: None,
             ripple_fraction: 0.0,
             ripple_hz: 0.0,
         },
@@ -719,6 +856,7 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
             load
         },
         faults: Vec::new(),
+        skipped_cycles: Default::default(),
     }
 }
 
@@ -842,7 +980,18 @@ fn run_scored(
     plan: &Plan,
     mismatch: bool,
 ) -> Result<(Vec<Scored>, String), SimError> {
-    let mut scored = ObserverKind::ALL
+    run_scored_with(sc, plan, &ObserverKind::ALL, mismatch, Vec::new()).map(|(s, e, _)| (s, e))
+}
+
+/// [`run_scored`] with the given observers and sinks, also returning the run.
+fn run_scored_with(
+    sc: &Scenario,
+    plan: &Plan,
+    kinds: &[ObserverKind],
+    mismatch: bool,
+    sinks: Vec<&mut dyn crate::sim::SampleSink>,
+) -> Result<(Vec<Scored>, String, crate::sim::RunOutput), SimError> {
+    let mut scored = kinds
         .iter()
         .map(|&k| Scored::new(k, None, sc, plan.clone()))
         .collect::<Result<Vec<_>, _>>()?;
@@ -872,7 +1021,11 @@ fn run_scored(
             .iter_mut()
             .map(|s| s as &mut dyn SideObserver)
             .collect();
-        run_with_side_observers(sc, &mut drive, Default::default(), &mut side)?
+        let opts = crate::sim::RunOptions {
+            sinks,
+            ..Default::default()
+        };
+        run_with_side_observers(sc, &mut drive, opts, &mut side)?
     };
     if !out.end.is_completed() {
         return Err(SimError::Stopped {
@@ -880,7 +1033,72 @@ fn run_scored(
             reason: format!("suite scenario {}: {}", sc.name, out.end.describe()),
         });
     }
-    Ok((scored, out.end.describe()))
+    let end = out.end.describe();
+    Ok((scored, end, out))
+}
+
+/// Scores the controller's own observer over a window (a sink of the run).
+struct FocScore {
+    window: (f64, f64),
+    sums: Sums,
+}
+
+impl crate::sim::SampleSink for FocScore {
+    fn record(&mut self, s: &Sample) -> Result<(), String> {
+        if s.t_s >= self.window.0
+            && s.t_s < self.window.1
+            && let Some(o) = &s.controller_observer
+        {
+            self.sums.add_sample(o);
+        }
+        Ok(())
+    }
+}
+
+/// The real-drive rows of one motor (module docs).
+fn real_drive_rows(motor: SuiteMotor, opts: &SuiteOptions) -> Result<Vec<RealDriveRow>, SimError> {
+    let plan = Plan::real_drive(opts.short);
+    let mut rows = Vec::new();
+    for effect in RealDriveEffect::ALL {
+        let mut sc = scenario_with(motor, opts, &plan, INITIAL_ANGLE_RAD);
+        sc.name = format!("suite-{}-real-drive", motor.name());
+        effect.apply(&mut sc);
+        let mut foc = FocScore {
+            window: (plan.windows[0].3, plan.windows[0].4),
+            sums: Sums::default(),
+        };
+        let kinds = [ObserverKind::FluxBaseline, ObserverKind::DefaultEkf];
+        let (scored, _, out) = run_scored_with(&sc, &plan, &kinds, false, vec![&mut foc])?;
+        let stats = |k: ObserverKind| {
+            scored
+                .iter()
+                .find(|s| s.kind == k)
+                .and_then(|s| s.windows.first())
+                .map_or(
+                    AngleStats {
+                        samples: 0,
+                        rms_deg: f64::NAN,
+                        max_deg: f64::NAN,
+                        mean_deg: f64::NAN,
+                    },
+                    AngleStats::of,
+                )
+        };
+        if let Some(w) = plan.windows.first() {
+            rows.push(RealDriveRow {
+                motor,
+                effect,
+                condition: w.0.to_string(),
+                w_ts_rad: w.1 * sc.rated_speed_e_rad_s() * sc.ts_s(),
+                ekf: stats(ObserverKind::DefaultEkf),
+                baseline: stats(ObserverKind::FluxBaseline),
+                foc_observer: AngleStats::of(&foc.sums),
+                skipped_periods: out.metrics.skipped_control_periods,
+                periods: out.metrics.periods,
+            });
+        }
+    }
+    Ok(rows)
 }
 
 impl Scored {
@@ -907,7 +1125,11 @@ pub fn run_suite_motors(
     let mut steady = Vec::new();
     let mut transients = Vec::new();
     let mut mismatch = Vec::new();
+    let mut real_drive = Vec::new();
     for &motor in selected {
+        if REAL_DRIVE_MOTORS.contains(&motor) {
+            real_drive.extend(real_drive_rows(motor, opts)?);
+        }
         let starts = motor_start_angles_deg(motor, opts.short);
         let plan = Plan::main(opts.short);
         let sc = scenario_with(motor, opts, &plan, INITIAL_ANGLE_RAD);
@@ -1013,6 +1235,7 @@ pub fn run_suite_motors(
         steady,
         transients,
         mismatch,
+        real_drive,
         checks: Vec::new(),
     };
     report.checks = report.evaluate();
@@ -1343,6 +1566,34 @@ impl SuiteReport {
                 r.psi_f_error_pct.unwrap_or(f64::NAN),
                 r.rs_error_pct
             );
+        }
+        if !self.real_drive.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n## Real-drive effects, not told to the observers\n\nOne run per motor and effect: the observers converge at 50 % rated speed, the speed rises to rated, the rated load steps on; angle error over a window at rated speed and load. The default EKF and the baseline step on every sample with the voltage the drive believes it applied; foc's own f32 observer runs inside the (sensored) drive and misses the skipped periods with it. Effects: the voltage applied 1.5 periods after the sample (the observers assume 1); 5th and 7th back-EMF harmonics of 3 % and 2 % of the fundamental; 1 % of the control periods skipped.\n"
+            );
+            let _ = writeln!(
+                s,
+                "| motor | effect | w_e Ts (rad) | EKF angle RMS / max / mean (deg) | baseline angle RMS / max / mean (deg) | foc observer angle RMS / max / mean (deg) | skipped periods |"
+            );
+            let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+            let f = |a: &AngleStats| {
+                format!("{:.3} / {:.3} / {:+.3}", a.rms_deg, a.max_deg, a.mean_deg)
+            };
+            for r in &self.real_drive {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {:.3} | {} | {} | {} | {} of {} |",
+                    r.motor.name(),
+                    r.effect.name(),
+                    r.w_ts_rad,
+                    f(&r.ekf),
+                    f(&r.baseline),
+                    f(&r.foc_observer),
+                    r.skipped_periods,
+                    r.periods
+                );
+            }
         }
         let _ = writeln!(
             s,

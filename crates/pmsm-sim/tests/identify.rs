@@ -61,6 +61,7 @@ fn unnamed() -> Vec<Scenario> {
         j_kg_m2: 4e-3,
         b_nm_s_rad: 2e-3,
         coulomb_nm: 0.0,
+        emf_harmonics: Default::default(),
     };
     let spindle = MotorModel {
         rs_ohm: 1.2,
@@ -71,6 +72,7 @@ fn unnamed() -> Vec<Scenario> {
         j_kg_m2: 2e-4,
         b_nm_s_rad: 1e-4,
         coulomb_nm: 0.0,
+        emf_harmonics: Default::default(),
     };
     let fan = MotorModel {
         rs_ohm: 8.0,
@@ -81,6 +83,7 @@ fn unnamed() -> Vec<Scenario> {
         j_kg_m2: 3e-4,
         b_nm_s_rad: 5e-5,
         coulomb_nm: 0.0,
+        emf_harmonics: Default::default(),
     };
     vec![
         custom("hub-48v", hub, 48.0, 20.0, 600.0),
