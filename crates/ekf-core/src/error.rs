@@ -51,6 +51,13 @@ pub enum Param {
     ConsistencyRatio,
     /// Ceiling of the consistency check's baseline, `ConsistencyCheck::max_baseline`.
     ConsistencyMaxBaseline,
+    /// A noise level of the drive observer (`DriveConfig::sigma_*`).
+    DriveNoise,
+    /// A prior of the drive observer's input errors (`DriveConfig::sigma_tau_s`,
+    /// `sigma_rs_ohm`, `sigma_vdt_v`, `sign_band_a`).
+    DrivePrior,
+    /// A time of the drive observer (`DriveConfig::settle_s`, `restart_s`).
+    DriveTime,
     /// Initial standard deviation of the tracked flux, `ParameterTracking::psi_f_sigma0`.
     TrackingPsiSigma,
     /// Initial standard deviation of the tracked resistance, `ParameterTracking::rs_sigma0`.
@@ -148,6 +155,9 @@ impl fmt::Display for Param {
             Param::ConsistencySlowSamples => "consistency.slow_samples",
             Param::ConsistencyRatio => "consistency.ratio",
             Param::ConsistencyMaxBaseline => "consistency.max_baseline",
+            Param::DriveNoise => "drive.sigma (noise level)",
+            Param::DrivePrior => "drive.sigma (input error prior)",
+            Param::DriveTime => "drive.settle_s / restart_s",
             Param::TrackingPsiSigma => "parameter_tracking.psi_f_sigma0",
             Param::TrackingRsSigma => "parameter_tracking.rs_sigma0",
             Param::TrackingPsiWalk => "parameter_tracking.psi_f_walk_per_sqrt_s",

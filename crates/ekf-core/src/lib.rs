@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod angle;
+pub mod drive;
 pub mod ekf;
 mod error;
 pub mod flux;
@@ -19,6 +20,7 @@ pub mod testing;
 pub mod trig;
 
 pub use angle::wrap_angle;
+pub use drive::{DriveConfig, DriveEstimate, DriveObserver};
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
 pub use error::{ConfigError, Matrix, Param};
 pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, FluxTiming};

@@ -202,9 +202,9 @@ use crate::structured;
 use crate::structured::{Outcome, Sym4};
 use crate::{ConfigError, Float, to_t, wrap_angle};
 use model::Discrete;
+pub(crate) use safeguards::ConsistencyState;
 use safeguards::{
-    BranchState, ConsistencyState, Events, GateState, HealthState, Verdict, gate_accepted_high,
-    gate_verdict,
+    BranchState, Events, GateState, HealthState, Verdict, gate_accepted_high, gate_verdict,
 };
 use tracking::{Tracker, TrackerSlow, TrackerStep};
 

@@ -124,10 +124,10 @@ impl<T: Float> ObserverConfig<T> {
             positive(g.settled_nis, Param::GateSettledNis)?;
         }
         if let Some(c) = &self.consistency {
-            if !(c.fast_samples >= T::one()) {
+            if !c.fast_samples.is_finite() || c.fast_samples < T::one() {
                 return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
             }
-            if !(c.slow_samples >= T::one()) {
+            if !c.slow_samples.is_finite() || c.slow_samples < T::one() {
                 return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
             }
             positive(c.ratio, Param::ConsistencyRatio)?;

@@ -189,21 +189,21 @@ impl<T: Float> ConsistencyCheck<T> {
 
 /// Consistency check state.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct ConsistencyState<T> {
-    pub(super) k_fast: T,
-    pub(super) k_slow: T,
-    pub(super) ratio: T,
-    pub(super) hold_samples: u32,
-    pub(super) max_baseline: T,
-    pub(super) fast: T,
-    pub(super) baseline: T,
+pub(crate) struct ConsistencyState<T> {
+    pub(crate) k_fast: T,
+    pub(crate) k_slow: T,
+    pub(crate) ratio: T,
+    pub(crate) hold_samples: u32,
+    pub(crate) max_baseline: T,
+    pub(crate) fast: T,
+    pub(crate) baseline: T,
     /// Steps in a row below half the limit while inconsistent.
-    pub(super) calm: u32,
-    pub(super) inconsistent: bool,
+    pub(crate) calm: u32,
+    pub(crate) inconsistent: bool,
 }
 
 impl<T: Float> ConsistencyState<T> {
-    pub(super) fn new(c: &ConsistencyCheck<T>) -> Self {
+    pub(crate) fn new(c: &ConsistencyCheck<T>) -> Self {
         let two: T = to_t(2.0);
         Self {
             k_fast: T::one() / c.fast_samples,
@@ -219,7 +219,7 @@ impl<T: Float> ConsistencyState<T> {
     }
 
     /// Restarts after a reset: untrusted until the hold has passed; the baseline is kept.
-    pub(super) fn restart(&mut self) {
+    pub(crate) fn restart(&mut self) {
         self.fast = self.baseline;
         self.calm = 0;
         self.inconsistent = true;
@@ -227,7 +227,7 @@ impl<T: Float> ConsistencyState<T> {
 
     /// One step's NIS.
     #[inline(always)]
-    pub(super) fn watch(&mut self, nis: T) {
+    pub(crate) fn watch(&mut self, nis: T) {
         let cap: T = to_t(1e6);
         let n = if nis < cap { nis } else { cap };
         self.fast += (n - self.fast) * self.k_fast;

@@ -1,0 +1,620 @@
+//! The drive observer: an EKF for recorded drives, whose model carries what a real inverter
+//! and a real firmware add to the seed's motor model.
+//!
+//! State (8): `x = [i_a, i_b, w, th, a, tau, dRs, v_dt]`: the currents (A), the electrical
+//! speed (rad/s) and angle (rad), the electrical acceleration `a` (rad/s^2), and three input
+//! errors: the lead `tau` (s) of the applied voltage over the logged one, the resistance error
+//! `dRs` (ohm) and the inverter's dead-time voltage `v_dt` (V).
+//!
+//! # Model
+//!
+//! Over the period `h` that ended at the sample (the record's own period, see
+//! [`DriveObserver::step_dt`]), with `I = i_a + j i_b`, `u` the logged voltage of the period:
+//!
+//! ```text
+//! U     = u e^{j w tau} - dRs I - v_dt s(I)          the voltage applied to the windings
+//! s(I)  = 2/3 sum_k tanh(i_k / i_band) e^{j 2 pi k / 3}   the phases' conduction signs
+//! I-    = alpha I + (1 - alpha) / Rs U + (psi_a / Lq) (-j e^{j th}) w_m G(w_m)
+//! w-    = w + a h,   th- = th + w h + a h^2 / 2,   a, tau, dRs, v_dt constant
+//! ```
+//!
+//! with `alpha = e^{-Rs h / Lq}`, `w_m = w + a h / 2` (the period's mean speed), `G` the
+//! lag-free EMF gain of [`observer`](crate::observer) (`(e^{j w h} - alpha) / (Rs / Lq + j w)`)
+//! and the active flux `psi_a = psi_f + (Ld - Lq) i_d`.
+//!
+//! - **Voltage timing.** A firmware computes its voltage at the sample and the PWM applies it
+//!   later, after rotating it by the speed times the time it expects to elapse; the logged
+//!   command then lags the applied vector by a fraction of a period to more than one. At a
+//!   fixed speed the lead `tau` shows as the angle offset `w tau`, which a filter without it
+//!   takes for an angle; it is observable from the way that offset changes with speed (the
+//!   angle must then move at `w + tau dw/dt`, which the speed state and the EMF's magnitude
+//!   `w psi_f` cannot both follow) and from the current-dependent terms (`Rs I`,
+//!   `j w Lq I`, which do not rotate with the EMF).
+//! - **Resistance and dead time.** `dRs I` and `v_dt s(I)` are both voltage drops along the
+//!   current; one operating point cannot tell them apart (nor either from an angle and flux
+//!   error: `design` section 7 of the tracking module). Changes of the current's magnitude
+//!   separate them (`dRs I` scales with it, `v_dt s(I)` does not), and changes of speed
+//!   separate them from the angle. Both matter most at low speed and high current: on a
+//!   4.5 kHz ESC recording, the configured `Rs` was about 30 % high and the dead-time voltage
+//!   0.2-0.3 V, enough to lose the rotor in every hard acceleration.
+//! - **Acceleration.** A drive steps its speed at 10^5 rad/s^2 el. and more; a speed modelled
+//!   as a random walk falls behind, and a filter behind its rotor while the EMF grows is where
+//!   `theta + pi` flips happen. The acceleration as a state (a random walk) follows a ramp
+//!   without lag and keeps the speed's process noise small at steady speed.
+//!
+//! # Adaptation only where it is safe
+//!
+//! The input errors take their gain only while the angle is tracked (`P33` below the limit),
+//! the innovations are consistent ([`ConsistencyCheck`](crate::ConsistencyCheck), the same
+//! check as the [`PmsmObserver`](crate::PmsmObserver)'s status) and have been for
+//! `settle_s`, above a minimum speed. Otherwise their gain rows are zero: they are held, and
+//! the filter runs with them as known inputs (their covariance stays, the Joseph update keeps
+//! it consistent with the gain actually used). They carry no process noise: their variance
+//! only falls from its prior, so an unobservable direction (one steady operating point) keeps
+//! its prior and moves by no more than the data supports. Each is clamped to a physical range
+//! (`tau` in `[0, 2 Ts]`, `dRs` in `[-0.9 Rs, 2 Rs]`, `v_dt >= 0`).
+//!
+//! A filter inconsistent for `restart_s` in a row (it has lost the rotor, or converged to the
+//! `theta + pi` solution during a start) restarts its motion states: angle and speed unknown
+//! (`P0`), acceleration 0; the input errors and their covariance are kept.
+//!
+//! Jacobian: exact in `w`, `th`, `a`, `tau`, `dRs`, `v_dt`; in the currents it keeps the
+//! decay, the active flux's and the input errors' terms (the conduction signs' slope
+//! included).
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::observer::ConsistencyState;
+use crate::trig::sin_cos_small;
+use crate::{ConfigError, ConsistencyCheck, EkfError, Float, MotorParams, Param, to_t, wrap_angle};
+
+/// Number of states of the drive observer.
+pub const DRIVE_STATES: usize = 8;
+
+type Vec8<T> = SVector<T, DRIVE_STATES>;
+type Mat8<T> = SMatrix<T, DRIVE_STATES, DRIVE_STATES>;
+
+/// Configuration of a [`DriveObserver`]; start from [`DriveConfig::new`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveConfig<T: Float> {
+    /// Motor parameters (as configured; the observer estimates `dRs` around `rs_ohm`).
+    pub motor: MotorParams<T>,
+    /// Nominal sample period `Ts`, s.
+    pub ts_s: T,
+    /// Current measurement noise standard deviation, A.
+    pub sigma_i_a: T,
+    /// Current process noise per sample, A.
+    pub sigma_i_process_a: T,
+    /// Speed random walk per sample, rad/s.
+    pub sigma_w_rad_s: T,
+    /// Angle random walk per sample, rad.
+    pub sigma_th_rad: T,
+    /// Acceleration random walk per sample, rad/s^2.
+    pub sigma_acc_rad_s2: T,
+    /// Prior standard deviation of the voltage lead `tau` (s); its prior mean is 0.
+    pub sigma_tau_s: T,
+    /// Prior standard deviation of `dRs`, ohm.
+    pub sigma_rs_ohm: T,
+    /// Prior standard deviation of the dead-time voltage, V.
+    pub sigma_vdt_v: T,
+    /// Current of the conduction sign's `tanh` band, A.
+    pub sign_band_a: T,
+    /// Input errors adapt only after this long tracked and consistent, s.
+    pub settle_s: T,
+    /// Restart the motion states after this long inconsistent, s.
+    pub restart_s: T,
+    /// The status reads tracking only while the angle's standard deviation is below this, rad.
+    pub angle_sigma_limit_rad: T,
+    /// Estimate the input errors (`false`: they stay 0, an 5-state filter with acceleration).
+    pub estimate_input_errors: bool,
+    /// The innovation consistency check (status and adaptation).
+    pub consistency: ConsistencyCheck<T>,
+}
+
+/// Normalized noise levels of [`DriveConfig::new`] (fractions of `I_c = psi_f / Lq`, or per
+/// sample in units of `Ts`).
+mod norm {
+    /// Measurement noise, fraction of `I_c`: a recorded drive's current noise and what the
+    /// model leaves out (harmonics, saturation, PWM ripple), 5.5 times the level of
+    /// [`NoiseCovariances::scaled`](crate::NoiseCovariances::scaled), which is tuned to the
+    /// simulator's sensors.
+    pub const SIGMA_I: f64 = 0.011;
+    /// Current process noise, fraction of `I_c` per sample.
+    pub const SIGMA_I_PROCESS: f64 = 1.0e-3;
+    /// Speed random walk, `w Ts` per sample.
+    pub const SIGMA_W: f64 = 2.0e-4;
+    /// Angle random walk, rad per sample.
+    pub const SIGMA_TH: f64 = 1.0e-4;
+    /// Acceleration random walk, `a Ts^2` per sample.
+    pub const SIGMA_ACC: f64 = 5.0e-5;
+    /// Prior of the voltage lead, periods.
+    pub const SIGMA_TAU: f64 = 0.5;
+    /// Prior of the resistance error, fraction of `Rs`.
+    pub const SIGMA_RS: f64 = 0.3;
+    /// Prior of the dead-time voltage, fraction of `Rs I_c`.
+    pub const SIGMA_VDT: f64 = 0.05;
+    /// Conduction sign band, fraction of `I_c`.
+    pub const SIGN_BAND: f64 = 0.01;
+}
+
+impl<T: Float> DriveConfig<T> {
+    /// Defaults scaled from the motor and `Ts` (module [`norm`] gives the normalized levels):
+    /// `I_c = psi_f / Lq` sets the current scales, `Ts` the speed and acceleration scales,
+    /// `Rs I_c` the dead-time voltage's prior; settle 0.1 s, restart after 20 ms inconsistent.
+    pub fn new(motor: MotorParams<T>, ts_s: T) -> Self {
+        let ic = motor.characteristic_current_a();
+        Self {
+            motor,
+            ts_s,
+            sigma_i_a: ic * to_t(norm::SIGMA_I),
+            sigma_i_process_a: ic * to_t(norm::SIGMA_I_PROCESS),
+            sigma_w_rad_s: to_t::<T>(norm::SIGMA_W) / ts_s,
+            sigma_th_rad: to_t(norm::SIGMA_TH),
+            sigma_acc_rad_s2: to_t::<T>(norm::SIGMA_ACC) / (ts_s * ts_s),
+            sigma_tau_s: ts_s * to_t(norm::SIGMA_TAU),
+            sigma_rs_ohm: motor.rs_ohm * to_t(norm::SIGMA_RS),
+            sigma_vdt_v: motor.rs_ohm * ic * to_t(norm::SIGMA_VDT),
+            sign_band_a: ic * to_t(norm::SIGN_BAND),
+            settle_s: to_t(0.1),
+            restart_s: to_t(0.02),
+            angle_sigma_limit_rad: to_t(0.2),
+            estimate_input_errors: true,
+            consistency: ConsistencyCheck::default_for(ts_s),
+        }
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.motor.validate()?;
+        let pos = |v: T, p: Param| {
+            if !v.is_finite() {
+                Err(ConfigError::NonFinite(p))
+            } else if v <= T::zero() {
+                Err(ConfigError::NotPositive(p))
+            } else {
+                Ok(())
+            }
+        };
+        pos(self.ts_s, Param::Ts)?;
+        pos(self.sigma_i_a, Param::DriveNoise)?;
+        pos(self.sigma_i_process_a, Param::DriveNoise)?;
+        pos(self.sigma_w_rad_s, Param::DriveNoise)?;
+        pos(self.sigma_th_rad, Param::DriveNoise)?;
+        pos(self.sigma_acc_rad_s2, Param::DriveNoise)?;
+        pos(self.sigma_tau_s, Param::DrivePrior)?;
+        pos(self.sigma_rs_ohm, Param::DrivePrior)?;
+        pos(self.sigma_vdt_v, Param::DrivePrior)?;
+        pos(self.sign_band_a, Param::DrivePrior)?;
+        pos(self.settle_s, Param::DriveTime)?;
+        pos(self.restart_s, Param::DriveTime)?;
+        pos(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
+        let c = &self.consistency;
+        if !c.fast_samples.is_finite() || c.fast_samples < T::one() {
+            return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
+        }
+        if !c.slow_samples.is_finite() || c.slow_samples < T::one() {
+            return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
+        }
+        pos(c.ratio, Param::ConsistencyRatio)?;
+        pos(c.max_baseline, Param::ConsistencyMaxBaseline)?;
+        // The variances must stay finite: the squares of the scales and `1 / Ts^2`.
+        let big = self.sigma_acc_rad_s2 * self.sigma_acc_rad_s2 + self.sigma_i_a * self.sigma_i_a;
+        if !big.is_finite() {
+            return Err(ConfigError::NonFinite(Param::DriveNoise));
+        }
+        Ok(())
+    }
+}
+
+/// One output sample of the [`DriveObserver`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveEstimate<T> {
+    /// Electrical angle, rad, in `[-pi, pi)`.
+    pub theta_rad: T,
+    /// Electrical speed, rad/s.
+    pub omega_e_rad_s: T,
+    /// Mechanical speed, rad/s.
+    pub omega_mech_rad_s: T,
+    /// Electrical acceleration, rad/s^2.
+    pub accel_rad_s2: T,
+    /// Estimated alpha current, A.
+    pub i_alpha_a: T,
+    /// Estimated beta current, A.
+    pub i_beta_a: T,
+    /// Normalized innovation squared of this sample.
+    pub nis: T,
+    /// Lead of the applied voltage over the logged one, s.
+    pub voltage_lead_s: T,
+    /// Resistance in use (configured plus estimated error), ohm.
+    pub rs_ohm: T,
+    /// Dead-time voltage, V.
+    pub dead_time_v: T,
+    /// The angle is tracked and the innovations are consistent.
+    pub tracking: bool,
+    /// The innovations are far out of line (the status is then not tracking).
+    pub inconsistent: bool,
+    /// The input errors took their gain in this sample.
+    pub adapting: bool,
+    /// The motion states restarted in this sample (inconsistent for `restart_s`).
+    pub restarted: bool,
+}
+
+/// The drive observer (module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DriveObserver<T: Float> {
+    cfg: DriveConfig<T>,
+    x: Vec8<T>,
+    p: Mat8<T>,
+    p0: Mat8<T>,
+    q: Vec8<T>,
+    /// Measurement noise variance, A^2.
+    r: T,
+    consistency: ConsistencyState<T>,
+    /// Steps in a row tracked and consistent (counted until settled).
+    good: u32,
+    /// Tracked and consistent for `settle_s` in a row since the start or the last restart.
+    settled: bool,
+    /// Steps in a row inconsistent.
+    bad: u32,
+    settle_samples: u32,
+    restart_samples: u32,
+    inv_pole_pairs: T,
+    nis: T,
+    adapting: bool,
+    restarted: bool,
+}
+
+fn sq<T: Float>(v: T) -> T {
+    v * v
+}
+
+/// Complex product of `(re, im)` pairs.
+#[inline(always)]
+fn cmul<T: Float>(a: (T, T), b: (T, T)) -> (T, T) {
+    (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0)
+}
+
+impl<T: Float> DriveObserver<T> {
+    /// Validates `cfg` and builds the observer: state 0 (rotor unknown), `P0` from the
+    /// configuration's scales (`(0.1 I_c)^2`, `(0.05 / Ts)^2`, `pi^2`, `(1e-3 / Ts^2)^2`, the
+    /// input errors' priors).
+    pub fn new(cfg: &DriveConfig<T>) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        let ts = cfg.ts_s;
+        let ic = cfg.motor.characteristic_current_a();
+        let ie = if cfg.estimate_input_errors {
+            T::one()
+        } else {
+            T::zero()
+        };
+        let p0 = Mat8::from_diagonal(&Vec8::from([
+            sq(ic * to_t(0.1)),
+            sq(ic * to_t(0.1)),
+            sq(to_t::<T>(0.05) / ts),
+            sq(T::pi()),
+            sq(to_t::<T>(1e-3) / (ts * ts)),
+            sq(cfg.sigma_tau_s) * ie,
+            sq(cfg.sigma_rs_ohm) * ie,
+            sq(cfg.sigma_vdt_v) * ie,
+        ]));
+        let q = Vec8::from([
+            sq(cfg.sigma_i_process_a),
+            sq(cfg.sigma_i_process_a),
+            sq(cfg.sigma_w_rad_s),
+            sq(cfg.sigma_th_rad),
+            sq(cfg.sigma_acc_rad_s2),
+            T::zero(),
+            T::zero(),
+            T::zero(),
+        ]);
+        let samples = |s: T| {
+            let n = s / ts;
+            if n < to_t(1e9) {
+                // Whole samples, at least one; `as` saturates.
+                let n: f64 = n.to_subset().unwrap_or(1.0);
+                (n.ceil() as u32).max(1)
+            } else {
+                u32::MAX
+            }
+        };
+        Ok(Self {
+            x: Vec8::zeros(),
+            p: p0,
+            p0,
+            q,
+            r: sq(cfg.sigma_i_a),
+            consistency: ConsistencyState::new(&cfg.consistency),
+            good: 0,
+            settled: false,
+            bad: 0,
+            settle_samples: samples(cfg.settle_s),
+            restart_samples: samples(cfg.restart_s),
+            inv_pole_pairs: T::one() / to_t(f64::from(cfg.motor.pole_pairs)),
+            nis: T::zero(),
+            adapting: false,
+            restarted: false,
+            cfg: *cfg,
+        })
+    }
+
+    /// The state `[i_a, i_b, w, th, a, tau, dRs, v_dt]`.
+    pub fn state(&self) -> &Vec8<T> {
+        &self.x
+    }
+
+    /// The state covariance (8 x 8).
+    pub fn covariance(&self) -> &Mat8<T> {
+        &self.p
+    }
+
+    /// One sample over the nominal period `Ts` ([`step_dt`](Self::step_dt)).
+    pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<DriveEstimate<T>, EkfError> {
+        self.step_dt(u_prev, i, self.cfg.ts_s)
+    }
+
+    /// One sample: predict over the period `dt_s` that ended now with the logged voltage
+    /// `u_prev` of that period, correct with the currents `i` sampled now (project timing).
+    /// Refused, nothing changed: non-finite input ([`EkfError::NonFiniteInput`]) or
+    /// measurement, a period not in `(0, 64 Ts]` ([`EkfError::InvalidPeriod`]), or a
+    /// non-finite result.
+    pub fn step_dt(
+        &mut self,
+        u_prev: [T; 2],
+        i: [T; 2],
+        dt_s: T,
+    ) -> Result<DriveEstimate<T>, EkfError> {
+        if !(u_prev[0].is_finite() && u_prev[1].is_finite()) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        if !(i[0].is_finite() && i[1].is_finite()) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        let ts = self.cfg.ts_s;
+        if !(dt_s > T::zero() && dt_s <= ts * to_t(crate::observer::MAX_PERIOD_FACTOR)) {
+            return Err(EkfError::InvalidPeriod);
+        }
+        let (xm, phi) = self.transition(&self.x, u_prev, dt_s);
+        let scale = dt_s / ts;
+        let mut pm = phi * self.p * phi.transpose();
+        for k in 0..DRIVE_STATES {
+            pm[(k, k)] += self.q[k] * scale;
+        }
+
+        // Innovation, S = P-[0:2, 0:2] + R I.
+        let y = [i[0] - xm[0], i[1] - xm[1]];
+        let r = self.r;
+        let (s00, s01, s11) = (pm[(0, 0)] + r, pm[(0, 1)], pm[(1, 1)] + r);
+        let det = s00 * s11 - s01 * s01;
+        if !det.is_finite() || det <= T::zero() {
+            return Err(EkfError::SingularInnovation);
+        }
+        let inv_det = T::one() / det;
+        let (i00, i01, i11) = (s11 * inv_det, -s01 * inv_det, s00 * inv_det);
+        let nis = y[0] * (i00 * y[0] + i01 * y[1]) + y[1] * (i01 * y[0] + i11 * y[1]);
+        // Adaptation gate (module docs), from the state before this correction.
+        let tracked = pm[(3, 3)] <= sq(self.cfg.angle_sigma_limit_rad);
+        let mut consistency = self.consistency;
+        consistency.watch(nis);
+        let good = if tracked && !consistency.inconsistent {
+            self.good.saturating_add(1)
+        } else {
+            0
+        };
+        let ok = tracked && !consistency.inconsistent;
+        let settled = self.settled || good >= self.settle_samples;
+
+        let adapting = self.cfg.estimate_input_errors && settled && ok;
+        // K = P- H^T S^-1 (8 x 2); the input errors' rows zero unless adapting.
+        let mut kg = SMatrix::<T, DRIVE_STATES, 2>::zeros();
+        let rows = if adapting { DRIVE_STATES } else { 5 };
+        for r in 0..rows {
+            let (a, b) = (pm[(r, 0)], pm[(r, 1)]);
+            kg[(r, 0)] = a * i00 + b * i01;
+            kg[(r, 1)] = a * i01 + b * i11;
+        }
+        let mut x = xm;
+        for r in 0..DRIVE_STATES {
+            x[r] += kg[(r, 0)] * y[0] + kg[(r, 1)] * y[1];
+        }
+        x[3] = wrap_angle(x[3]);
+        self.clamp_inputs(&mut x);
+        // Joseph form: P = (I - K H) P- (I - K H)^T + K R K^T (valid for any gain).
+        let mut a = Mat8::<T>::identity();
+        for r in 0..DRIVE_STATES {
+            a[(r, 0)] -= kg[(r, 0)];
+            a[(r, 1)] -= kg[(r, 1)];
+        }
+        let mut p = a * pm * a.transpose() + kg * kg.transpose() * r;
+        p = (p + p.transpose()) * to_t::<T>(0.5);
+        if !(x.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite())) {
+            return Err(EkfError::NonFiniteResult);
+        }
+        self.x = x;
+        self.p = p;
+        self.consistency = consistency;
+        self.good = good;
+        self.settled = settled;
+        self.nis = nis;
+        self.adapting = adapting;
+        self.bad = if consistency.inconsistent {
+            self.bad.saturating_add(1)
+        } else {
+            0
+        };
+        self.restarted = false;
+        if self.bad >= self.restart_samples {
+            self.restart_motion(i);
+        }
+        Ok(self.estimate())
+    }
+
+    /// Restarts the motion states (module docs): currents = the measured ones, speed, angle
+    /// and acceleration unknown (`P0` block), their correlation with the input errors
+    /// dropped; the input errors kept.
+    fn restart_motion(&mut self, i: [T; 2]) {
+        self.x[0] = i[0];
+        self.x[1] = i[1];
+        self.x[2] = T::zero();
+        self.x[4] = T::zero();
+        for r in 0..5 {
+            for c in 0..DRIVE_STATES {
+                self.p[(r, c)] = self.p0[(r, c)];
+                self.p[(c, r)] = self.p0[(c, r)];
+            }
+        }
+        self.bad = 0;
+        self.good = 0;
+        self.settled = false;
+        self.restarted = true;
+        self.consistency.restart();
+    }
+
+    fn clamp_inputs(&self, x: &mut Vec8<T>) {
+        let ts = self.cfg.ts_s;
+        let rs = self.cfg.motor.rs_ohm;
+        let cl = |v: T, lo: T, hi: T| {
+            if v < lo {
+                lo
+            } else if v > hi {
+                hi
+            } else {
+                v
+            }
+        };
+        x[5] = cl(x[5], T::zero(), ts + ts);
+        x[6] = cl(x[6], rs * to_t(-0.9), rs + rs);
+        let vmax = self.cfg.sigma_vdt_v * to_t(8.0);
+        x[7] = cl(x[7], T::zero(), vmax);
+    }
+
+    /// The model's prediction over `h` from `x` with the logged voltage `u`, and its
+    /// Jacobian (module docs).
+    fn transition(&self, x: &Vec8<T>, u: [T; 2], h: T) -> (Vec8<T>, Mat8<T>) {
+        let m = &self.cfg.motor;
+        let (ia, ib, w, th, acc, tau, drs, vdt) = (x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7]);
+        let inv_l = T::one() / m.lq_h;
+        let a = m.rs_ohm * inv_l;
+        let one_minus_alpha = -(-a * h).exp_m1();
+        let alpha = T::one() - one_minus_alpha;
+        let g = one_minus_alpha / m.rs_ohm;
+        let half: T = to_t(0.5);
+        // Voltage lead: U0 = u e^{j w tau}.
+        let (st, ct) = sin_cos_small(w * tau);
+        let u0 = cmul((u[0], u[1]), (ct, st));
+        // Conduction signs s(I) and their slopes.
+        let band = self.cfg.sign_band_a;
+        let r3 = to_t::<T>(0.866_025_403_784_438_6);
+        let phases = [ia, -half * ia + r3 * ib, -half * ia - r3 * ib];
+        // d i_k / d (ia, ib).
+        let dph = [(T::one(), T::zero()), (-half, r3), (-half, -r3)];
+        // e^{j 2 pi k / 3}.
+        let rot = [(T::one(), T::zero()), (-half, r3), (-half, -r3)];
+        let two_thirds: T = to_t(2.0 / 3.0);
+        let (mut s_re, mut s_im) = (T::zero(), T::zero());
+        let (mut ds_a, mut ds_b) = ((T::zero(), T::zero()), (T::zero(), T::zero()));
+        for k in 0..3 {
+            let t = (phases[k] / band).tanh();
+            let slope = (T::one() - t * t) / band * two_thirds;
+            s_re += two_thirds * t * rot[k].0;
+            s_im += two_thirds * t * rot[k].1;
+            ds_a.0 += slope * dph[k].0 * rot[k].0;
+            ds_a.1 += slope * dph[k].0 * rot[k].1;
+            ds_b.0 += slope * dph[k].1 * rot[k].0;
+            ds_b.1 += slope * dph[k].1 * rot[k].1;
+        }
+        let ur = (u0.0 - drs * ia - vdt * s_re, u0.1 - drs * ib - vdt * s_im);
+        // EMF: c (-j e^{j th}) M, M = w_m G(w_m), c = psi_a / Lq.
+        let (sn, cs) = th.sin_cos_angle();
+        let sal = (m.ld_h - m.lq_h) * inv_l;
+        let id = ia * cs + ib * sn;
+        let iq = ib * cs - ia * sn;
+        let c = m.psi_f_wb * inv_l + sal * id;
+        let wm = w + acc * h * half;
+        let (m_v, mp) = emf_gain(a, one_minus_alpha, wm, h);
+        let e0 = (sn, -cs);
+        let e0m = cmul(e0, m_v);
+        let e0mp = cmul(e0, mp);
+        let ia_n = alpha * ia + g * ur.0 + c * e0m.0;
+        let ib_n = alpha * ib + g * ur.1 + c * e0m.1;
+        let xn = Vec8::from([
+            ia_n,
+            ib_n,
+            w + acc * h,
+            wrap_angle(th + w * h + acc * h * h * half),
+            acc,
+            tau,
+            drs,
+            vdt,
+        ]);
+        let mut f = Mat8::<T>::identity();
+        // d/d ia, d/d ib.
+        let (ka, kb) = (sal * cs, sal * sn);
+        f[(0, 0)] = alpha - g * drs - g * vdt * ds_a.0 + ka * e0m.0;
+        f[(1, 0)] = -g * vdt * ds_a.1 + ka * e0m.1;
+        f[(0, 1)] = -g * vdt * ds_b.0 + kb * e0m.0;
+        f[(1, 1)] = alpha - g * drs - g * vdt * ds_b.1 + kb * e0m.1;
+        // d/d w: g j tau U0 + c e0 M'.
+        f[(0, 2)] = -g * tau * u0.1 + c * e0mp.0;
+        f[(1, 2)] = g * tau * u0.0 + c * e0mp.1;
+        // d/d th: c e^{j th} M + sal i_q e0 M.
+        let em = cmul((cs, sn), m_v);
+        f[(0, 3)] = c * em.0 + sal * iq * e0m.0;
+        f[(1, 3)] = c * em.1 + sal * iq * e0m.1;
+        // d/d a: c e0 M' h / 2.
+        f[(0, 4)] = c * e0mp.0 * h * half;
+        f[(1, 4)] = c * e0mp.1 * h * half;
+        // d/d tau: g j w U0.
+        f[(0, 5)] = -g * w * u0.1;
+        f[(1, 5)] = g * w * u0.0;
+        // d/d dRs, d/d v_dt.
+        f[(0, 6)] = -g * ia;
+        f[(1, 6)] = -g * ib;
+        f[(0, 7)] = -g * s_re;
+        f[(1, 7)] = -g * s_im;
+        // Motion rows.
+        f[(2, 4)] = h;
+        f[(3, 2)] = h;
+        f[(3, 4)] = h * h * half;
+        (xn, f)
+    }
+
+    /// The current estimate.
+    pub fn estimate(&self) -> DriveEstimate<T> {
+        let x = &self.x;
+        let tracked = self.p[(3, 3)] <= sq(self.cfg.angle_sigma_limit_rad);
+        let inconsistent = self.consistency.inconsistent;
+        DriveEstimate {
+            theta_rad: x[3],
+            omega_e_rad_s: x[2],
+            omega_mech_rad_s: x[2] * self.inv_pole_pairs,
+            accel_rad_s2: x[4],
+            i_alpha_a: x[0],
+            i_beta_a: x[1],
+            nis: self.nis,
+            voltage_lead_s: x[5],
+            rs_ohm: self.cfg.motor.rs_ohm + x[6],
+            dead_time_v: x[7],
+            tracking: tracked && !inconsistent,
+            inconsistent,
+            adapting: self.adapting,
+            restarted: self.restarted,
+        }
+    }
+}
+
+/// `(w G(w), d(w G)/dw)` as `(re, im)` pairs, `G(w) = (e^{j w h} - alpha) / (a + j w)`.
+fn emf_gain<T: Float>(a: T, one_minus_alpha: T, w: T, h: T) -> ((T, T), (T, T)) {
+    let two = T::one() + T::one();
+    let (sh, ch) = sin_cos_small(w * h / two);
+    let cos_m1 = -two * sh * sh;
+    let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
+    let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
+    let inv_d2 = T::one() / (a * a + w * w);
+    let g_re = (n_re * a + n_im * w) * inv_d2;
+    let g_im = (n_im * a - n_re * w) * inv_d2;
+    let (t_re, t_im) = (h * ex_re - g_re, h * ex_im - g_im);
+    let (jt_re, jt_im) = (-t_im, t_re);
+    let gp_re = (jt_re * a + jt_im * w) * inv_d2;
+    let gp_im = (jt_im * a - jt_re * w) * inv_d2;
+    ((w * g_re, w * g_im), (g_re + w * gp_re, g_im + w * gp_im))
+}
