@@ -67,6 +67,7 @@ use nalgebra::{SMatrix, SVector};
 use crate::observer::ConsistencyState;
 use crate::trig::sin_cos_small;
 use crate::{ConfigError, ConsistencyCheck, EkfError, Float, MotorParams, Param, to_t, wrap_angle};
+use crate::{Estimate, ObserverConfig, PmsmObserver, Status};
 
 /// Number of states of the drive observer.
 pub const DRIVE_STATES: usize = 8;
@@ -105,6 +106,9 @@ pub struct DriveConfig<T: Float> {
     pub restart_s: T,
     /// The status reads tracking only while the angle's standard deviation is below this, rad.
     pub angle_sigma_limit_rad: T,
+    /// `dRs` and `v_dt` adapt only while the resistive drop `Rs |i|` is at least this share
+    /// of the back-EMF `|w| psi_f` (where they matter and are told apart from an angle).
+    pub drop_share: T,
     /// Estimate the input errors (`false`: they stay 0, an 5-state filter with acceleration).
     pub estimate_input_errors: bool,
     /// The innovation consistency check (status and adaptation).
@@ -157,7 +161,8 @@ impl<T: Float> DriveConfig<T> {
             sign_band_a: ic * to_t(norm::SIGN_BAND),
             settle_s: to_t(0.1),
             restart_s: to_t(0.02),
-            angle_sigma_limit_rad: to_t(0.2),
+            angle_sigma_limit_rad: to_t(0.35),
+            drop_share: to_t(0.25),
             estimate_input_errors: true,
             consistency: ConsistencyCheck::default_for(ts_s),
         }
@@ -188,6 +193,7 @@ impl<T: Float> DriveConfig<T> {
         pos(self.settle_s, Param::DriveTime)?;
         pos(self.restart_s, Param::DriveTime)?;
         pos(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
+        pos(self.drop_share, Param::DrivePrior)?;
         let c = &self.consistency;
         if !c.fast_samples.is_finite() || c.fast_samples < T::one() {
             return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
@@ -262,6 +268,14 @@ pub struct DriveObserver<T: Float> {
     nis: T,
     adapting: bool,
     restarted: bool,
+    /// The acquisition observer (module docs), always stepped.
+    acq: PmsmObserver<T>,
+    /// Its last estimate.
+    acq_est: Option<Estimate<T>>,
+    /// Steps in a row the acquisition observer has reported tracking.
+    acq_good: u32,
+    /// The drive filter carries the estimate (else the acquisition observer does).
+    engaged: bool,
 }
 
 fn sq<T: Float>(v: T) -> T {
@@ -333,6 +347,10 @@ impl<T: Float> DriveObserver<T> {
             nis: T::zero(),
             adapting: false,
             restarted: false,
+            acq: PmsmObserver::new(&ObserverConfig::new(cfg.motor, ts))?,
+            acq_est: None,
+            acq_good: 0,
+            engaged: false,
             cfg: *cfg,
         })
     }
@@ -373,6 +391,76 @@ impl<T: Float> DriveObserver<T> {
         if !(dt_s > T::zero() && dt_s <= ts * to_t(crate::observer::MAX_PERIOD_FACTOR)) {
             return Err(EkfError::InvalidPeriod);
         }
+        // The acquisition observer runs on every sample (its errors refuse the sample).
+        let mut acq = self.acq.clone();
+        let e = acq.step_dt(u_prev, i, dt_s)?;
+        if !self.engaged {
+            // Hand-over once the acquisition has tracked for `settle_s`: the motion states
+            // and their covariance from it, acceleration 0, the input errors kept.
+            let good = if e.status == Status::Tracking {
+                self.acq_good.saturating_add(1)
+            } else {
+                0
+            };
+            self.acq = acq;
+            self.acq_est = Some(e);
+            self.acq_good = good;
+            self.restarted = false;
+            self.adapting = false;
+            self.nis = e.nis;
+            if good >= self.restart_samples {
+                self.engage();
+            }
+            return Ok(self.estimate());
+        }
+        let out = self.drive_step(u_prev, i, dt_s);
+        if out.is_ok() {
+            self.acq = acq;
+            self.acq_est = Some(e);
+            self.acq_good = if e.status == Status::Tracking {
+                self.acq_good.saturating_add(1)
+            } else {
+                0
+            };
+        }
+        out
+    }
+
+    /// Hands the estimate over from the acquisition observer to the drive filter.
+    fn engage(&mut self) {
+        let xa = *self.acq.state();
+        let pa = self.acq.covariance();
+        for k in 0..4 {
+            self.x[k] = xa[k];
+        }
+        self.x[4] = T::zero();
+        for r in 0..5 {
+            for c in 0..DRIVE_STATES {
+                self.p[(r, c)] = T::zero();
+                self.p[(c, r)] = T::zero();
+            }
+        }
+        for r in 0..4 {
+            for c in 0..4 {
+                self.p[(r, c)] = pa[(r, c)];
+            }
+        }
+        self.p[(4, 4)] = self.p0[(4, 4)];
+        self.consistency.restart();
+        self.bad = 0;
+        self.good = 0;
+        self.settled = false;
+        self.engaged = true;
+    }
+
+    /// One step of the drive filter (engaged).
+    fn drive_step(
+        &mut self,
+        u_prev: [T; 2],
+        i: [T; 2],
+        dt_s: T,
+    ) -> Result<DriveEstimate<T>, EkfError> {
+        let ts = self.cfg.ts_s;
         let (xm, phi) = self.transition(&self.x, u_prev, dt_s);
         let scale = dt_s / ts;
         let mut pm = phi * self.p * phi.transpose();
@@ -406,8 +494,16 @@ impl<T: Float> DriveObserver<T> {
         let adapting = self.cfg.estimate_input_errors && settled && ok;
         // K = P- H^T S^-1 (8 x 2); the input errors' rows zero unless adapting.
         let mut kg = SMatrix::<T, DRIVE_STATES, 2>::zeros();
+        // The drops along the current (dRs, v_dt) only where they are a fair share of the
+        // voltage: `Rs |i| >= drop_share |w| psi_f` (module docs).
+        let m = &self.cfg.motor;
+        let drop = m.rs_ohm * (xm[0] * xm[0] + xm[1] * xm[1]).sqrt();
+        let drops = drop >= self.cfg.drop_share * xm[2].abs() * m.psi_f_wb;
         let rows = if adapting { DRIVE_STATES } else { 5 };
         for r in 0..rows {
+            if r >= 6 && !drops {
+                continue;
+            }
             let (a, b) = (pm[(r, 0)], pm[(r, 1)]);
             kg[(r, 0)] = a * i00 + b * i01;
             kg[(r, 1)] = a * i01 + b * i11;
@@ -448,25 +544,31 @@ impl<T: Float> DriveObserver<T> {
         Ok(self.estimate())
     }
 
-    /// Restarts the motion states (module docs): currents = the measured ones, speed, angle
-    /// and acceleration unknown (`P0` block), their correlation with the input errors
-    /// dropped; the input errors kept.
+    /// Restarts the drive filter's motion states (module docs): the drive filter has been
+    /// inconsistent for `restart_s`. From the acquisition observer when it tracks, else
+    /// unknown (`P0` block: speed, angle and acceleration), with the measured currents. The
+    /// input errors and their covariance are kept; their correlation with the motion is
+    /// dropped.
     fn restart_motion(&mut self, i: [T; 2]) {
-        self.x[0] = i[0];
-        self.x[1] = i[1];
-        self.x[2] = T::zero();
-        self.x[4] = T::zero();
-        for r in 0..5 {
-            for c in 0..DRIVE_STATES {
-                self.p[(r, c)] = self.p0[(r, c)];
-                self.p[(c, r)] = self.p0[(c, r)];
+        if self.acq_est.is_some_and(|e| e.status == Status::Tracking) {
+            self.engage();
+        } else {
+            self.x[0] = i[0];
+            self.x[1] = i[1];
+            self.x[2] = T::zero();
+            self.x[4] = T::zero();
+            for r in 0..5 {
+                for c in 0..DRIVE_STATES {
+                    self.p[(r, c)] = self.p0[(r, c)];
+                    self.p[(c, r)] = self.p0[(c, r)];
+                }
             }
+            self.consistency.restart();
+            self.bad = 0;
+            self.good = 0;
+            self.settled = false;
         }
-        self.bad = 0;
-        self.good = 0;
-        self.settled = false;
         self.restarted = true;
-        self.consistency.restart();
     }
 
     fn clamp_inputs(&self, x: &mut Vec8<T>) {
@@ -581,6 +683,25 @@ impl<T: Float> DriveObserver<T> {
     /// The current estimate.
     pub fn estimate(&self) -> DriveEstimate<T> {
         let x = &self.x;
+        if !self.engaged {
+            let e = self.acq_est.unwrap_or_else(|| self.acq.estimate());
+            return DriveEstimate {
+                theta_rad: e.theta_rad,
+                omega_e_rad_s: e.omega_e_rad_s,
+                omega_mech_rad_s: e.omega_mech_rad_s,
+                accel_rad_s2: T::zero(),
+                i_alpha_a: e.i_alpha_a,
+                i_beta_a: e.i_beta_a,
+                nis: e.nis,
+                voltage_lead_s: x[5],
+                rs_ohm: self.cfg.motor.rs_ohm + x[6],
+                dead_time_v: x[7],
+                tracking: e.status == Status::Tracking,
+                inconsistent: e.inconsistent,
+                adapting: false,
+                restarted: self.restarted,
+            };
+        }
         let tracked = self.p[(3, 3)] <= sq(self.cfg.angle_sigma_limit_rad);
         let inconsistent = self.consistency.inconsistent;
         DriveEstimate {
