@@ -52,7 +52,7 @@
 //! it consistent with the gain actually used). They carry no process noise: their variance
 //! only falls from its prior, so an unobservable direction (one steady operating point) keeps
 //! its prior and moves by no more than the data supports. Each is clamped to a physical range
-//! (`tau` in `[0, 2 Ts]`, `dRs` in `[-0.9 Rs, 2 Rs]`, `v_dt >= 0`).
+//! (`tau` in `[-Ts, 2 Ts]`, `dRs` in `[-0.9 Rs, 2 Rs]`, `v_dt` in `[0, 8 sigma_vdt_v]`).
 //!
 //! A filter inconsistent for `restart_s` in a row (it has lost the rotor, or converged to the
 //! `theta + pi` solution during a start) restarts its motion states: angle and speed unknown
@@ -583,7 +583,7 @@ impl<T: Float> DriveObserver<T> {
                 v
             }
         };
-        x[5] = cl(x[5], T::zero(), ts + ts);
+        x[5] = cl(x[5], -ts, ts + ts);
         x[6] = cl(x[6], rs * to_t(-0.9), rs + rs);
         let vmax = self.cfg.sigma_vdt_v * to_t(8.0);
         x[7] = cl(x[7], T::zero(), vmax);

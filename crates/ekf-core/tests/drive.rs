@@ -1,0 +1,118 @@
+//! The drive observer on simulated records with what real drives add: a voltage lead that the
+//! logged command does not show, at a speed that keeps changing.
+mod common;
+use common::*;
+use core::f64::consts::PI;
+use ekf_core::{
+    DriveConfig, DriveObserver, EkfError, MotorParams, ObserverConfig, PmsmObserver, wrap_angle,
+};
+
+/// The servo stepping between 30 and 90 % of rated speed, 15 % of `I_c` on the q axis, 20 mA
+/// noise; the applied voltage leads the logged one by `lead` periods: the log holds the
+/// applied vector turned back by `w lead Ts`.
+fn record(lead: f64) -> (Trace, Vec<[f64; 2]>) {
+    let motor = MotorParams::servo();
+    let ts = 1e-4;
+    let wr = 3000.0 / 60.0 * 2.0 * PI * 4.0;
+    let ic = motor.characteristic_current_a();
+    // Steps between 30 % and 90 % of rated every 0.1 s, 15 ms ramps (a drive's speed steps).
+    let speed = move |t: f64| {
+        let ph = t % 0.2;
+        let up = ((ph - 0.0) / 0.015).clamp(0.0, 1.0);
+        let down = ((ph - 0.1) / 0.015).clamp(0.0, 1.0);
+        wr * (0.3 + 0.6 * (up - down))
+    };
+    let iq = move |_t: f64| 0.15 * ic;
+    let sc = Scenario {
+        motor,
+        ts,
+        n: 12000,
+        speed: &speed,
+        iq_ref: &iq,
+        th0: 0.3,
+        noise_a: 0.02,
+        seed: 11,
+    };
+    let tr = simulate(&sc);
+    let logged =
+        tr.u.iter()
+            .zip(&tr.w)
+            .map(|(u, w)| {
+                let (s, c) = (-w * lead * ts).sin_cos();
+                [c * u[0] - s * u[1], s * u[0] + c * u[1]]
+            })
+            .collect();
+    (tr, logged)
+}
+
+/// (RMS about the mean, mean) of the angle error over the last half, deg.
+fn spread(err: &[f64]) -> (f64, f64) {
+    let h = &err[err.len() / 2..];
+    let mean = h.iter().sum::<f64>() / h.len() as f64;
+    let var = h.iter().map(|e| (e - mean) * (e - mean)).sum::<f64>() / h.len() as f64;
+    (var.sqrt(), mean)
+}
+
+/// Runs both observers on a record with `lead`; returns the drive's last estimate, the
+/// (RMS about the mean, mean) of both, and the drive's tracking share of the last half.
+fn compare(lead: f64) -> (ekf_core::DriveEstimate<f64>, (f64, f64), (f64, f64), f64) {
+    let (tr, logged) = record(lead);
+    let motor = MotorParams::servo();
+    let ts = tr.ts;
+    let mut drive = DriveObserver::new(&DriveConfig::new(motor, ts)).unwrap();
+    let mut classic = PmsmObserver::new(&ObserverConfig::new(motor, ts)).unwrap();
+    let (mut e_drive, mut e_classic) = (vec![], vec![]);
+    let mut u_prev = [0.0; 2];
+    let mut last = None;
+    let mut tracking = 0usize;
+    for (k, i) in tr.i_meas.iter().enumerate() {
+        let d = drive.step(u_prev, *i).unwrap();
+        let c = classic.step(u_prev, *i).unwrap();
+        e_drive.push(wrap_angle(d.theta_rad - tr.th[k]).to_degrees());
+        e_classic.push(wrap_angle(c.theta_rad - tr.th[k]).to_degrees());
+        if k >= tr.i_meas.len() / 2 && d.tracking {
+            tracking += 1;
+        }
+        u_prev = logged[k];
+        last = Some(d);
+    }
+    let d = last.unwrap();
+    let (rms_d, mean_d) = spread(&e_drive);
+    let (rms_c, mean_c) = spread(&e_classic);
+    println!(
+        "lead {lead} Ts: drive observer lead {:.3} Ts, Rs {:.3} ohm, v_dt {:.3} V; angle about \
+         its mean: drive {rms_d:.3} deg (mean {mean_d:+.3}), default observer {rms_c:.3} deg \
+         (mean {mean_c:+.3}); drive tracking {:.1} % of the last half",
+        d.voltage_lead_s / ts,
+        d.rs_ohm,
+        d.dead_time_v,
+        100.0 * tracking as f64 / (tr.i_meas.len() / 2) as f64
+    );
+    let share = tracking as f64 / (tr.i_meas.len() / 2) as f64;
+    (d, (rms_d, mean_d), (rms_c, mean_c), share)
+}
+
+/// Measured: lead 0.514 Ts found; angle about its mean 0.33 deg (mean -0.29) against the
+/// default observer's 0.91 deg (mean -2.38), which takes `w tau` for an angle.
+#[test]
+fn drive_observer_finds_the_voltage_lead_and_holds_the_angle() {
+    let (d, (rms_d, mean_d), (rms_c, _), share) = compare(0.5);
+    assert!((d.voltage_lead_s / 1e-4 - 0.5).abs() < 0.1, "{d:?}");
+    assert!(rms_d < 0.4 && mean_d.abs() < 0.6, "{rms_d} {mean_d}");
+    assert!(rms_c > 2.5 * rms_d, "{rms_c} vs {rms_d}");
+    assert!(share >= 0.9, "{share}");
+}
+
+/// Without a lead: measured, the drive observer settles at a lead of 0.23 Ts (a bias of the
+/// estimate on this record, not understood yet), its angle 0.37 deg about a mean of +0.80 deg
+/// against the default observer's 0.28 deg about +0.03 deg.
+#[test]
+fn drive_observer_without_a_lead_stays_close() {
+    let (d, (rms_d, mean_d), (rms_c, _), share) = compare(0.0);
+    assert!((d.voltage_lead_s / 1e-4).abs() < 0.3, "{d:?}");
+    assert!(
+        rms_d < 1.5 * rms_c && mean_d.abs() < 1.0,
+        "{rms_d} {mean_d} / {rms_c}"
+    );
+    assert!(share >= 0.9, "{share}");
+}
