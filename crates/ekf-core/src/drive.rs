@@ -322,11 +322,11 @@ impl<T: Float> DriveObserver<T> {
             T::zero(),
         ]);
         let samples = |s: T| {
-            let n = s / ts;
+            let n = (s / ts).ceil();
             if n < to_t(1e9) {
-                // Whole samples, at least one; `as` saturates.
+                // Whole samples, at least one (`as` saturates).
                 let n: f64 = n.to_subset().unwrap_or(1.0);
-                (n.ceil() as u32).max(1)
+                (n as u32).max(1)
             } else {
                 u32::MAX
             }

@@ -116,3 +116,35 @@ fn drive_observer_without_a_lead_stays_close() {
     );
     assert!(share >= 0.9, "{share}");
 }
+
+#[test]
+fn drive_observer_refuses_bad_samples_and_keeps_its_state() {
+    let motor = MotorParams::servo();
+    let ts = 1e-4;
+    let mut d = DriveObserver::new(&DriveConfig::new(motor, ts)).unwrap();
+    d.step([1.0, 0.0], [0.1, 0.0]).unwrap();
+    let before = d.clone();
+    assert_eq!(
+        d.step([f64::NAN, 0.0], [0.0; 2]),
+        Err(EkfError::NonFiniteInput)
+    );
+    assert_eq!(
+        d.step([0.0; 2], [0.0, f64::INFINITY]),
+        Err(EkfError::NonFiniteMeasurement)
+    );
+    assert_eq!(
+        d.step_dt([0.0; 2], [0.0; 2], -ts),
+        Err(EkfError::InvalidPeriod)
+    );
+    assert_eq!(
+        d.step_dt([0.0; 2], [0.0; 2], f64::NAN),
+        Err(EkfError::InvalidPeriod)
+    );
+    assert_eq!(d, before);
+    let mut bad = DriveConfig::new(motor, ts);
+    bad.sigma_i_a = -1.0;
+    assert!(DriveObserver::new(&bad).is_err());
+    bad = DriveConfig::new(motor, ts);
+    bad.settle_s = f64::NAN;
+    assert!(DriveObserver::new(&bad).is_err());
+}
