@@ -266,6 +266,9 @@ pub struct Estimate<T> {
     /// The consistency check finds the recent innovations out of line (the status is then
     /// [`Status::Uncertain`]); `false` with the check off.
     pub inconsistent: bool,
+    /// The angle's standard deviation is below the configured limit (the covariance's part of
+    /// the status, whatever the innovations say).
+    pub angle_tracked: bool,
 }
 
 /// Event counters of an observer since its construction (saturating).
@@ -1022,7 +1025,8 @@ impl<T: Float> PmsmObserver<T> {
     pub fn estimate(&self) -> Estimate<T> {
         let x = &self.x;
         let inconsistent = self.consistency.as_ref().is_some_and(|w| w.inconsistent);
-        let status = if self.p.p33 > self.angle_var_limit || inconsistent {
+        let angle_tracked = self.p.p33 <= self.angle_var_limit;
+        let status = if !angle_tracked || inconsistent {
             Status::Uncertain
         } else {
             Status::Tracking
@@ -1064,6 +1068,7 @@ impl<T: Float> PmsmObserver<T> {
             winding_temperature_c,
             parameters_tracking: tracking,
             inconsistent,
+            angle_tracked,
         }
     }
 

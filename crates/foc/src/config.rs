@@ -40,7 +40,7 @@
 //! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
 //! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended) | as `damping_ratio` |
-//! | `observer` | [`ObserverConfig::new`] for the motor and `Ts`, without its consistency check (`consistency: None`) | foc's health monitor judges the innovations itself (NIS average with persistence); the hand-over reads the covariance status |
+//! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | its status includes the innovation consistency check (the health monitor's `Uncertain` loss reason); the salient kick detection reads the covariance's part (`Estimate::angle_tracked`) |
 //! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
 //! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
 //! | `samples.stuck_angle_rad` | `pi / 4` | a phase reading repeated bit for bit while the current vector turns an eighth of a period: [`Fault::CurrentSensor`](crate::Fault::CurrentSensor) |
@@ -422,13 +422,7 @@ impl FocConfig {
             },
             health: HealthConfig::default(),
             samples: SampleCheckConfig::default(),
-            // The observer's innovation consistency check is off: foc's health monitor judges
-            // the innovations itself (its NIS average, with persistence), and the start-up's
-            // hand-over reads the covariance status.
-            observer: ObserverConfig {
-                consistency: None,
-                ..ObserverConfig::new(motor, ts_s)
-            },
+            observer: ObserverConfig::new(motor, ts_s),
         }
         .with_inertia(kt / 1000.0)
     }

@@ -304,7 +304,7 @@
 
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
-use ekf_core::{Estimate, Status};
+use ekf_core::Estimate;
 
 use crate::config::{FocConfig, Mode, ObserverLossPolicy, Reversal};
 use crate::fault::Fault;
@@ -944,7 +944,7 @@ impl Sequencer {
                         self.v.w_noise += self.v.w_f * self.v.w_f;
                     }
                     let seen = self.kick_speed > 0.0
-                        && (!self.salient || est.status == Status::Tracking)
+                        && (!self.salient || est.angle_tracked)
                         && (fit || self.v.w_f.abs() >= self.observer_threshold())
                         && self.v.timer >= self.coast_settle_ticks;
                     self.v.moving = if seen {

@@ -319,6 +319,9 @@ pub struct CaseResult {
     pub detected_after_s: Option<f64>,
     /// Worst |angle error| of foc's observer after the fault, while in closed loop, deg el.
     pub worst_angle_error_deg: f64,
+    /// Periods of that window in which foc's observer reported `Tracking` while more than
+    /// 45 deg off.
+    pub tracking_while_lost: usize,
     /// Largest true phase current after the fault, A.
     pub max_phase_current_a: f64,
     /// The stated current limit, A.
@@ -481,6 +484,7 @@ pub fn run_case(case: &FaultCase, opts: &SuiteOptions) -> Result<CaseResult, Sim
             (a, b) => a.or(b),
         },
         worst_angle_error_deg: score.closed_loop.max_e,
+        tracking_while_lost: score.closed_loop.tracking_lost,
         max_phase_current_a: score.max_current_a,
         current_limit_a: limit,
         bad_duties: checked.bad_duties,
@@ -520,9 +524,9 @@ pub fn markdown(results: &[CaseResult], opts: &SuiteOptions) -> String {
     );
     let _ = writeln!(
         s,
-        "| fault | expected | outcome | reason | detected after | worst angle error | max phase current | safe | speed at end | as expected |"
+        "| fault | expected | outcome | reason | detected after | worst angle error | Tracking while > 45 deg off | max phase current | safe | speed at end | as expected |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|");
     for r in results {
         let det = r
             .detected_after_s
@@ -537,13 +541,14 @@ pub fn markdown(results: &[CaseResult], opts: &SuiteOptions) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {:.2} deg | {:.2} A (limit {:.2}) | {} | {:.0} rpm | {} |",
+            "| {} | {} | {} | {} | {} | {:.2} deg | {} | {:.2} A (limit {:.2}) | {} | {:.0} rpm | {} |",
             r.name,
             r.expected.describe(),
             r.outcome,
             r.reason.unwrap_or("-"),
             det,
             r.worst_angle_error_deg,
+            r.tracking_while_lost,
             r.max_phase_current_a,
             r.current_limit_a,
             safe,

@@ -120,6 +120,8 @@ pub(crate) struct Sums {
     pub(crate) sum_w2: f64,
     pub(crate) max_w: f64,
     pub(crate) tracking: usize,
+    /// Samples with status `Tracking` while more than 45 deg off.
+    pub(crate) tracking_lost: usize,
     pub(crate) sum_nis: f64,
 }
 
@@ -133,6 +135,7 @@ impl Sums {
         self.sum_w2 += ew * ew;
         self.max_w = self.max_w.max(ew.abs());
         self.tracking += usize::from(tracking);
+        self.tracking_lost += usize::from(tracking && e.abs() > 45.0);
         self.sum_nis += nis;
     }
 

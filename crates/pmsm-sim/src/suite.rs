@@ -557,7 +557,15 @@ pub struct TransientRow {
     pub load_step_speed_max_rad_s: f64,
     /// Failed observer steps over the whole run.
     pub failures: usize,
+    /// Share of the whole run's estimates with status `Tracking`, %.
+    pub tracking_pct: f64,
+    /// Estimates with status `Tracking` while more than [`LOST_DEG`] off, over the whole run
+    /// (convergence phase included): an honest status has none.
+    pub tracking_while_lost: usize,
 }
+
+/// An estimate more than this far off (deg el.) has lost the rotor.
+pub const LOST_DEG: f64 = 45.0;
 
 /// One goal or limit, checked.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -878,6 +886,11 @@ struct Scored {
     /// Time of the last sample of the convergence phase.
     last_conv_s: f64,
     failures: usize,
+    /// Estimates over the whole run, those with status `Tracking`, and those among them more
+    /// than [`LOST_DEG`] off.
+    estimates: usize,
+    tracking: usize,
+    tracking_while_lost: usize,
 }
 
 impl Scored {
@@ -918,6 +931,9 @@ impl Scored {
             last_bad_s: None,
             last_conv_s: 0.0,
             failures: 0,
+            estimates: 0,
+            tracking: 0,
+            tracking_while_lost: 0,
         })
     }
 }
@@ -934,8 +950,17 @@ impl SideObserver for Scored {
     fn record(&mut self, sample: &Sample, own: Result<ObserverSample, EkfError>) {
         let t = sample.t_s;
         let own = own.ok();
-        if own.is_none() {
-            self.failures += 1;
+        match &own {
+            None => self.failures += 1,
+            Some(s) => {
+                self.estimates += 1;
+                if s.tracking {
+                    self.tracking += 1;
+                    if s.angle_error_deg.abs() > LOST_DEG {
+                        self.tracking_while_lost += 1;
+                    }
+                }
+            }
         }
         if t < self.plan.conv_end_s {
             self.last_conv_s = t;
@@ -1224,6 +1249,8 @@ pub fn run_suite_motors(
                 },
                 load_step_speed_max_rad_s: s.step.max_w,
                 failures: s.failures,
+                tracking_pct: 100.0 * s.tracking as f64 / s.estimates.max(1) as f64,
+                tracking_while_lost: s.tracking_while_lost,
             });
         }
     }
@@ -1498,9 +1525,9 @@ impl SuiteReport {
         let _ = writeln!(s, "\n## Transients\n");
         let _ = writeln!(
             s,
-            "| observer | motor | convergence, main run (ms) | converged starts | worst convergence over starts (ms) | worst angle error, rated load step (deg) | worst speed error, load step (rad/s) |"
+            "| observer | motor | convergence, main run (ms) | converged starts | worst convergence over starts (ms) | worst angle error, rated load step (deg) | worst speed error, load step (rad/s) | status Tracking, whole run (%) | Tracking while > 45 deg off (samples) |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
         let ms = |c: Option<f64>| match c {
             Some(c) => format!("{:.1}", c * 1e3),
             None => "not converged".to_string(),
@@ -1508,7 +1535,7 @@ impl SuiteReport {
         for t in &self.transients {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {}/{} | {} | {:.2} | {:.2} |",
+                "| {} | {} | {} | {}/{} | {} | {:.2} | {:.2} | {:.1} | {} |",
                 short_name(t.observer),
                 t.motor.name(),
                 ms(t.convergence_time_s),
@@ -1516,7 +1543,9 @@ impl SuiteReport {
                 t.start_angles_deg.len(),
                 ms(t.convergence_worst_s),
                 t.load_step_max_deg,
-                t.load_step_speed_max_rad_s
+                t.load_step_speed_max_rad_s,
+                t.tracking_pct,
+                t.tracking_while_lost
             );
         }
         if let Some(t) = self.transients.first() {

@@ -119,6 +119,9 @@ fn short_run_goals_and_limits() {
         assert_eq!(base.converged_starts, base.start_angles_deg.len(), "{m:?}");
         let ekf = r.transient_row(ObserverKind::DefaultEkf, m).expect("row");
         assert_eq!(ekf.converged_starts, ekf.start_angles_deg.len(), "{m:?}");
+        // An honest status: never Tracking while more than 45 deg off, start included.
+        assert_eq!(ekf.tracking_while_lost, 0, "{m:?}");
+        assert!(ekf.tracking_pct > 95.0, "{m:?} {}", ekf.tracking_pct);
         // Through the load step the EKF's worst error is below the baseline's.
         assert!(ekf.load_step_max_deg < base.load_step_max_deg, "{m:?}");
     }
