@@ -25,6 +25,7 @@ __all__ = [
     "clear_buffer_pool",
     "read_log",
     "FluxObserver",
+    "DriveObserver",
     "LogError",
     "SimulationError",
     "PyfocError",
@@ -227,6 +228,50 @@ class FluxObserver:
         dt: npt.ArrayLike | None = None,
     ) -> FluxOutput:
         """Run over a record (Ekf.run's timing); ``dt`` is validated, the step is the fixed ts."""
+
+class DriveOutput(TypedDict):
+    theta: npt.NDArray[np.float64]
+    omega: npt.NDArray[np.float64]
+    omega_mech: npt.NDArray[np.float64]
+    i_alpha: npt.NDArray[np.float64]
+    i_beta: npt.NDArray[np.float64]
+    nis: npt.NDArray[np.float64]
+    accel: npt.NDArray[np.float64]
+    """Electrical acceleration, rad/s^2."""
+    voltage_lead: npt.NDArray[np.float64]
+    """Lead of the applied voltage over the logged one, s."""
+    rs: npt.NDArray[np.float64]
+    """Resistance in use (configured plus estimated error), ohm."""
+    dead_time: npt.NDArray[np.float64]
+    """Inverter dead-time voltage, V."""
+    status: npt.NDArray[np.int8]
+    """Status.TRACKING while the observer tracks, UNCERTAIN otherwise, REJECTED for a refused row."""
+
+@final
+class DriveObserver:
+    """ekf-core's drive observer (DriveConfig::new(motor, ts)): an EKF for recorded drives with
+    the acceleration, the voltage lead, the resistance error and the dead-time voltage as states."""
+
+    @property
+    def ts(self) -> float:
+        """Sample time, s."""
+    @property
+    def state(self) -> npt.NDArray[np.float64]:
+        """[i_alpha, i_beta, omega_e, theta, accel, voltage_lead, d_rs, dead_time], shape (8,) (a copy)."""
+    @property
+    def covariance(self) -> npt.NDArray[np.float64]:
+        """State covariance, shape (8, 8) (a copy)."""
+    def __new__(cls, motor: Motor, ts: float) -> DriveObserver: ...
+    def run(
+        self,
+        u_ab: npt.ArrayLike,
+        i_ab: npt.ArrayLike,
+        *,
+        u_prev: npt.ArrayLike | None = None,
+        dt: npt.ArrayLike | None = None,
+    ) -> DriveOutput:
+        """Run over a record (Ekf.run's timing), continuing from the current state; ``dt``: the
+        period that ended at each row (a period above 64 ts is a REJECTED row)."""
 
 class DriveLog(TypedDict, total=False):
     t: npt.NDArray[np.float64]

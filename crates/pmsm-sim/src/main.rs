@@ -138,8 +138,8 @@ enum Command {
     /// NIS and angle error of the default and the tuned filter.
     Tune(TuneArgs),
     /// Replay a recorded drive (CSV in the documented format, or a pmsm-sim MCAP log)
-    /// through the default EKF and the flux + PLL baseline; prints the score table and writes
-    /// metrics.json, replay.mcap and plot.svg to <out>.
+    /// through the default EKF, the drive observer and the flux + PLL baseline; prints the
+    /// score table and writes metrics.json, replay.mcap and plot.svg to <out>.
     Replay {
         /// The log: CSV (header t_s, dt_s, u_alpha_v, u_beta_v, i_alpha_a, i_beta_a, optional
         /// theta_ref_rad, omega_ref_rad_s) or a pmsm-sim MCAP log.

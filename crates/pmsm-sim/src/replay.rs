@@ -1,7 +1,9 @@
 //! Replay of a recorded drive: a user's own log (CSV, documented below) or a `pmsm-sim` MCAP
 //! log, run through the default EKF ([`ekf_core::PmsmObserver`] with
-//! [`ekf_core::ObserverConfig::new`]) and the flux + PLL baseline
-//! ([`ekf_core::FluxObserver`]), scored against the log's reference angle when it has one.
+//! [`ekf_core::ObserverConfig::new`]), the drive observer ([`ekf_core::DriveObserver`] with
+//! [`ekf_core::DriveConfig::new`]: acceleration, voltage lead, resistance error and dead-time
+//! voltage as states) and the flux + PLL baseline ([`ekf_core::FluxObserver`]), scored against
+//! the log's reference angle when it has one.
 //!
 //! # The CSV format
 //!
@@ -49,8 +51,9 @@
 //! 180 deg), minus its circular mean over those samples (the reference's constant mounting
 //! offset; reported), in electrical degrees. Reported: RMS, max, the share of samples more
 //! than 45 deg off, the share of samples in each status, and the samples with status
-//! TRACKING while more than 45 deg off. The flux baseline has no confidence measure: its
-//! status is TRACKING on every accepted sample.
+//! TRACKING while more than 45 deg off. The three observers are scored alike. The drive
+//! observer's status is TRACKING when its estimate says `tracking`, else UNCERTAIN. The flux
+//! baseline has no confidence measure: its status is TRACKING on every accepted sample.
 //!
 //! # Outputs of a replay ([`write_outputs`])
 //!
@@ -59,7 +62,8 @@
 //! reference angle; `NaN` without a reference), `truth.torque_nm` and `load_torque_nm` `NaN`,
 //! `truth.psi_f_wb` / `rs_ohm` the configured motor's; `measured.u_dc_v` `NaN`;
 //! `observer` the default EKF; `controller_observer` the **flux + PLL baseline** (the plot
-//! labels it as the controller's observer); `seed_filter` absent; `control` zero except
+//! labels it as the controller's observer); `seed_filter` absent (the drive observer is
+//! scored in `metrics.json` and the table, not logged); `control` zero except
 //! `telemetry.state` (`replay`) and `speed_ref_rpm` (the reference speed, 0 without);
 //! `inverter.u_ab_commanded_v` = `u_ab[k]`, the other inverter fields 0. The observers'
 //! `angle_error_deg` is the error with that observer's offset removed. Log times are
@@ -70,7 +74,8 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use ekf_core::{
-    FluxObserver, FluxObserverConfig, MotorParams, ObserverConfig, PmsmObserver, Status, wrap_angle,
+    DriveConfig, DriveObserver, FluxObserver, FluxObserverConfig, MotorParams, ObserverConfig,
+    PmsmObserver, Status, wrap_angle,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -729,6 +734,49 @@ pub fn run_flux(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Re
     Ok(tr)
 }
 
+/// Runs the drive observer (`DriveConfig::new(motor, ts)`) over `log`, each row over its own
+/// period (refused beyond 64 Ts: a rejected row). Status: TRACKING when the estimate says
+/// `tracking`, else UNCERTAIN; REJECTED on a refused sample.
+pub fn run_drive(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
+    log.check()?;
+    let cfg = DriveConfig::new(motor.params, motor.ts_s);
+    let mut obs = DriveObserver::new(&cfg)?;
+    let n = log.len();
+    let mut tr = ObserverTrace {
+        theta: Vec::with_capacity(n),
+        omega: Vec::with_capacity(n),
+        status: Vec::with_capacity(n),
+        samples: Vec::with_capacity(n),
+    };
+    for k in 0..n {
+        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
+        let (e, status) = match obs.step_dt(u_prev, log.i_ab[k], log.dt_s[k]) {
+            Ok(e) if e.tracking => (e, ReplayStatus::Tracking),
+            Ok(e) => (e, ReplayStatus::Uncertain),
+            Err(_) => (obs.estimate(), ReplayStatus::Rejected),
+        };
+        let p = obs.covariance();
+        tr.theta.push(e.theta_rad);
+        tr.omega.push(e.omega_e_rad_s);
+        tr.status.push(status);
+        tr.samples.push(ObserverSample {
+            theta_e_rad: e.theta_rad,
+            omega_e_rad_s: e.omega_e_rad_s,
+            angle_error_deg: f64::NAN,
+            speed_error_rad_s: f64::NAN,
+            p_diag: [p[(0, 0)], p[(1, 1)], p[(2, 2)], p[(3, 3)]],
+            nis: e.nis,
+            tracking: status == ReplayStatus::Tracking,
+            psi_f_wb: motor.params.psi_f_wb,
+            psi_f_sigma_wb: 0.0,
+            rs_ohm: e.rs_ohm,
+            rs_sigma_ohm: p[(6, 6)].max(0.0).sqrt(),
+            winding_temperature_c: f64::NAN,
+        });
+    }
+    Ok(tr)
+}
+
 /// One observer's score against the reference (module docs, "Scoring").
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Score {
@@ -841,10 +889,14 @@ pub struct ReplayReport {
     pub has_reference: bool,
     /// The default EKF's score (`null` without a reference).
     pub ekf: Option<Score>,
+    /// The drive observer's score.
+    pub drive: Option<Score>,
     /// The flux + PLL baseline's score.
     pub flux: Option<Score>,
     /// Samples refused by the EKF (non-finite result).
     pub ekf_rejected: usize,
+    /// Samples refused by the drive observer.
+    pub drive_rejected: usize,
 }
 
 /// A replay's traces and report.
@@ -854,19 +906,27 @@ pub struct Replay {
     pub report: ReplayReport,
     /// The default EKF's outputs.
     pub ekf: ObserverTrace,
+    /// The drive observer's outputs.
+    pub drive: ObserverTrace,
     /// The flux baseline's outputs.
     pub flux: ObserverTrace,
 }
 
-/// Runs both observers over `log` and scores them; `name` names the log in the report.
+/// Runs the three observers over `log` and scores them; `name` names the log in the report.
 pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay, ReplayError> {
     let mut ekf = run_ekf(log, motor)?;
+    let mut drive = run_drive(log, motor)?;
     let mut flux = run_flux(log, motor)?;
     let ts = motor.ts_s;
     let ekf_score = score(log, ts, &ekf.theta, &ekf.status);
+    let drive_score = score(log, ts, &drive.theta, &drive.status);
     let flux_score = score(log, ts, &flux.theta, &flux.status);
     if let Some(th_ref) = &log.theta_ref {
-        for (tr, sc) in [(&mut ekf, &ekf_score), (&mut flux, &flux_score)] {
+        for (tr, sc) in [
+            (&mut ekf, &ekf_score),
+            (&mut drive, &drive_score),
+            (&mut flux, &flux_score),
+        ] {
             let off = sc.map_or(0.0, |s| s.offset_deg.to_radians());
             for (k, smp) in tr.samples.iter_mut().enumerate() {
                 smp.angle_error_deg = wrap_angle(smp.theta_e_rad - th_ref[k] - off).to_degrees();
@@ -887,14 +947,25 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
             .count(),
         has_reference: log.theta_ref.is_some(),
         ekf: ekf_score,
+        drive: drive_score,
         flux: flux_score,
-        ekf_rejected: ekf
-            .status
-            .iter()
-            .filter(|s| **s == ReplayStatus::Rejected)
-            .count(),
+        ekf_rejected: rejected(&ekf),
+        drive_rejected: rejected(&drive),
     };
-    Ok(Replay { report, ekf, flux })
+    Ok(Replay {
+        report,
+        ekf,
+        drive,
+        flux,
+    })
+}
+
+/// Rows of a trace with status REJECTED.
+fn rejected(tr: &ObserverTrace) -> usize {
+    tr.status
+        .iter()
+        .filter(|s| **s == ReplayStatus::Rejected)
+        .count()
 }
 
 /// The report as a Markdown table.
@@ -914,7 +985,11 @@ pub fn markdown(r: &ReplayReport) -> String {
         "| observer | scored | offset deg | RMS deg | max deg | > 45 deg | TRACKING | UNCERTAIN | REJECTED | TRACKING while > 45 deg |\n\
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
-    for (name, sc) in [("EKF (default)", &r.ekf), ("flux + PLL", &r.flux)] {
+    for (name, sc) in [
+        ("EKF (default)", &r.ekf),
+        ("drive observer", &r.drive),
+        ("flux + PLL", &r.flux),
+    ] {
         match sc {
             Some(x) => s.push_str(&format!(
                 "| {name} | {} | {:.1} | {:.2} | {:.1} | {:.2} % | {:.1} % | {:.1} % | {:.1} % | {} |\n",

@@ -114,6 +114,18 @@ fn replay_of_simulated_logs() {
     assert!(s0.rms_deg < 1.0, "{s0:?}");
     assert_eq!(s0.tracking_while_lost, 0);
     assert!(r0.report.flux.is_some());
+    // The drive observer: scored alike, every row accepted, finite, and on the simulator's
+    // clean log it tracks the rotor.
+    let d0 = r0.report.drive.unwrap_or_else(|| panic!("drive scored"));
+    assert_eq!(d0.samples, s0.samples);
+    assert_eq!(r0.report.drive_rejected, 0);
+    assert!(r0.drive.theta.iter().all(|v| v.is_finite()));
+    assert_eq!(r0.drive.theta.len(), exact.len());
+    assert!(d0.rms_deg < 5.0, "{d0:?}");
+    assert_eq!(d0.tracking_while_lost, 0, "{d0:?}");
+    assert!(d0.tracking_share > 0.5, "{d0:?}");
+    let json = serde_json::to_value(&r0.report).unwrap_or_else(|e| panic!("{e}"));
+    assert!(json["drive"]["rms_deg"].is_number() && json["drive_rejected"] == 0);
 
     // Exact CSV (amplitude-invariant): the same arrays, the same score.
     let csv = to_csv(&exact, 1.0, &[], 0);
@@ -191,6 +203,13 @@ fn replay_of_simulated_logs() {
     assert!(back.i_ab == a.i_ab);
     let md = pmsm_sim::replay::markdown(&ra.report);
     assert!(md.contains("| EKF (default) |") && md.contains("| flux + PLL |"));
+    assert!(md.contains("| drive observer |"));
+    // Skipped cycles: the drive observer steps over the merged periods and stays finite.
+    let dm = rm.report.drive.unwrap_or_else(|| panic!("drive scored"));
+    assert!(
+        dm.rms_deg.is_finite() && rm.report.drive_rejected == 0,
+        "{dm:?}"
+    );
 
     // Corrupt MCAP: errors, never panics.
     let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{e}"));

@@ -23,6 +23,7 @@ use pyo3::sync::PyOnceLock;
 use pyo3::types::{PyDict, PyModule, PySlice};
 
 mod convert;
+mod drive;
 mod identify;
 mod pool;
 mod replay;
@@ -1203,6 +1204,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(pool::clear_buffer_pool, m)?)?;
     m.add_function(wrap_pyfunction!(replay::read_log, m)?)?;
     m.add_class::<replay::FluxObserver>()?;
+    m.add_class::<drive::DriveObserver>()?;
     m.add("LogError", py.get_type::<replay::LogError>())?;
     m.add("SimulationError", py.get_type::<SimulationError>())?;
     m.add("PyfocError", py.get_type::<PyfocError>())?;
