@@ -355,7 +355,9 @@ impl<T: Float> DriveObserver<T> {
         })
     }
 
-    /// The state `[i_a, i_b, w, th, a, tau, dRs, v_dt]`.
+    /// The drive filter's state `[i_a, i_b, w, th, a, tau, dRs, v_dt]` (before the hand-over
+    /// its motion part is not the estimate: [`estimate`](Self::estimate) then reports the
+    /// acquisition observer's).
     pub fn state(&self) -> &Vec8<T> {
         &self.x
     }

@@ -167,7 +167,13 @@
 //! stayed at or below half that limit for 32 steps. The baseline learns the innovation level
 //! of the data (a recorded drive's noise and model error that the configured `R` does not
 //! describe); its clamp at 4 times itself keeps a loss from teaching it, its ceiling (400)
-//! bounds the error ever accepted as noise. It changes no state: only the status. On three
+//! bounds the error ever accepted as noise. It changes no state: only the status. With the
+//! check on, the status also requires the back-EMF to be known to be there: the speed
+//! estimate away from zero by three of its standard deviations (`w^2 >= 9 P22`), or an angle
+//! fused by [`PmsmObserver::correct_angle`] within the last 64 steps (high-frequency
+//! injection at standstill). At a start from rest the filter's angle variance collapses
+//! within a few samples although no EMF has told it anything; this rule keeps such a start
+//! `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the parts.) On three
 //! real ESC recordings (4.5 kHz, steps and reversals up to 5000 rad/s el.) samples reported
 //! [`Status::Tracking`] while more than 45 deg off went from 489 / 0 / 427 to 3 / 0 / 0 (the
 //! 3: the first samples of a loss, 48-49 deg off, before its innovations grew).
@@ -191,6 +197,10 @@ pub use safeguards::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS,
 };
 pub use tracking::{ParameterTracking, RsTracking};
+
+/// Steps after a fused angle ([`PmsmObserver::correct_angle`]) in which the angle counts as
+/// observable at any speed (the status's observability rule, module docs "Consistency").
+const FUSED_STEPS: u32 = 64;
 
 /// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
 pub const MAX_PERIOD_FACTOR: f64 = 64.0;
@@ -308,6 +318,9 @@ pub struct PmsmObserver<T: Float> {
     gate: Option<GateState<T>>,
     health: Option<HealthState<T>>,
     consistency: Option<ConsistencyState<T>>,
+    /// Steps left in which a fused angle ([`Self::correct_angle`]) makes the angle observable
+    /// at any speed.
+    fused: u32,
     tracker: Option<Tracker<T>>,
     /// The tracking's constants and split filter (present with `tracker`).
     slow: Option<TrackerSlow<T>>,
@@ -389,6 +402,7 @@ impl<T: Float> PmsmObserver<T> {
                 divergence_samples: h.divergence_samples,
             }),
             consistency: cfg.consistency.as_ref().map(ConsistencyState::new),
+            fused: 0,
             tracker,
             slow,
             events: Events::default(),
@@ -671,6 +685,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = pn;
+        self.fused = FUSED_STEPS;
         // The step's events stay reported (a reset below adds its own).
         if self.unhealthy(&self.x, &self.p) {
             self.self_reset(None);
@@ -795,6 +810,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         if let Some(w) = &mut self.consistency {
             w.watch(c.nis);
+            self.fused = self.fused.saturating_sub(1);
         }
         self.last = c;
         self.events = Events::default();
@@ -1026,7 +1042,12 @@ impl<T: Float> PmsmObserver<T> {
         let x = &self.x;
         let inconsistent = self.consistency.as_ref().is_some_and(|w| w.inconsistent);
         let angle_tracked = self.p.p33 <= self.angle_var_limit;
-        let status = if !angle_tracked || inconsistent {
+        // With the consistency check: the back-EMF must be known to be there, the speed away
+        // from zero by three standard deviations (or an angle fused recently).
+        let observable = self.consistency.is_none()
+            || self.fused > 0
+            || x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22;
+        let status = if !angle_tracked || inconsistent || !observable {
             Status::Uncertain
         } else {
             Status::Tracking

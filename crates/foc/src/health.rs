@@ -11,7 +11,11 @@
 //!   healthy EKF the angle advances by `w Ts` plus zero-mean corrections; a filter that is
 //!   slipping or re-converging moves its angle by corrections that do not average out.
 //!   Tolerance `speed_tolerance * max(|w|, w_handover)`.
-//! - **Status.** [`Status::Uncertain`] (angle standard deviation above the observer's limit).
+//! - **Status.** The angle's standard deviation above the observer's limit, or its
+//!   innovations out of line ([`Estimate::angle_tracked`], [`Estimate::inconsistent`]). The
+//!   observer's [`Status`](ekf_core::Status) also reads `Uncertain` while the speed is not
+//!   known to be away from zero; the controller knows that from its own state machine, so
+//!   that part is not a loss here.
 //! - **theta + pi lock** (design section 3: `(w, th)` and `(-w, th + pi)` give the same
 //!   back-EMF). Under I/f the rotor's d axis stays within 90 deg of the current vector
 //!   (a stable load angle), so an estimate more than `lock_angle_rad` (default 135 deg) away
@@ -35,7 +39,7 @@
 //! ticks) before it is reported, so single bad samples do nothing. What the controller does
 //! with the report is in [`startup`](crate::startup).
 
-use ekf_core::{Estimate, Status};
+use ekf_core::Estimate;
 
 use crate::config::HealthConfig;
 use crate::trig::{at_most, max2, wrap};
@@ -45,7 +49,7 @@ use crate::trig::{at_most, max2, wrap};
 pub enum LossReason {
     /// The observer refused its step (non-finite result or singular innovation covariance).
     StepFailed,
-    /// The observer reports [`Status::Uncertain`].
+    /// The observer's angle is not tracked (covariance) or its innovations are out of line.
     Uncertain,
     /// Average NIS above `nis_limit`.
     Nis,
@@ -194,7 +198,7 @@ impl HealthMonitor {
         // First failing basic check.
         let basic = if !step_ok {
             Some(LossReason::StepFailed)
-        } else if est.status == Status::Uncertain {
+        } else if !est.angle_tracked || est.inconsistent {
             Some(LossReason::Uncertain)
         } else if !at_most(self.nis_avg, self.cfg.nis_limit) {
             Some(LossReason::Nis)
@@ -213,7 +217,8 @@ impl HealthMonitor {
                 let fast = omega.abs() >= 0.5 * self.handover;
                 let opposite = w * omega < 0.0 && w.abs() > 0.25 * omega.abs();
                 let lock = fast
-                    && est.status == Status::Tracking
+                    && est.angle_tracked
+                    && !est.inconsistent
                     && (offset.abs() > self.cfg.lock_angle_rad || opposite);
                 let agrees = w * omega > 0.0
                     && offset.abs() < 0.5 * core::f32::consts::PI

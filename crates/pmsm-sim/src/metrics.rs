@@ -97,6 +97,12 @@ pub struct ObserverMetrics {
     pub speed_error_max_rad_s: f64,
     /// Fraction of the window in which the observer reported `Tracking`, %.
     pub tracking_pct: f64,
+    /// Fraction of the whole run (start-up and low speed included) in which the observer
+    /// reported `Tracking`, %.
+    pub tracking_run_pct: f64,
+    /// Samples of the whole run with status `Tracking` while more than 45 deg off (an honest
+    /// status has none).
+    pub tracking_while_lost: usize,
     /// Mean normalized innovation squared over the window.
     pub nis_mean: f64,
     /// Its flux linkage (tracked, or the configured one) at the last sample against the
@@ -181,6 +187,11 @@ pub struct ObserverScore {
     all: Sums,
     /// The last sample's parameters: estimated and true `psi_f`, `Rs`.
     params: [f64; 4],
+    /// Samples of the whole run, those with status `Tracking`, and those among them more
+    /// than 45 deg off.
+    run_samples: usize,
+    run_tracking: usize,
+    run_tracking_lost: usize,
 }
 
 impl ObserverScore {
@@ -194,6 +205,9 @@ impl ObserverScore {
             window: Sums::default(),
             all: Sums::default(),
             params: [f64::NAN; 4],
+            run_samples: 0,
+            run_tracking: 0,
+            run_tracking_lost: 0,
         }
     }
 
@@ -211,6 +225,11 @@ impl ObserverScore {
             self.t_first = Some(t_s);
         }
         let e = est.angle_error_deg;
+        self.run_samples += 1;
+        if est.tracking {
+            self.run_tracking += 1;
+            self.run_tracking_lost += usize::from(e.abs() > 45.0);
+        }
         if !is_converged(e) {
             self.run_start = None;
             self.window = Sums::default();
@@ -245,6 +264,8 @@ impl ObserverScore {
             speed_error_rms_pct: 100.0 * speed_rms / self.rated_omega_e_rad_s,
             speed_error_max_rad_s: if s.n > 0 { s.max_w } else { f64::NAN },
             tracking_pct: 100.0 * s.tracking as f64 / nf,
+            tracking_run_pct: 100.0 * self.run_tracking as f64 / self.run_samples.max(1) as f64,
+            tracking_while_lost: self.run_tracking_lost,
             nis_mean: s.sum_nis / nf,
             psi_f_error_end_pct: 100.0 * (self.params[0] / self.params[2] - 1.0),
             rs_error_end_pct: 100.0 * (self.params[1] / self.params[3] - 1.0),

@@ -59,7 +59,7 @@ pub fn table(m: &RunMetrics) -> String {
     cols.push(("EKF f64 (sim)", m.observer.as_ref()));
     cols.push(("seed filter", m.seed_filter.as_ref()));
     type Row = (&'static str, &'static str, fn(&ObserverMetrics) -> String);
-    let rows: [Row; 13] = [
+    let rows: [Row; 15] = [
         ("convergence time", "s", |o| {
             o.convergence_time_s
                 .map_or_else(|| "never".into(), |t| format!("{t:.4}"))
@@ -85,6 +85,12 @@ pub fn table(m: &RunMetrics) -> String {
         }),
         ("status Tracking in window", "%", |o| {
             format!("{:.1}", o.tracking_pct)
+        }),
+        ("status Tracking, whole run", "%", |o| {
+            format!("{:.1}", o.tracking_run_pct)
+        }),
+        ("Tracking while > 45 deg off", "samples", |o| {
+            format!("{}", o.tracking_while_lost)
         }),
         ("NIS mean (2: consistent)", "", |o| {
             format!("{:.2}", o.nis_mean)
