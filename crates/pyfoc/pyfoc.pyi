@@ -42,9 +42,11 @@ class Status(enum.IntEnum):
     the ``status`` of ``Ekf.step``."""
 
     TRACKING = 0
-    """The angle's standard deviation is below its limit."""
+    """The angle can be trusted: its standard deviation is below its limit, the innovations are
+    consistent with the noise seen before, and the speed is known to be away from zero."""
     UNCERTAIN = 1
-    """The filter ran but the angle is not trustworthy yet (not converged, or near standstill)."""
+    """The filter ran but the angle is not trustworthy: not converged, near standstill, or the
+    innovations far out of line (the model no longer explains the currents: a lost filter)."""
     REJECTED = 2
     """Non-finite voltage or current: the sample was refused and the state kept."""
 

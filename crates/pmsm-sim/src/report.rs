@@ -89,7 +89,7 @@ pub fn table(m: &RunMetrics) -> String {
         ("status Tracking, whole run", "%", |o| {
             format!("{:.1}", o.tracking_run_pct)
         }),
-        ("Tracking while > 45 deg off", "samples", |o| {
+        ("Tracking while >45 deg off", "samples", |o| {
             format!("{}", o.tracking_while_lost)
         }),
         ("NIS mean (2: consistent)", "", |o| {
