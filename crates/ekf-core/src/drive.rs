@@ -202,6 +202,7 @@ impl<T: Float> DriveConfig<T> {
             return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
         }
         pos(c.ratio, Param::ConsistencyRatio)?;
+        pos(c.single_ratio, Param::ConsistencyRatio)?;
         pos(c.max_baseline, Param::ConsistencyMaxBaseline)?;
         // The variances must stay finite: the squares of the scales and `1 / Ts^2`.
         let big = self.sigma_acc_rad_s2 * self.sigma_acc_rad_s2 + self.sigma_i_a * self.sigma_i_a;

@@ -162,7 +162,7 @@
 //! model error: it stays small while the filter sits on a wrong solution or falls behind a
 //! fast transient it cannot follow. The innovations see it. The check keeps a fast mean
 //! (4 samples) and a slow, clamped baseline (1024 samples) of the `NIS`; while the fast mean
-//! exceeds 8 times the baseline, or one sample 16 times, the status reads
+//! exceeds 8 times the baseline, or one sample 10 times, the status reads
 //! [`Status::Uncertain`] (reported as [`Estimate::inconsistent`]), until the fast mean has
 //! stayed at or below half that limit for 32 steps. The baseline learns the innovation level
 //! of the data (a recorded drive's noise and model error that the configured `R` does not
@@ -175,8 +175,7 @@
 //! within a few samples although no EMF has told it anything; this rule keeps such a start
 //! `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the parts.) On three
 //! real ESC recordings (4.5 kHz, steps and reversals up to 5000 rad/s el.) samples reported
-//! [`Status::Tracking`] while more than 45 deg off went from 489 / 0 / 427 to 3 / 0 / 0 (the
-//! 3: the first samples of a loss, 48-49 deg off, before its innovations grew).
+//! [`Status::Tracking`] while more than 45 deg off went from 489 / 0 / 427 to 0 / 0 / 0.
 //!
 //! **Irregular periods.** [`PmsmObserver::step_dt`] predicts over the period that actually
 //! ended at the sample (a skipped control cycle, a log's time stamps) with the model for that
@@ -810,7 +809,9 @@ impl<T: Float> PmsmObserver<T> {
         }
         if let Some(w) = &mut self.consistency {
             w.watch(c.nis);
-            self.fused = self.fused.saturating_sub(1);
+            if self.fused != 0 {
+                self.fused -= 1;
+            }
         }
         self.last = c;
         self.events = Events::default();
@@ -1040,13 +1041,17 @@ impl<T: Float> PmsmObserver<T> {
     /// The current estimate.
     pub fn estimate(&self) -> Estimate<T> {
         let x = &self.x;
-        let inconsistent = self.consistency.as_ref().is_some_and(|w| w.inconsistent);
         let angle_tracked = self.p.p33 <= self.angle_var_limit;
-        // With the consistency check: the back-EMF must be known to be there, the speed away
-        // from zero by three standard deviations (or an angle fused recently).
-        let observable = self.consistency.is_none()
-            || self.fused > 0
-            || x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22;
+        // With the consistency check: the innovations consistent, and the back-EMF known to be
+        // there (the speed away from zero by three standard deviations, or an angle fused
+        // recently).
+        let (inconsistent, observable) = match &self.consistency {
+            Some(w) => (
+                w.inconsistent,
+                self.fused > 0 || x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22,
+            ),
+            None => (false, true),
+        };
         let status = if !angle_tracked || inconsistent || !observable {
             Status::Uncertain
         } else {

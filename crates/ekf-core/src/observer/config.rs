@@ -131,6 +131,7 @@ impl<T: Float> ObserverConfig<T> {
                 return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
             }
             positive(c.ratio, Param::ConsistencyRatio)?;
+            positive(c.single_ratio, Param::ConsistencyRatio)?;
             positive(c.max_baseline, Param::ConsistencyMaxBaseline)?;
         }
         if let Some(t) = &self.parameter_tracking {

@@ -138,12 +138,12 @@ impl<T: Float> Default for CovarianceHealth<T> {
 /// filter sits on a wrong solution.
 ///
 /// ```text
-/// n_k  = min(NIS_k, 1e6)
+/// n_k  = NIS_k
 /// f_k  = f_k-1 + (n_k - f_k-1) / fast_samples                       fast mean (about 2-4 ms)
-/// b_k  = b_k-1 + (min(n_k, 4 b_k-1) - b_k-1) / slow_samples          baseline, clamped
-///        b in [2, max_baseline]
-/// inconsistent when f_k > ratio b_k or n_k > 2 ratio b_k (one sample far out: the onset of a
-/// loss); trusted again after hold_samples steps in a row with f_k <= ratio b_k / 2
+/// b    = b + (mean of min(n_k, 4 b) over 8 samples - b) 8 / slow_samples
+///        once per 8 samples, b in [2, max_baseline]                  baseline, clamped
+/// inconsistent when f_k > ratio b_k or n_k > single_ratio b_k (one sample far out: the onset
+/// of a loss); trusted again after hold_samples steps in a row with f_k <= ratio b_k / 2
 /// ```
 ///
 /// For a consistent filter `NIS` is chi-square with 2 degrees of freedom (mean 2); a
@@ -161,6 +161,9 @@ pub struct ConsistencyCheck<T> {
     pub slow_samples: T,
     /// The fast mean above `ratio` times the baseline is inconsistent.
     pub ratio: T,
+    /// One sample above `single_ratio` times the baseline is inconsistent (the onset of a
+    /// loss, before the fast mean has grown).
+    pub single_ratio: T,
     /// Steps in a row with the fast mean at or below half the limit before the angle is
     /// trusted again.
     pub hold_samples: u32,
@@ -169,18 +172,21 @@ pub struct ConsistencyCheck<T> {
 }
 
 impl<T: Float> ConsistencyCheck<T> {
-    /// `fast_samples = 4`, `slow_samples = 1024`, `ratio = 8`, `hold_samples = 32`,
-    /// `max_baseline = 400`.
+    /// `fast_samples = 4`, `slow_samples = 1024`, `ratio = 8`, `single_ratio = 10`,
+    /// `hold_samples = 32`, `max_baseline = 400`.
     ///
-    /// For a consistent filter (baseline 2), one sample exceeds `2 ratio b = 32` with a
-    /// probability of `e^-16 = 1.1e-7` (once in 15 min at 10 kHz, then 32 samples
-    /// uncertain), and the fast mean (about a chi-square with 8 degrees of freedom over 4)
-    /// exceeds 16 far less often.
+    /// For a consistent filter (baseline 2), one sample exceeds `single_ratio b = 20` with a
+    /// probability of `e^-10 = 4.5e-5` (at 10 kHz about once in 2 s, then 32 samples
+    /// uncertain: 0.15 % of the time), and the fast mean (about a chi-square with 8 degrees of
+    /// freedom over 4) exceeds 16 far less often. On real records the single-sample rule
+    /// catches the first samples of a loss (48-49 deg off, innovations 13-19 times the
+    /// baseline) that the fast mean reaches a few samples later.
     pub fn default_for(_ts_s: T) -> Self {
         Self {
             fast_samples: to_t(4.0),
             slow_samples: to_t(1024.0),
             ratio: to_t(8.0),
+            single_ratio: to_t(10.0),
             hold_samples: 32,
             max_baseline: to_t(400.0),
         }
@@ -191,31 +197,66 @@ impl<T: Float> ConsistencyCheck<T> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct ConsistencyState<T> {
     pub(crate) k_fast: T,
-    pub(crate) k_slow: T,
+    /// `BASELINE_BLOCK / slow_samples`: the baseline's gain per block.
+    pub(crate) k_block: T,
     pub(crate) ratio: T,
+    pub(crate) single_ratio: T,
     pub(crate) hold_samples: u32,
     pub(crate) max_baseline: T,
     pub(crate) fast: T,
     pub(crate) baseline: T,
+    /// Limits from the baseline (refreshed with it): `ratio b`, `ratio b / 2`,
+    /// `single_ratio b`, `4 b`.
+    pub(crate) limit: T,
+    pub(crate) half_limit: T,
+    pub(crate) single: T,
+    pub(crate) clamp: T,
+    /// The block's sum of clamped NIS and its count.
+    pub(crate) block_sum: T,
+    pub(crate) block_n: u32,
     /// Steps in a row below half the limit while inconsistent.
     pub(crate) calm: u32,
     pub(crate) inconsistent: bool,
 }
 
+/// The baseline is updated once per block of this many samples, from their clamped mean (it
+/// moves over about a thousand samples: the block changes nothing of it but the cost).
+const BASELINE_BLOCK: u32 = 8;
+
 impl<T: Float> ConsistencyState<T> {
     pub(crate) fn new(c: &ConsistencyCheck<T>) -> Self {
         let two: T = to_t(2.0);
-        Self {
+        let mut s = Self {
             k_fast: T::one() / c.fast_samples,
-            k_slow: T::one() / c.slow_samples,
+            k_block: to_t::<T>(f64::from(BASELINE_BLOCK)) / c.slow_samples,
             ratio: c.ratio,
+            single_ratio: c.single_ratio,
             hold_samples: c.hold_samples,
             max_baseline: c.max_baseline,
             fast: two,
             baseline: two,
+            limit: T::zero(),
+            half_limit: T::zero(),
+            single: T::zero(),
+            clamp: T::zero(),
+            block_sum: T::zero(),
+            block_n: 0,
             calm: 0,
             inconsistent: true,
+        };
+        if s.k_block > T::one() {
+            s.k_block = T::one();
         }
+        s.refresh();
+        s
+    }
+
+    /// The limits from the baseline.
+    fn refresh(&mut self) {
+        self.limit = self.ratio * self.baseline;
+        self.half_limit = self.limit * to_t(0.5);
+        self.single = self.single_ratio * self.baseline;
+        self.clamp = self.baseline * to_t(4.0);
     }
 
     /// Restarts after a reset: untrusted until the hold has passed; the baseline is kept.
@@ -225,15 +266,12 @@ impl<T: Float> ConsistencyState<T> {
         self.inconsistent = true;
     }
 
-    /// One step's NIS.
-    #[inline(always)]
-    pub(crate) fn watch(&mut self, nis: T) {
-        let cap: T = to_t(1e6);
-        let n = if nis < cap { nis } else { cap };
-        self.fast += (n - self.fast) * self.k_fast;
-        let four_b = self.baseline * to_t(4.0);
-        let nb = if n < four_b { n } else { four_b };
-        let b = self.baseline + (nb - self.baseline) * self.k_slow;
+    /// The baseline's update from a full block (out of line: once in eight samples).
+    #[cold]
+    #[inline(never)]
+    fn update_baseline(&mut self) {
+        let mean = self.block_sum / to_t(f64::from(BASELINE_BLOCK));
+        let b = self.baseline + (mean - self.baseline) * self.k_block;
         let two: T = to_t(2.0);
         self.baseline = if b < two {
             two
@@ -242,12 +280,25 @@ impl<T: Float> ConsistencyState<T> {
         } else {
             b
         };
-        let limit = self.ratio * self.baseline;
-        if self.fast > limit || n > limit + limit {
+        self.block_sum = T::zero();
+        self.block_n = 0;
+        self.refresh();
+    }
+
+    /// One step's NIS (finite: a step with a non-finite result is refused before).
+    #[inline(always)]
+    pub(crate) fn watch(&mut self, nis: T) {
+        self.fast += (nis - self.fast) * self.k_fast;
+        self.block_sum += if nis < self.clamp { nis } else { self.clamp };
+        self.block_n += 1;
+        if self.block_n == BASELINE_BLOCK {
+            self.update_baseline();
+        }
+        if self.fast > self.limit || nis > self.single {
             self.inconsistent = true;
             self.calm = 0;
         } else if self.inconsistent {
-            if self.fast + self.fast <= limit {
+            if self.fast <= self.half_limit {
                 self.calm += 1;
                 if self.calm >= self.hold_samples {
                     self.inconsistent = false;
