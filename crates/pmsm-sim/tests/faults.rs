@@ -33,6 +33,9 @@ fn every_fault_leaves_the_drive_safe() {
             r.name
         );
         assert!(r.max_phase_current_a <= r.current_limit_a, "{r:#?}");
+        // An honest status: foc's observer never reports Tracking while more than 45 deg off
+        // in closed loop after the fault (the locked rotor included: no EMF, no trust).
+        assert_eq!(r.tracking_while_lost, 0, "{}", r.name);
         assert_eq!(r.run_end, "completed", "{}", r.name);
     }
     let md = markdown(&rs, &SuiteOptions::default());
