@@ -65,6 +65,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use crate::observer::ConsistencyState;
+use crate::observer::model::lag_free_gain;
 use crate::trig::sin_cos_small;
 use crate::{ConfigError, ConsistencyCheck, EkfError, Float, MotorParams, Param, to_t, wrap_angle};
 use crate::{Estimate, ObserverConfig, PmsmObserver, Status};
@@ -635,7 +636,7 @@ impl<T: Float> DriveObserver<T> {
         let iq = ib * cs - ia * sn;
         let c = m.psi_f_wb * inv_l + sal * id;
         let wm = w + acc * h * half;
-        let (m_v, mp) = emf_gain(a, one_minus_alpha, wm, h);
+        let (_, m_v, mp) = lag_free_gain(a, one_minus_alpha, wm, h);
         let e0 = (sn, -cs);
         let e0m = cmul(e0, m_v);
         let e0mp = cmul(e0, mp);
@@ -724,21 +725,4 @@ impl<T: Float> DriveObserver<T> {
             restarted: self.restarted,
         }
     }
-}
-
-/// `(w G(w), d(w G)/dw)` as `(re, im)` pairs, `G(w) = (e^{j w h} - alpha) / (a + j w)`.
-fn emf_gain<T: Float>(a: T, one_minus_alpha: T, w: T, h: T) -> ((T, T), (T, T)) {
-    let two = T::one() + T::one();
-    let (sh, ch) = sin_cos_small(w * h / two);
-    let cos_m1 = -two * sh * sh;
-    let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
-    let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
-    let inv_d2 = T::one() / (a * a + w * w);
-    let g_re = (n_re * a + n_im * w) * inv_d2;
-    let g_im = (n_im * a - n_re * w) * inv_d2;
-    let (t_re, t_im) = (h * ex_re - g_re, h * ex_im - g_im);
-    let (jt_re, jt_im) = (-t_im, t_re);
-    let gp_re = (jt_re * a + jt_im * w) * inv_d2;
-    let gp_im = (jt_im * a - jt_re * w) * inv_d2;
-    ((w * g_re, w * g_im), (g_re + w * gp_re, g_im + w * gp_im))
 }

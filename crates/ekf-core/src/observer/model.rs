@@ -379,34 +379,43 @@ impl<T: Float> Discrete<T> {
         let ts = self.ts;
         match self.discretization {
             Discretization::ForwardEuler => ((ts, T::zero()), (w * ts, T::zero()), (ts, T::zero())),
-            Discretization::LagFree => {
-                let a = self.a;
-                let one_minus_alpha = self.one_minus_decay;
-                let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
-                let two = T::one() + T::one();
-                // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
-                let cos_m1 = -two * sh * sh;
-                let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
-                // N = e^{j w Ts} - alpha.
-                let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
-                let inv_d2 = T::one() / (a * a + w * w);
-                // G = N / (a + j w) = N (a - j w) / (a^2 + w^2).
-                let g_re = (n_re * a + n_im * w) * inv_d2;
-                let g_im = (n_im * a - n_re * w) * inv_d2;
-                // G' = j (Ts e^{j w Ts} - G) / (a + j w).
-                let (t_re, t_im) = (ts * ex_re - g_re, ts * ex_im - g_im);
-                // j (t) = -t_im + j t_re; divide by (a + j w).
-                let (jt_re, jt_im) = (-t_im, t_re);
-                let gp_re = (jt_re * a + jt_im * w) * inv_d2;
-                let gp_im = (jt_im * a - jt_re * w) * inv_d2;
-                (
-                    (g_re, g_im),
-                    (w * g_re, w * g_im),
-                    (g_re + w * gp_re, g_im + w * gp_im),
-                )
-            }
+            Discretization::LagFree => lag_free_gain(self.a, self.one_minus_decay, w, ts),
         }
     }
+}
+
+/// The lag-free EMF gain over a period `ts` (module docs of [`observer`](crate::observer)):
+/// `(G, w G, d(w G)/dw)` as `(re, im)` pairs, `G(w) = (e^{j w ts} - alpha) / (a + j w)` with
+/// `a = Rs / Ls` and `1 - alpha = one_minus_alpha`.
+#[inline(always)]
+pub(crate) fn lag_free_gain<T: Float>(
+    a: T,
+    one_minus_alpha: T,
+    w: T,
+    ts: T,
+) -> ((T, T), (T, T), (T, T)) {
+    let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
+    let two = T::one() + T::one();
+    // e^{j w Ts} = cos + j sin, with cos - 1 = -2 sin^2(w Ts / 2).
+    let cos_m1 = -two * sh * sh;
+    let (ex_re, ex_im) = (T::one() + cos_m1, two * sh * ch);
+    // N = e^{j w Ts} - alpha.
+    let (n_re, n_im) = (cos_m1 + one_minus_alpha, ex_im);
+    let inv_d2 = T::one() / (a * a + w * w);
+    // G = N / (a + j w) = N (a - j w) / (a^2 + w^2).
+    let g_re = (n_re * a + n_im * w) * inv_d2;
+    let g_im = (n_im * a - n_re * w) * inv_d2;
+    // G' = j (Ts e^{j w Ts} - G) / (a + j w).
+    let (t_re, t_im) = (ts * ex_re - g_re, ts * ex_im - g_im);
+    // j (t) = -t_im + j t_re; divide by (a + j w).
+    let (jt_re, jt_im) = (-t_im, t_re);
+    let gp_re = (jt_re * a + jt_im * w) * inv_d2;
+    let gp_im = (jt_im * a - jt_re * w) * inv_d2;
+    (
+        (g_re, g_im),
+        (w * g_re, w * g_im),
+        (g_re + w * gp_re, g_im + w * gp_im),
+    )
 }
 
 impl<T: Float> ProcessModel<T, 4, 2> for PmsmModel<T> {
