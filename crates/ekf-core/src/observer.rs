@@ -156,7 +156,6 @@
 //! `divergence_samples` (200) tracked steps in a row (counted by the innovation gate: the check
 //! needs it), the observer resets itself as above. On
 //! the surface reference motors it never fires in the suite.
-
 //!
 //! **Consistency** ([`ConsistencyCheck`]). The covariance reflects the model's noise, not a
 //! model error: it stays small while the filter sits on a wrong solution or falls behind a
@@ -173,9 +172,10 @@
 //! fused by [`PmsmObserver::correct_angle`] within the last 64 steps (high-frequency
 //! injection at standstill). At a start from rest the filter's angle variance collapses
 //! within a few samples although no EMF has told it anything; this rule keeps such a start
-//! `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the parts.) On three
-//! real ESC recordings (4.5 kHz, steps and reversals up to 5000 rad/s el.) samples reported
-//! [`Status::Tracking`] while more than 45 deg off went from 489 / 0 / 427 to 0 / 0 / 0.
+//! `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the parts.)
+//! On three real ESC recordings (4.5 kHz, steps and reversals up to 5000 rad/s el.) samples
+//! reported [`Status::Tracking`] while more than 45 deg off went from 489 / 0 / 427 to
+//! 0 / 0 / 0.
 //!
 //! **Irregular periods.** [`PmsmObserver::step_dt`] predicts over the period that actually
 //! ended at the sample (a skipped control cycle, a log's time stamps) with the model for that
@@ -220,8 +220,9 @@ use tracking::{Tracker, TrackerSlow, TrackerStep};
 /// Whether the angle estimate can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Status {
-    /// The angle's standard deviation is below the configured limit and the innovations are
-    /// consistent (with the consistency check on).
+    /// The angle's standard deviation is below the configured limit and, with the
+    /// consistency check on, the innovations are consistent and the speed is known to be away
+    /// from zero (module docs, "Consistency").
     Tracking,
     /// The angle's standard deviation exceeds the limit (the filter has not converged yet, or
     /// the back-EMF is too small to observe the angle near standstill), or the innovations

@@ -124,15 +124,7 @@ impl<T: Float> ObserverConfig<T> {
             positive(g.settled_nis, Param::GateSettledNis)?;
         }
         if let Some(c) = &self.consistency {
-            if !c.fast_samples.is_finite() || c.fast_samples < T::one() {
-                return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
-            }
-            if !c.slow_samples.is_finite() || c.slow_samples < T::one() {
-                return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
-            }
-            positive(c.ratio, Param::ConsistencyRatio)?;
-            positive(c.single_ratio, Param::ConsistencyRatio)?;
-            positive(c.max_baseline, Param::ConsistencyMaxBaseline)?;
+            c.validate()?;
         }
         if let Some(t) = &self.parameter_tracking {
             t.validate_for(self.motor.psi_f_wb, self.motor.rs_ohm, self.ts_s)?;

@@ -2,8 +2,9 @@
 //! configuration ([`BranchCheck`], [`InnovationGate`], [`CovarianceHealth`]) and running state.
 
 use super::ObserverCounters;
+use crate::motor::positive;
 use crate::structured::Sym4;
-use crate::{Float, to_t};
+use crate::{ConfigError, Float, Param, to_t};
 
 /// Wrong-branch detection (module docs, "Wrong branch"): `(w, th)` and `(-w, th + pi)` give
 /// the same back-EMF, and only `dth/dt = w` tells them apart. On the wrong branch the
@@ -172,6 +173,20 @@ pub struct ConsistencyCheck<T> {
 }
 
 impl<T: Float> ConsistencyCheck<T> {
+    /// Checks every field: the sample counts at least 1, the ratios and the ceiling finite
+    /// and above zero.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if !self.fast_samples.is_finite() || self.fast_samples < T::one() {
+            return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
+        }
+        if !self.slow_samples.is_finite() || self.slow_samples < T::one() {
+            return Err(ConfigError::NotPositive(Param::ConsistencySlowSamples));
+        }
+        positive(self.ratio, Param::ConsistencyRatio)?;
+        positive(self.single_ratio, Param::ConsistencyRatio)?;
+        positive(self.max_baseline, Param::ConsistencyMaxBaseline)
+    }
+
     /// `fast_samples = 4`, `slow_samples = 1024`, `ratio = 8`, `single_ratio = 10`,
     /// `hold_samples = 32`, `max_baseline = 400`.
     ///
