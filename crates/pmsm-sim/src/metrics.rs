@@ -113,6 +113,10 @@ pub struct ObserverMetrics {
     pub rs_error_end_pct: f64,
 }
 
+/// An estimate more than this far off (deg el.) has lost the rotor: its status must not be
+/// `Tracking`.
+pub const LOST_DEG: f64 = 45.0;
+
 /// Running sums of an observer's errors over a window: the one accumulator behind every
 /// score of the simulator (these metrics, the suite's rows, the fault suite's worst error).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -126,7 +130,7 @@ pub(crate) struct Sums {
     pub(crate) sum_w2: f64,
     pub(crate) max_w: f64,
     pub(crate) tracking: usize,
-    /// Samples with status `Tracking` while more than 45 deg off.
+    /// Samples with status `Tracking` while more than [`LOST_DEG`] off.
     pub(crate) tracking_lost: usize,
     pub(crate) sum_nis: f64,
 }
@@ -141,7 +145,7 @@ impl Sums {
         self.sum_w2 += ew * ew;
         self.max_w = self.max_w.max(ew.abs());
         self.tracking += usize::from(tracking);
-        self.tracking_lost += usize::from(tracking && e.abs() > 45.0);
+        self.tracking_lost += usize::from(tracking && e.abs() > LOST_DEG);
         self.sum_nis += nis;
     }
 
@@ -167,6 +171,11 @@ impl Sums {
         self.sum_e / self.n as f64
     }
 
+    /// Share of the samples with status `Tracking`, % (0 when empty).
+    pub(crate) fn tracking_pct(&self) -> f64 {
+        100.0 * self.tracking as f64 / self.n.max(1) as f64
+    }
+
     /// RMS speed error over the window, rad/s el. (NaN when empty).
     pub(crate) fn speed_rms_rad_s(&self) -> f64 {
         (self.sum_w2 / self.n as f64).sqrt()
@@ -187,11 +196,8 @@ pub struct ObserverScore {
     all: Sums,
     /// The last sample's parameters: estimated and true `psi_f`, `Rs`.
     params: [f64; 4],
-    /// Samples of the whole run, those with status `Tracking`, and those among them more
-    /// than 45 deg off.
-    run_samples: usize,
-    run_tracking: usize,
-    run_tracking_lost: usize,
+    /// Every sample of the whole run (start-up and low speed included): the status shares.
+    run: Sums,
 }
 
 impl ObserverScore {
@@ -205,9 +211,7 @@ impl ObserverScore {
             window: Sums::default(),
             all: Sums::default(),
             params: [f64::NAN; 4],
-            run_samples: 0,
-            run_tracking: 0,
-            run_tracking_lost: 0,
+            run: Sums::default(),
         }
     }
 
@@ -225,11 +229,7 @@ impl ObserverScore {
             self.t_first = Some(t_s);
         }
         let e = est.angle_error_deg;
-        self.run_samples += 1;
-        if est.tracking {
-            self.run_tracking += 1;
-            self.run_tracking_lost += usize::from(e.abs() > 45.0);
-        }
+        self.run.add_sample(est);
         if !is_converged(e) {
             self.run_start = None;
             self.window = Sums::default();
@@ -264,8 +264,8 @@ impl ObserverScore {
             speed_error_rms_pct: 100.0 * speed_rms / self.rated_omega_e_rad_s,
             speed_error_max_rad_s: if s.n > 0 { s.max_w } else { f64::NAN },
             tracking_pct: 100.0 * s.tracking as f64 / nf,
-            tracking_run_pct: 100.0 * self.run_tracking as f64 / self.run_samples.max(1) as f64,
-            tracking_while_lost: self.run_tracking_lost,
+            tracking_run_pct: self.run.tracking_pct(),
+            tracking_while_lost: self.run.tracking_lost,
             nis_mean: s.sum_nis / nf,
             psi_f_error_end_pct: 100.0 * (self.params[0] / self.params[2] - 1.0),
             rs_error_end_pct: 100.0 * (self.params[1] / self.params[3] - 1.0),

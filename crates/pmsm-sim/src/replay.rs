@@ -90,8 +90,8 @@ pub const MIN_SPEED_SHARE: f64 = 0.1;
 pub const LONG_PERIOD_TS: f64 = 1.35;
 /// Time not scored after a long period, s.
 pub const SKIP_AFTER_LONG_S: f64 = 0.02;
-/// Angle error above which a sample counts as lost, electrical degrees.
-pub const LOST_DEG: f64 = 45.0;
+/// Angle error above which a sample counts as lost, electrical degrees (the simulator's).
+pub use crate::metrics::LOST_DEG;
 
 /// Why a log or motor file could not be read, or a replay not run.
 #[derive(Debug, Error)]

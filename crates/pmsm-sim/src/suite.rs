@@ -73,7 +73,7 @@
 //! 0.6 % and 0.29 % of `psi_f`), 1 % of the control periods skipped (`[skipped_cycles]`),
 //! and the same run without any (the reference). Each run: the observers converge at 50 %
 //! rated speed, the speed rises to rated, the rated load steps on, and the angle error is
-//! scored over a window at rated speed and load ([`Plan::real_drive`]). The default EKF and
+//! scored over a window at rated speed and load (`Plan::real_drive`). The default EKF and
 //! the baseline step on every sample with the voltage the drive believes it applied (not
 //! told of the effect); foc's own `f32` observer (foc runs sensored, its observer alongside)
 //! misses the skipped periods with its controller. No goals: the table shows what each
@@ -559,13 +559,10 @@ pub struct TransientRow {
     pub failures: usize,
     /// Share of the whole run's estimates with status `Tracking`, %.
     pub tracking_pct: f64,
-    /// Estimates with status `Tracking` while more than [`LOST_DEG`] off, over the whole run
+    /// Estimates with status `Tracking` while more than [`LOST_DEG`](crate::metrics::LOST_DEG) off, over the whole run
     /// (convergence phase included): an honest status has none.
     pub tracking_while_lost: usize,
 }
-
-/// An estimate more than this far off (deg el.) has lost the rotor.
-pub const LOST_DEG: f64 = 45.0;
 
 /// One goal or limit, checked.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -886,11 +883,8 @@ struct Scored {
     /// Time of the last sample of the convergence phase.
     last_conv_s: f64,
     failures: usize,
-    /// Estimates over the whole run, those with status `Tracking`, and those among them more
-    /// than [`LOST_DEG`] off.
-    estimates: usize,
-    tracking: usize,
-    tracking_while_lost: usize,
+    /// Every estimate of the whole run: the status shares.
+    run: Sums,
 }
 
 impl Scored {
@@ -931,9 +925,7 @@ impl Scored {
             last_bad_s: None,
             last_conv_s: 0.0,
             failures: 0,
-            estimates: 0,
-            tracking: 0,
-            tracking_while_lost: 0,
+            run: Sums::default(),
         })
     }
 }
@@ -952,15 +944,7 @@ impl SideObserver for Scored {
         let own = own.ok();
         match &own {
             None => self.failures += 1,
-            Some(s) => {
-                self.estimates += 1;
-                if s.tracking {
-                    self.tracking += 1;
-                    if s.angle_error_deg.abs() > LOST_DEG {
-                        self.tracking_while_lost += 1;
-                    }
-                }
-            }
+            Some(s) => self.run.add_sample(s),
         }
         if t < self.plan.conv_end_s {
             self.last_conv_s = t;
@@ -1249,8 +1233,8 @@ pub fn run_suite_motors(
                 },
                 load_step_speed_max_rad_s: s.step.max_w,
                 failures: s.failures,
-                tracking_pct: 100.0 * s.tracking as f64 / s.estimates.max(1) as f64,
-                tracking_while_lost: s.tracking_while_lost,
+                tracking_pct: s.run.tracking_pct(),
+                tracking_while_lost: s.run.tracking_lost,
             });
         }
     }
