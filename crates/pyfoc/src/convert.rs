@@ -134,6 +134,27 @@ pub(crate) fn vector<'py>(
     }
 }
 
+/// The record arguments of a `run`: `u_ab` and `i_ab` as `(N, 2)` arrays of one length `N`,
+/// and `u_prev` (shape `(2,)`) when given; errors name the argument.
+#[allow(clippy::type_complexity)]
+pub(crate) fn record_args<'py>(
+    u_ab: &Bound<'py, PyAny>,
+    i_ab: &Bound<'py, PyAny>,
+    u_prev: Option<&Bound<'py, PyAny>>,
+) -> PyResult<(RealArray<'py>, RealArray<'py>, usize, Option<[f64; 2]>)> {
+    let u = rows2(u_ab, "u_ab")?;
+    let i = rows2(i_ab, "i_ab")?;
+    let n = u.shape()[0];
+    if n != i.shape()[0] {
+        return Err(PyValueError::new_err(format!(
+            "u_ab and i_ab must have the same length, got {n} and {}",
+            i.shape()[0]
+        )));
+    }
+    let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+    Ok((u, i, n, u_prev))
+}
+
 /// A fixed-length vector (shape `(N,)`).
 pub(crate) fn fixed<const N: usize>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<[f64; N]> {
     let arr = vector(obj, name, Some(N))?;

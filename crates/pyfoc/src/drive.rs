@@ -6,12 +6,11 @@
 use std::sync::{Mutex, PoisonError};
 
 use ekf_core::{DriveConfig, DriveEstimate, DriveObserver as Inner};
-use numpy::{PyArray1, PyArray2, PyUntypedArrayMethods};
-use pyo3::exceptions::PyValueError;
+use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{fixed, rows2, to_vec};
+use crate::convert::{record_args, to_vec};
 use crate::replay::periods;
 use crate::{ConfigError, Motor, RowStatus};
 
@@ -107,16 +106,7 @@ impl DriveObserver {
         u_prev: Option<&Bound<'py, PyAny>>,
         dt: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let u = rows2(u_ab, "u_ab")?;
-        let i = rows2(i_ab, "i_ab")?;
-        let n = u.shape()[0];
-        if n != i.shape()[0] {
-            return Err(PyValueError::new_err(format!(
-                "u_ab and i_ab must have the same length, got {n} and {}",
-                i.shape()[0]
-            )));
-        }
-        let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        let (u, i, n, u_prev) = record_args(u_ab, i_ab, u_prev)?;
         let dt = dt.map(|d| periods(d, n)).transpose()?;
         // Input copies (32 bytes a row), the columns (80) and the status (1).
         crate::convert::ensure_memory(n as u128 * 113, "run")?;

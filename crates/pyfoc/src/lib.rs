@@ -31,7 +31,7 @@ mod simulate;
 mod suite;
 mod tune;
 
-use convert::{contiguous, fixed, rows2, square, to_vec};
+use convert::{contiguous, fixed, record_args, rows2, square, to_vec};
 
 create_exception!(
     pyfoc,
@@ -936,16 +936,7 @@ impl Ekf {
         dt: Option<&Bound<'py, PyAny>>,
         out: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let u = rows2(u_ab, "u_ab")?;
-        let i = rows2(i_ab, "i_ab")?;
-        let n = u.shape()[0];
-        if n != i.shape()[0] {
-            return Err(PyValueError::new_err(format!(
-                "u_ab and i_ab must have the same length, got {n} and {}",
-                i.shape()[0]
-            )));
-        }
-        let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        let (u, i, n, u_prev) = record_args(u_ab, i_ab, u_prev)?;
         if let Some(dt) = dt {
             // Per-row periods: a separate, plain loop (`replay::run_dt`); the optimized
             // path below is left as it is.

@@ -6,14 +6,14 @@
 use std::sync::{Mutex, PoisonError};
 
 use ekf_core::{Float, FluxObserverConfig, PmsmObserver};
-use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayMethods};
 use pmsm_sim::replay::{ReplayError, Scaling};
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{contiguous, fixed, path_of, rows2, to_vec, vector};
+use crate::convert::{contiguous, path_of, record_args, to_vec, vector};
 use crate::{ConfigError, Motor, OUTPUTS, Observer, OutArrays, PyfocError, Row, RowStatus};
 
 create_exception!(
@@ -225,16 +225,7 @@ impl FluxObserver {
         u_prev: Option<&Bound<'py, PyAny>>,
         dt: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let u = rows2(u_ab, "u_ab")?;
-        let i = rows2(i_ab, "i_ab")?;
-        let n = u.shape()[0];
-        if n != i.shape()[0] {
-            return Err(PyValueError::new_err(format!(
-                "u_ab and i_ab must have the same length, got {n} and {}",
-                i.shape()[0]
-            )));
-        }
-        let u_prev = u_prev.map(|p| fixed::<2>(p, "u_prev")).transpose()?;
+        let (u, i, n, u_prev) = record_args(u_ab, i_ab, u_prev)?;
         if let Some(dt) = dt {
             periods(dt, n)?;
         }
