@@ -650,11 +650,13 @@ pub struct ObserverTrace {
     pub samples: Vec<ObserverSample>,
 }
 
-/// Runs the default EKF (`ObserverConfig::new(motor, ts)`) over `log`.
-pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
-    log.check()?;
-    let cfg = ObserverConfig::new(motor.params, motor.ts_s);
-    let mut obs = PmsmObserver::new(&cfg)?;
+/// Steps an observer over `log` (row `k` predicts with the voltage of the period before it,
+/// over the period that ended at it, and corrects with its currents): `step(u_prev, i, dt)`
+/// gives the row's sample (angle error not filled) and status.
+fn trace(
+    log: &DriveLog,
+    mut step: impl FnMut([f64; 2], [f64; 2], f64) -> (ObserverSample, ReplayStatus),
+) -> ObserverTrace {
     let n = log.len();
     let mut tr = ObserverTrace {
         theta: Vec::with_capacity(n),
@@ -664,8 +666,23 @@ pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Rep
     };
     for k in 0..n {
         let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
+        let (sample, status) = step(u_prev, log.i_ab[k], log.dt_s[k]);
+        tr.theta.push(sample.theta_e_rad);
+        tr.omega.push(sample.omega_e_rad_s);
+        tr.status.push(status);
+        tr.samples.push(sample);
+    }
+    tr
+}
+
+/// Runs the default EKF (`ObserverConfig::new(motor, ts)`) over `log`.
+pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
+    log.check()?;
+    let cfg = ObserverConfig::new(motor.params, motor.ts_s);
+    let mut obs = PmsmObserver::new(&cfg)?;
+    Ok(trace(log, |u_prev, i, dt| {
         // The period that ended at this row (refused beyond 64 Ts: a rejected row).
-        let (e, status) = match obs.step_dt(u_prev, log.i_ab[k], log.dt_s[k]) {
+        let (e, status) = match obs.step_dt(u_prev, i, dt) {
             Ok(e) => (
                 e,
                 match e.status {
@@ -676,10 +693,7 @@ pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Rep
             Err(_) => (obs.estimate(), ReplayStatus::Rejected),
         };
         let p = obs.covariance();
-        tr.theta.push(e.theta_rad);
-        tr.omega.push(e.omega_e_rad_s);
-        tr.status.push(status);
-        tr.samples.push(ObserverSample {
+        let sample = ObserverSample {
             theta_e_rad: e.theta_rad,
             omega_e_rad_s: e.omega_e_rad_s,
             angle_error_deg: f64::NAN,
@@ -692,9 +706,9 @@ pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Rep
             rs_ohm: e.rs_ohm,
             rs_sigma_ohm: e.rs_sigma_ohm,
             winding_temperature_c: e.winding_temperature_c,
-        });
-    }
-    Ok(tr)
+        };
+        (sample, status)
+    }))
 }
 
 /// Runs the flux + PLL baseline (`FluxObserverConfig::new(motor, ts)`) over `log`. It has a
@@ -704,19 +718,13 @@ pub fn run_flux(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Re
     log.check()?;
     let cfg = FluxObserverConfig::new(motor.params, motor.ts_s);
     let mut obs = FluxObserver::new(&cfg)?;
-    let n = log.len();
-    let mut tr = ObserverTrace::default();
     let (psi, rs) = obs.parameters();
-    for k in 0..n {
-        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
-        let (e, status) = match obs.step(u_prev, log.i_ab[k]) {
+    Ok(trace(log, |u_prev, i, _dt| {
+        let (e, status) = match obs.step(u_prev, i) {
             Ok(e) => (e, ReplayStatus::Tracking),
             Err(_) => (obs.estimate(), ReplayStatus::Rejected),
         };
-        tr.theta.push(e.theta_rad);
-        tr.omega.push(e.omega_e_rad_s);
-        tr.status.push(status);
-        tr.samples.push(ObserverSample {
+        let sample = ObserverSample {
             theta_e_rad: e.theta_rad,
             omega_e_rad_s: e.omega_e_rad_s,
             angle_error_deg: f64::NAN,
@@ -729,9 +737,9 @@ pub fn run_flux(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Re
             rs_ohm: rs,
             rs_sigma_ohm: 0.0,
             winding_temperature_c: f64::NAN,
-        });
-    }
-    Ok(tr)
+        };
+        (sample, status)
+    }))
 }
 
 /// Runs the drive observer (`DriveConfig::new(motor, ts)`) over `log`, each row over its own
@@ -741,25 +749,14 @@ pub fn run_drive(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, R
     log.check()?;
     let cfg = DriveConfig::new(motor.params, motor.ts_s);
     let mut obs = DriveObserver::new(&cfg)?;
-    let n = log.len();
-    let mut tr = ObserverTrace {
-        theta: Vec::with_capacity(n),
-        omega: Vec::with_capacity(n),
-        status: Vec::with_capacity(n),
-        samples: Vec::with_capacity(n),
-    };
-    for k in 0..n {
-        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
-        let (e, status) = match obs.step_dt(u_prev, log.i_ab[k], log.dt_s[k]) {
+    Ok(trace(log, |u_prev, i, dt| {
+        let (e, status) = match obs.step_dt(u_prev, i, dt) {
             Ok(e) if e.tracking => (e, ReplayStatus::Tracking),
             Ok(e) => (e, ReplayStatus::Uncertain),
             Err(_) => (obs.estimate(), ReplayStatus::Rejected),
         };
         let p = obs.covariance();
-        tr.theta.push(e.theta_rad);
-        tr.omega.push(e.omega_e_rad_s);
-        tr.status.push(status);
-        tr.samples.push(ObserverSample {
+        let sample = ObserverSample {
             theta_e_rad: e.theta_rad,
             omega_e_rad_s: e.omega_e_rad_s,
             angle_error_deg: f64::NAN,
@@ -772,9 +769,9 @@ pub fn run_drive(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, R
             rs_ohm: e.rs_ohm,
             rs_sigma_ohm: p[(6, 6)].max(0.0).sqrt(),
             winding_temperature_c: f64::NAN,
-        });
-    }
-    Ok(tr)
+        };
+        (sample, status)
+    }))
 }
 
 /// One observer's score against the reference (module docs, "Scoring").
