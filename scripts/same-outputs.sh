@@ -8,7 +8,7 @@ cd "$(dirname "$0")/.."
 out=$(realpath -m "${1:?usage: same-outputs.sh DIR}")
 rm -rf "$out"; mkdir -p "$out"
 cargo build --release --locked -q -p pmsm-sim
-sim=target/release/pmsm-sim
+sim="${CARGO_TARGET_DIR:-target}/release/pmsm-sim"
 $sim run --out "$out/run" --json >"$out/run.stdout" 2>/dev/null
 $sim identify --out "$out/identify" --json >"$out/identify.stdout" 2>/dev/null
 $sim tune "$out/run/run.mcap" --json --max-evals 400 >"$out/tune.stdout" 2>/dev/null
