@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod angle;
+pub mod catalog;
 pub mod drive;
 pub mod ekf;
 mod error;

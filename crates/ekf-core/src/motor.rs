@@ -1,7 +1,7 @@
-//! Motor parameters of a PMSM (surface or interior), the reference motors of `design.md`
-//! section 6 and the two interior reference motors of the README.
+//! Motor parameters of a PMSM (surface or interior), with the reference motors of
+//! [`crate::catalog`] as presets.
 
-use crate::{ConfigError, Float, Param, to_t};
+use crate::{ConfigError, Float, Param, catalog, to_t};
 
 /// Electrical parameters of a PMSM (SI units): surface (`ld_h == lq_h`) or interior.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,32 +37,34 @@ pub const MIN_SALIENCY_RATIO: f64 = 0.25;
 pub const MAX_SALIENCY_RATIO: f64 = 8.0;
 
 impl<T: Float> MotorParams<T> {
-    /// Servo motor, the textbook default of `design.md` section 6 (Rs 2.875, Ls 8.5 mH,
+    /// Servo motor, the textbook default ([`catalog::SERVO`]: Rs 2.875, Ls 8.5 mH,
     /// psi_f 0.175 Wb, 4 pole pairs).
     pub fn servo() -> Self {
-        Self::from_f64(2.875, 8.5e-3, 0.175, 4)
+        catalog::SERVO.params()
     }
 
-    /// Industrial 2.2 kW motor, surface variant (Rs 3.6, Ls 36 mH, psi_f 0.545 Wb, 3 pole pairs).
+    /// Industrial 2.2 kW motor, surface variant ([`catalog::INDUSTRIAL_2K2`]: Rs 3.6, Ls 36 mH,
+    /// psi_f 0.545 Wb, 3 pole pairs).
     pub fn industrial_2k2() -> Self {
-        Self::from_f64(3.6, 36e-3, 0.545, 3)
+        catalog::INDUSTRIAL_2K2.params()
     }
 
-    /// Small fast (drone class) motor (Rs 0.12, Ls 0.15 mH, psi_f 6 mWb, 7 pole pairs).
+    /// Small fast (drone class) motor ([`catalog::SMALL_FAST`]: Rs 0.12, Ls 0.15 mH,
+    /// psi_f 6 mWb, 7 pole pairs).
     pub fn small_fast() -> Self {
-        Self::from_f64(0.12, 0.15e-3, 0.006, 7)
+        catalog::SMALL_FAST.params()
     }
 
-    /// Industrial interior PMSM, 2.2 kW class (Rs 3.6, Ld 30 mH, Lq 42 mH, Lq/Ld 1.4,
-    /// psi_f 0.50 Wb, 3 pole pairs; README's reference-motor table).
+    /// Industrial interior PMSM, 2.2 kW class ([`catalog::INDUSTRIAL_IPM`]: Rs 3.6, Ld 30 mH,
+    /// Lq 42 mH, psi_f 0.50 Wb, 3 pole pairs).
     pub fn industrial_ipm() -> Self {
-        Self::salient_from_f64(3.6, 30e-3, 42e-3, 0.50, 3)
+        catalog::INDUSTRIAL_IPM.params()
     }
 
-    /// Strongly salient traction-class interior PMSM, 48 V (Rs 8 mohm, Ld 50 uH, Lq 150 uH,
-    /// Lq/Ld 3, psi_f 12 mWb, 4 pole pairs; README's reference-motor table).
+    /// Strongly salient traction-class interior PMSM, 48 V ([`catalog::TRACTION_IPM`]:
+    /// Rs 8 mohm, Ld 50 uH, Lq 150 uH, psi_f 12 mWb, 4 pole pairs).
     pub fn traction_ipm() -> Self {
-        Self::salient_from_f64(0.008, 50e-6, 150e-6, 0.012, 4)
+        catalog::TRACTION_IPM.params()
     }
 
     /// Surface-PMSM parameters from `f64` values (`Ld = Lq = ls_h`).

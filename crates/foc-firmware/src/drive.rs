@@ -9,6 +9,7 @@
 
 use cortex_m_semihosting::hprintln;
 use foc::ekf_core::MotorParams;
+use foc::ekf_core::catalog::SERVO;
 use foc::{
     AlphaBeta, Foc, FocConfig, HfiConfig, HfiPhase, State, TickInput, TickOutput,
     duties_to_alpha_beta,
@@ -17,7 +18,7 @@ use foc::{
 use crate::meter::{Clock, Tally};
 
 const TS_S: f32 = 50e-6;
-const U_DC_V: f32 = 300.0;
+const U_DC_V: f32 = SERVO.u_dc_v as f32;
 const SPEED_REF_MECH_RAD_S: f32 = 104.719_76; // 1000 rpm
 const TICKS: u32 = 24_000; // 1.2 s
 
@@ -164,7 +165,7 @@ impl<P: DrivePlant> Drive<P> {
     }
 }
 
-/// Servo motor of design.md section 6 with its mechanics.
+/// The catalog's servo motor with its mechanics.
 struct Plant {
     ia: f32,
     ib: f32,
@@ -182,7 +183,12 @@ impl DrivePlant for Plant {
 
     fn step(&mut self, u: AlphaBeta, on: bool) {
         let (rs, ls, psi, p, j, b) = (
-            2.875_f32, 8.5e-3_f32, 0.175_f32, 4.0_f32, 8e-4_f32, 1e-3_f32,
+            SERVO.rs_ohm as f32,
+            SERVO.ld_h as f32,
+            SERVO.psi_f_wb as f32,
+            SERVO.pole_pairs as f32,
+            SERVO.j_kg_m2 as f32,
+            SERVO.b_nm_s_rad as f32,
         );
         if !on {
             self.ia = 0.0;
@@ -218,7 +224,8 @@ pub fn run_damped(clock: &Clock) -> Result<(), &'static str> {
 }
 
 fn run_start(clock: &Clock, damped: bool) -> Result<(), &'static str> {
-    let mut cfg = FocConfig::new(MotorParams::servo(), TS_S, U_DC_V).with_inertia(8e-4);
+    let mut cfg =
+        FocConfig::new(MotorParams::servo(), TS_S, U_DC_V).with_inertia(SERVO.j_kg_m2 as f32);
     if damped {
         cfg.startup.damping_ratio = 1.0;
         cfg.startup.kick_speed_ratio = 0.2;

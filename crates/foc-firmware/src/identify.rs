@@ -1,5 +1,5 @@
 //! The self-commissioning sequence on the target: `foc::Identifier` measures a small
-//! on-target plant (the servo motor of design.md section 6, made salient: `Lq = 1.5 Ld`) from
+//! on-target plant (the catalog's servo motor, made salient: `Lq = 1.5 Ld`) from
 //! standstill through the whole sequence, spin and inertia included, with the settings the
 //! simulator derives for the default scenario (10 kHz PWM, 300 V bus, one period of
 //! computation delay, 2.25 A test current, spin at 500 rpm). Every tick is counted; the
@@ -19,20 +19,21 @@
 //! paths, not its accuracy (the desktop simulator's `pmsm-sim identify` measures that).
 
 use cortex_m_semihosting::hprintln;
+use foc::ekf_core::catalog::SERVO;
 use foc::{AlphaBeta, Identifier, IdentifyConfig, IdentifyStep, TickInput, duties_to_alpha_beta};
 
 use crate::meter::{Clock, Histogram};
 
 const TS_S: f32 = 1e-4;
 const U_DC_V: f32 = 300.0;
-/// The motor: servo (design.md section 6) with `Lq = 1.5 Ld`.
-const RS: f32 = 2.875;
-const LD: f32 = 8.5e-3;
-const LQ: f32 = 12.75e-3;
-const PSI: f32 = 0.175;
-const POLE_PAIRS: u32 = 4;
-const J: f32 = 8e-4;
-const B: f32 = 1e-3;
+/// The motor: the catalog's servo with `Lq = 1.5 Ld`.
+const RS: f32 = SERVO.rs_ohm as f32;
+const LD: f32 = SERVO.ld_h as f32;
+const LQ: f32 = (1.5 * SERVO.ld_h) as f32;
+const PSI: f32 = SERVO.psi_f_wb as f32;
+const POLE_PAIRS: u32 = SERVO.pole_pairs;
+const J: f32 = SERVO.j_kg_m2 as f32;
+const B: f32 = SERVO.b_nm_s_rad as f32;
 /// Upper bound of the run, ticks (the sequence takes about 2.1 s).
 const MAX_TICKS: u32 = 40_000;
 

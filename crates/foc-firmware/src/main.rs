@@ -54,6 +54,7 @@ use core::panic::PanicInfo;
 
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use cortex_m_semihosting::{debug, heprintln, hprintln};
+use ekf_core::catalog::SERVO;
 use ekf_core::nalgebra::Vector2;
 use ekf_core::observer::parts::Parts;
 use ekf_core::{
@@ -159,7 +160,13 @@ fn run() -> Result<(), &'static str> {
             // salient path (active flux, d-axis correction, full current block) is counted.
             name: "ekf_step_salient",
             cfg: ObserverConfig::new(
-                MotorParams::salient_from_f64(2.875, 0.7 * 8.5e-3, 8.5e-3, 0.175, 4),
+                MotorParams::salient_from_f64(
+                    SERVO.rs_ohm,
+                    0.7 * SERVO.ld_h,
+                    SERVO.ld_h,
+                    SERVO.psi_f_wb,
+                    SERVO.pole_pairs,
+                ),
                 TS_S,
             ),
             max_angle_err_deg: 1.0,
@@ -229,7 +236,7 @@ fn run() -> Result<(), &'static str> {
             checked: true,
         },
         Variant {
-            // Forward Euler lags by about w Ts / 2 = 1.2 deg here (design.md section 3).
+            // Forward Euler lags by about w Ts / 2 = 1.2 deg here (docs/design.md section 3).
             name: "ekf_step_euler",
             cfg: ObserverConfig {
                 discretization: Discretization::ForwardEuler,
@@ -241,7 +248,7 @@ fn run() -> Result<(), &'static str> {
         },
         Variant {
             // The seed's tuning, counted only: started from x0 = 0 it can settle in the
-            // theta + pi state with the speed's sign flipped (design.md section 3).
+            // theta + pi state with the speed's sign flipped (docs/design.md section 3).
             name: "ekf_step_seed",
             cfg: ObserverConfig::seed(MotorParams::servo(), TS_S),
             max_angle_err_deg: 5.0,

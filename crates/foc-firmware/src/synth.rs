@@ -1,7 +1,7 @@
-//! A deterministic synthetic run of the servo motor (`design.md` section 6) at constant speed,
+//! A deterministic synthetic run of the servo motor (`docs/design.md` section 6) at constant speed,
 //! made on the target in `f32`.
 //!
-//! The plant is the exact solution of the alpha-beta current equations (`design.md` section 2)
+//! The plant is the exact solution of the alpha-beta current equations (`docs/design.md` section 2)
 //! over one period for a voltage held by the inverter and a rotor turning at constant speed
 //! (the derivation is in `ekf_core::observer`'s module docs). In complex notation
 //! (`i = i_a + j i_b`, `p_k = e^{j th_k}`):
@@ -19,9 +19,10 @@
 //! on an MCU that measures phase currents, with a deterministic uniform noise of `+-NOISE_A` on
 //! phases a and b.
 //!
-//! Timing follows `design.md` section 4: `u[k]` is held over `[t_k, t_{k+1})`, `i[k]` is
+//! Timing follows `docs/design.md` section 4: `u[k]` is held over `[t_k, t_{k+1})`, `i[k]` is
 //! sampled at `t_k`, and the observer's step `k` takes `(u[k-1], i[k])`.
 
+use ekf_core::catalog::SERVO;
 use ekf_core::wrap_angle;
 use foc::{AlphaBeta, Dq};
 
@@ -31,10 +32,10 @@ pub const SAMPLES: usize = 2000;
 /// Sample period, s.
 const TS: f64 = 1e-4;
 /// Servo motor: stator resistance (ohm), inductance (H), flux linkage (Wb), pole pairs.
-const RS: f64 = 2.875;
-const LS: f64 = 8.5e-3;
-const PSI: f64 = 0.175;
-const POLE_PAIRS: f64 = 4.0;
+const RS: f64 = SERVO.rs_ohm;
+const LS: f64 = SERVO.ld_h;
+const PSI: f64 = SERVO.psi_f_wb;
+const POLE_PAIRS: f64 = SERVO.pole_pairs as f64;
 /// Mechanical speed of the run, rpm.
 const SPEED_RPM: f64 = 1000.0;
 /// Electrical speed, rad/s (418.9 rad/s: `w Ts` = 0.042 rad per sample).
