@@ -11,6 +11,7 @@ pub mod drive;
 pub mod ekf;
 mod error;
 pub mod flux;
+pub mod fluxmap;
 pub mod motor;
 pub mod noise;
 pub mod observer;
@@ -25,6 +26,7 @@ pub use drive::{DriveConfig, DriveEstimate, DriveObserver};
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
 pub use error::{ConfigError, Matrix, Param};
 pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, FluxTiming};
+pub use fluxmap::{FluxMap, FluxMapError, FluxPoint};
 pub use motor::{MAX_SALIENCY_RATIO, MIN_SALIENCY_RATIO, MotorKind, MotorParams};
 pub use noise::NoiseCovariances;
 pub use observer::{
