@@ -3,7 +3,7 @@
 //! and seed (forward Euler, standard form) configurations; and the peers on the same data: the
 //! generic `Ekf` on the same model (no safeguards, no tracking) and the flux observer + PLL.
 //!
-//! Run: `cargo bench -p benches --bench ekf_step`. Target (issue 2): <= 30 ns per step in f64.
+//! Run: `cargo bench -p benches --bench ekf_step`. Target: <= 30 ns per step in f64 (not met: docs/performance.md).
 use std::hint::black_box;
 
 use benches::samples;

@@ -336,7 +336,7 @@ fn dead_time_setting_reaches_foc() {
 ///
 /// With the dead time compensated, the sensor errors and the ripple are what is left: about
 /// twice the default's observer error and speed ripple. The start (`foc::startup`'s kick with
-/// its flux detectors, issue 14 item 1) turns the rotor 1.41 % of rated speed backwards
+/// its flux detectors) turns the rotor 1.41 % of rated speed backwards
 /// here: the Coulomb friction (and the offsets' current) stops a rotor detected at the
 /// kick speed within its coast, twice, and the kick speed grows 1.5 times with each stop
 /// (the next coast launches from a 0.2 rad turn; the start's own grid, without friction,

@@ -1,5 +1,5 @@
 //! Convergence from any initial angle error with the rotor spinning and the speed estimate 0
-//! (design.md section 3, "theta+pi lock"): the three reference motors at +-10 %, +-50 % and
+//! (docs/design.md section 3, "theta+pi lock"): the three reference motors at +-10 %, +-50 % and
 //! +-100 % of their rated speed, initial angle errors every 30 deg (every 10 deg with
 //! `EKF_GRID_FULL=1`). A cell passes when the wrapped angle error is below 5 deg el. from some
 //! time before 50 ms to the end of the 100 ms run.
@@ -161,7 +161,7 @@ fn default_locks_from_any_angle_and_seed_does_not() {
 }
 
 /// The interior motors (active-flux model) at rated q current with the MTPA d current: the
-/// default passes every cell of the grid within 50 ms too (issue 13's goal; measured: all
+/// default passes every cell of the grid within 50 ms too (the goal; measured: all
 /// 144 cells lock within 25 ms: worst 23 ms industrial, 25 ms traction). At this load (the traction motor's `Lq i_q` exceeds
 /// `psi_f`) the convergence transients sometimes trip the branch check the wrong way
 /// (measured 5 of 144 cells); the check then undoes it within the same run (every cell still

@@ -33,7 +33,7 @@ fn steady(
 }
 
 /// Steady-state bias and RMS on both interior motors, at `w_e Ts` from 0.02 to 0.3 (Ts chosen
-/// per point), at rated q current with the MTPA d current. Goal (issue 13): bias < 0.1 deg.
+/// per point), at rated q current with the MTPA d current. Goal: bias < 0.1 deg.
 #[test]
 fn bias_below_a_tenth_of_a_degree_up_to_w_ts_0_3() {
     for (name, motor, _rated, iq_rated, noise) in interior_motors() {
@@ -293,7 +293,7 @@ fn bad_inductances_are_typed_errors() {
 }
 
 /// The salient flux baseline (active flux + PLL, firmware form) on the interior motors at
-/// half rated speed and rated current, next to the EKF (issue 13: EKF RMS <= 0.5x baseline).
+/// half rated speed and rated current, next to the EKF (goal: EKF RMS <= 0.5x baseline).
 #[test]
 fn salient_flux_baseline_and_ekf() {
     use ekf_core::{FluxObserver, FluxObserverConfig, FluxTiming};

@@ -1,7 +1,7 @@
 //! foc's damped start (module `foc::startup`: kick, coast and launch from the observer;
 //! damped I/f) on the test rig's servo (ideal bridge, 20 mA of current noise, 20 kHz), from
 //! twelve rotor angles, against the classic start (align, undamped I/f) on the same rig. The
-//! grid of issue 14 over three motors on the full simulator is pmsm-sim's
+//! grid of the damped start over three motors on the full simulator is pmsm-sim's
 //! `tests/startup.rs`; this is foc's own check of the same code.
 
 mod common;

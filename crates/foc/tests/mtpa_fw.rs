@@ -1,4 +1,4 @@
-//! MTPA and field weakening (issue 13, item 3): the MTPA law against a brute-force search,
+//! MTPA and field weakening: the MTPA law against a brute-force search,
 //! field weakening in closed loop on a salient dq plant (current and voltage limits held at
 //! twice base speed), surface paths unchanged, bad settings refused.
 //!

@@ -1,4 +1,4 @@
-"""The default Ekf on a third-party plant: motulator's trace of the 2.2 kW motor (design.md
+"""The default Ekf on a third-party plant: motulator's trace of the 2.2 kW motor (docs/design.md
 section 6) at 4 kHz, open-loop V/f ramp to 40 Hz then a 5 N m load step (fixture made by
 tests/data/motulator/gen_motulator_trace.py). Angle error after convergence, stated in the
 README and asserted here."""

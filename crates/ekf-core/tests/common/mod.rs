@@ -7,7 +7,7 @@
 use core::f64::consts::PI;
 use ekf_core::{Estimate, MotorParams, ObserverConfig, PmsmObserver, wrap_angle};
 
-/// The three reference motors of `design.md` section 6 as the tests use them: name, motor,
+/// The three reference motors of `docs/design.md` section 6 as the tests use them: name, motor,
 /// rated electrical speed (rad/s), current-sensor noise standard deviation (A).
 pub fn reference_motors() -> [(&'static str, MotorParams<f64>, f64, f64); 3] {
     [
@@ -65,7 +65,7 @@ pub fn motor_f32(m: &MotorParams<f64>) -> MotorParams<f32> {
 }
 
 /// The MTPA d-axis current for a current magnitude `i` (A) of a motor with `Lq > Ld`
-/// (`design.md` section 7); 0 for a surface or inversely salient motor.
+/// (`docs/design.md` section 7); 0 for a surface or inversely salient motor.
 pub fn mtpa_id(m: &MotorParams<f64>, i: f64) -> f64 {
     let dl = m.lq_h - m.ld_h;
     if dl <= 0.0 {
@@ -133,7 +133,7 @@ pub fn simulate(sc: &Scenario) -> Trace {
     tr
 }
 
-/// The salient plant: the rotor-frame equations (`design.md` section 7)
+/// The salient plant: the rotor-frame equations (`docs/design.md` section 7)
 ///
 /// ```text
 /// Ld di_d/dt = u_d - Rs i_d + w Lq i_q,    Lq di_q/dt = u_q - Rs i_q - w (Ld i_d + psi_f)
