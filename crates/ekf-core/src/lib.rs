@@ -15,6 +15,7 @@ pub mod fluxmap;
 pub mod motor;
 pub mod noise;
 pub mod observer;
+pub mod saturated;
 pub mod saturation;
 mod structured;
 #[cfg(feature = "testing")]
