@@ -46,6 +46,10 @@ pub trait Float: nalgebra::RealField + Copy {
     /// `f64` on a single-precision FPU), [`trig::sin_cos_f64`] for `f64` (inline, within 1 ulp
     /// like the standard library's call, and the same with and without `std`).
     fn sin_cos_angle(self) -> (Self, Self);
+
+    /// `self` truncated toward zero to an index, saturating (`0` for NaN and negatives): a
+    /// cast in this precision (no conversion through `f64` on the MCU).
+    fn trunc_index(self) -> usize;
 }
 
 impl Float for f32 {
@@ -53,12 +57,22 @@ impl Float for f32 {
     fn sin_cos_angle(self) -> (f32, f32) {
         trig::sin_cos_f32(self)
     }
+
+    #[inline]
+    fn trunc_index(self) -> usize {
+        self as usize
+    }
 }
 
 impl Float for f64 {
     #[inline(always)]
     fn sin_cos_angle(self) -> (f64, f64) {
         trig::sin_cos_f64(self)
+    }
+
+    #[inline]
+    fn trunc_index(self) -> usize {
+        self as usize
     }
 }
 

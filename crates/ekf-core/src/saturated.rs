@@ -31,6 +31,11 @@
 //! The transition Jacobian is that of the formulas above with `L` held (the map's second
 //! derivatives are left out, as an EKF leaves out what the first-order expansion drops).
 //!
+//! Cost on the Cortex-M4F (`f32`, 9 x 11 map; `map_observer_step` of
+//! `bash scripts/qemu-firmware.sh`): 2286 instructions per step on the generic [`Ekf`], of
+//! which the map's evaluation is 505; the constant-parameter salient step is 1143 on its
+//! hand-scheduled update.
+//!
 //! The noise covariances are those of the constant-parameter observer
 //! ([`NoiseCovariances::scaled`]) for the map's small-signal parameters
 //! ([`MapModel::small_signal`]).

@@ -47,6 +47,7 @@
 mod drive;
 mod identify;
 mod meter;
+mod saturated;
 mod synth;
 
 use core::hint::black_box;
@@ -300,6 +301,9 @@ fn run() -> Result<(), &'static str> {
         black_box(sc);
     }
     trig.report("sin_cos_f32");
+
+    // A flux map (saturating machines): its evaluation and the map observer's step.
+    saturated::run(&clock, &data)?;
 
     // The full controller tick (foc), sensorless closed loop on an on-target plant.
     drive::run(&clock)?;
