@@ -117,8 +117,8 @@ pub struct HfiConfig {
 }
 
 /// Default [`HfiConfig::fusion_sigma_rad`] with a short carrier period (module [`crate::hfi`],
-/// "Hand-over band"), rad el.: the middle of the values that passed the traction IPM's
-/// reversal on noise seeds 1-24.
+/// "Hand-over band"), rad el.: inside the range that passes the traction IPM's reversal
+/// over the noise seeds of `docs/hfi.md` (0.01 to 0.1 rad; off or 0.3 rad do not).
 pub const HFI_FUSION_SIGMA_RAD: f32 = 0.03;
 
 /// Peak angle error (rad el.) of the tracking loop after a step `a` of the load's acceleration,

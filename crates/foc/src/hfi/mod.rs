@@ -199,9 +199,9 @@
 //! | `pll_bandwidth_rad_s` `w_n` | `sqrt(a_max)`, within 5-50 Hz and at most `0.1 / ((N + 2) Ts)` | a full-torque load step costs at most [`LOAD_STEP_PEAK`]` a_max / w_n^2 = 0.27` rad (the triple-pole loop's peak, within its +-45 deg capture range); a tenth of the loop's delay (the period's estimate and the computation delay) |
 //! | with the noise known | as above if the predicted angle noise is within [`TARGET_ANGLE_RMS_RAD`] (1 deg); otherwise `V_h = 0.8 u_lim`, `w_n = sqrt(0.54 a_max)` and the shortest `N <= 8` that meets it | 1 deg RMS keeps the largest error within about 5 deg; `0.54 a_max` is what a load step allows at 0.5 rad |
 //! | `blend_low_rad_s`, `blend_high_rad_s` | `h / 2`, `h` | the observer takes over where the start-up would hand over to it |
-//! | `fusion_sigma_rad` | [`HFI_FUSION_SIGMA_RAD`] (0.03 rad), 0 with a long carrier period | the middle of the values that pass the traction IPM's reversal over noise seeds; a long period makes HFI the weak side at the band's top |
+//! | `fusion_sigma_rad` | [`HFI_FUSION_SIGMA_RAD`] (0.03 rad), 0 with a long carrier period | inside the range that passes the traction IPM's reversal over noise seeds (`docs/hfi.md`); a long period makes HFI the weak side at the band's top |
 //! | observer's `psi_f`/`Rs` tracking | frozen below [`HFI_TRACKING_SPEED_FACTOR`]` = 2` times `blend_high` (`Foc::enable_hfi`; `disable_hfi` restores it) | a flux estimate let loose at a few % of rated speed collapses within milliseconds and loses the reversal by pi |
-//! | polarity | `I_p = 0.8 I_lim`, 20 ms pulses after 60 ms of settling | enough saturation for a contrast of several percent; the loop settles in a few of its time constants |
+//! | polarity | `I_p = 0.8 I_lim`, 20 ms pulses after 60 ms of settling | the deeper the saturation, the clearer the contrast, with headroom under the limit for the carrier's ripple; the loop locks on the salient axis before the pulses, and each pulse's current has settled by its measured second half |
 
 mod blend;
 mod config;
