@@ -63,7 +63,8 @@ impl HfiTracker {
     }
 
     /// Restarts at angle `theta` (rad el.) and speed `omega` (rad/s el.), carrier history
-    /// cleared (the first demodulation comes three samples after the carrier is applied).
+    /// cleared (the first demodulation comes one carrier period of steps, `2 N + 1` samples,
+    /// after the carrier is applied).
     pub fn reset(&mut self, theta: f32, omega: f32) {
         self.pll.reset(theta, omega);
         self.carrier.clear();
@@ -110,8 +111,8 @@ impl HfiTracker {
         self.demod.response()
     }
 
-    /// A sample was missing or refused: the next three accepted samples rebuild the history
-    /// before the loop corrects again (the angle keeps integrating the speed).
+    /// A sample was missing or refused: the next `2 N + 1` accepted samples rebuild the
+    /// history before the loop corrects again (the angle keeps integrating the speed).
     pub fn skip(&mut self, accel_rad_s2: f32) {
         self.demod.skip();
         self.pll.predict(accel_rad_s2);
