@@ -16,7 +16,8 @@ $sim suite --out "$out/suite" >"$out/suite.stdout" 2>/dev/null
 $sim faults --out "$out/faults" >"$out/faults.stdout" 2>/dev/null
 # wall-clock and path fields vary between identical runs; MCAP files are compared
 # by their messages, schemas and metadata (the summary's clock fields left out)
-py=python3; [ -x .venv/bin/python ] && py=.venv/bin/python
+py=${PYTHON:-python3}; [ -x .venv/bin/python ] && py=.venv/bin/python
+"$py" -c "import mcap" 2>/dev/null || { echo "same-outputs.sh: needs the Python package mcap (set PYTHON=... or make .venv: bash scripts/test-all.sh)" >&2; exit 1; }
 $py - "$out" <<'PY'
 import hashlib, json, pathlib, re, sys
 root = pathlib.Path(sys.argv[1])
