@@ -20,14 +20,15 @@
 //! | [`IdentifyStep::Offsets`] | current-sensor offsets | PWM off, mean of the phase currents |
 //! | [`IdentifyStep::Probe`] | wiring and a rough inductance | bipolar voltage pulses along the three phase axes, doubling the voltage (then the pulse length) until one axis reaches 40 % of the test current; an axis that stays dead is an open phase, all three: no motor. `L ~ U t / di` sizes the current loop |
 //! | [`IdentifyStep::Align`] | rotor to a known angle | test current at 90 deg, then at 0 deg (the phase-a axis), so that a rotor at any angle (also 180 deg away) is pulled in; the q voltage is left at zero, so the swinging rotor's EMF drives a braking current (electrical damping) |
-//! | [`IdentifyStep::Resistance`] | `Rs`, inverter voltage error | DC current along the aligned d axis at 50 % and 100 % of the test current: `Rs = dU / dI`; the dead-time voltage (the same at both levels, the phase currents keep their signs) cancels and is reported as `U1 - Rs I1` |
+//! | [`IdentifyStep::Resistance`] | `Rs`, inverter voltage error | DC current along the aligned d axis at 50 % and 100 % of the test current: `Rs = dU / dI`; the dead-time voltage (the same at both levels, the phase currents keep their signs) cancels and is reported as `U(I_t) - Rs I_t` |
 //! | [`IdentifyStep::InductanceD`] | `Ld` | the DC voltage held, plus a sinusoidal voltage along d; the current's response at the injection frequency, demodulated over whole periods, fitted to the exact zero-order-hold model of the RL circuit with the computation delay, `i[k+1] = a i[k] + b u[k-d]`: `L = Ts (1 - a) / (b (-ln a))` |
 //! | [`IdentifyStep::InductanceQ`] | `Lq` | the same along q (the DC d current holds the rotor); at two frequencies `w` and `w/2`, so that the rotor's small oscillation (an apparent `-K/w^2` in `L`) is extrapolated away: `Lq = (4 L(w) - L(w/2)) / 3` |
 //! | [`IdentifyStep::Spin`] | `psi_f` | I/f: the test current along a frame that turns with a jerk-limited ramp to `spin_speed_rad_s`; at constant speed the mean frame voltage gives the active-flux EMF `E = u - (Rs + j w Lq) i` (dead-time voltage removed), `|E| = w (psi_f + (Ld - Lq) i_d)`, its angle the load angle and so `i_d`; `w` is the rotor's mean speed over the window, the frame's minus the drift of the load angle (the rotor swings about the frame) |
 //! | [`IdentifyStep::Inertia`] | `J` (optional) | the frame accelerates to 1.4 x the spin speed and back at the same rate; every tick gives the rotor angle (frame minus load angle) and the torque (from the load angle and the current); a least-squares fit of the rotor's trajectory to `J theta'' = T - B theta' - T_c`, integrated twice, with the initial angle and speed and the friction as nuisance parameters, gives `J`. The I/f frame holds the rotor like a spring; with little friction the rotor swings about it for seconds, and the fit models that swing instead of averaging it (friction is fitted but not reported) |
 //!
-//! The standstill steps take about 0.8 s with the default durations, the spin about 1.2 s
-//! (1.7 s with the inertia); the measured accuracy is in `docs/identify.md`.
+//! With the default durations the standstill steps take about 0.9 s; a spin to 25 % of rated
+//! speed in 0.4 s takes about 0.8 s more, the inertia move 0.4 s. The measured accuracy and
+//! the cost per tick are in `docs/identify.md`.
 //!
 //! # The equations of each step
 //!
@@ -52,8 +53,8 @@
 //!
 //! **Inductance.** On top of `U2` (d), `u_x[k] = U_hf cos(w k)` along the axis, `w = 2 pi /
 //! N`, `N` = [`IdentifyConfig::hf_period_ticks`]. A first part (2 periods settling, 4
-//! demodulated) sets `U_hf` for a current amplitude of `0.3 I_t` (started from `|Rs + j w
-//! L_max / Ts|`), within `0.9 U_lim - |U2|`. After settling `3 L_max / Rs` (between 2
+//! demodulated) sets `U_hf` for a current amplitude of `0.3 I_t` (started from `0.3 I_t (Rs +
+//! w L_max)`, `w` in rad/s), within `0.9 U_lim - |U2|`. After settling `3 L_max / Rs` (between 2
 //! periods and 50 ms, in whole periods), the axis current and voltage are demodulated over
 //! `inductance_time_s` (whole periods): `H = I / U`. The model `H = b z^-d / (z - a)` is
 //! solved for real `a`, `b` from `a H + b z^-d = H z`, and `L = Ts (1 - a) / (b (-ln a))`
@@ -87,19 +88,19 @@
 //!
 //! | field | default | why |
 //! |---|---|---|
-//! | `test_current_a` | given; about half the rated current | large against the sensor noise and the dead-time current band, small enough to heat nothing in 2 s |
+//! | `test_current_a` | given; about half the rated current (pmsm-sim: half the current limit) | every level scales with it: align and resistance `I_t` and `I_t / 2`, injection amplitude `0.3 I_t`, spin current |
 //! | `delay` | `ComputationDelay::OnePeriod` | real hardware; the inductance model and the spin's voltage rotation use it |
-//! | `over_current_a` | `2.5 I_t` | above the transients of the current loops (the validation asks at least `1.5 I_t`) |
+//! | `over_current_a` | `2.5 I_t` | room for the loops' overshoot and the injection's peak above `I_t` (the validation asks at least `1.5 I_t`) |
 //! | `u_dc_min_v`, `u_dc_max_v` | `0.5 U`, `1.25 U` | |
-//! | `max_modulation` | 0.95 | headroom for the loops at the circle's edge |
-//! | `current_bw_rad_s` | `2 pi 300` | with `Kp` from the probe's smallest `L`, well inside `0.5 / Ts` (the validation's bound) on any PWM of 5 kHz or more |
+//! | `max_modulation` | 0.95 | 5 % of the circle left to the current loops' transients |
+//! | `current_bw_rad_s` | `2 pi 300` | the loops hold DC or slowly turning currents only; within the validation's bound `bw Ts <= 0.5` from a 3.8 kHz PWM up |
 //! | `hf_frequency_hz` | 1 kHz (10 ticks at 10 kHz) | `w L` well above `Rs` on the reference motors (servo: 53 ohm against 2.9 ohm), so `a` is well away from 1 and 0; a whole number of ticks per period (at least 4) |
 //! | `align_time_s` | 0.3 s | two halves of 0.15 s: the rotor swings in and is braked |
 //! | `resistance_time_s` | 0.13 s per level | 30 % settling (the d loop), 70 % averaging the sensor noise |
 //! | `inductance_time_s` | 0.08 s | 80 periods at 1 kHz |
 //! | `spin_speed_rad_s`, `spin_accel_rad_s2` | 0 (no spin: `psi_f` and `J` not measured) | the motor may not be free to turn; the caller decides (pmsm-sim: 25 % of rated speed, reached in 0.4 s) |
 //! | `spin_current_a` | `I_t` | the rotor follows the frame with a load angle well below 90 deg |
-//! | `spin_settle_time_s`, `spin_measure_time_s` | 0.15 s, 0.2 s | the swing after the ramp decays; the window spans several of its periods |
+//! | `spin_settle_time_s`, `spin_measure_time_s` | 0.15 s, 0.2 s | the ramp's end transient decays; the rotor's remaining swing about the frame is corrected by the load angle's drift over the window (`w_rotor`) |
 //! | `measure_inertia` | `false` | needs the spin |
 //! | `pole_pairs` | 1 | only `J` (mechanical) uses it |
 //!
@@ -124,8 +125,9 @@
 //! [`Identifier`] holds the shared context (settings, frame, results so far) and the state of
 //! the step in progress, an enum whose variants carry their own state: one file per step
 //! (`offsets`, `probe`, `align`, `resistance`, `inductance`, `spin`, `inertia`; the I/f drive
-//! of the last two in `if_drive`). Each step's `step` returns the voltage and the state that
-//! follows it; [`Identifier::tick`] checks the inputs, picks the step and modulates.
+//! of the last two in `if_drive`). Each step's `step` returns the voltage and whether the step
+//! is over, its `next` the state that follows; [`Identifier::tick`] checks the inputs, picks
+//! the step and modulates.
 
 use crate::controller::{PhaseCurrents, TickInput};
 use crate::hal::{CurrentSense, Inverter, write_bridge};
