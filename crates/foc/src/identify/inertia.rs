@@ -110,9 +110,9 @@ impl Inertia {
 /// by averaging the torque over segments shorter than its period). The load-angle noise
 /// enters only `y` (the fitted variable) and, integrated, `S` and `Y`.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct InertiaFit {
+struct InertiaFit {
     /// Frame speed at the start, rad/s electrical.
-    pub(super) w0: f32,
+    w0: f32,
     /// Ticks in the window.
     len: u32,
     /// Ticks so far.

@@ -11,13 +11,13 @@ use super::context::{Context, Tick};
 use super::outcome::IdentifyError;
 
 /// The pulse voltage doubles from this fraction of the limit.
-pub(super) const PROBE_START: f32 = 1.0 / 512.0;
+const PROBE_START: f32 = 1.0 / 512.0;
 /// The probe stops when an axis reaches this fraction of the test current.
-pub(super) const PROBE_TARGET: f32 = 0.4;
+const PROBE_TARGET: f32 = 0.4;
 /// Longest probe pulse, ticks.
 pub(super) const PROBE_MAX_M: u32 = 64;
 /// Repetitions of the deciding probe level.
-pub(super) const PROBE_REPS: u32 = 4;
+const PROBE_REPS: u32 = 4;
 
 /// The pulse in progress and what the pulses so far found.
 #[derive(Clone, Copy, Debug)]
