@@ -159,6 +159,44 @@ pub struct StartupConfig {
     pub kick_speed_ratio: f32,
 }
 
+impl StartupConfig {
+    /// The default hand-over speed, rad/s el.: `max(2 Rs I_f / psi_f, 0.02 max_speed)`, the
+    /// speed whose back-EMF is twice the resistive drop of the I/f current `if_current_a`
+    /// (observable, and an `Rs` error biases the angle little), at least 2 % of
+    /// `max_speed_rad_s` (module docs, "Defaults and where they come from").
+    pub fn default_handover_speed_rad_s(
+        motor: &MotorParams<f32>,
+        if_current_a: f32,
+        max_speed_rad_s: f32,
+    ) -> f32 {
+        (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s)
+    }
+
+    /// The default I/f acceleration, rad/s^2 el.: the hand-over speed reached in
+    /// [`DEFAULT_RAMP_TIME_S`](Self::DEFAULT_RAMP_TIME_S) (0.5 s).
+    pub fn default_accel_rad_s2(handover_speed_rad_s: f32) -> f32 {
+        handover_speed_rad_s / Self::DEFAULT_RAMP_TIME_S
+    }
+
+    /// Time the default I/f ramp takes from standstill to the hand-over speed, s.
+    pub const DEFAULT_RAMP_TIME_S: f32 = 0.5;
+
+    /// Kick speed as a fraction of the rated speed when the kick is on (0.6 %: a fifth of
+    /// a hand-over at 3 % of rated speed), whatever the hand-over speed.
+    pub const KICK_SPEED_OF_RATED: f64 = 0.006;
+
+    /// The kick speed ratio that puts the kick at [`KICK_SPEED_OF_RATED`](Self::KICK_SPEED_OF_RATED)
+    /// of the rated speed `rated_speed_e_rad_s` (rad/s el.) for the hand-over speed
+    /// `handover_speed_rad_s`: `min(0.006 w_rated / w_handover, 1)`. (`FocConfig::new`
+    /// leaves the kick off: it does not know the rated speed.) A host-side helper: computed
+    /// in `f64` (the simulator's rated speed), not meant for the MCU's tick path.
+    pub fn kick_speed_ratio_for(rated_speed_e_rad_s: f64, handover_speed_rad_s: f32) -> f32 {
+        let kick =
+            Self::KICK_SPEED_OF_RATED * rated_speed_e_rad_s / f64::from(handover_speed_rad_s);
+        kick.min(1.0) as f32
+    }
+}
+
 /// Observer health monitoring (module [`health`](crate::health)).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HealthConfig {
@@ -374,7 +412,7 @@ impl FocConfig {
         let if_current_a = 0.5 * current_limit_a;
         let max_speed_rad_s = 0.95 * u_dc_nominal_v * FRAC_1_SQRT_3 / motor.psi_f_wb;
         let handover =
-            (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s);
+            StartupConfig::default_handover_speed_rad_s(&motor, if_current_a, max_speed_rad_s);
         let current_bw_rad_s = 0.1 * PI / ts_s;
         let kt = torque_constant(&motor);
         let speed_divider = round_u16(0.5e-3 / ts_s).max(1);
@@ -411,7 +449,7 @@ impl FocConfig {
                 align_time_s: 0.2,
                 align_angle_rad: 0.0,
                 if_current_a,
-                accel_rad_s2: handover / 0.5,
+                accel_rad_s2: StartupConfig::default_accel_rad_s2(handover),
                 handover_speed_rad_s: handover,
                 blend_time_s: 20e-3,
                 exit_speed_ratio: 0.7,
