@@ -13,7 +13,7 @@
 //! ```
 //!
 //! Each state is a type that carries its own variables, in a file of its own, with its own
-//! step function; [`Sequencer`]'s dispatcher runs the health monitor, calls the step of the
+//! step function; `Sequencer`'s dispatcher runs the health monitor, calls the step of the
 //! state it is in and builds the tick's plan from the state it ends in:
 //!
 //! | state ([`State`]) | type | file | what it does |
@@ -39,50 +39,50 @@
 //!
 //! 1. **Kick.** The current rises at most at `r = w_k / (2 c d^2)` per second, with
 //!    `w_k = kick_speed_ratio * handover_speed` the speed taken as motion,
-//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere and `d` ([`KICK_DELAY_S`], 6 ms)
+//!    `c = 1.5 p^2 psi_f / J` the acceleration per ampere and `d` (`KICK_DELAY_S`, 6 ms)
 //!    the detection's delay: from rest the speed grows as `c r t^2 / 2`, seen `d` late it has
 //!    gained `c r t d`, which this `r` keeps below `w_k`. Motion is any of:
 //!    - the observer's speed, low-pass filtered (1 ms; 4 ms and its `Tracking` status on an
-//!      interior motor), above `w_k` for [`MOVING_TICKS`] ticks; on a surface motor the
-//!      threshold is at least [`KICK_NOISE_K`] times the RMS of that speed over the kick's
+//!      interior motor), above `w_k` for `MOVING_TICKS` ticks; on a surface motor the
+//!      threshold is at least `KICK_NOISE_K` times the RMS of that speed over the kick's
 //!      first 10 ms (rotor at rest, current small);
 //!    - (surface motors) the flux `x = int(u - R i) dt - L i` along the kick vector (`i` the
-//!      kick's current reference, from the moment it is [`KICK_FIT_BAND`] times the
-//!      dead-time compensation's linear band, after [`KICK_FIT_MIN_S`]): (a) its slope
+//!      kick's current reference, from the moment it is `KICK_FIT_BAND` times the
+//!      dead-time compensation's linear band, after `KICK_FIT_MIN_S`): (a) its slope
 //!      (two cascaded 1.5 ms low-pass filters) over `psi_f` at least `w_k`; (b) the matched
 //!      fit `x = c + A P(t)` per axis (`Q` the integral of the kick current, `P` that of
 //!      `Q`: a rotor at rest under a fixed vector turns as `P`) whose speed
-//!      `|A| Q / psi_f` is at least `w_k` with `|A|^2` at least [`KICK_FIT_CHI2`] times its
+//!      `|A| Q / psi_f` is at least `w_k` with `|A|^2` at least `KICK_FIT_CHI2` times its
 //!      variance. The fit reads the slow start of a rotor, the slope a rotor falling off the
 //!      dead point late and fast. After a false alarm (a timed-out coast) the rotor may be
 //!      crawling, and both flux detectors stay off until the next step.
-//! 2. **Coast.** The current is cut to a small vector (at most [`COAST_INJECTION`] of the
+//! 2. **Coast.** The current is cut to a small vector (at most `COAST_INJECTION` of the
 //!    alignment current, and small enough that its torque swings the speed by at most
-//!    [`COAST_RIPPLE`] of `w_k`) turning [`COAST_INJECTION_TURNS`] times per
-//!    [`EMF_BLOCK_S`] block: no net torque, and its voltage (resistive, inductive, dead
+//!    `COAST_RIPPLE` of `w_k`) turning `COAST_INJECTION_TURNS` times per
+//!    `EMF_BLOCK_S` block: no net torque, and its voltage (resistive, inductive, dead
 //!    time) averages out of each block, so the block mean of the loops' voltage is the
-//!    back-EMF `e = w psi_f j e^(j th)`. After [`COAST_SETTLE_S`] the sign of
+//!    back-EMF `e = w psi_f j e^(j th)`. After `COAST_SETTLE_S` the sign of
 //!    `e_first x e_last` gives the direction of rotation (the observer alone cannot tell
 //!    `(th, w)` from `(th + pi, -w)` at this speed). The coast ends once the back-EMF has
-//!    turned [`COAST_TURN_RAD`] from its first block (both blocks at least the back-EMF of
+//!    turned `COAST_TURN_RAD` from its first block (both blocks at least the back-EMF of
 //!    `w_k / 2`) and, on a surface motor, the speed of that turn and the mean speed of the
-//!    two blocks' magnitudes agree within [`COAST_SPEED_AGREEMENT`] (noise turns the block
+//!    two blocks' magnitudes agree within `COAST_SPEED_AGREEMENT` (noise turns the block
 //!    means of a slow rotor far faster than the rotor turns). No such turn within
-//!    [`COAST_S`] is a false alarm: the kick resumes. A back-EMF falling from at least half
+//!    `COAST_S` is a false alarm: the kick resumes. A back-EMF falling from at least half
 //!    that of `w_k` to below a quarter of it is a rotor that stopped (friction): the kick
-//!    resumes at once with the flux detectors on, `w_k` [`KICK_BOOST`] times larger (at
-//!    most [`KICK_BOOST_MAX`] times), and the next coast ends on [`COAST_TURN_STOPPED_RAD`].
+//!    resumes at once with the flux detectors on, `w_k` `KICK_BOOST` times larger (at
+//!    most `KICK_BOOST_MAX` times), and the next coast ends on `COAST_TURN_STOPPED_RAD`.
 //! 3. **Launch.** From the last block: the rotor's d axis 90 deg behind `e_last` in the
 //!    direction of rotation (advanced by half a block and the voltage's one-tick delay),
 //!    its speed `|e_last| / psi_f`; the observer is re-seeded there (sigma
-//!    [`LAUNCH_SIGMA`]). I/f starts with `gamma = th + 0.5 rad` ([`LAUNCH_LEAD_RAD`])
+//!    `LAUNCH_SIGMA`). I/f starts with `gamma = th + 0.5 rad` (`LAUNCH_LEAD_RAD`)
 //!    toward the commanded direction, the ramp at the rotor's speed when it turns the
 //!    commanded way and at zero otherwise (a backward-turning rotor is braked at once; the
 //!    ramp's first sign change then does not re-seed the observer).
 //!
 //! **Interior motors** (`Ld != Lq`) use a simpler form of these steps, on which they were
 //! measured to start: no coast current, the coast ends once the observer's integrated speed
-//! has turned 0.5 rad (false alarm after [`SALIENT_COAST_S`]), and the launch starts from
+//! has turned 0.5 rad (false alarm after `SALIENT_COAST_S`), and the launch starts from
 //! the observer's estimate (moved to the other branch when it lies more than 90 deg from
 //! the back-EMF's angle), with a 1 rad lead and the ramp at its speed.
 //!
