@@ -5,8 +5,8 @@
 //!
 //! The speed loop outputs a **torque command** expressed as the surface-equivalent current
 //! `i_T = T* / k_t` (ampere, `k_t = 1.5 p psi_f`): on a surface motor `i_T` is the q current
-//! reference itself, exactly as before salient motors were supported, so surface drives are
-//! unchanged bit for bit. On a salient motor the torque
+//! reference itself (no conversion, no extra arithmetic on the surface path). On a salient
+//! motor the torque
 //!
 //! ```text
 //! T = 1.5 p (psi_f i_q + (Ld - Lq) i_d i_q) = 1.5 p (psi_f - a i_d) i_q,   a = Lq - Ld

@@ -32,14 +32,14 @@
 //! | `dead_time_s` | `0` (compensation off) | a property of the bridge: set it to the gate driver's dead time |
 //! | `dead_time_band_a` | `None`: `0.02 current_limit_a` at [`Foc::new`](crate::Foc::new) | the smooth sign's linear band (module [`deadtime`](crate::deadtime)): in pmsm-sim 1 and 2 % do alike, 5 % doubles the residual observer error; on hardware about half the current ripple |
 //! | `startup.if_current_a`, `align_current_a` | `0.5 current_limit_a` | |
-//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
-//! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` | hand-over speed in half a second |
+//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` ([`StartupConfig::default_handover_speed_rad_s`]) | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
+//! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` ([`StartupConfig::default_accel_rad_s2`]) | hand-over speed in half a second |
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
 //! | `startup.exit_speed_ratio` | 0.7 | closed loop is left below 0.7 of the hand-over speed (hysteresis): a stop, a slow command |
 //! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
-//! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended) | as `damping_ratio` |
+//! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended; [`StartupConfig::kick_speed_ratio_for`] puts the kick at 0.6 % of a known rated speed) | as `damping_ratio` |
 //! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | its status includes the innovation consistency check (the health monitor's `Uncertain` loss reason); the salient kick detection reads the covariance's part (`Estimate::angle_tracked`) |
 //! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
 //! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
@@ -600,6 +600,26 @@ fn torque_constant(motor: &MotorParams<f32>) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn startup_defaults_come_from_the_startup_functions() {
+        let (m, ts, u) = (MotorParams::servo(), 100e-6, 300.0);
+        let c = FocConfig::new(m, ts, u);
+        let h = StartupConfig::default_handover_speed_rad_s(
+            &m,
+            c.startup.if_current_a,
+            c.max_speed_rad_s,
+        );
+        assert_eq!(c.startup.handover_speed_rad_s.to_bits(), h.to_bits());
+        assert_eq!(
+            c.startup.accel_rad_s2.to_bits(),
+            StartupConfig::default_accel_rad_s2(h).to_bits()
+        );
+        // 0.6 % of the rated speed, at most the hand-over speed.
+        let r = StartupConfig::kick_speed_ratio_for(f64::from(10.0 * h), h);
+        assert!((r - 0.06).abs() < 1e-6);
+        assert_eq!(StartupConfig::kick_speed_ratio_for(1e9, h), 1.0);
+    }
 
     #[test]
     fn defaults_validate_on_reference_motors() {

@@ -93,7 +93,7 @@
 //!
 //! The speed loop's output is a torque command, `i_T = T* / k_t` (module [`crate::mtpa`]).
 //! A surface motor without field weakening takes it as the q reference unchanged (the plan's
-//! references go to the loops as they are, the surface behaviour before salient motors).
+//! references go to the loops as they are).
 //! Otherwise (`shaped_refs`): `i_d = i_d,plan + i_d,mtpa + i_fw` (`i_d,mtpa`: one step of
 //! the MTPA iteration for `i_T` from the last tick's MTPA point), limited to
 //! `[-max_negative_id, current_limit_a]`; `i_q = psi_f i_T / (psi_f + (Ld - Lq) i_d)`;

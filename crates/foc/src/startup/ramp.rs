@@ -3,12 +3,12 @@
 //!
 //! 1. (start from standstill only) the damping: `phi = clamp(-K (w_hat - w_ol), +-phi_max)`,
 //!    `gamma += phi - phi_last` with `K = 2 zeta / w_n`;
-//! 2. at the hand-over speed (`|target| >= w_h`, `w_ol` toward the target, `|w_ol| >=
+//! 2. a theta+pi lock reported as a loss: a re-acquisition (observer re-seeded at the
+//!    vector, sigma 45 deg); more than `max_reacquire` in a row trip `ObserverLost`;
+//! 3. else at the hand-over speed (`|target| >= w_h`, `w_ol` toward the target, `|w_ol| >=
 //!    0.999 w_h`): the hand-over once the health monitor reports the observer ready; after
 //!    `acquire_timeout_s` there without it a stall (`|w_avg| < |w_ol| / 4`) or a
-//!    re-acquisition (observer re-seeded at the vector, sigma 45 deg);
-//! 3. a theta+pi lock reported as a loss: a re-acquisition; more than `max_reacquire` in a
-//!    row trip `ObserverLost`;
+//!    re-acquisition;
 //! 4. a stop is complete at `w_ol = 0`;
 //! 5. after the plan takes this tick's frame, the ramp advances: `gamma += w_ol Ts`,
 //!    `w_ol` slews toward `clamp(target, +-w_h)` at `accel_rad_s2`; a sign change of
