@@ -58,7 +58,8 @@
 //! [`run_period`] takes the two sides as separate values; [`run_period_on`] one value that
 //! implements both traits.
 
-use crate::controller::{Foc, PhaseCurrents, RotorSensor, TickInput, TickOutput};
+use crate::controller::Foc;
+use crate::io::{PhaseCurrents, RotorSensor, TickInput, TickOutput};
 
 /// The power stage: three half-bridges driven by a PWM timer.
 pub trait Inverter {

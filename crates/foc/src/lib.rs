@@ -12,6 +12,7 @@ pub mod hal;
 pub mod health;
 pub mod hfi;
 pub mod identify;
+pub mod io;
 pub mod mtpa;
 pub mod pi;
 pub mod startup;
@@ -24,9 +25,7 @@ pub use config::{
     ComputationDelay, ConfigError, Field, FieldWeakeningConfig, FocConfig, HealthConfig, Mode,
     ObserverLossPolicy, Reversal, SampleCheckConfig, StartupConfig,
 };
-pub use controller::{
-    CommandError, Foc, PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput,
-};
+pub use controller::{CommandError, Foc};
 pub use deadtime::DeadTimeCompensation;
 pub use fault::{Fault, FaultInfo};
 pub use fieldweak::FieldWeakening;
@@ -38,6 +37,7 @@ pub use identify::{
     Identified, Identifier, IdentifyConfig, IdentifyConfigError, IdentifyError, IdentifyFailure,
     IdentifyOutput, IdentifyStep, identify_period,
 };
+pub use io::{PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput};
 pub use mtpa::Mtpa;
 pub use pi::{Pi, PiGains};
 pub use startup::State;

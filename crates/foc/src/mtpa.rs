@@ -5,8 +5,8 @@
 //!
 //! The speed loop outputs a **torque command** expressed as the surface-equivalent current
 //! `i_T = T* / k_t` (ampere, `k_t = 1.5 p psi_f`): on a surface motor `i_T` is the q current
-//! reference itself, exactly as before salient motors were supported, so surface drives are
-//! unchanged bit for bit. On a salient motor the torque
+//! reference itself (no conversion, no extra arithmetic on the surface path). On a salient
+//! motor the torque
 //!
 //! ```text
 //! T = 1.5 p (psi_f i_q + (Ld - Lq) i_d i_q) = 1.5 p (psi_f - a i_d) i_q,   a = Lq - Ld
@@ -31,7 +31,7 @@
 //! i_d = (psi_f - sqrt(psi_f^2 + 4 a^2 i_q^2)) / (2 a) = -2 a i_q^2 / (psi_f + sqrt(psi_f^2 + 4 a^2 i_q^2))
 //! ```
 //!
-//! (design.md section 7; the second line is the same curve parameterized by `i_q`, from
+//! (docs/design.md section 7; the second line is the same curve parameterized by `i_q`, from
 //! `psi_f i_d + a (i_d^2 - i_q^2) = 0`). The right-hand forms are the rationalized ones used
 //! here: exact for `a -> 0` (surface: `i_d = 0`), no cancellation, and the same formula
 //! gives the positive `i_d` of an inversely salient motor (`a < 0`).
@@ -97,7 +97,7 @@ impl Mtpa {
         -2.0 * self.a * q2 / (self.psi + sqrt(self.psi2 + self.four_a2 * q2))
     }
 
-    /// MTPA d current for the current magnitude `i_s` (issue 13's form), A.
+    /// MTPA d current for the current magnitude `i_s`, A.
     pub fn id_for_magnitude(&self, i_s: f32) -> f32 {
         let s2 = i_s * i_s;
         -2.0 * self.a * s2 / (self.psi + sqrt(self.psi2 + 2.0 * self.four_a2 * s2))

@@ -32,14 +32,14 @@
 //! | `dead_time_s` | `0` (compensation off) | a property of the bridge: set it to the gate driver's dead time |
 //! | `dead_time_band_a` | `None`: `0.02 current_limit_a` at [`Foc::new`](crate::Foc::new) | the smooth sign's linear band (module [`deadtime`](crate::deadtime)): in pmsm-sim 1 and 2 % do alike, 5 % doubles the residual observer error; on hardware about half the current ripple |
 //! | `startup.if_current_a`, `align_current_a` | `0.5 current_limit_a` | |
-//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
-//! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` | hand-over speed in half a second |
+//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` ([`StartupConfig::default_handover_speed_rad_s`]) | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
+//! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` ([`StartupConfig::default_accel_rad_s2`]) | hand-over speed in half a second |
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
 //! | `startup.exit_speed_ratio` | 0.7 | closed loop is left below 0.7 of the hand-over speed (hysteresis): a stop, a slow command |
 //! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
-//! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended) | as `damping_ratio` |
+//! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended; [`StartupConfig::kick_speed_ratio_for`] puts the kick at 0.6 % of a known rated speed) | as `damping_ratio` |
 //! | `observer` | [`ObserverConfig::new`] for the motor and `Ts` | its status includes the innovation consistency check (the health monitor's `Uncertain` loss reason); the salient kick detection reads the covariance's part (`Estimate::angle_tracked`) |
 //! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
 //! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
@@ -49,9 +49,12 @@
 //! Health thresholds: [`HealthConfig::default`].
 
 use core::f32::consts::PI;
-use core::fmt;
 
 use ekf_core::{MotorParams, ObserverConfig};
+
+mod validate;
+
+pub use validate::{ConfigError, Field};
 
 use crate::pi::PiGains;
 use crate::transforms::FRAC_1_SQRT_3;
@@ -157,6 +160,44 @@ pub struct StartupConfig {
     /// off (the default: the alignment holds its current for `align_time_s`); 0.2 is the
     /// recommended value. In `[0, 1]`.
     pub kick_speed_ratio: f32,
+}
+
+impl StartupConfig {
+    /// The default hand-over speed, rad/s el.: `max(2 Rs I_f / psi_f, 0.02 max_speed)`, the
+    /// speed whose back-EMF is twice the resistive drop of the I/f current `if_current_a`
+    /// (observable, and an `Rs` error biases the angle little), at least 2 % of
+    /// `max_speed_rad_s` (module docs, "Defaults and where they come from").
+    pub fn default_handover_speed_rad_s(
+        motor: &MotorParams<f32>,
+        if_current_a: f32,
+        max_speed_rad_s: f32,
+    ) -> f32 {
+        (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s)
+    }
+
+    /// The default I/f acceleration, rad/s^2 el.: the hand-over speed reached in
+    /// [`DEFAULT_RAMP_TIME_S`](Self::DEFAULT_RAMP_TIME_S) (0.5 s).
+    pub fn default_accel_rad_s2(handover_speed_rad_s: f32) -> f32 {
+        handover_speed_rad_s / Self::DEFAULT_RAMP_TIME_S
+    }
+
+    /// Time the default I/f ramp takes from standstill to the hand-over speed, s.
+    pub const DEFAULT_RAMP_TIME_S: f32 = 0.5;
+
+    /// Kick speed as a fraction of the rated speed when the kick is on (0.6 %: a fifth of
+    /// a hand-over at 3 % of rated speed), whatever the hand-over speed.
+    pub const KICK_SPEED_OF_RATED: f64 = 0.006;
+
+    /// The kick speed ratio that puts the kick at [`KICK_SPEED_OF_RATED`](Self::KICK_SPEED_OF_RATED)
+    /// of the rated speed `rated_speed_e_rad_s` (rad/s el.) for the hand-over speed
+    /// `handover_speed_rad_s`: `min(0.006 w_rated / w_handover, 1)`. (`FocConfig::new`
+    /// leaves the kick off: it does not know the rated speed.) A host-side helper: computed
+    /// in `f64` (the simulator's rated speed), not meant for the MCU's tick path.
+    pub fn kick_speed_ratio_for(rated_speed_e_rad_s: f64, handover_speed_rad_s: f32) -> f32 {
+        let kick =
+            Self::KICK_SPEED_OF_RATED * rated_speed_e_rad_s / f64::from(handover_speed_rad_s);
+        kick.min(1.0) as f32
+    }
 }
 
 /// Observer health monitoring (module [`health`](crate::health)).
@@ -374,7 +415,7 @@ impl FocConfig {
         let if_current_a = 0.5 * current_limit_a;
         let max_speed_rad_s = 0.95 * u_dc_nominal_v * FRAC_1_SQRT_3 / motor.psi_f_wb;
         let handover =
-            (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s);
+            StartupConfig::default_handover_speed_rad_s(&motor, if_current_a, max_speed_rad_s);
         let current_bw_rad_s = 0.1 * PI / ts_s;
         let kt = torque_constant(&motor);
         let speed_divider = round_u16(0.5e-3 / ts_s).max(1);
@@ -411,7 +452,7 @@ impl FocConfig {
                 align_time_s: 0.2,
                 align_angle_rad: 0.0,
                 if_current_a,
-                accel_rad_s2: handover / 0.5,
+                accel_rad_s2: StartupConfig::default_accel_rad_s2(handover),
                 handover_speed_rad_s: handover,
                 blend_time_s: 20e-3,
                 exit_speed_ratio: 0.7,
@@ -545,127 +586,6 @@ impl FocConfig {
             }
         })
     }
-
-    /// Checks every field (no panics; the first problem found is returned).
-    pub fn validate(&self) -> Result<(), ConfigError> {
-        use Field as F;
-        self.motor.validate().map_err(ConfigError::Observer)?;
-        self.observer.validate().map_err(ConfigError::Observer)?;
-        if self.observer.motor != self.motor || self.observer.ts_s != self.ts_s {
-            return Err(ConfigError::ObserverMismatch);
-        }
-        positive(self.ts_s, F::Ts)?;
-        in_range(self.angle_advance_periods, 0.0, 4.0, F::AngleAdvance)?;
-        positive(self.current_bw_rad_s, F::CurrentBandwidth)?;
-        if !(self.current_pi_gains().is_valid() && self.current_pi_gains_d().is_valid()) {
-            return Err(ConfigError::OutOfRange(F::CurrentGains));
-        }
-        positive(self.speed_bw_rad_s, F::SpeedBandwidth)?;
-        positive(self.inertia_kg_m2, F::Inertia)?;
-        if !self.speed_pi_gains().is_valid() {
-            return Err(ConfigError::OutOfRange(F::SpeedGains));
-        }
-        if self.speed_divider == 0 {
-            return Err(ConfigError::NotPositive(F::SpeedDivider));
-        }
-        positive(self.current_limit_a, F::CurrentLimit)?;
-        positive(self.over_current_a, F::OverCurrent)?;
-        if self.over_current_a <= self.current_limit_a {
-            return Err(ConfigError::OutOfRange(F::OverCurrent));
-        }
-        positive(self.u_dc_min_v, F::UdcMin)?;
-        positive(self.u_dc_max_v, F::UdcMax)?;
-        if self.u_dc_max_v <= self.u_dc_min_v {
-            return Err(ConfigError::OutOfRange(F::UdcMax));
-        }
-        positive(self.max_speed_rad_s, F::MaxSpeed)?;
-        positive(self.speed_slew_rad_s2, F::SpeedSlew)?;
-        in_range(
-            self.max_modulation,
-            1e-3,
-            2.0 * FRAC_1_SQRT_3,
-            F::MaxModulation,
-        )?;
-        in_range(self.dead_time_s, 0.0, f32::MAX, F::DeadTime)?;
-        if self.dead_time_s >= 0.5 * self.ts_s {
-            return Err(ConfigError::OutOfRange(F::DeadTime));
-        }
-        positive(self.dead_time_band(), F::DeadTimeBand)?;
-        let fw = &self.field_weakening;
-        in_range(fw.voltage_margin, 0.5, 1.0, F::FwVoltageMargin)?;
-        positive(fw.bandwidth_rad_s, F::FwBandwidth)?;
-        if fw.bandwidth_rad_s > self.current_bw_rad_s {
-            return Err(ConfigError::OutOfRange(F::FwBandwidth));
-        }
-        positive(self.max_negative_id(), F::FwMaxNegativeId)?;
-        if self.max_negative_id() > self.current_limit_a {
-            return Err(ConfigError::OutOfRange(F::FwMaxNegativeId));
-        }
-        let s = &self.startup;
-        positive(s.align_current_a, F::AlignCurrent)?;
-        if s.align_current_a > self.current_limit_a {
-            return Err(ConfigError::OutOfRange(F::AlignCurrent));
-        }
-        in_range(s.align_time_s, 0.0, 60.0, F::AlignTime)?;
-        in_range(s.align_angle_rad, -2.0 * PI, 2.0 * PI, F::AlignAngle)?;
-        positive(s.if_current_a, F::IfCurrent)?;
-        if s.if_current_a > self.current_limit_a {
-            return Err(ConfigError::OutOfRange(F::IfCurrent));
-        }
-        positive(s.accel_rad_s2, F::Accel)?;
-        positive(s.handover_speed_rad_s, F::HandoverSpeed)?;
-        if s.handover_speed_rad_s >= self.max_speed_rad_s {
-            return Err(ConfigError::OutOfRange(F::HandoverSpeed));
-        }
-        in_range(s.blend_time_s, 0.0, 60.0, F::BlendTime)?;
-        in_range(s.exit_speed_ratio, 0.01, 0.99, F::ExitSpeedRatio)?;
-        positive(s.acquire_timeout_s, F::AcquireTimeout)?;
-        in_range(s.damping_ratio, 0.0, 5.0, F::DampingRatio)?;
-        in_range(s.kick_speed_ratio, 0.0, 1.0, F::KickSpeedRatio)?;
-        let h = &self.health;
-        positive(h.window_s, F::HealthWindow)?;
-        if h.window_s < self.ts_s {
-            return Err(ConfigError::OutOfRange(F::HealthWindow));
-        }
-        positive(h.nis_limit, F::NisLimit)?;
-        positive(h.speed_tolerance, F::SpeedTolerance)?;
-        in_range(h.lock_angle_rad, 0.5 * PI, PI, F::LockAngle)?;
-        positive(h.lost_time_s, F::LostTime)?;
-        positive(h.lock_time_s, F::LockTime)?;
-        positive(h.stall_time_s, F::StallTime)?;
-        let [lo, hi] = h.flux_range;
-        if !(lo.is_finite() && hi.is_finite()) {
-            return Err(ConfigError::NonFinite(F::FluxRange));
-        }
-        if !(lo > 0.0 && lo < 1.0 && hi > 1.0) {
-            return Err(ConfigError::OutOfRange(F::FluxRange));
-        }
-        let step = self.max_current_step();
-        if step.is_nan() {
-            return Err(ConfigError::NonFinite(F::MaxCurrentStep));
-        } else if step <= 0.0 {
-            return Err(ConfigError::NotPositive(F::MaxCurrentStep));
-        }
-        if self.samples.missing_trip_ticks == 0 {
-            return Err(ConfigError::NotPositive(F::MissingTripTicks));
-        }
-        if self.samples.over_current_trip_ticks == 0 {
-            return Err(ConfigError::NotPositive(F::OverCurrentTripTicks));
-        }
-        in_range(self.samples.stuck_angle_rad, 0.0, 1.0e6, F::StuckAngle)?;
-        // Every duration must fit the u32 tick counters.
-        let longest = s
-            .align_time_s
-            .max(s.blend_time_s)
-            .max(s.acquire_timeout_s)
-            .max(h.lost_time_s)
-            .max(h.lock_time_s)
-            .max(h.stall_time_s);
-        if longest / self.ts_s > 1.0e9 {
-            return Err(ConfigError::OutOfRange(F::Ts));
-        }
-        Ok(())
-    }
 }
 
 /// `min(a, b)` without `f32::min` (whose NaN handling hides a NaN in `a`).
@@ -677,118 +597,29 @@ fn torque_constant(motor: &MotorParams<f32>) -> f32 {
     1.5 * motor.pole_pairs as f32 * motor.psi_f_wb
 }
 
-fn positive(v: f32, field: Field) -> Result<(), ConfigError> {
-    if !v.is_finite() {
-        Err(ConfigError::NonFinite(field))
-    } else if v <= 0.0 {
-        Err(ConfigError::NotPositive(field))
-    } else {
-        Ok(())
-    }
-}
-
-fn in_range(v: f32, lo: f32, hi: f32, field: Field) -> Result<(), ConfigError> {
-    if !v.is_finite() {
-        Err(ConfigError::NonFinite(field))
-    } else if v < lo || v > hi {
-        Err(ConfigError::OutOfRange(field))
-    } else {
-        Ok(())
-    }
-}
-
-/// A field of [`FocConfig`] named in a [`ConfigError`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[allow(missing_docs)] // each variant is the field of the same name
-pub enum Field {
-    Ts,
-    AngleAdvance,
-    CurrentBandwidth,
-    CurrentGains,
-    SpeedBandwidth,
-    Inertia,
-    SpeedGains,
-    SpeedDivider,
-    CurrentLimit,
-    OverCurrent,
-    UdcMin,
-    UdcMax,
-    MaxSpeed,
-    SpeedSlew,
-    MaxModulation,
-    DeadTime,
-    DeadTimeBand,
-    AlignCurrent,
-    AlignTime,
-    AlignAngle,
-    IfCurrent,
-    Accel,
-    HandoverSpeed,
-    BlendTime,
-    ExitSpeedRatio,
-    AcquireTimeout,
-    /// `startup.damping_ratio`.
-    DampingRatio,
-    /// `startup.kick_speed_ratio`.
-    KickSpeedRatio,
-    HealthWindow,
-    NisLimit,
-    /// `health.flux_range`.
-    FluxRange,
-    SpeedTolerance,
-    LockAngle,
-    LostTime,
-    LockTime,
-    StallTime,
-    MaxCurrentStep,
-    MissingTripTicks,
-    OverCurrentTripTicks,
-    StuckAngle,
-    /// `field_weakening.voltage_margin`.
-    FwVoltageMargin,
-    /// `field_weakening.bandwidth_rad_s`.
-    FwBandwidth,
-    /// `field_weakening.max_negative_id_a` (or its default).
-    FwMaxNegativeId,
-}
-
-/// Why a [`FocConfig`] was refused.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ConfigError {
-    /// The motor or observer configuration is invalid.
-    Observer(ekf_core::ConfigError),
-    /// `observer.motor` or `observer.ts_s` differ from `motor` / `ts_s`.
-    ObserverMismatch,
-    /// The field is NaN or infinite.
-    NonFinite(Field),
-    /// The field is zero or negative.
-    NotPositive(Field),
-    /// The field is outside its range, or inconsistent with another (`over_current_a` not
-    /// above `current_limit_a`, `u_dc_max_v` not above `u_dc_min_v`, a start-up current above
-    /// the limit, the hand-over speed not below the maximum speed, a dead time not below half
-    /// the PWM period, ...).
-    OutOfRange(Field),
-}
-
-impl fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            ConfigError::Observer(e) => write!(f, "observer configuration: {e}"),
-            ConfigError::ObserverMismatch => {
-                f.write_str("observer.motor / observer.ts_s differ from motor / ts_s")
-            }
-            ConfigError::NonFinite(x) => write!(f, "{x:?} is not finite"),
-            ConfigError::NotPositive(x) => write!(f, "{x:?} must be positive"),
-            ConfigError::OutOfRange(x) => write!(f, "{x:?} is out of range"),
-        }
-    }
-}
-
-impl core::error::Error for ConfigError {}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn startup_defaults_come_from_the_startup_functions() {
+        let (m, ts, u) = (MotorParams::servo(), 100e-6, 300.0);
+        let c = FocConfig::new(m, ts, u);
+        let h = StartupConfig::default_handover_speed_rad_s(
+            &m,
+            c.startup.if_current_a,
+            c.max_speed_rad_s,
+        );
+        assert_eq!(c.startup.handover_speed_rad_s.to_bits(), h.to_bits());
+        assert_eq!(
+            c.startup.accel_rad_s2.to_bits(),
+            StartupConfig::default_accel_rad_s2(h).to_bits()
+        );
+        // 0.6 % of the rated speed, at most the hand-over speed.
+        let r = StartupConfig::kick_speed_ratio_for(f64::from(10.0 * h), h);
+        assert!((r - 0.06).abs() < 1e-6);
+        assert_eq!(StartupConfig::kick_speed_ratio_for(1e9, h), 1.0);
+    }
 
     #[test]
     fn defaults_validate_on_reference_motors() {

@@ -15,7 +15,7 @@
 //!      (= the voltage of d[k] unless clamped) into a 2-deep history
 //! ```
 //!
-//! # Timing (design section 4) and the computation delay
+//! # Timing (docs/design.md section 4) and the computation delay
 //!
 //! The ADC samples `i[k]` at `t_k`; the duties computed by tick `k` are loaded by the PWM
 //! timer at the next period boundary and applied over `[t_k+1, t_k+2)`
@@ -93,7 +93,7 @@
 //!
 //! The speed loop's output is a torque command, `i_T = T* / k_t` (module [`crate::mtpa`]).
 //! A surface motor without field weakening takes it as the q reference unchanged (the plan's
-//! references go to the loops as they are, the surface behaviour before salient motors).
+//! references go to the loops as they are).
 //! Otherwise (`shaped_refs`): `i_d = i_d,plan + i_d,mtpa + i_fw` (`i_d,mtpa`: one step of
 //! the MTPA iteration for `i_T` from the last tick's MTPA point), limited to
 //! `[-max_negative_id, current_limit_a]`; `i_q = psi_f i_T / (psi_f + (Ld - Lq) i_d)`;
@@ -145,6 +145,10 @@
 //! `f64`. Counted on the Cortex-M4F and mapped part by part: the crate README, "Cost on the
 //! Cortex-M4F".
 
+mod checks;
+mod hfi_path;
+mod loops;
+
 use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{Estimate, PmsmObserver};
 
@@ -153,121 +157,23 @@ use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
-use crate::hfi::{HFI_TRACKING_SPEED_FACTOR, HfiConfig, HfiDrive, HfiError, HfiPhase, HfiStatus};
+use crate::hfi::{HfiConfig, HfiDrive, HfiError, HfiPhase, HfiStatus};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
-use crate::startup::{Frame, Inputs, Plan, Seed, Sequencer, State, Stop};
+use crate::startup::{Inputs, Plan, Seed, Sequencer, State, Stop};
 use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
-use crate::transforms::{Abc, AlphaBeta, Dq};
-use crate::trig::{add_angles, at_most, max2, min2, sin_cos, sin_cos_small, sqrt, wrap};
+use crate::transforms::{AlphaBeta, Dq};
+use crate::trig::{add_angles, max2, min2, sin_cos, sin_cos_small, sqrt, wrap};
 
-/// Phase currents as sampled: three (or two plus a computed third) phases, or already in
-/// alpha-beta.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum PhaseCurrents {
-    /// Phase currents, A. The controller uses `a` and `b` (Clarke with `c = -a - b`); `c` is
-    /// checked for finiteness and over-current only.
-    Abc(Abc),
-    /// Alpha-beta currents, A.
-    AlphaBeta(AlphaBeta),
-}
+pub use crate::io::{PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput};
 
-/// Rotor position from a sensor (sensored mode, or for comparison).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RotorSensor {
-    /// Electrical rotor angle at `t_k`, rad (any value within `+-1e4`; wrapped internally).
-    pub theta_e_rad: f32,
-    /// Electrical speed, rad/s.
-    pub omega_e_rad_s: f32,
-}
-
-/// Everything one tick needs, sampled at `t_k`.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TickInput {
-    /// Phase currents sampled at `t_k`, A.
-    pub currents: PhaseCurrents,
-    /// DC-bus voltage, V.
-    pub u_dc_v: f32,
-    /// Rotor angle and speed from a sensor: required in [`Mode::Sensored`], ignored (but
-    /// checked) in [`Mode::Sensorless`].
-    pub sensor: Option<RotorSensor>,
-}
-
-impl TickInput {
-    /// Input from phase currents `a`, `b`, `c` (A) and the bus voltage (V).
-    pub fn abc(a: f32, b: f32, c: f32, u_dc_v: f32) -> Self {
-        Self {
-            currents: PhaseCurrents::Abc(Abc { a, b, c }),
-            u_dc_v,
-            sensor: None,
-        }
-    }
-
-    /// Input from alpha-beta currents (A) and the bus voltage (V).
-    pub fn alpha_beta(alpha: f32, beta: f32, u_dc_v: f32) -> Self {
-        Self {
-            currents: PhaseCurrents::AlphaBeta(AlphaBeta { alpha, beta }),
-            u_dc_v,
-            sensor: None,
-        }
-    }
-
-    /// The same input with a rotor sensor reading (electrical angle, rad; speed, rad/s).
-    pub fn with_sensor(mut self, theta_e_rad: f32, omega_e_rad_s: f32) -> Self {
-        self.sensor = Some(RotorSensor {
-            theta_e_rad,
-            omega_e_rad_s,
-        });
-        self
-    }
-}
-
-/// Signals worth logging, for this tick (the health monitor's findings:
-/// [`Foc::health_report`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Telemetry {
-    /// Measured currents in the control frame, A.
-    pub i_dq: Dq,
-    /// Current references in the control frame, A.
-    pub i_dq_ref: Dq,
-    /// Voltage the current loops asked for in the control frame (after their limit), V.
-    pub u_dq: Dq,
-    /// Voltage the duties of this tick apply (after SVPWM clamping; with dead-time
-    /// compensation the voltage expected at the motor, the duties net of the compensation),
-    /// V. The observer is fed this one when it is applied.
-    pub u_ab: AlphaBeta,
-    /// Control-frame angle at `t_k` (Park), rad el. The inverse Park used
-    /// `theta_rad + angle_advance_periods * omega_rad_s * ts_s`.
-    pub theta_rad: f32,
-    /// Speed of the control frame, rad/s el.
-    pub omega_rad_s: f32,
-    /// The (slewed) speed reference of the speed loop, rad/s mech. (the ramp speed under I/f).
-    pub speed_ref_mech_rad_s: f32,
-    /// The observer's estimate after this tick's step (the previous one if refused).
-    pub estimate: Estimate<f32>,
-    /// Whether the observer accepted this tick's step.
-    pub observer_ok: bool,
-    /// Whether this tick's current sample was used: `false` when it was missing or
-    /// implausible and the tick rode through (module docs, "Bad current samples").
-    pub sample_ok: bool,
-}
-
-/// What one tick returns: the duties for the PWM timer and the status.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TickOutput {
-    /// Duties of phases a, b, c: always finite and in `[0, 1]`; `0.5` each when the PWM is
-    /// off or faulted.
-    pub duties: [f32; 3],
-    /// Whether the bridge must switch. `false`: outputs off (all switches open), which is the
-    /// safe state of every fault and of `Idle`.
-    pub pwm_enabled: bool,
-    /// State after this tick.
-    pub state: State,
-    /// The latched fault, if any.
-    pub fault: Option<Fault>,
-    /// Signals for logging.
-    pub telemetry: Telemetry,
-}
+/// The observer's input of a tick: the voltage of its step (V), the current it takes (A),
+/// and with HFI on the carrier's response and the fundamental current.
+type ObserverInput = (
+    [f32; 2],
+    AlphaBeta,
+    Option<(Option<crate::hfi::Response>, AlphaBeta)>,
+);
 
 /// Why a command was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -376,17 +282,6 @@ fn reseed_observer(observer: &mut PmsmObserver<f32>, cfg: &FocConfig, seed: Seed
     let _ = observer.reset(x, p);
 }
 
-/// The first non-finite of three values (the last one if none is).
-fn first_bad(a: f32, b: f32, c: f32) -> f32 {
-    if !a.is_finite() {
-        a
-    } else if !b.is_finite() {
-        b
-    } else {
-        c
-    }
-}
-
 impl Foc {
     /// Validates `cfg` and builds an idle controller.
     pub fn new(cfg: &FocConfig) -> Result<Self, ConfigError> {
@@ -464,29 +359,6 @@ impl Foc {
         self.rebuild_observer(Some(hfi));
         self.hfi = Some(HfiDrive::new(&self.cfg, hfi));
         Ok(())
-    }
-
-    /// Rebuilds the (idle) observer for HFI `hfi` (or none), keeping its tracked `psi_f` and
-    /// `Rs`. With HFI its online parameter tracking stays frozen below
-    /// [`HFI_TRACKING_SPEED_FACTOR`](crate::hfi::HFI_TRACKING_SPEED_FACTOR) times the top of the blend band: the observer's speed is
-    /// noisiest there, the carrier's steps are in its input, and a flux estimate that moves
-    /// while the drive leans on HFI was measured to collapse (traction motor: `psi_f` from
-    /// 0.012 to 0.0066 Wb in 2 ms at 7 % of rated speed, the speed estimate 40 % high after
-    /// it, the reversal lost by pi).
-    fn rebuild_observer(&mut self, hfi: Option<&HfiConfig>) {
-        let mut oc = self.cfg.observer;
-        if let (Some(h), Some(t)) = (hfi, oc.parameter_tracking.as_mut()) {
-            t.min_speed_rad_s = max2(
-                t.min_speed_rad_s,
-                HFI_TRACKING_SPEED_FACTOR * h.blend_high_rad_s,
-            );
-        }
-        // Cannot fail: only a speed threshold differs from the validated configuration.
-        if let Ok(mut o) = PmsmObserver::new(&oc) {
-            let (psi_f, rs) = self.observer.parameters();
-            let _ = o.set_parameters(psi_f, rs);
-            self.observer = o;
-        }
     }
 
     /// Turns high-frequency injection off (the controller as built by [`Foc::new`]). Only
@@ -617,50 +489,22 @@ impl Foc {
 
     /// One PWM period (module docs): samples of `t_k` in, duties for the next period out.
     /// Never panics; the duties are finite and in `[0, 1]` whatever the input.
+    ///
+    /// The signal path: measure (Clarke, the sample and bus checks), observe (the
+    /// observer's input and step), sequence (the state machine's plan, or a stop), control
+    /// (Park, the current loops), modulate (inverse Park, SVPWM, dead time, history). The
+    /// first three are helpers; control and modulate are written out here (as helpers
+    /// they cost about 20 instructions per tick on the Cortex-M4F).
     pub fn tick(&mut self, input: &TickInput) -> TickOutput {
         self.tick_count = self.tick_count.wrapping_add(1);
-        let (i_ab, c_abs) = match input.currents {
-            PhaseCurrents::Abc(x) => (x.to_alpha_beta(), x.c.abs()),
-            PhaseCurrents::AlphaBeta(x) => (x, 0.0),
-        };
-        let sample_ok = self.check_currents(input, i_ab, c_abs);
-        self.protect(input);
+        // Measure.
+        let (i_ab, sample_ok) = self.measure(input);
         if matches!(self.seq.state(), State::Idle | State::Fault) {
             return self.safe_output();
         }
-
-        // Observer: the voltage applied over [t_k-1, t_k), the currents at t_k (only a
-        // prediction over a bad sample).
-        let u_prev = match self.cfg.delay {
-            ComputationDelay::OnePeriod => self.u_hist[1],
-            ComputationDelay::None => self.u_hist[0],
-        };
-        // With the HFI carrier on, the observer sees the fundamental only: the carrier's
-        // voltage taken out of the input, its predicted current out of the sample (module
-        // docs, "Low speed by HFI").
-        let (u_prev, i_obs, hfi_demod) = match self.hfi.as_mut() {
-            None => (u_prev, i_ab, None),
-            Some(h) => {
-                let carrier = h.tracker.applied_carrier();
-                let (resp, fund) = h.demodulate(i_ab, sample_ok);
-                if h.demodulated() {
-                    let i_fund = i_ab - h.tracker.carrier_current();
-                    (u_prev - carrier, i_fund, Some((resp, fund)))
-                } else {
-                    (u_prev, i_ab, Some((resp, fund)))
-                }
-            }
-        };
-        let u_prev = [u_prev.alpha, u_prev.beta];
-        let (est, observer_ok) = if sample_ok {
-            match self.observer.step(u_prev, [i_obs.alpha, i_obs.beta]) {
-                Ok(e) => (e, true),
-                Err(_) => (self.observer.estimate(), false),
-            }
-        } else {
-            let ok = self.observer.predict(u_prev).is_ok();
-            (self.observer.estimate(), ok)
-        };
+        // Observe.
+        let (u_prev, i_obs, hfi_demod) = self.observer_input(i_ab, sample_ok);
+        let (est, observer_ok) = self.observe(u_prev, i_obs, sample_ok);
         // Over a bad sample the observer's predicted currents stand in for the measurement
         // (telemetry, frame changes); the current loops do not use them.
         let i_ab = if sample_ok {
@@ -671,33 +515,17 @@ impl Foc {
                 beta: est.i_beta_a,
             }
         };
-
-        let mut carrier = None;
-        let mut i_loop = i_ab;
-        let plan = if self.hfi.is_none() {
-            // Matched right where it is made (a decision passed through memory costs about 80
-            // instructions per tick on the Cortex-M4F).
-            let inputs = Inputs {
-                estimate: &est,
-                observer_ok,
-                sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
-                u_ab: u_prev,
-            };
-            let (cfg, observer) = (&self.cfg, &mut self.observer);
-            match self.seq.step(cfg, inputs, &mut |seed| {
-                reseed_observer(observer, cfg, seed)
-            }) {
-                Ok(plan) => plan,
+        // Sequence. Matched right where it is made (a decision passed through memory costs
+        // about 80 instructions per tick on the Cortex-M4F).
+        let (plan, carrier, i_loop) = if self.hfi.is_none() {
+            match self.sequence(input, &est, observer_ok, u_prev) {
+                Ok(plan) => (plan, None, i_ab),
                 Err(stop) => return self.stopped(stop),
             }
         } else {
             let (resp, fund) = hfi_demod.unwrap_or((None, i_ab));
             match self.hfi_plan(&est, observer_ok, i_ab, resp, fund) {
-                Ok((plan, c, i)) => {
-                    carrier = c;
-                    i_loop = i;
-                    plan
-                }
+                Ok(p) => p,
                 Err(stop) => return self.stopped(stop),
             }
         };
@@ -715,8 +543,7 @@ impl Foc {
                 self.stuck_ticks = [0; 2];
             }
         }
-
-        // Current loops in the control frame.
+        // Control: the current loops in the plan's frame.
         let frame = plan.frame;
         let (s, c) = sin_cos(frame.theta);
         let i_dq = i_loop.to_dq(s, c);
@@ -755,8 +582,9 @@ impl Foc {
         };
         self.u_dq_last = u_dq;
 
-        // Inverse Park at the middle of the application interval (the advance rotates the
-        // frame's sine and cosine by a small angle), SVPWM, dead-time compensation, history.
+        // Modulate: inverse Park at the middle of the application interval (the advance
+        // rotates the frame's sine and cosine by a small angle), SVPWM, dead-time
+        // compensation, history.
         let (sd, cd) = sin_cos_small(frame.omega * self.advance_s);
         let (s2, c2) = add_angles(s, c, sd, cd);
         let mut u_ab = u_dq.to_alpha_beta(s2, c2);
@@ -764,10 +592,6 @@ impl Foc {
             u_ab = u_ab + u_h;
         }
         let (duties, applied) = if self.dead_time.is_active() {
-            // Phase currents predicted for the middle of the application interval, turned
-            // with the frame like the voltage: the reference, which the loops will have
-            // reached (and which carries no sensor noise), or the measured vector while the
-            // voltage limit keeps them off it.
             let i = if limited { i_dq } else { i_ref };
             let i_pred = i.to_alpha_beta(s2, c2).to_abc();
             let (d, _) = modulate_duties(u_ab, u_dc);
@@ -805,71 +629,85 @@ impl Foc {
         }
     }
 
-    /// The plan of a tick with HFI on (module docs, "Low speed by HFI"): the standstill test's
-    /// d current in the tracked frame, or the sequencer's sensored path on the blended angle;
-    /// with the carrier to add and the current the loops take.
-    #[inline(never)]
-    fn hfi_plan(
-        &mut self,
-        est: &Estimate<f32>,
-        observer_ok: bool,
-        i_ab: AlphaBeta,
-        resp: Option<crate::hfi::Response>,
-        fund: AlphaBeta,
-    ) -> Result<(Plan, Option<AlphaBeta>, AlphaBeta), Stop> {
-        let Some(h) = self.hfi.as_mut() else {
-            return Err(Stop::Off);
+    /// Measure: the currents in alpha-beta (Clarke), whether the sample is used (module
+    /// docs, "Bad current samples"), and the bus and sensor checks (which may trip).
+    #[inline(always)]
+    fn measure(&mut self, input: &TickInput) -> (AlphaBeta, bool) {
+        let (i_ab, c_abs) = match input.currents {
+            PhaseCurrents::Abc(x) => (x.to_alpha_beta(), x.c.abs()),
+            PhaseCurrents::AlphaBeta(x) => (x, 0.0),
         };
-        let plan = if let Some(i_d) = h.standstill(resp) {
-            Plan {
-                frame: Frame {
-                    theta: h.tracker.theta(),
-                    omega: 0.0,
-                    emf: false,
-                },
-                i_ref: Dq { d: i_d, q: 0.0 },
-                reframe_from: None,
+        let sample_ok = self.check_currents(input, i_ab, c_abs);
+        self.protect(input);
+        (i_ab, sample_ok)
+    }
+
+    /// The observer's input: the voltage applied over `[t_k-1, t_k)` (from the history, by
+    /// the computation delay) and the current sample; with the HFI carrier on the
+    /// fundamental only (the carrier's voltage taken out of the input, its predicted current
+    /// out of the sample: module docs, "Low speed by HFI"), with the carrier's response.
+    #[inline(always)]
+    fn observer_input(&mut self, i_ab: AlphaBeta, sample_ok: bool) -> ObserverInput {
+        let u_prev = match self.cfg.delay {
+            ComputationDelay::OnePeriod => self.u_hist[1],
+            ComputationDelay::None => self.u_hist[0],
+        };
+        let (u_prev, i_obs, hfi_demod) = match self.hfi.as_mut() {
+            None => (u_prev, i_ab, None),
+            Some(h) => {
+                let carrier = h.tracker.applied_carrier();
+                let (resp, fund) = h.demodulate(i_ab, sample_ok);
+                if h.demodulated() {
+                    let i_fund = i_ab - h.tracker.carrier_current();
+                    (u_prev - carrier, i_fund, Some((resp, fund)))
+                } else {
+                    (u_prev, i_ab, Some((resp, fund)))
+                }
+            }
+        };
+        ([u_prev.alpha, u_prev.beta], i_obs, hfi_demod)
+    }
+
+    /// Observe: the observer's step on the voltage `u_prev` and the current `i_obs` (only
+    /// a prediction over a bad sample); its estimate and whether it accepted the step.
+    #[inline(always)]
+    fn observe(
+        &mut self,
+        u_prev: [f32; 2],
+        i_obs: AlphaBeta,
+        sample_ok: bool,
+    ) -> (Estimate<f32>, bool) {
+        if sample_ok {
+            match self.observer.step(u_prev, [i_obs.alpha, i_obs.beta]) {
+                Ok(e) => (e, true),
+                Err(_) => (self.observer.estimate(), false),
             }
         } else {
-            // HFI's angle fused into the observer while HFI has a say (module [`crate::hfi`],
-            // "Hand-over band"); the observer keeps its estimate if refused. (The tick's
-            // telemetry keeps the step's estimate.)
-            let (mut theta_o, mut omega_o) = (est.theta_rad, est.omega_e_rad_s);
-            if observer_ok
-                && let Some(var) = h.fusion_variance()
-                && self.observer.correct_angle(h.tracker.theta(), var).is_ok()
-            {
-                let x = self.observer.state();
-                (theta_o, omega_o) = (x[3], x[2]);
-            }
-            let b = h.blend(theta_o, omega_o);
-            if let Some((theta, omega)) = b.reseed {
-                let seed = Seed {
-                    theta,
-                    omega,
-                    sigma_theta: 0.1,
-                };
-                reseed_observer(&mut self.observer, &self.cfg, seed);
-            }
-            let inputs = Inputs {
-                estimate: est,
-                observer_ok,
-                sensor: Some((b.theta, b.omega)),
-                // Read only by the damped start of the sensorless path.
-                u_ab: [0.0; 2],
-            };
-            self.cfg.mode = Mode::Sensored;
-            let (cfg, observer) = (&self.cfg, &mut self.observer);
-            let r = self.seq.step(cfg, inputs, &mut |seed| {
-                reseed_observer(observer, cfg, seed)
-            });
-            self.cfg.mode = Mode::Sensorless;
-            let plan = r?;
-            h.set_torque_command(plan.i_ref.q);
-            plan
+            let ok = self.observer.predict(u_prev).is_ok();
+            (self.observer.estimate(), ok)
+        }
+    }
+
+    /// Sequence: the state machine's plan for this tick (control frame, current
+    /// references), or why the PWM goes off. (With HFI on: `hfi_plan`.)
+    #[inline(always)]
+    fn sequence(
+        &mut self,
+        input: &TickInput,
+        est: &Estimate<f32>,
+        observer_ok: bool,
+        u_prev: [f32; 2],
+    ) -> Result<Plan, Stop> {
+        let inputs = Inputs {
+            estimate: est,
+            observer_ok,
+            sensor: input.sensor.map(|s| (s.theta_e_rad, s.omega_e_rad_s)),
+            u_ab: u_prev,
         };
-        let (carrier, i_loop) = h.finish(i_ab, fund);
-        Ok((plan, carrier, i_loop))
+        let (cfg, observer) = (&self.cfg, &mut self.observer);
+        self.seq.step(cfg, inputs, &mut |seed| {
+            reseed_observer(observer, cfg, seed)
+        })
     }
 
     /// The PWM-off output for the sequencer's `stop` (idle, or a fault to latch).
@@ -882,265 +720,6 @@ impl Foc {
             Stop::Trip(fault, value) => self.trip(fault, value),
         }
         self.safe_output()
-    }
-
-    /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the
-    /// torque command as a surface-equivalent current, `r.d` a hand-over's fading d
-    /// current): d from MTPA (one fixed-point step from the last MTPA point) plus the
-    /// field-weakening correction, limited to `[-max_negative_id, current_limit_a]`; q from
-    /// the torque with that d; then the current circle, cutting q first.
-    ///
-    /// First the field-weakening integrator (module [`crate::fieldweak`]) takes the loops'
-    /// steady-state voltage, their integrators (as the last tick left them) plus this tick's
-    /// feed-forward `ff`, against `u_max` (only on an accepted sample). Out of the observer's
-    /// frame (align, I/f) the plan's references are returned and the correction is reset.
-    #[inline(never)]
-    fn shaped_refs(&mut self, plan: Plan, ff: Dq, u_max: f32, sample_ok: bool) -> Dq {
-        if !plan.frame.emf {
-            self.fw.reset();
-            self.iq_last = 0.0;
-            return plan.i_ref;
-        }
-        if self.fw_on && sample_ok {
-            let v = Dq {
-                d: self.pi_d.integrator() + ff.d,
-                q: self.pi_q.integrator() + ff.q,
-            };
-            self.fw
-                .update(v.norm_squared(), u_max, plan.frame.omega, self.id_base);
-        }
-        let r = plan.i_ref;
-        let lim = self.cfg.current_limit_a;
-        // The MTPA point of the torque command alone (one fixed-point step from the last
-        // one): field weakening and the current circle stay out of the iteration, which
-        // they would turn into an oscillation.
-        let id_base = if self.mtpa_on {
-            let m = self.mtpa.step(r.q, self.iq_last, 0.0);
-            self.iq_last = m.q;
-            r.d + m.d
-        } else {
-            r.d
-        };
-        self.id_base = id_base;
-        let d = crate::pi::limit(id_base + self.fw.id(), -self.max_neg_id, lim);
-        let q = if self.salient {
-            self.mtpa.iq_for_torque(r.q, d)
-        } else {
-            r.q
-        };
-        let q_max_sq = lim * lim - d * d;
-        let q = if at_most(q * q, q_max_sq) {
-            q
-        } else {
-            let m = sqrt(q_max_sq);
-            crate::pi::limit(q, -m, m)
-        };
-        Dq { d, q }
-    }
-
-    /// A phase reading repeated: accumulates the angle the current vector turned meanwhile
-    /// (only while the commanded current is at least 5 % of the current limit) and trips
-    /// [`Fault::CurrentSensor`] once it exceeds `samples.stuck_angle_rad` (and at least 4
-    /// ticks). Returns whether it tripped.
-    ///
-    /// The angle accrues at the larger of the frame's present speed and its speed when the
-    /// repetition began. The frozen reading feeds the observer, so the frame's speed soon
-    /// follows the fault, not the rotor: on the servo test rig at 400 rad/s el. it swings
-    /// between -260 and +830 rad/s within a quarter period, and counted at the present
-    /// speed alone a quarter turn took up to 1.4 quarter periods. A rotor cannot shed its
-    /// speed that fast, so the speed at the onset bounds the rate the real vector turns.
-    #[cold]
-    #[inline(never)]
-    fn stuck_channel(&mut self, same: [bool; 2], x: Abc, plan: Plan) -> bool {
-        let limit = self.cfg.samples.stuck_angle_rad;
-        let i_min = 0.05 * self.cfg.current_limit_a;
-        let driven = at_most(i_min * i_min, plan.i_ref.norm_squared());
-        let w = max2(plan.frame.omega, -plan.frame.omega);
-        for (ch, v) in [x.a, x.b].into_iter().enumerate() {
-            if !same[ch] {
-                self.stuck_angle[ch] = 0.0;
-                self.stuck_ticks[ch] = 0;
-                continue;
-            }
-            if self.stuck_ticks[ch] == 0 {
-                self.stuck_omega[ch] = w;
-            }
-            if driven {
-                self.stuck_angle[ch] += max2(w, self.stuck_omega[ch]) * self.cfg.ts_s;
-            }
-            self.stuck_ticks[ch] = self.stuck_ticks[ch].saturating_add(1);
-            if limit > 0.0 && self.stuck_angle[ch] > limit && self.stuck_ticks[ch] >= 4 {
-                self.trip(Fault::CurrentSensor, v);
-                return true;
-            }
-        }
-        false
-    }
-
-    /// The last dq voltage for a tick over a bad sample: in this tick's frame (rotated when
-    /// the frame changed) and within the voltage limit `u_max`; and whether it was limited.
-    #[cold]
-    #[inline(never)]
-    fn held_voltage(&self, reframed_from: Option<Frame>, frame: Frame, u_max: f32) -> (Dq, bool) {
-        let mut u = self.u_dq_last;
-        if let Some(old) = reframed_from {
-            let (s, c) = sin_cos(wrap(old.theta - frame.theta));
-            u = u.rotate(s, c);
-        }
-        let n2 = u.norm_squared();
-        if at_most(n2, u_max * u_max) {
-            (u, false)
-        } else {
-            (u * (u_max / sqrt(n2)), true)
-        }
-    }
-
-    /// Checks this tick's current sample (module docs, "Bad current samples"): whether it is
-    /// used. Counts bad samples and over-current samples in a row and trips when either
-    /// count reaches its limit.
-    #[inline]
-    fn check_currents(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) -> bool {
-        let lim_sq = if self.missed == 0 {
-            self.max_step_sq
-        } else {
-            let lim = self.max_step_a * (f32::from(self.missed) + 1.0);
-            lim * lim
-        };
-        let d = i_ab - self.i_last;
-        // False for NaN: a non-finite current is never accepted (`c` too).
-        if !(at_most(d.norm_squared(), lim_sq) && at_most(c_abs, f32::MAX)) {
-            self.bad_sample(input, i_ab, c_abs);
-            return false;
-        }
-        self.missed = 0;
-        self.i_last = i_ab;
-        if at_most(i_ab.norm_squared(), self.over_current_sq)
-            && at_most(c_abs, self.cfg.over_current_a)
-        {
-            self.over_current_count = 0;
-        } else {
-            self.over_current_sample(i_ab, c_abs);
-        }
-        true
-    }
-
-    /// An accepted sample above the over-current level: trips when there have been
-    /// `over_current_trip_ticks` in a row.
-    #[cold]
-    #[inline(never)]
-    fn over_current_sample(&mut self, i_ab: AlphaBeta, c_abs: f32) {
-        self.over_current_count = self.over_current_count.saturating_add(1);
-        if self.over_current_count >= self.cfg.samples.over_current_trip_ticks {
-            self.trip(Fault::OverCurrent, max2(sqrt(i_ab.norm_squared()), c_abs));
-        }
-    }
-
-    /// A missing or implausible sample: trips when there have been `missing_trip_ticks` in
-    /// a row (non-finite: `NonFiniteInput`; above the over-current level: `OverCurrent`;
-    /// else `NonFiniteInput`, an absurd value).
-    #[cold]
-    #[inline(never)]
-    fn bad_sample(&mut self, input: &TickInput, i_ab: AlphaBeta, c_abs: f32) {
-        self.missed = self.missed.saturating_add(1);
-        if self.missed < self.cfg.samples.missing_trip_ticks {
-            return;
-        }
-        let non_finite = match input.currents {
-            PhaseCurrents::Abc(x) if !x.is_finite() => Some(first_bad(x.a, x.b, x.c)),
-            PhaseCurrents::AlphaBeta(x) if !x.is_finite() => Some(first_bad(x.alpha, x.beta, 0.0)),
-            _ => None,
-        };
-        let magnitude = max2(sqrt(i_ab.norm_squared()), c_abs);
-        match non_finite {
-            Some(v) => self.trip(Fault::NonFiniteInput, v),
-            None if !at_most(magnitude, self.cfg.over_current_a) => {
-                self.trip(Fault::OverCurrent, magnitude)
-            }
-            None => self.trip(Fault::NonFiniteInput, magnitude),
-        }
-    }
-
-    /// Decoupling and back-EMF feed-forward in `frame` for the measured currents `i`, with
-    /// the observer's tracked flux linkage (the configured one when its parameter tracking is
-    /// off): `u_d = -w Lq i_q`, `u_q = w Ld i_d + w psi_f`. The tracked flux is the one that,
-    /// with the `Rs` the observer uses, explains the q-axis voltage, so a warm motor's EMF is
-    /// fed forward as it is. The resistive drop is left to the PI integrators: a term
-    /// `Rs i` on the measured currents would cancel the winding's own damping of the rotor's
-    /// swing under I/f (a restart then failed to hand over in `tests/state_machine.rs`).
-    fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
-        let wlq = frame.omega * self.cfg.motor.lq_h;
-        let wld = frame.omega * self.cfg.motor.ld_h;
-        let emf = if frame.emf {
-            frame.omega * self.observer.parameters().0
-        } else {
-            0.0
-        };
-        Dq {
-            d: -wlq * i.q,
-            q: wld * i.d + emf,
-        }
-    }
-
-    /// Re-expresses the current integrators of frame `old` in frame `new` so that the
-    /// voltage `integrator + feed-forward` is the same vector in alpha-beta.
-    fn reframe(&mut self, old: Frame, new: Frame, i_ab: AlphaBeta, ff_new: Dq) {
-        let ff_old = self.feed_forward(i_ab.to_dq_angle(old.theta), old);
-        let v_old = Dq {
-            d: self.pi_d.integrator() + ff_old.d,
-            q: self.pi_q.integrator() + ff_old.q,
-        };
-        let (s, c) = sin_cos(wrap(old.theta - new.theta));
-        let v_new = v_old.rotate(s, c);
-        self.pi_d.set_integrator(v_new.d - ff_new.d);
-        self.pi_q.set_integrator(v_new.q - ff_new.q);
-    }
-
-    /// Checks of the bus voltage and the sensor (the currents: `check_currents`); trips the
-    /// first fault found.
-    fn protect(&mut self, input: &TickInput) {
-        // Fast path: comparisons that are false for NaN cover finiteness too.
-        let running = !matches!(self.seq.state(), State::Idle | State::Fault);
-        let u_dc = input.u_dc_v;
-        let u_min = if running {
-            self.cfg.u_dc_min_v
-        } else {
-            -f32::MAX
-        };
-        let sensor_ok = match input.sensor {
-            Some(s) => at_most(s.theta_e_rad.abs(), 1.0e4) && at_most(s.omega_e_rad_s.abs(), 1.0e6),
-            None => !(running && self.cfg.mode == Mode::Sensored),
-        };
-        if at_most(u_dc, self.cfg.u_dc_max_v) && u_dc >= u_min && sensor_ok {
-            return;
-        }
-        self.classify_fault(input, running);
-    }
-
-    /// The slow path of [`protect`](Self::protect): which fault, with which value.
-    #[cold]
-    #[inline(never)]
-    fn classify_fault(&mut self, input: &TickInput, running: bool) {
-        let u_dc = input.u_dc_v;
-        // Non-finite or absurd inputs.
-        let bad = if !u_dc.is_finite() {
-            Some(u_dc)
-        } else {
-            match input.sensor {
-                Some(s) if !at_most(s.theta_e_rad.abs(), 1.0e4) => Some(s.theta_e_rad),
-                Some(s) if !at_most(s.omega_e_rad_s.abs(), 1.0e6) => Some(s.omega_e_rad_s),
-                None if running && self.cfg.mode == Mode::Sensored => Some(f32::NAN),
-                _ => None,
-            }
-        };
-        if let Some(v) = bad {
-            self.trip(Fault::NonFiniteInput, v);
-            return;
-        }
-        if u_dc > self.cfg.u_dc_max_v {
-            self.trip(Fault::BusOverVoltage, u_dc);
-        } else if running && u_dc < self.cfg.u_dc_min_v {
-            self.trip(Fault::BusUnderVoltage, u_dc);
-        }
     }
 
     /// Latches `fault` (if none is latched yet) and turns the PWM off.
