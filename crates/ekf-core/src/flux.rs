@@ -40,7 +40,7 @@
 //! # Discrete form and timing ([`FluxTiming`])
 //!
 //! `step(u_prev, i)` at sample `k` has the timing of [`PmsmObserver::step`](crate::PmsmObserver)
-//! (`design.md` section 4): `u_prev = u[k-1]`, held over `[t_k-1, t_k)`, and `i = i[k]`,
+//! (`docs/design.md` section 4): `u_prev = u[k-1]`, held over `[t_k-1, t_k)`, and `i = i[k]`,
 //! sampled at `t_k`. [`FluxTiming::Firmware`] (the default, the form the firmwares run) is
 //! forward Euler on the sample:
 //!

@@ -13,7 +13,7 @@ pub mod flux;
 pub mod motor;
 pub mod noise;
 pub mod observer;
-mod structured;
+
 #[cfg(feature = "testing")]
 #[doc(hidden)]
 pub mod testing;
