@@ -2,7 +2,8 @@
 
 use crate::Float;
 
-/// Wraps an angle to `[-pi, pi)`: `th - 2 pi floor((th + pi) / (2 pi))` (design section 4).
+/// Wraps an angle to `[-pi, pi)`: `th - 2 pi floor((th + pi) / (2 pi))` (`docs/design.md`
+/// section 4).
 ///
 /// Computed as that formula for `|th| < 3 pi` (one fold at most, bit-identical to it) and
 /// with the exact float remainder beyond. Returns NaN for a non-finite input.

@@ -68,8 +68,7 @@
 //!
 //! The measurement noise is `0.011 I_c` (5.5 times the simulator-tuned default): a recorded
 //! drive's currents carry noise and what the model leaves out (harmonics, saturation, PWM
-//! ripple). Measured on three real ESC runs and on simulated speed steps: the crate README,
-//! "The drive observer".
+//! ripple). Measured on three real ESC runs and on simulated speed steps: `docs/accuracy.md`.
 //!
 //! Jacobian: exact in `w`, `th`, `a`, `tau`, `dRs`, `v_dt`; in the currents it keeps the
 //! decay, the active flux's and the input errors' terms (the conduction signs' slope

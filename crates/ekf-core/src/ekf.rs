@@ -6,7 +6,7 @@
 //! Predict and correct are separate calls, so a caller may predict several times between
 //! measurements, or coast (predict only) over a missing sample.
 //!
-//! Equations (seed flow, steps 1-6, with the errata of `design.md` section 2 applied):
+//! Equations (seed flow, steps 1-6, with the errata of `docs/design.md` section 2 applied):
 //!
 //! ```text
 //! predict:  x- = f_d(x, u)                      (step 1)

@@ -40,7 +40,7 @@
 //! # Discrete form and timing ([`FluxTiming`])
 //!
 //! `step(u_prev, i)` at sample `k` has the timing of [`PmsmObserver::step`](crate::PmsmObserver)
-//! (`design.md` section 4): `u_prev = u[k-1]`, held over `[t_k-1, t_k)`, and `i = i[k]`,
+//! (`docs/design.md` section 4): `u_prev = u[k-1]`, held over `[t_k-1, t_k)`, and `i = i[k]`,
 //! sampled at `t_k`. [`FluxTiming::Firmware`] (the default, the form the firmwares run) is
 //! forward Euler on the sample:
 //!
@@ -63,12 +63,10 @@
 //! bias = g Ts Ls i_q / psi_f   rad        (independent of the speed)
 //! ```
 //!
-//! 0.57 deg with the default gain at `Ls i_q = 0.1 psi_f`; measured 0.50 to 0.57 deg for
-//! `w_e Ts` from 0.02 to 0.25 (`tests/flux.rs`). [`FluxTiming::Centred`] is the obvious
-//! compensation: the correction uses `eta_0 = x - Ls i[k-1]` (both at `t_k-1`) and the
-//! resistive drop the mean `Rs (i[k-1] + i[k]) / 2`; measured bias 0.004 to 0.04 deg in the
-//! same runs. Without load both forms are within 0.05 deg up to `w_e Ts = 0.25` on the servo
-//! motor (0.1 deg on the small fast one). The suite's baseline is the firmware form.
+//! 0.57 deg with the default gain at `Ls i_q = 0.1 psi_f`. [`FluxTiming::Centred`] is the
+//! obvious compensation: the correction uses `eta_0 = x - Ls i[k-1]` (both at `t_k-1`) and the
+//! resistive drop the mean `Rs (i[k-1] + i[k]) / 2` (both forms measured in
+//! `docs/accuracy.md`). The suite's baseline is the firmware form.
 //!
 //! # Interior motors: active flux
 //!
@@ -84,11 +82,10 @@
 //! ```
 //!
 //! which is stable only while `w (w + a b / psi_a) > 0`, i.e. for `|w| > 2 gamma psi_a |b|` when
-//! `w b < 0`: an interior motor under load at moderate speed (measured on the traction reference
-//! motor at rated current: 37 deg of error at half speed, the failure VESC users report at
-//! `Lq = 2 Ld`). The step therefore limits `gamma / 2` to `|w_pll| / (8 psi_a |b|)` (a margin of
-//! 2 on the bound; surface motors are untouched). The firmware form's lead shrinks with the
-//! gain.
+//! `w b < 0`: an interior motor under load at moderate speed (the failure VESC users report at
+//! `Lq = 2 Ld`; measured in `docs/accuracy.md`). The step therefore limits `gamma / 2` to
+//! `|w_pll| / (8 psi_a |b|)` (a margin of 2 on the bound; surface motors are untouched). The
+//! firmware form's lead shrinks with the gain.
 //!
 //! # Usual tuning ([`FluxObserverConfig::new`])
 //!

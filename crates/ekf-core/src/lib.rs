@@ -17,7 +17,6 @@ pub mod noise;
 pub mod observer;
 pub mod saturated;
 pub mod saturation;
-mod structured;
 #[cfg(feature = "testing")]
 #[doc(hidden)]
 pub mod testing;

@@ -28,7 +28,7 @@
 //!
 //! With the same normalized numbers the filter's gains, bandwidths and accuracy depend only on
 //! `w_e Ts` and `Rs Ts / Ls`, not on the size of the motor; the tests run the same default on
-//! the three reference motors of `design.md` section 6. For the servo motor at 10 kHz,
+//! the three reference motors of `docs/design.md` section 6. For the servo motor at 10 kHz,
 //! `I_c = 20.6 A` and the default is `R = 1.7e-3 A^2` (sigma 41 mA),
 //! `Q = diag(4.2e-4, 4.2e-4, 4.0, 1e-8)`.
 //!

@@ -30,7 +30,7 @@
 //! is one shift).
 //!
 //! Cost on the Cortex-M4F (`cargo bench -p benches --bench cortex_m4`, line `sin_cos_f32`): 32
-//! instructions (was 46); the measuring closure's path runs 35 (the meter subtracts its own
+//! instructions; the measuring closure's path runs 35 (the meter subtracts its own
 //! frame): 2 constant loads and one multiply-add for `j`, 4 integer instructions for the index
 //! and the range check, 3 for the row's address, 3 loads of the row, 1 subtraction, 2
 //! multiplies for `r^2`, `r^3`, 2 for `sin r` (a load, a multiply-add), 4 for `cos r - 1` (a

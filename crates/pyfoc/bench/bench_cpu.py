@@ -3,10 +3,10 @@ machine's load enters as little as possible (bench_run.py's wall-clock ratio mov
 
     python crates/pyfoc/bench/bench_cpu.py [LABEL]     (inside the venv with pyfoc)
 
-Per configuration, 9 calls, each after a `Ekf._time_steps` on the same rows; a call's result
-is dropped before the next (as in bench_run.py, so `run` may reuse its buffers). Columns:
+Per configuration, 9 calls, each after a `pyfoc._bench.time_steps` on the same rows; a call's
+result is dropped before the next (as in bench_run.py, so `run` may reuse its buffers). Columns:
 `thread`: CPU time of the calling thread, on which the filter runs (`time.thread_time`), over
-the steps' time (the fastest of the 9 `_time_steps`: preemption only lengthens it), min and
+the steps' time (the fastest of the 9 `time_steps`: preemption only lengthens it), min and
 median over the calls; `all`: CPU time of every thread of the process (`getrusage`: the
 helper thread that copies the inputs included) over the steps' time, median of the last 8
 calls; `sys`: the kernel's part of it per call (page faults, zeroing fresh memory); `minflt`:
@@ -23,6 +23,7 @@ import sys  # noqa: E402
 import time  # noqa: E402
 
 import pyfoc  # noqa: E402
+from pyfoc._bench import time_steps  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from bench_run import SERVO, TS, make  # noqa: E402
@@ -47,7 +48,7 @@ def main():
         out = new().run(u[:chunk], i[:chunk]) if chunk else None
         steps, thread, cpu, kernel, faults = [], [], [], [], []
         for _ in range(9):
-            steps.append(new()._time_steps(u, i))
+            steps.append(time_steps(new(), u, i))
             ekf = new()
             r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.thread_time()
             if chunk:

@@ -17,6 +17,7 @@ import pathlib
 import numpy as np
 
 import pyfoc
+from pyfoc._bench import time_steps
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "tests"))
 from test_filterpy import SeedEkf, H, wrap  # noqa: E402
@@ -35,8 +36,8 @@ def make(n, seed=0):
 
 def time_pyfoc(n, chunk=None, **kw):
     """Samples per second of `Ekf.run`, and the median over the repeats of the ratio of its
-    time to that of the observer's own steps on the same rows (`Ekf._time_steps`: the loop
-    of `run` without its input checks and copies and without its output arrays), timed
+    time to that of the observer's own steps on the same rows (`pyfoc._bench.time_steps`: the
+    loop of `run` without its input checks and copies and without its output arrays), timed
     alternately so that both see the same machine.
 
     `chunk`: the record is filtered in calls of `chunk` rows, each writing into the arrays of
@@ -45,7 +46,7 @@ def time_pyfoc(n, chunk=None, **kw):
     u, i = make(n)
     times, ratios = [], []
     for _ in range(5):
-        core = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=TS, **kw)._time_steps(u, i)
+        core = time_steps(pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=TS, **kw), u, i)
         ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), ts=TS, **kw)
         if chunk is None:
             t0 = time.perf_counter()

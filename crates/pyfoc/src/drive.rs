@@ -11,8 +11,10 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::{record_args, to_vec};
+use crate::errors::ConfigError;
+use crate::motor::Motor;
 use crate::replay::periods;
-use crate::{ConfigError, Motor, RowStatus};
+use crate::status::RowStatus;
 
 /// The float columns of `DriveObserver.run`, in this order.
 const DRIVE_OUTPUTS: [&str; 10] = [

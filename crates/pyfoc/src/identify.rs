@@ -3,8 +3,8 @@
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::errors::{PyfocError, SimulationError};
 use crate::simulate::scenario_of;
-use crate::{PyfocError, SimulationError};
 
 /// Identifies the motor of `scenario` (a preset name, a TOML path or a dict): Rs, Ld, Lq,
 /// psi_f, J and the inverter's voltage error, from standstill and a short I/f spin, with the

@@ -14,7 +14,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::{contiguous, path_of, record_args, to_vec, vector};
-use crate::{ConfigError, Motor, OUTPUTS, Observer, OutArrays, PyfocError, Row, RowStatus};
+use crate::engine::OutArrays;
+use crate::errors::{ConfigError, PyfocError};
+use crate::motor::Motor;
+use crate::observer::{OUTPUTS, Observer, Row};
+use crate::status::RowStatus;
 
 create_exception!(
     pyfoc,
@@ -110,8 +114,8 @@ fn step_row_dt<T: Float + Into<f64>>(
 ) -> Row {
     let c = |v: f64| T::from_subset(&v);
     let (values, status) = match o.step_dt(u.map(c), i.map(c), c(dt)) {
-        Ok(e) => (crate::outputs(&e), RowStatus::of(e.status)),
-        Err(_) => (crate::outputs(&o.estimate()), RowStatus::Rejected),
+        Ok(e) => (crate::observer::outputs(&e), RowStatus::of(e.status)),
+        Err(_) => (crate::observer::outputs(&o.estimate()), RowStatus::Rejected),
     };
     Row {
         values: values.map(Into::into),

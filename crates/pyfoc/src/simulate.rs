@@ -6,7 +6,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::{ensure_memory, nesting_within, path_of};
-use crate::{ConfigError, SimulationError};
+use crate::errors::{ConfigError, SimulationError};
 
 /// Bytes per period of a recorded run: the trace's sample and the output columns (about 45
 /// doubles).

@@ -4,7 +4,7 @@ use pmsm_sim::suite::{SuiteOptions, run_suite};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::{PyfocError, SimulationError};
+use crate::errors::{PyfocError, SimulationError};
 
 /// Runs the observer suite: the five reference motors (three surface, two interior) at
 /// 10/50/100 % rated speed, a rated load step and starts from unknown angles, with the seed's

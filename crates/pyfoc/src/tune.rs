@@ -9,7 +9,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::convert::{ensure_memory, fixed, path_of, rows2, to_vec, vector};
-use crate::{ConfigError, FilterError, Motor, PyfocError};
+use crate::errors::{ConfigError, FilterError, PyfocError};
+use crate::motor::Motor;
 
 fn to_py(e: TuneError) -> PyErr {
     match e {

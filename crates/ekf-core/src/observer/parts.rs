@@ -9,7 +9,7 @@
 use nalgebra::Vector4;
 
 use super::PmsmObserver;
-use crate::structured::{self, Outcome, Sym4};
+use super::structured::{self, Outcome, Sym4};
 use crate::{Float, PmsmModel};
 
 /// A copy of an observer's model, state and covariance (module docs).

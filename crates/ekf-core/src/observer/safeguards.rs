@@ -2,8 +2,8 @@
 //! configuration ([`BranchCheck`], [`InnovationGate`], [`CovarianceHealth`]) and running state.
 
 use super::ObserverCounters;
+use super::structured::Sym4;
 use crate::motor::positive;
-use crate::structured::Sym4;
 use crate::{ConfigError, Float, Param, to_t};
 
 /// Wrong-branch detection (module docs, "Wrong branch"): `(w, th)` and `(-w, th + pi)` give

@@ -26,9 +26,10 @@
 
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
+use super::PmsmModel;
+use super::model::{Discrete, TransitionTerms};
 use crate::ekf::{Correction, CovarianceUpdate, EkfError, finite};
-use crate::observer::model::{Discrete, TransitionTerms};
-use crate::{Float, PmsmModel, to_t, wrap_angle};
+use crate::{Float, to_t, wrap_angle};
 
 /// The 10 unique entries of a symmetric 4 x 4 matrix.
 #[derive(Clone, Copy, Debug, PartialEq)]

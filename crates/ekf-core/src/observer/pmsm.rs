@@ -1,0 +1,219 @@
+//! The observer type [`PmsmObserver`]: its state, its construction and its accessors.
+
+use super::{ObserverConfig, ObserverCounters, PmsmModel};
+use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
+
+use super::model::Discrete;
+use super::safeguards::{BranchState, ConsistencyState, Events, GateState, HealthState};
+use super::structured::Sym4;
+use super::tracking::{Tracker, TrackerSlow};
+use crate::ekf::{Correction, EkfError, finite};
+use crate::{ConfigError, Float, to_t, wrap_angle};
+
+/// The PMSM alpha-beta EKF observer (seed's model; module docs give equations and timing).
+///
+/// Its steps run a hand-scheduled update on the 10 unique entries of the symmetric covariance
+/// (the `structured` module), which gives the same results as [`Ekf`](crate::Ekf) driven by
+/// [`PmsmModel`]
+/// (to rounding; tested) at a fraction of the cost, followed by the safeguards of the
+/// configuration (branch check, innovation gate, covariance health; module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PmsmObserver<T: Float> {
+    pub(super) model: PmsmModel<T>,
+    pub(super) x: Vector4<T>,
+    pub(super) p: Sym4<T>,
+    pub(super) last: Correction<T, 2>,
+    pub(super) inv_pole_pairs: T,
+    /// Configured `(psi_f, Rs, reference temperature)`, reported when tracking is off.
+    pub(super) nominal: (T, T, T),
+    pub(super) angle_var_limit: T,
+    /// Salient motors: the filter has locked (angle tracked with settled innovations) and
+    /// keeps the angle tracked since; the d-axis transient correction applies (module docs).
+    pub(super) locked: bool,
+    pub(super) branch: Option<BranchState<T>>,
+    pub(super) gate: Option<GateState<T>>,
+    pub(super) health: Option<HealthState<T>>,
+    pub(super) consistency: Option<ConsistencyState<T>>,
+    /// Steps left in which a fused angle ([`Self::correct_angle`]) makes the angle observable
+    /// at any speed.
+    pub(super) fused: u32,
+    pub(super) tracker: Option<Tracker<T>>,
+    /// The tracking's constants and split filter (present with `tracker`).
+    pub(super) slow: Option<TrackerSlow<T>>,
+    /// The step's constants at a tracked `Rs` (`model.discrete_at(_, rs)`) and that `Rs`:
+    /// `Rs` changes only once per window of the split filter, so a step whose `Rs` is this one
+    /// recomputes only the flux's term (refreshed by [`Self::refresh_rs_constants`]).
+    pub(super) rs_constants: (T, Discrete<T>),
+    pub(super) events: Events,
+    pub(super) counters: ObserverCounters,
+}
+
+pub(super) fn zero_correction<T: Float>() -> Correction<T, 2> {
+    Correction {
+        innovation: Vector2::zeros(),
+        innovation_covariance: Matrix2::zeros(),
+        nis: T::zero(),
+    }
+}
+
+impl<T: Float> PmsmObserver<T> {
+    /// Validates `cfg` and builds the observer at `x0`, `P0`.
+    pub fn new(cfg: &ObserverConfig<T>) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        let mut x0 = cfg.x0;
+        x0[3] = wrap_angle(x0[3]);
+        let ts = cfg.ts_s;
+        let p0 = Sym4::from_matrix(&cfg.p0);
+        let (tracker, slow) = match cfg.parameter_tracking {
+            Some(t) => {
+                let (tracker, slow) = Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts);
+                (Some(tracker), Some(slow))
+            }
+            None => (None, None),
+        };
+        let model = PmsmModel::new(cfg);
+        let rs_constants = (
+            cfg.motor.rs_ohm,
+            model.discrete_at(cfg.motor.psi_f_wb, cfg.motor.rs_ohm),
+        );
+        Ok(Self {
+            model,
+            rs_constants,
+            x: x0,
+            p: p0,
+            last: zero_correction(),
+            inv_pole_pairs: T::one() / to_t(f64::from(cfg.motor.pole_pairs)),
+            nominal: (
+                cfg.motor.psi_f_wb,
+                cfg.motor.rs_ohm,
+                cfg.parameter_tracking
+                    .map_or(to_t(20.0), |t| t.reference_temperature_c),
+            ),
+            angle_var_limit: cfg.angle_sigma_limit_rad * cfg.angle_sigma_limit_rad,
+            locked: false,
+            branch: cfg.branch_check.map(|b| BranchState {
+                threshold: b.threshold_rad,
+                min_speed2: b.min_speed_rad_s * b.min_speed_rad_s,
+                k: b.allowance * ts,
+                two_ts: ts + ts,
+                flip_var: b.flip_angle_sigma_rad * b.flip_angle_sigma_rad,
+                sum: T::zero(),
+            }),
+            gate: cfg.innovation_gate.map(|g| GateState {
+                threshold: g.nis_threshold,
+                max_consecutive: g.max_consecutive,
+                settled_nis: g.settled_nis,
+                nis_mean: g.nis_threshold,
+                consecutive: 0,
+                open: false,
+                inconsistent: 0,
+            }),
+            health: cfg.covariance_health.map(|h| HealthState {
+                refusals: 0,
+                trace_bound: h.trace_factor * p0.trace(),
+                current_bound: h.current_factor * cfg.motor.characteristic_current_a(),
+                speed_bound: h.max_w_ts_rad / cfg.ts_s,
+                p0,
+                divergence_nis: h.divergence_nis,
+                divergence_samples: h.divergence_samples,
+            }),
+            consistency: cfg.consistency.as_ref().map(ConsistencyState::new),
+            fused: 0,
+            tracker,
+            slow,
+            events: Events::default(),
+            counters: ObserverCounters::default(),
+        })
+    }
+
+    /// Event counters (gate rejections and reopenings, branch flips, health resets).
+    pub fn counters(&self) -> &ObserverCounters {
+        &self.counters
+    }
+
+    /// State `[i_a, i_b, w_e, theta]`.
+    pub fn state(&self) -> &Vector4<T> {
+        &self.x
+    }
+
+    /// State covariance `P` (4 x 4, symmetric).
+    pub fn covariance(&self) -> Matrix4<T> {
+        self.p.to_matrix()
+    }
+
+    /// Innovation, its covariance and the NIS of the last correction (zeros before the first).
+    pub fn last_correction(&self) -> &Correction<T, 2> {
+        &self.last
+    }
+
+    /// The process/measurement model.
+    pub fn model(&self) -> &PmsmModel<T> {
+        &self.model
+    }
+
+    /// Replaces the estimate and covariance (angle wrapped, covariance made symmetric), clears
+    /// the last correction's diagnostics (innovation, `S`, NIS read 0 until the next
+    /// correction), the events and the running state of the gate and the branch check (the
+    /// counters are kept). Refused, nothing changed, when either is not finite. The covariance
+    /// is not checked here: an unhealthy one is caught by the health check of the next step.
+    pub fn reset(&mut self, mut x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
+        if !(finite(x.as_slice()) && finite(p.as_slice())) {
+            return Err(EkfError::NonFiniteResult);
+        }
+        x[3] = wrap_angle(x[3]);
+        self.x = x;
+        self.p = Sym4::from_matrix(&p);
+        self.last = zero_correction();
+        self.events = Events::default();
+        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) {
+            t.restart(slow, false);
+        }
+        self.restart_safeguards();
+        self.refresh_rs_constants();
+        Ok(())
+    }
+
+    /// The flux's rows of the augmented covariance: its cross-covariance with
+    /// `[i_a, i_b, w_e, theta]` and its variance (`None` when tracking is off). The cross-
+    /// covariance is zero while the tracking is frozen.
+    pub fn flux_covariance(&self) -> Option<(Vector4<T>, T)> {
+        self.tracker
+            .as_ref()
+            .map(|t| (Vector4::from(t.s.x), t.s.c_pp))
+    }
+
+    /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.
+    pub fn parameters(&self) -> (T, T) {
+        match &self.tracker {
+            Some(t) => (t.psi, t.rs),
+            None => (self.nominal.0, self.nominal.1),
+        }
+    }
+
+    /// Sets the tracked `(psi_f, Rs)` (e.g. from a previous run or a commissioning) and
+    /// clears their cross-covariance with the state; their variances are kept. The thermal
+    /// link of the `Rs` split filter takes them as its temperature reference. Refused,
+    /// nothing changed, when tracking is off, a value is not finite or outside the
+    /// configured range.
+    pub fn set_parameters(&mut self, psi_f_wb: T, rs_ohm: T) -> Result<(), EkfError> {
+        let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) else {
+            return Err(EkfError::NonFiniteInput);
+        };
+        let k = slow.k;
+        if !(psi_f_wb >= k.psi_min
+            && psi_f_wb <= k.psi_max
+            && rs_ohm >= k.rs_min
+            && rs_ohm <= k.rs_max)
+        {
+            return Err(EkfError::NonFiniteInput);
+        }
+        t.psi = psi_f_wb;
+        t.rs = rs_ohm;
+        t.restart(slow, false);
+        if let Some(s) = &mut slow.split {
+            s.anchor(psi_f_wb, rs_ohm, t.s.c_pp, &k);
+        }
+        self.refresh_rs_constants();
+        Ok(())
+    }
+}

@@ -1,0 +1,369 @@
+//! One step of the observer: prediction, correction with the innovation gate and the branch
+//! check, and the tracking's per-step work (module docs of [`observer`](crate::observer)).
+
+#[cfg(all(feature = "std", target_arch = "x86_64"))]
+use super::host;
+use super::{Estimate, PmsmObserver};
+use nalgebra::Vector4;
+
+use super::safeguards::{Events, Verdict, gate_accepted_high, gate_verdict};
+use super::structured::{self, Outcome, Sym4};
+use super::tracking::TrackerStep;
+use crate::ekf::{EkfError, finite};
+use crate::{Float, to_t};
+
+/// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
+pub const MAX_PERIOD_FACTOR: f64 = 64.0;
+
+impl<T: Float> PmsmObserver<T> {
+    /// One sample: predict with `u_prev = [u_a, u_b]` (V, held over the previous period), then
+    /// correct with the sampled currents `i = [i_a, i_b]` (A), then apply the safeguards.
+    ///
+    /// A non-finite input or measurement returns the error and leaves the observer as it was.
+    /// So does a singular innovation covariance or a non-finite result, unless the covariance
+    /// health check is on and finds the stored covariance unhealthy: then the observer resets
+    /// itself from the measured currents and returns that estimate
+    /// ([`Estimate::covariance_reset`]).
+    ///
+    /// On an x86-64 host (`std`) with AVX2 and FMA it runs the same code compiled for those
+    /// extensions (three-operand instructions: a fifth fewer of them), chosen once at run
+    /// time; the results are bit for bit the portable build's (no contraction of multiplies
+    /// and adds into FMAs; tested).
+    // Elsewhere `step` is the portable body itself, kept out of line as before the host
+    // dispatch was added (the body is large; inlined into its callers it cost the Cortex-M4F
+    // tick 17 instructions and 50 kB of flash).
+    #[cfg_attr(not(all(feature = "std", target_arch = "x86_64")), inline(never))]
+    pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        #[cfg(all(feature = "std", target_arch = "x86_64"))]
+        if host::has_avx2_fma() {
+            return host::step_avx2_fma(self, u_prev, i);
+        }
+        self.step_portable(u_prev, i)
+    }
+
+    /// [`step`](Self::step) over a period of `dt_s` seconds that ended at this sample (an
+    /// irregular period: a skipped or late control cycle, or a log's time stamps). When
+    /// `dt_s` equals the configured `Ts` this is `step` itself, bit for bit and at its cost;
+    /// otherwise the prediction uses the model for that period
+    /// ([`PmsmModel::with_period`](super::PmsmModel::with_period): the current decay, input gain and EMF gain over `dt_s`, the
+    /// angle advanced by `w dt_s`, `Q` scaled by `dt_s / Ts`), and the correction and the
+    /// safeguards are those of `step`.
+    ///
+    /// Refused with [`EkfError::InvalidPeriod`], state kept, when `dt_s` is not finite, not
+    /// above zero, or longer than [`MAX_PERIOD_FACTOR`] sample times (a gap that long is a
+    /// lost record: restart the observer).
+    pub fn step_dt(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) -> Result<Estimate<T>, EkfError> {
+        let ts = self.model.ts();
+        if dt_s == ts {
+            return self.step(u_prev, i);
+        }
+        if !(dt_s > T::zero() && dt_s <= ts * to_t(MAX_PERIOD_FACTOR)) {
+            return Err(EkfError::InvalidPeriod);
+        }
+        let model = self.model;
+        let cached = self.rs_constants;
+        self.model = model.with_period(dt_s);
+        // The cached constants at the tracked `Rs` are for `Ts`: recompute them for `dt_s`.
+        self.rs_constants = (cached.0, self.model.discrete_at(self.nominal.0, cached.0));
+        let out = self.step_portable(u_prev, i);
+        self.model = model;
+        self.rs_constants = cached;
+        out
+    }
+
+    /// [`step`](Self::step) in the portable build (the code every target runs).
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn step_portable(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        // One test on the common path; which argument was bad is sorted out only on failure.
+        if !(u_prev[0] + u_prev[1] + i[0] + i[1]).is_finite() {
+            if !finite(&u_prev) {
+                return Err(EkfError::NonFiniteInput);
+            }
+            if !finite(&i) {
+                return Err(EkfError::NonFiniteMeasurement);
+            }
+            // All four finite but their sum overflows: absurd, yet valid input; go on.
+        }
+        // Four monomorphic paths: the one without tracking carries none of its code, the
+        // surface ones none of the salient model's.
+        match (self.tracker.is_some(), self.model.discrete().salient) {
+            (true, false) => {
+                let (xm, pm, tm) = self.prior::<true, false>(u_prev);
+                self.correct_prior::<true, false>(xm, pm, tm, i)
+            }
+            (false, false) => {
+                let (xm, pm, _) = self.prior::<false, false>(u_prev);
+                self.correct_prior::<false, false>(xm, pm, None, i)
+            }
+            (true, true) => {
+                let (xm, pm, tm) = self.prior::<true, true>(u_prev);
+                self.correct_prior::<true, true>(xm, pm, tm, i)
+            }
+            (false, true) => {
+                let (xm, pm, _) = self.prior::<false, true>(u_prev);
+                self.correct_prior::<false, true>(xm, pm, None, i)
+            }
+        }
+    }
+
+    /// The prediction `(x-, P-)` and, with tracking (`TRACK`, the tracker present), the prior
+    /// of the tracked parameters (nothing is stored here). `S`: the motor is salient.
+    #[inline(always)]
+    pub(super) fn prior<const TRACK: bool, const S: bool>(
+        &self,
+        u_prev: [T; 2],
+    ) -> (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>) {
+        let q = self.model.q_sym();
+        match (&self.tracker, &self.slow) {
+            (Some(tr), Some(slow)) if TRACK => {
+                let k = &slow.k;
+                let tracked = self.p.p33 <= self.angle_var_limit;
+                let trusted = self.locked;
+                let active = tr.should_track(k, tracked, self.x[2], self.p.p22);
+                let disc = if tr.rs == self.rs_constants.0 {
+                    self.model.discrete_with_flux(&self.rs_constants.1, tr.psi)
+                } else {
+                    self.model.discrete_at(tr.psi, tr.rs)
+                };
+                let (xm, mut pm, t) =
+                    structured::predict::<T, S>(&disc, q, &self.x, &self.p, u_prev, trusted);
+                let tm = tr.predict::<S>(k, &disc, &t, &self.x, &mut pm, active);
+                (xm, pm, Some(tm))
+            }
+            _ => {
+                let trusted = self.locked;
+                let (xm, pm, _) = structured::predict::<T, S>(
+                    self.model.discrete(),
+                    q,
+                    &self.x,
+                    &self.p,
+                    u_prev,
+                    trusted,
+                );
+                (xm, pm, None)
+            }
+        }
+    }
+
+    /// Salient motors: updates the lock (module docs) after a committed correction. Locked
+    /// when the angle is tracked and the innovations are consistent (the gate's running mean of
+    /// the NIS at or below its settled level; always, without a gate); stays locked while the
+    /// angle stays tracked.
+    #[inline(always)]
+    pub(super) fn update_lock(&mut self) {
+        let tracked = self.p.p33 <= self.angle_var_limit;
+        let settled = self
+            .gate
+            .as_ref()
+            .is_none_or(|g| g.nis_mean <= g.settled_nis);
+        self.locked = tracked && (self.locked || settled);
+    }
+
+    /// Prediction only (e.g. to coast over a missing current sample), with the voltage held
+    /// over the period just ended. Refused, state kept, for a non-finite input or result. The
+    /// covariance health check (when on) runs after it; on a reset the currents are kept.
+    pub fn predict(&mut self, u_prev: [T; 2]) -> Result<(), EkfError> {
+        if !finite(&u_prev) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        let (x, p, tm) = match (self.tracker.is_some(), self.model.discrete().salient) {
+            (true, false) => self.prior::<true, false>(u_prev),
+            (false, false) => self.prior::<false, false>(u_prev),
+            (true, true) => self.prior::<true, true>(u_prev),
+            (false, true) => self.prior::<false, true>(u_prev),
+        };
+        let tracker_finite = match (&tm, &self.tracker) {
+            (Some(s), Some(t)) => t.finite_with(s, t.psi),
+            _ => true,
+        };
+        if !(finite(x.as_slice()) && p.all_finite() && tracker_finite) {
+            if self.refused_resets() {
+                self.events = Events::default();
+                self.self_reset(None);
+                return Ok(());
+            }
+            return Err(EkfError::NonFiniteResult);
+        }
+        if let Some(h) = &mut self.health {
+            h.refusals = 0;
+        }
+        self.x = x;
+        self.p = p;
+        if let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+            t.commit(s, t.psi);
+            self.tracker_housekeeping();
+        }
+        self.events = Events::default();
+        if self.unhealthy(&self.x, &self.p) {
+            self.self_reset(None);
+        }
+        Ok(())
+    }
+
+    /// Correction only, with the currents sampled now, then the safeguards. Refused, state
+    /// kept, for a non-finite measurement; other errors as for [`step`](Self::step).
+    pub fn correct(&mut self, i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        if !finite(&i) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        match (self.tracker.is_some(), self.model.discrete().salient) {
+            (true, false) => {
+                let tm = self.tracker.map(|t| t.as_step());
+                self.correct_prior::<true, false>(self.x, self.p, tm, i)
+            }
+            (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, i),
+            (true, true) => {
+                let tm = self.tracker.map(|t| t.as_step());
+                self.correct_prior::<true, true>(self.x, self.p, tm, i)
+            }
+            (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, i),
+        }
+    }
+
+    /// Correction of the prior `(xm, pm)` with the currents `i`, innovation gate, branch check
+    /// and covariance health (module docs).
+    #[inline(always)]
+    pub(super) fn correct_prior<const TRACK: bool, const S: bool>(
+        &mut self,
+        xm: Vector4<T>,
+        pm: Sym4<T>,
+        tm: Option<TrackerStep<T>>,
+        i: [T; 2],
+    ) -> Result<Estimate<T>, EkfError> {
+        // Common path first: every test below is one comparison on good data; the rare
+        // branches (rejection, reopening, flip, reset) are out-of-line functions.
+        let tracking = pm.p33 <= self.angle_var_limit;
+        // The gate decides from the NIS before the update is computed; its bookkeeping is
+        // applied only once the step has succeeded (a refused step changes nothing).
+        let mut verdict = Verdict::Low;
+        let gate = &self.gate;
+        let outcome = structured::correct_unchecked(&self.model, &xm, &pm, i, |nis| match gate {
+            Some(g) if nis > g.threshold => {
+                verdict = gate_verdict(g, tracking);
+                verdict == Verdict::Reject
+            }
+            _ => false,
+        });
+        let (post, tn) = match outcome {
+            Ok(Outcome::Updated(post)) => match (&tm, &self.tracker, &self.slow) {
+                (Some(s), Some(t), Some(slow)) if TRACK => {
+                    let (step, psi, sum) = t.correct(&slow.k, s, &post);
+                    // Both sums finite in one test (`v - v` is 0 for a finite `v`, NaN
+                    // otherwise): the state's results and the tracker's.
+                    #[allow(clippy::eq_op)]
+                    let finite = (post.sum - post.sum) + (sum - sum) == T::zero();
+                    if !finite {
+                        return self.refused(EkfError::NonFiniteResult, i);
+                    }
+                    (post, Some((step, psi)))
+                }
+                _ => {
+                    if !post.sum.is_finite() {
+                        return self.refused(EkfError::NonFiniteResult, i);
+                    }
+                    (post, None)
+                }
+            },
+            Ok(Outcome::Skipped(c)) => {
+                // Rejected by the gate: the step is the prediction only.
+                self.x = xm;
+                self.p = pm;
+                if TRACK && let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+                    t.commit(s, t.psi);
+                    self.tracker_housekeeping();
+                }
+                if let Some(w) = &mut self.consistency {
+                    w.watch(c.nis);
+                }
+                self.last = c;
+                self.gate_rejected();
+                if self.unhealthy(&self.x, &self.p) {
+                    self.self_reset(Some(i));
+                }
+                return Ok(self.estimate());
+            }
+            Err(e) => return self.refused(e, i),
+        };
+        let (x, c, dth) = (post.x, post.correction, post.dth);
+        if let Some(h) = &mut self.health {
+            h.refusals = 0;
+        }
+        self.x = x;
+        self.p = post.p;
+        if TRACK && let (Some((s, psi)), Some(t)) = (&tn, &mut self.tracker) {
+            t.commit(s, *psi);
+            self.tracker_housekeeping();
+        }
+        if let Some(w) = &mut self.consistency {
+            w.watch(c.nis);
+            if self.fused != 0 {
+                self.fused -= 1;
+            }
+        }
+        self.last = c;
+        self.events = Events::default();
+        if let Some(g) = &mut self.gate {
+            if verdict == Verdict::Low {
+                g.consecutive = 0;
+                g.open = false;
+                g.inconsistent = 0;
+                g.nis_mean += (c.nis - g.nis_mean) * to_t::<T>(1.0 / 16.0);
+            } else {
+                gate_accepted_high(g, &mut self.counters, verdict);
+            }
+        }
+        if S {
+            self.update_lock();
+        }
+        let diverged = verdict != Verdict::Low && self.diverging(c.nis, tracking);
+        if let Some(b) = &mut self.branch {
+            let w = x[2];
+            let w2 = w * w;
+            if tracking && w2 > b.min_speed2 {
+                // Plain comparisons: `min`/`max` are libm calls (NaN rules) on the MCU.
+                let back = -(dth * w);
+                let cap = b.two_ts * w2;
+                let back = if back < cap { back } else { cap };
+                let sum = b.sum + back - b.k * w2;
+                b.sum = if sum > T::zero() { sum } else { T::zero() };
+                if b.sum > b.threshold * w.abs() {
+                    self.flip();
+                }
+            } else {
+                b.sum = T::zero();
+            }
+        }
+        if diverged || self.unhealthy(&self.x, &self.p) {
+            self.self_reset(Some(i));
+        }
+        Ok(self.estimate())
+    }
+
+    /// The tracking's slow work after a committed step, when due (a full window of the split
+    /// filter, the reported deviations).
+    #[inline(always)]
+    pub(super) fn tracker_housekeeping(&mut self) {
+        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow)
+            && t.housekeeping_due(&slow.k)
+        {
+            t.housekeeping(slow);
+            self.refresh_rs_constants();
+        }
+    }
+
+    /// Recomputes the step's constants for the tracked `Rs` when it has changed (after the
+    /// split filter's window, `set_parameters`, a restart). Only a cache: a step whose `Rs`
+    /// differs from the cached one computes its constants itself.
+    #[cold]
+    #[inline(never)]
+    pub(super) fn refresh_rs_constants(&mut self) {
+        if let Some(t) = &self.tracker
+            && t.rs != self.rs_constants.0
+        {
+            // At the configured flux, so that the cache is a function of `Rs` alone (its `c`
+            // is replaced each step).
+            self.rs_constants = (t.rs, self.model.discrete_at(self.nominal.0, t.rs));
+        }
+    }
+}

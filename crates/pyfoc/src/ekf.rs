@@ -1,0 +1,306 @@
+//! `pyfoc.Ekf`: the PMSM observer of `ekf_core::observer` on numpy arrays. Thin: the
+//! configuration's spellings and checks, one step as a dict, and `run`, whose fast path is
+//! the [`engine`](crate::engine)'s.
+
+use std::sync::Mutex;
+
+use ekf_core::nalgebra::{Matrix2, Matrix4, Vector4};
+use ekf_core::{
+    CovarianceUpdate, Discretization, EkfError, Float, ObserverConfig, PmsmObserver, RsTracking,
+};
+use numpy::{PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::convert::{self, fixed, record_args, square, to_vec};
+use crate::engine;
+use crate::errors::{ConfigError, FilterError};
+use crate::motor::Motor;
+use crate::observer::{Columns, Filter, OUTPUTS, Observer};
+use crate::replay;
+
+/// Extended Kalman filter observer of a PMSM, surface or interior (active-flux model when
+/// `ld != lq`; states `i_alpha, i_beta, omega_e, theta`).
+///
+/// `Ekf(motor, ts, *, q=None, r=None, x0=None, p0=None, discretization="lag_free",
+/// dtype="float64", covariance_update="joseph")`.
+///
+/// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
+/// calls on one `Ekf` from several threads are serialized (each completes, in some order)
+/// while other Python threads keep running.
+#[pyclass(frozen, module = "pyfoc")]
+pub(crate) struct Ekf {
+    inner: Mutex<Filter>,
+    /// Sample time, s.
+    #[pyo3(get)]
+    ts: f64,
+    /// Precision of the filter, `"float64"` or `"float32"`.
+    #[pyo3(get)]
+    dtype: &'static str,
+}
+
+impl Ekf {
+    /// Runs `f` on the filter with the GIL released and the lock held
+    /// ([`Filter::with`]).
+    pub(crate) fn with<R: Send>(
+        &self,
+        py: Python<'_>,
+        f: impl FnOnce(&mut Filter) -> R + Send,
+    ) -> R {
+        Filter::with(&self.inner, py, f)
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build<T: Float>(
+    motor: &Motor,
+    ts: f64,
+    q: Option<[[f64; 4]; 4]>,
+    r: Option<[[f64; 2]; 2]>,
+    x0: Option<[f64; 4]>,
+    p0: Option<[[f64; 4]; 4]>,
+    disc: Discretization,
+    update: CovarianceUpdate,
+    tracking: Tracking,
+) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
+    let conv = |v: f64| T::from_subset(&v);
+    let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
+    cfg.discretization = disc;
+    cfg.covariance_update = update;
+    match tracking {
+        Tracking::Default => {}
+        Tracking::Flux => {
+            if let Some(t) = &mut cfg.parameter_tracking {
+                t.rs = RsTracking::Fixed;
+            }
+        }
+        Tracking::Off => cfg.parameter_tracking = None,
+    }
+    if let Some(q) = q {
+        cfg.noise.q = Matrix4::from_fn(|i, j| conv(q[i][j]));
+    }
+    if let Some(r) = r {
+        cfg.noise.r = Matrix2::from_fn(|i, j| conv(r[i][j]));
+    }
+    if let Some(x0) = x0 {
+        cfg.x0 = Vector4::from_fn(|i, _| conv(x0[i]));
+    }
+    if let Some(p0) = p0 {
+        cfg.p0 = Matrix4::from_fn(|i, j| conv(p0[i][j]));
+    }
+    PmsmObserver::new(&cfg)
+}
+
+/// Online parameter tracking of an [`Ekf`] (`tracking=` argument).
+#[derive(Clone, Copy)]
+enum Tracking {
+    /// `"default"`: the flux tracked, `Rs` by the split filter with the thermal link.
+    Default,
+    /// `"flux"`: the flux tracked, `Rs` fixed.
+    Flux,
+    /// `"off"`: the configured parameters as they are.
+    Off,
+}
+
+#[pymethods]
+impl Ekf {
+    #[new]
+    #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
+        discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
+        tracking = "default"))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        motor: &Motor,
+        ts: f64,
+        q: Option<&Bound<'_, PyAny>>,
+        r: Option<&Bound<'_, PyAny>>,
+        x0: Option<&Bound<'_, PyAny>>,
+        p0: Option<&Bound<'_, PyAny>>,
+        discretization: &str,
+        dtype: &str,
+        covariance_update: &str,
+        tracking: &str,
+    ) -> PyResult<Self> {
+        let disc = match discretization {
+            "lag_free" => Discretization::LagFree,
+            "forward_euler" => Discretization::ForwardEuler,
+            other => {
+                return Err(ConfigError::new_err(format!(
+                    "discretization must be 'lag_free' or 'forward_euler', got {other:?}"
+                )));
+            }
+        };
+        let update = match covariance_update {
+            "joseph" => CovarianceUpdate::Joseph,
+            "standard" => CovarianceUpdate::StandardSymmetrized,
+            other => {
+                return Err(ConfigError::new_err(format!(
+                    "covariance_update must be 'joseph' or 'standard', got {other:?}"
+                )));
+            }
+        };
+        let tracking = match tracking {
+            "default" => Tracking::Default,
+            "flux" => Tracking::Flux,
+            "off" => Tracking::Off,
+            other => {
+                return Err(ConfigError::new_err(format!(
+                    "tracking must be 'default', 'flux' or 'off', got {other:?}"
+                )));
+            }
+        };
+        let q = q.map(|o| square::<4>(o, "q")).transpose()?;
+        let r = r.map(|o| square::<2>(o, "r")).transpose()?;
+        let p0 = p0.map(|o| square::<4>(o, "p0")).transpose()?;
+        let x0 = x0.map(|o| fixed::<4>(o, "x0")).transpose()?;
+        let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
+        let (observer, dtype) = match dtype {
+            "float64" => (
+                Observer::F64(
+                    build(motor, ts, q, r, x0, p0, disc, update, tracking).map_err(cfg_err)?,
+                ),
+                "float64",
+            ),
+            "float32" => (
+                Observer::F32(
+                    build(motor, ts, q, r, x0, p0, disc, update, tracking).map_err(cfg_err)?,
+                ),
+                "float32",
+            ),
+            other => {
+                return Err(ConfigError::new_err(format!(
+                    "dtype must be 'float64' or 'float32', got {other:?}"
+                )));
+            }
+        };
+        Ok(Self {
+            inner: Mutex::new(Filter {
+                observer,
+                u_last: [0.0, 0.0],
+            }),
+            ts,
+            dtype,
+        })
+    }
+
+    /// Runs the filter over a record; returns a dict of `(N,)` float64 arrays `theta`, `omega`,
+    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`, `psi_f`, `rs`, `winding_temperature` (the
+    /// tracked parameters) and an int8 array `status` (the values of
+    /// `pyfoc.Status`). Continues from the filter's current state: row 0
+    /// predicts with `u_prev` if given, else with the last row of the previous `run` (zero
+    /// for a new filter). The GIL is released while the filter runs.
+    ///
+    /// `out`: a dict holding those ten arrays (e.g. the dict a previous `run` of the same
+    /// length returned), written in place and returned, so that a record filtered in chunks
+    /// allocates nothing per chunk (fresh output memory is the largest cost of `run` after
+    /// the steps). Each array must be one-dimensional of length N, C-contiguous, writable, of
+    /// the dtype above, and not shared with another output; no other thread may use them
+    /// during the call. A bad `out` raises before the filter moves.
+    ///
+    /// `dt`: an `(N,)` array of the period that ended at each row, s (each finite and > 0,
+    /// else ValueError naming `dt`), for logs with irregular periods (skipped cycles); the
+    /// rows then run in a plain loop. Without it every period is `ts`.
+    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, dt = None, out = None))]
+    fn run<'py>(
+        &self,
+        py: Python<'py>,
+        u_ab: &Bound<'py, PyAny>,
+        i_ab: &Bound<'py, PyAny>,
+        u_prev: Option<&Bound<'py, PyAny>>,
+        dt: Option<&Bound<'py, PyAny>>,
+        out: Option<Bound<'py, PyDict>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (u, i, n, u_prev) = record_args(u_ab, i_ab, u_prev)?;
+        if let Some(dt) = dt {
+            // Per-row periods: a separate, plain loop (`replay::run_dt`); the optimized
+            // path below is left as it is.
+            let dt = replay::periods(dt, n)?;
+            let given = out
+                .map(|d| engine::out_arrays(&d, n).map(|a| (a, d)))
+                .transpose()?;
+            convert::ensure_memory(n as u128 * (40 + Columns::ROW_BYTES), "run")?;
+            let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
+            let rows = self.with(py, move |inner| {
+                let prev = u_prev.unwrap_or(inner.u_last);
+                let (rows, last) = inner.observer.run_dt(prev, &u, &i, &dt);
+                inner.u_last = last;
+                rows
+            });
+            return replay::rows_to_dict(py, &rows, given);
+        }
+        let given = out
+            .map(|d| engine::out_arrays(&d, n).map(|a| (a, d)))
+            .transpose()?;
+        engine::run(py, &self.inner, &u, &i, n, u_prev, given)
+    }
+
+    /// `omega_mech`, `i_alpha`, `i_beta`, `nis`, `psi_f`, `rs`, `winding_temperature`) and
+    /// `status`, a `pyfoc.Status`
+    /// (`REJECTED` for a non-finite sample, in which case the state is unchanged).
+    /// Does not change the voltage `run` uses for its next first row.
+    fn step<'py>(
+        &self,
+        py: Python<'py>,
+        u_prev: &Bound<'py, PyAny>,
+        i: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let u = fixed::<2>(u_prev, "u_prev")?;
+        let i = fixed::<2>(i, "i")?;
+        let r = self.with(py, |inner| inner.observer.step(u, i));
+        let out = PyDict::new(py);
+        for (name, v) in OUTPUTS.iter().zip(r.values) {
+            out.set_item(name, v)?;
+        }
+        out.set_item("status", r.status.to_py(py)?)?;
+        Ok(out)
+    }
+
+    /// State `[i_alpha, i_beta, omega_e, theta]` as a `(4,)` float64 array.
+    #[getter]
+    fn state<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let x = self.with(py, |inner| inner.observer.state());
+        PyArray1::from_slice(py, &x)
+    }
+
+    /// State covariance as a `(4, 4)` float64 array.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let p = self.with(py, |inner| inner.observer.covariance());
+        let rows: Vec<Vec<f64>> = p.iter().map(|r| r.to_vec()).collect();
+        Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+
+    /// Voltage `[u_alpha, u_beta]` that predicts the first row of the next `run`.
+    #[getter]
+    fn u_last<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let u = self.with(py, |inner| inner.u_last);
+        PyArray1::from_slice(py, &u)
+    }
+
+    /// Replaces state (length 4) and covariance (4 x 4). `FilterError` and nothing changed
+    /// when either is not finite.
+    fn reset(&self, py: Python<'_>, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
+        let x = fixed::<4>(x, "x")?;
+        let p = square::<4>(p, "p")?;
+        fn go<T: Float>(
+            o: &mut PmsmObserver<T>,
+            x: [f64; 4],
+            p: [[f64; 4]; 4],
+        ) -> Result<(), EkfError> {
+            let c = |v: f64| T::from_subset(&v);
+            o.reset(
+                Vector4::from_fn(|i, _| c(x[i])),
+                Matrix4::from_fn(|i, j| c(p[i][j])),
+            )
+        }
+        let res = self.with(py, |inner| match &mut inner.observer {
+            Observer::F64(o) => go(o, x, p),
+            Observer::F32(o) => go(o, x, p),
+        });
+        res.map_err(|e| FilterError::new_err(e.to_string()))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Ekf(ts={}, dtype={:?})", self.ts, self.dtype)
+    }
+}
