@@ -15,6 +15,8 @@ pub enum Param {
     Saliency,
     /// Magnet flux linkage `psi_f_wb`.
     PsiF,
+    /// Number of pole pairs `pole_pairs`.
+    PolePairs,
     /// Sample time `ts_s`.
     Ts,
     /// Angle standard deviation limit of the status `angle_sigma_limit_rad`.
@@ -133,6 +135,7 @@ impl fmt::Display for Param {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
             Param::Rs => "rs_ohm",
+            Param::PolePairs => "pole_pairs",
             Param::Ld => "ld_h",
             Param::Lq => "lq_h",
             Param::Saliency => "lq_h / ld_h",
@@ -208,7 +211,10 @@ impl fmt::Display for ConfigError {
             ConfigError::TooLargeInitialCovariance => {
                 f.write_str("covariance_health: trace_factor * trace(P0) is not finite")
             }
-            ConfigError::OutOfRange(p) => write!(f, "{p} is outside its documented range"),
+            ConfigError::OutOfRange(p) => match crate::motor::plausible_range(*p) {
+                Some(range) => write!(f, "{p} is outside its accepted range {range}"),
+                None => write!(f, "{p} is outside its documented range"),
+            },
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",
             ),

@@ -28,7 +28,10 @@ pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, Pro
 pub use error::{ConfigError, Matrix, Param};
 pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, FluxTiming};
 pub use fluxmap::{FluxMap, FluxMapError, FluxPoint};
-pub use motor::{MAX_SALIENCY_RATIO, MIN_SALIENCY_RATIO, MotorKind, MotorParams};
+pub use motor::{
+    MAX_INDUCTANCE_H, MAX_POLE_PAIRS, MAX_PSI_F_WB, MAX_RS_OHM, MAX_SALIENCY_RATIO,
+    MIN_INDUCTANCE_H, MIN_SALIENCY_RATIO, MotorKind, MotorParams,
+};
 pub use noise::NoiseCovariances;
 pub use observer::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization, Estimate, InnovationGate,

@@ -36,6 +36,29 @@ pub const MIN_SALIENCY_RATIO: f64 = 0.25;
 /// (synchronous-reluctance-like rotors reach 5-8).
 pub const MAX_SALIENCY_RATIO: f64 = 8.0;
 
+/// Largest accepted stator resistance, ohm ([`MotorParams::validate`]).
+pub const MAX_RS_OHM: f64 = 1e3;
+/// Smallest accepted inductance, H.
+pub const MIN_INDUCTANCE_H: f64 = 1e-8;
+/// Largest accepted inductance, H.
+pub const MAX_INDUCTANCE_H: f64 = 10.0;
+/// Largest accepted flux linkage, Wb.
+pub const MAX_PSI_F_WB: f64 = 100.0;
+/// Largest accepted number of pole pairs.
+pub const MAX_POLE_PAIRS: u32 = 1000;
+
+/// The accepted range of a motor parameter, as text for errors (`None` for other
+/// parameters).
+pub(crate) fn plausible_range(p: Param) -> Option<&'static str> {
+    match p {
+        Param::Rs => Some("(0, 1000] ohm"),
+        Param::Ld | Param::Lq => Some("[1e-8, 10] H"),
+        Param::PsiF => Some("(0, 100] Wb"),
+        Param::PolePairs => Some("1..=1000"),
+        _ => None,
+    }
+}
+
 impl<T: Float> MotorParams<T> {
     /// Servo motor, the textbook default ([`catalog::SERVO`]: Rs 2.875, Ls 8.5 mH,
     /// psi_f 0.175 Wb, 4 pole pairs).
@@ -90,12 +113,30 @@ impl<T: Float> MotorParams<T> {
     }
 
     /// Checks that Rs, Ld, Lq and psi_f are finite and positive, that `Lq / Ld` is within
-    /// [`MIN_SALIENCY_RATIO`]..=[`MAX_SALIENCY_RATIO`] and that there is a pole pair.
+    /// [`MIN_SALIENCY_RATIO`]..=[`MAX_SALIENCY_RATIO`] and that there is a pole pair; and that
+    /// every value is one a motor can have: `Rs <= 1000` ohm, `1e-8 <= L <= 10` H,
+    /// `psi_f <= 100` Wb, at most 1000 pole pairs ([`MAX_RS_OHM`], ...). Beyond these no
+    /// drive this observer serves exists, and the scaled covariances would leave the range of
+    /// `f32`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive(self.rs_ohm, Param::Rs)?;
         positive(self.ld_h, Param::Ld)?;
         positive(self.lq_h, Param::Lq)?;
         positive(self.psi_f_wb, Param::PsiF)?;
+        let within = |v: T, lo: f64, hi: f64, p: Param| {
+            if v >= to_t::<T>(lo) && v <= to_t::<T>(hi) {
+                Ok(())
+            } else {
+                Err(ConfigError::OutOfRange(p))
+            }
+        };
+        within(self.rs_ohm, 0.0, MAX_RS_OHM, Param::Rs)?;
+        within(self.ld_h, MIN_INDUCTANCE_H, MAX_INDUCTANCE_H, Param::Ld)?;
+        within(self.lq_h, MIN_INDUCTANCE_H, MAX_INDUCTANCE_H, Param::Lq)?;
+        within(self.psi_f_wb, 0.0, MAX_PSI_F_WB, Param::PsiF)?;
+        if self.pole_pairs > MAX_POLE_PAIRS {
+            return Err(ConfigError::OutOfRange(Param::PolePairs));
+        }
         let ratio = self.lq_h / self.ld_h;
         if !(ratio >= to_t(MIN_SALIENCY_RATIO) && ratio <= to_t(MAX_SALIENCY_RATIO)) {
             return Err(ConfigError::OutOfRange(Param::Saliency));

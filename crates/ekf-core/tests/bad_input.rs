@@ -231,3 +231,67 @@ fn singular_innovation_covariance_is_an_error() {
         assert_eq!(ekf, before);
     }
 }
+
+/// Finite but absurd motors are refused, naming the parameter and its accepted range.
+#[test]
+fn implausible_motors_are_refused_with_their_range() {
+    use ekf_core::MotorParams;
+    let servo = MotorParams::<f64>::servo();
+    let cases = [
+        (
+            MotorParams {
+                rs_ohm: 1e300,
+                ..servo
+            },
+            Param::Rs,
+            "rs_ohm",
+            "(0, 1000] ohm",
+        ),
+        (
+            MotorParams {
+                ld_h: 1e-12,
+                ..servo
+            },
+            Param::Ld,
+            "ld_h",
+            "[1e-8, 10] H",
+        ),
+        (
+            MotorParams {
+                lq_h: 50.0,
+                ..servo
+            },
+            Param::Lq,
+            "lq_h",
+            "[1e-8, 10] H",
+        ),
+        (
+            MotorParams {
+                psi_f_wb: 1e5,
+                ..servo
+            },
+            Param::PsiF,
+            "psi_f_wb",
+            "(0, 100] Wb",
+        ),
+        (
+            MotorParams {
+                pole_pairs: 1 << 31,
+                ..servo
+            },
+            Param::PolePairs,
+            "pole_pairs",
+            "1..=1000",
+        ),
+    ];
+    for (m, p, name, range) in cases {
+        let e = m.validate().unwrap_err();
+        assert_eq!(e, ConfigError::OutOfRange(p));
+        let text = e.to_string();
+        assert!(text.contains(name) && text.contains(range), "{text}");
+    }
+    // The reference motors are all inside.
+    for m in ekf_core::catalog::ALL {
+        assert!(m.params::<f32>().validate().is_ok(), "{}", m.name);
+    }
+}

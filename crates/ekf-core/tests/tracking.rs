@@ -459,7 +459,7 @@ fn bad_tracking_configuration_is_refused() {
         split(-0.0012, 20.0, 100, -1.0),
         ConfigError::NotPositive(Param::TrackingWindowSigma),
     );
-    // A flux so large its variance overflows.
+    // A flux so large its variance would overflow: refused first as no motor's flux.
     let huge = ObserverConfig {
         motor: MotorParams {
             psi_f_wb: 1e200,
@@ -469,7 +469,7 @@ fn bad_tracking_configuration_is_refused() {
     };
     assert_eq!(
         PmsmObserver::new(&huge).err(),
-        Some(ConfigError::OutOfRange(Param::TrackingPsiSigma))
+        Some(ConfigError::OutOfRange(Param::PsiF))
     );
     // set_parameters refuses values outside the configured range or with tracking off.
     let mut obs = PmsmObserver::new(&base).expect("valid");
