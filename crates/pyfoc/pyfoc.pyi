@@ -101,6 +101,19 @@ class Motor:
         ld: float | None = None,
         lq: float | None = None,
     ) -> Motor: ...
+    @staticmethod
+    def from_datasheet(
+        *,
+        pole_pairs: int,
+        r_ll: float,
+        l_ll: float | None = None,
+        kv_rpm_per_v: float | None = None,
+        kt_nm_per_a: float | None = None,
+        ld_ll: float | None = None,
+        lq_ll: float | None = None,
+    ) -> Motor:
+        """Motor from line-to-line R and L (halved to per phase) and Kv (rpm per volt of
+        line-to-line peak back-EMF) or Kt (N m per peak phase ampere): exactly one of them."""
 
 class RunOutput(TypedDict):
     theta: npt.NDArray[np.float64]

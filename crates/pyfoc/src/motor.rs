@@ -69,6 +69,66 @@ impl Motor {
         Ok(m)
     }
 
+    /// Motor from datasheet values (`ekf_core::catalog::datasheet` states the conventions):
+    /// line-to-line resistance and inductance of a star winding (halved to per phase), and
+    /// the flux from `kv_rpm_per_v` (rpm per volt of line-to-line peak back-EMF) or
+    /// `kt_nm_per_a` (N m per peak phase ampere): exactly one of the two.
+    #[staticmethod]
+    #[pyo3(signature = (*, pole_pairs, r_ll, l_ll = None, kv_rpm_per_v = None, kt_nm_per_a = None, ld_ll = None, lq_ll = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn from_datasheet(
+        pole_pairs: i64,
+        r_ll: f64,
+        l_ll: Option<f64>,
+        kv_rpm_per_v: Option<f64>,
+        kt_nm_per_a: Option<f64>,
+        ld_ll: Option<f64>,
+        lq_ll: Option<f64>,
+    ) -> PyResult<Self> {
+        use ekf_core::catalog::datasheet;
+        let pp = u32::try_from(pole_pairs)
+            .ok()
+            .filter(|&p| p >= 1)
+            .ok_or_else(|| {
+                ConfigError::new_err(format!("pole_pairs must be >= 1, got {pole_pairs}"))
+            })?;
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(v)
+            } else {
+                Err(ConfigError::new_err(format!(
+                    "{name} must be positive and finite, got {v}"
+                )))
+            }
+        };
+        let psi_f = match (kv_rpm_per_v, kt_nm_per_a) {
+            (Some(kv), None) => datasheet::psi_f_from_kv(positive("kv_rpm_per_v", kv)?, pp),
+            (None, Some(kt)) => datasheet::psi_f_from_kt(positive("kt_nm_per_a", kt)?, pp),
+            _ => {
+                return Err(ConfigError::new_err(
+                    "give exactly one of kv_rpm_per_v and kt_nm_per_a",
+                ));
+            }
+        };
+        let (ld, lq) = match (l_ll, ld_ll, lq_ll) {
+            (Some(l), None, None) => {
+                let l = datasheet::phase_from_line_to_line(positive("l_ll", l)?);
+                (l, l)
+            }
+            (None, Some(d), Some(q)) => (
+                datasheet::phase_from_line_to_line(positive("ld_ll", d)?),
+                datasheet::phase_from_line_to_line(positive("lq_ll", q)?),
+            ),
+            _ => {
+                return Err(ConfigError::new_err(
+                    "give l_ll (surface motor) or both ld_ll and lq_ll (interior motor)",
+                ));
+            }
+        };
+        let rs = datasheet::phase_from_line_to_line(positive("r_ll", r_ll)?);
+        Self::new(rs, None, psi_f, i64::from(pp), Some(ld), Some(lq))
+    }
+
     /// `"surface"`, `"interior"` (Lq > Ld) or `"inverse_salient"` (Lq < Ld: accepted, but
     /// check that Ld and Lq are not swapped).
     #[getter]

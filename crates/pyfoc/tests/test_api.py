@@ -1,5 +1,6 @@
 """The Python API: shapes, dtypes, errors, chunking, non-finite samples, threads."""
 import enum
+import math
 import threading
 
 import numpy as np
@@ -393,3 +394,49 @@ def test_interior_motor_uses_ld_and_lq():
     assert salient.kind == "interior" and surface.kind == "surface"
     rms_salient, rms_surface = rms(salient), rms(surface)
     assert rms_salient < 0.3 and rms_surface > 2.0, (rms_salient, rms_surface)
+
+
+def test_motor_from_datasheet_converts_line_to_line_and_kt_kv():
+    m = pyfoc.Motor.from_datasheet(pole_pairs=4, r_ll=5.75, l_ll=17e-3, kt_nm_per_a=1.05)
+    assert m.rs == pytest.approx(2.875, rel=1e-12)
+    assert m.ld == m.lq == pytest.approx(8.5e-3, rel=1e-12)
+    assert m.psi_f == pytest.approx(0.175, rel=1e-12)
+    # Kv: rpm per volt of line-to-line peak EMF; sqrt(3) p psi_f volts per mechanical rad/s.
+    kv = 60.0 / (2 * math.pi * math.sqrt(3) * 4 * 0.175)
+    m2 = pyfoc.Motor.from_datasheet(pole_pairs=4, r_ll=5.75, l_ll=17e-3, kv_rpm_per_v=kv)
+    assert m2.psi_f == pytest.approx(0.175, rel=1e-12)
+    ipm = pyfoc.Motor.from_datasheet(
+        pole_pairs=3, r_ll=7.2, ld_ll=60e-3, lq_ll=84e-3, kt_nm_per_a=2.25
+    )
+    assert (ipm.ld, ipm.lq, ipm.kind) == (pytest.approx(30e-3), pytest.approx(42e-3), "interior")
+
+
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        (dict(kt_nm_per_a=1.0, kv_rpm_per_v=100.0), "exactly one"),
+        (dict(), "exactly one"),
+        (dict(kt_nm_per_a=-1.0), "kt_nm_per_a"),
+        (dict(kt_nm_per_a=1.0, l_ll=None), "l_ll"),
+        (dict(kt_nm_per_a=1.0, r_ll=float("nan")), "r_ll"),
+        (dict(kt_nm_per_a=1.0, pole_pairs=0), "pole_pairs"),
+    ],
+)
+def test_motor_from_datasheet_refuses_bad_values_naming_them(kwargs, words):
+    args = dict(pole_pairs=4, r_ll=5.75, l_ll=17e-3)
+    args.update(kwargs)
+    with pytest.raises(pyfoc.ConfigError, match=words):
+        pyfoc.Motor.from_datasheet(**args)
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        ((1e300, 8.5e-3, 0.175, 4), "rs_ohm"),
+        ((2.875, 8.5e-3, 0.175, 2**31), "pole_pairs"),
+        ((2.875, 8.5e-3, 1e9, 4), "psi_f_wb"),
+    ],
+)
+def test_motor_refuses_absurd_values_with_their_range(args, words):
+    with pytest.raises(pyfoc.ConfigError, match=words + ".*range"):
+        pyfoc.Motor(*args)
