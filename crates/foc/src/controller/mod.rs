@@ -201,7 +201,10 @@ impl core::error::Error for CommandError {}
 /// The controller (module docs). Build with [`Foc::new`], call [`Foc::tick`] once per PWM
 /// period, command with [`start`](Foc::start), [`stop`](Foc::stop),
 /// [`set_speed_ref_mech_rad_s`](Foc::set_speed_ref_mech_rad_s).
+// `repr(C)`: the fields in the order written (the layout rustc picks otherwise costs the
+// tick 30 instructions on the Cortex-M4F: `scripts/qemu-firmware.sh`, foc_tick 1724 vs 1694).
 #[derive(Clone, Debug)]
+#[repr(C)]
 pub struct Foc {
     cfg: FocConfig,
     // Constants derived from the configuration.

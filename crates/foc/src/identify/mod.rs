@@ -167,8 +167,11 @@ use spin::Spin;
 
 const INV_SQRT3: f32 = 0.577_350_26;
 
-/// The step in progress, with its own state.
+/// The step in progress, with its own state. (`repr(u8)`: a one-byte tag the dispatch
+/// reads directly; the niche layout Rust picks otherwise costs the worst tick, the
+/// inertia step's last, about 18 instructions on the Cortex-M4F.)
 #[derive(Clone, Debug)]
+#[repr(u8)]
 enum Step {
     Offsets(Offsets),
     Probe(Probe),
