@@ -397,7 +397,7 @@ def tune_qr(
     omega_true: npt.ArrayLike | None = None,
     skip: int | None = None,
     r_shape: Literal["full", "isotropic"] = "full",
-    max_evals: int = 5000,
+    max_evals: int | None = None,
     x0: npt.ArrayLike | None = None,
     discretization: Literal["lag_free", "forward_euler"] = "lag_free",
     min_speed: float | None = None,
@@ -419,7 +419,7 @@ def tune_qr_mcap(
     *,
     skip: int | None = None,
     r_shape: Literal["full", "isotropic"] = "full",
-    max_evals: int = 5000,
+    max_evals: int | None = None,
     x0: npt.ArrayLike | None = None,
     discretization: Literal["lag_free", "forward_euler"] = "lag_free",
     min_speed: float | None = None,
@@ -439,8 +439,8 @@ def identify(
     steps, total_time_s, error, error_kind, failed_step, pwm_off_at_end); a failed
     identification is reported (ok False), not raised. Releases the GIL."""
 
-def suite(*, short: bool = False, seed: int = 1, ideal: bool = False) -> dict[str, Any]:
-    """The observer suite of `pmsm-sim suite`: the three reference motors at 10/50/100 %
+def suite(*, short: bool = False, seed: int | None = None, ideal: bool = False) -> dict[str, Any]:
+    """(`seed`: None means 1.) The observer suite of `pmsm-sim suite`: the three reference motors at 10/50/100 %
     rated speed, a rated load step and starts from unknown angles; the seed's filter, the
     flux + PLL baseline and the default EKF side by side. Returns the report as a dict
     (`motors`, `steady`, `transients`, `checks`, ...) plus `markdown` (the printed tables) and

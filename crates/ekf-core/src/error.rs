@@ -112,6 +112,9 @@ pub enum ConfigError {
     NonFiniteMatrix(Matrix),
     /// The matrix is not symmetric.
     NotSymmetric(Matrix),
+    /// The matrix has an entry above
+    /// [`MAX_COVARIANCE_ENTRY`](crate::observer::MAX_COVARIANCE_ENTRY).
+    TooLargeMatrix(Matrix),
     /// The matrix has a negative eigenvalue.
     NotPositiveSemiDefinite(Matrix),
     /// The matrix must be positive definite (the measurement noise `R`: `S` must stay
@@ -198,6 +201,12 @@ impl fmt::Display for ConfigError {
             ConfigError::ZeroPolePairs => f.write_str("pole_pairs must be at least 1"),
             ConfigError::NonFiniteMatrix(m) => write!(f, "{m} holds a NaN or an infinity"),
             ConfigError::NotSymmetric(m) => write!(f, "{m} is not symmetric"),
+            ConfigError::TooLargeMatrix(m) => write!(
+                f,
+                "{m} has an entry above {:e}: no noise is that large, and the filter's \
+                 arithmetic would overflow",
+                crate::observer::MAX_COVARIANCE_ENTRY
+            ),
             ConfigError::NotPositiveDefinite(m) => {
                 write!(f, "{m} is not positive definite (it must be invertible)")
             }

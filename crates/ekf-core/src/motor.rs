@@ -55,6 +55,7 @@ pub(crate) fn plausible_range(p: Param) -> Option<&'static str> {
         Param::Ld | Param::Lq => Some("[1e-8, 10] H"),
         Param::PsiF => Some("(0, 100] Wb"),
         Param::PolePairs => Some("1..=1000"),
+        Param::Ts => Some("[1e-7, 1] s"),
         _ => None,
     }
 }

@@ -206,7 +206,9 @@ mod step;
 pub(crate) mod structured;
 pub mod tracking;
 
-pub use config::{ObserverConfig, default_p0};
+pub use config::{
+    MAX_COVARIANCE_ENTRY, MAX_TS_S, MIN_TS_S, ObserverConfig, check_covariance, default_p0,
+};
 pub use estimate::{Estimate, ObserverCounters, Status};
 pub use model::{Discretization, PmsmModel};
 pub use pmsm::PmsmObserver;

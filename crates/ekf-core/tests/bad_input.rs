@@ -295,3 +295,31 @@ fn implausible_motors_are_refused_with_their_range() {
         assert!(m.params::<f32>().validate().is_ok(), "{}", m.name);
     }
 }
+
+/// A sample time outside [1e-7, 1] s and covariances with absurd entries are refused before
+/// anything is derived from them (the scaled Q of ts = 1e-300 would overflow).
+#[test]
+fn absurd_sample_time_and_covariances_are_refused() {
+    use ekf_core::{Matrix, MotorParams, ObserverConfig, PmsmObserver};
+    let servo = MotorParams::<f64>::servo();
+    for ts in [1e-300, 1e-9, 10.0] {
+        let e = PmsmObserver::new(&ObserverConfig::new(servo, ts)).unwrap_err();
+        assert_eq!(e, ConfigError::OutOfRange(Param::Ts), "{ts}");
+        assert!(e.to_string().contains("[1e-7, 1] s"), "{e}");
+    }
+    let mut cfg = ObserverConfig::new(servo, 1e-4);
+    cfg.noise.q = Matrix4::identity() * 1e300;
+    assert_eq!(
+        PmsmObserver::new(&cfg).unwrap_err(),
+        ConfigError::TooLargeMatrix(Matrix::Q)
+    );
+    let mut cfg = ObserverConfig::new(servo, 1e-4);
+    cfg.p0 = Matrix4::identity() * 1e19;
+    assert_eq!(
+        PmsmObserver::new(&cfg).unwrap_err(),
+        ConfigError::TooLargeMatrix(Matrix::P0)
+    );
+    // The check a caller applies before a reset.
+    assert!(ekf_core::observer::check_covariance(&(-Matrix4::<f64>::identity())).is_err());
+    assert!(ekf_core::observer::check_covariance(&Matrix4::<f64>::identity()).is_ok());
+}

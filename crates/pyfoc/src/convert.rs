@@ -15,7 +15,7 @@ use numpy::{
 };
 use pyo3::exceptions::{PyMemoryError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyList, PyString, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyInt, PyList, PyString, PyTuple};
 
 /// A real array, float64, borrowed read-only from Python (no copy for a float64 ndarray).
 pub(crate) type RealArray<'py> = PyReadonlyArrayDyn<'py, f64>;
@@ -236,4 +236,25 @@ pub(crate) fn path_of(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<std::path:
     }
     obj.extract()
         .map_err(|_| PyTypeError::new_err(format!("{name}: expected a str or os.PathLike path")))
+}
+
+/// A non-negative integer argument (a seed, a count): `ValueError` naming the argument when it
+/// is negative or too large for `T`, `TypeError` naming it when it is not an integer (Python's
+/// own conversion would raise an `OverflowError` that names nothing).
+pub(crate) fn unsigned<T: TryFrom<u64>>(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<T> {
+    if !obj.is_instance_of::<PyInt>() {
+        return Err(PyTypeError::new_err(format!(
+            "{name} must be an integer, got {}",
+            obj.get_type().name()?
+        )));
+    }
+    if obj.lt(0)? {
+        return Err(PyValueError::new_err(format!(
+            "{name} must be >= 0, got {obj}"
+        )));
+    }
+    obj.extract::<u64>()
+        .ok()
+        .and_then(|v| T::try_from(v).ok())
+        .ok_or_else(|| PyValueError::new_err(format!("{name} = {obj} is too large")))
 }

@@ -278,10 +278,15 @@ impl Ekf {
     }
 
     /// Replaces state (length 4) and covariance (4 x 4). `FilterError` and nothing changed
-    /// when either is not finite.
+    /// when either is not finite; `ConfigError` and nothing changed when `p` fails the
+    /// constructor's check of `p0` (symmetric positive semi-definite, entries <= 1e18).
     fn reset(&self, py: Python<'_>, x: &Bound<'_, PyAny>, p: &Bound<'_, PyAny>) -> PyResult<()> {
         let x = fixed::<4>(x, "x")?;
         let p = square::<4>(p, "p")?;
+        if p.iter().flatten().all(|v| v.is_finite()) {
+            ekf_core::observer::check_covariance(&Matrix4::from_fn(|i, j| p[i][j]))
+                .map_err(|e| ConfigError::new_err(format!("p: {e}")))?;
+        }
         fn go<T: Float>(
             o: &mut PmsmObserver<T>,
             x: [f64; 4],

@@ -20,9 +20,12 @@ use crate::simulate::scenario_of;
 pub(crate) fn identify<'py>(
     py: Python<'py>,
     scenario: &Bound<'py, PyAny>,
-    seed: Option<u64>,
+    seed: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let sc = scenario_of(scenario)?;
+    let seed = seed
+        .map(|s| crate::convert::unsigned(s, "seed"))
+        .transpose()?;
     let opts = pmsm_sim::identify::IdentifyOptions {
         seed,
         ..Default::default()

@@ -118,7 +118,7 @@ pub(crate) fn simulate<'py>(
     py: Python<'py>,
     scenario: Option<&Bound<'py, PyAny>>,
     duration: Option<f64>,
-    seed: Option<u64>,
+    seed: Option<&Bound<'py, PyAny>>,
     mcap: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut sc = match scenario {
@@ -135,7 +135,7 @@ pub(crate) fn simulate<'py>(
         sc = sc.with_duration(d);
     }
     if let Some(s) = seed {
-        sc.seed = s;
+        sc.seed = crate::convert::unsigned(s, "seed")?;
     }
     sc.validate()
         .map_err(|e| ConfigError::new_err(format!("{}: {e}", sc.name)))?;

@@ -17,13 +17,17 @@ use crate::errors::{PyfocError, SimulationError};
 /// simulated time, `seed` seeds the sensor noise, `ideal` turns off noise, ADC, offsets, gain
 /// errors and dead time. Releases the GIL while it runs.
 #[pyfunction]
-#[pyo3(signature = (*, short = false, seed = 1, ideal = false))]
-pub(crate) fn suite(
-    py: Python<'_>,
+#[pyo3(signature = (*, short = false, seed = None, ideal = false))]
+pub(crate) fn suite<'py>(
+    py: Python<'py>,
     short: bool,
-    seed: u64,
+    seed: Option<&Bound<'py, PyAny>>,
     ideal: bool,
-) -> PyResult<Bound<'_, PyDict>> {
+) -> PyResult<Bound<'py, PyDict>> {
+    let seed = match seed {
+        Some(s) => crate::convert::unsigned(s, "seed")?,
+        None => 1,
+    };
     let opts = SuiteOptions { short, seed, ideal };
     let report = py
         .detach(|| run_suite(&opts))

@@ -8,7 +8,10 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{ensure_memory, fixed, path_of, rows2, to_vec, vector};
+use crate::convert::{ensure_memory, fixed, path_of, rows2, to_vec, unsigned, vector};
+
+/// `max_evals` when not given (the CLI's default).
+const DEFAULT_MAX_EVALS: usize = 5000;
 use crate::errors::{ConfigError, FilterError, PyfocError};
 use crate::motor::Motor;
 
@@ -25,9 +28,9 @@ fn to_py(e: TuneError) -> PyErr {
 
 #[allow(clippy::too_many_arguments)]
 fn options(
-    skip: Option<usize>,
+    skip: Option<&Bound<'_, PyAny>>,
     r_shape: &str,
-    max_evals: usize,
+    max_evals: Option<&Bound<'_, PyAny>>,
     x0: Option<&Bound<'_, PyAny>>,
     discretization: &str,
     min_speed: Option<f64>,
@@ -52,9 +55,12 @@ fn options(
         }
     };
     Ok(TuneOptions {
-        skip,
+        skip: skip.map(|o| unsigned::<usize>(o, "skip")).transpose()?,
         r_shape,
-        max_evaluations: max_evals,
+        max_evaluations: match max_evals {
+            Some(o) => unsigned::<usize>(o, "max_evals")?,
+            None => DEFAULT_MAX_EVALS,
+        },
         x0: x0
             .map(|o| fixed::<4>(o, "x0"))
             .transpose()?
@@ -87,7 +93,7 @@ fn report_dict<'py>(py: Python<'py>, rep: &TuneReport) -> PyResult<Bound<'py, Py
 /// default and the tuned filter. Returns a dict (see pyfoc.pyi). Releases the GIL.
 #[pyfunction]
 #[pyo3(signature = (motor, ts, u_ab, i_ab, *, theta_true = None, omega_true = None, skip = None,
-    r_shape = "full", max_evals = 5000, x0 = None, discretization = "lag_free",
+    r_shape = "full", max_evals = None, x0 = None, discretization = "lag_free",
     min_speed = None, bound_decades = 3.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn tune_qr<'py>(
@@ -98,9 +104,9 @@ pub(crate) fn tune_qr<'py>(
     i_ab: &Bound<'py, PyAny>,
     theta_true: Option<&Bound<'py, PyAny>>,
     omega_true: Option<&Bound<'py, PyAny>>,
-    skip: Option<usize>,
+    skip: Option<&Bound<'py, PyAny>>,
     r_shape: &str,
-    max_evals: usize,
+    max_evals: Option<&Bound<'py, PyAny>>,
     x0: Option<&Bound<'py, PyAny>>,
     discretization: &str,
     min_speed: Option<f64>,
@@ -155,15 +161,15 @@ pub(crate) fn tune_qr<'py>(
 /// scenario's sensor produces), `replay_matches_log` and `replay_max_diff_rad`. Releases the
 /// GIL.
 #[pyfunction]
-#[pyo3(signature = (path, *, skip = None, r_shape = "full", max_evals = 5000, x0 = None,
+#[pyo3(signature = (path, *, skip = None, r_shape = "full", max_evals = None, x0 = None,
     discretization = "lag_free", min_speed = None, bound_decades = 3.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn tune_qr_mcap<'py>(
     py: Python<'py>,
     path: &Bound<'py, PyAny>,
-    skip: Option<usize>,
+    skip: Option<&Bound<'py, PyAny>>,
     r_shape: &str,
-    max_evals: usize,
+    max_evals: Option<&Bound<'py, PyAny>>,
     x0: Option<&Bound<'py, PyAny>>,
     discretization: &str,
     min_speed: Option<f64>,

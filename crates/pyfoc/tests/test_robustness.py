@@ -558,7 +558,7 @@ def test_nan_in_truth_and_tuner_options():
         pyfoc.tune_qr(motor(), TS, u, i, r_shape="diagonal")
     with pytest.raises(ValueError):
         pyfoc.tune_qr(motor(), TS, u[:100], i[:100])
-    with pytest.raises(OverflowError):
+    with pytest.raises(ValueError, match="skip must be >= 0"):
         pyfoc.tune_qr(motor(), TS, u, i, skip=-1)
     with pytest.raises(pyfoc.ConfigError):
         pyfoc.tune_qr(motor(), math.nan, u, i)
@@ -567,3 +567,54 @@ def test_nan_in_truth_and_tuner_options():
     i2[500] = np.nan
     rep = pyfoc.tune_qr(motor(), TS, u, i2, skip=100, max_evals=20)
     assert rep["samples_rejected"] == 1
+
+
+def _servo():
+    return pyfoc.Motor(2.875, 8.5e-3, 0.175, 4)
+
+
+@pytest.mark.parametrize(
+    "p, words",
+    [
+        (-np.eye(4), "positive semi-definite"),
+        (np.eye(4) + np.triu(np.ones((4, 4)), 1), "symmetric"),
+        (np.eye(4) * 1e300, "entry above"),
+    ],
+)
+def test_reset_applies_the_constructors_covariance_check(p, words):
+    ekf = pyfoc.Ekf(_servo(), 1e-4)
+    before = ekf.state.copy()
+    with pytest.raises(pyfoc.ConfigError, match=words):
+        ekf.reset(np.zeros(4), p)
+    assert np.array_equal(ekf.state, before)
+
+
+def test_sample_time_out_of_range_is_named():
+    with pytest.raises(pyfoc.ConfigError, match=r"ts_s is outside its accepted range \[1e-7, 1\] s"):
+        pyfoc.Ekf(_servo(), 1e-300)
+
+
+@pytest.mark.parametrize("arg", ["q", "p0"])
+def test_absurd_covariances_are_refused(arg):
+    with pytest.raises(pyfoc.ConfigError, match="entry above"):
+        pyfoc.Ekf(_servo(), 1e-4, **{arg: np.eye(4) * 1e300})
+
+
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda: pyfoc.suite(seed=-1), "seed"),
+        (lambda: pyfoc.simulate("default", duration=0.01, seed=-3), "seed"),
+        (lambda: pyfoc.identify("default", seed=-1), "seed"),
+        (lambda: pyfoc.tune_qr_mcap("nonexistent.mcap", skip=-1), "skip"),
+        (lambda: pyfoc.tune_qr_mcap("nonexistent.mcap", max_evals=-5), "max_evals"),
+    ],
+)
+def test_negative_counts_name_the_argument(call, name):
+    with pytest.raises(ValueError, match=name + " must be >= 0"):
+        call()
+
+
+def test_non_integer_count_names_the_argument():
+    with pytest.raises(TypeError, match="seed must be an integer"):
+        pyfoc.suite(seed=1.5)

@@ -94,6 +94,9 @@ impl<T: Float> ObserverConfig<T> {
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.motor.validate()?;
         positive(self.ts_s, Param::Ts)?;
+        if !(self.ts_s >= to_t::<T>(MIN_TS_S) && self.ts_s <= to_t::<T>(MAX_TS_S)) {
+            return Err(ConfigError::OutOfRange(Param::Ts));
+        }
         positive(self.angle_sigma_limit_rad, Param::AngleSigmaLimit)?;
         check_psd(&self.noise.q, Matrix::Q)?;
         check_psd(&self.noise.r, Matrix::R)?;
@@ -167,8 +170,27 @@ pub fn default_p0<T: Float>(motor: &MotorParams<T>, ts_s: T) -> Matrix4<T> {
     Matrix4::from_diagonal(&Vector4::new(si * si, si * si, sw * sw, pi * pi))
 }
 
+/// Shortest accepted sample time, s (10 MHz).
+pub const MIN_TS_S: f64 = 1e-7;
+/// Longest accepted sample time, s (1 Hz).
+pub const MAX_TS_S: f64 = 1.0;
+/// Largest accepted entry of `Q`, `R`, `P0` and of a covariance given to a reset: no sensor
+/// or model error is that large, and beyond it the filter's `f32` arithmetic would overflow
+/// (products of two entries stay below `f32::MAX`).
+pub const MAX_COVARIANCE_ENTRY: f64 = 1e18;
+
+/// The check a configuration applies to `P0` (finite, symmetric to rounding, positive
+/// semi-definite, no entry above [`MAX_COVARIANCE_ENTRY`]), for a covariance a caller is
+/// about to give [`PmsmObserver::reset`](super::PmsmObserver::reset) (which checks only that
+/// it is finite: the health check of the next step catches a covariance that goes bad in
+/// the filter's own arithmetic).
+pub fn check_covariance<T: Float>(p: &Matrix4<T>) -> Result<(), ConfigError> {
+    check_psd(p, Matrix::P0)
+}
+
 /// Symmetric (to rounding) and positive semi-definite: `m + delta I` has a Cholesky factor for
-/// `delta = 1e3 eps max|m_ij|`, i.e. no eigenvalue below `-delta`.
+/// `delta = 1e3 eps max|m_ij|`, i.e. no eigenvalue below `-delta`; and no entry above
+/// [`MAX_COVARIANCE_ENTRY`].
 fn check_psd<T: Float, const N: usize>(
     m: &SMatrix<T, N, N>,
     which: Matrix,
@@ -177,6 +199,9 @@ fn check_psd<T: Float, const N: usize>(
         return Err(ConfigError::NonFiniteMatrix(which));
     }
     let scale = m.iter().fold(T::zero(), |acc, v| acc.max(v.abs()));
+    if scale > to_t::<T>(MAX_COVARIANCE_ENTRY) {
+        return Err(ConfigError::TooLargeMatrix(which));
+    }
     if scale == T::zero() {
         return Ok(());
     }
