@@ -325,7 +325,16 @@ impl Inverter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::svpwm::svpwm;
+    use crate::svpwm::inverse_clarke;
+
+    /// Duties realizing `u_ab_v` on `u_dc_v` (min-max zero-sequence injection).
+    fn duties(u_ab_v: [f64; 2], u_dc_v: f64) -> [f64; 3] {
+        let v = inverse_clarke(u_ab_v);
+        let off = -(v.iter().copied().fold(f64::MIN, f64::max)
+            + v.iter().copied().fold(f64::MAX, f64::min))
+            / 2.0;
+        v.map(|x| 0.5 + (x + off) / u_dc_v)
+    }
 
     fn cfg(delay: bool, dead: f64) -> InverterConfig {
         InverterConfig {
@@ -386,8 +395,8 @@ mod tests {
     #[test]
     fn delay_holds_duties_one_period() {
         let mut inv = Inverter::new(cfg(true, 0.0));
-        let d1 = svpwm([50.0, 20.0], 300.0).d;
-        let d2 = svpwm([-30.0, 10.0], 300.0).d;
+        let d1 = duties([50.0, 20.0], 300.0);
+        let d2 = duties([-30.0, 10.0], 300.0);
         let a = inv.apply(d1, 300.0, 300.0, [0.0; 3]);
         assert_eq!(a.u_ab_v, DVec2::ZERO);
         let b = inv.apply(d2, 300.0, 300.0, [0.0; 3]);

@@ -12,7 +12,6 @@ use core::f64::consts::PI;
 use serde::{Deserialize, Serialize};
 
 use crate::SimError;
-use crate::controller::{ControllerConfig, hz_to_rad_s};
 use crate::error::FieldError;
 use crate::faults::{FaultSpec, RunContext};
 use crate::inverter::InverterConfig;
@@ -60,26 +59,23 @@ pub const PRESETS: &[(&str, &str)] = &[
     ),
 ];
 
+/// Hz to rad/s.
+pub fn hz_to_rad_s(f_hz: f64) -> f64 {
+    2.0 * PI * f_hz
+}
+
 /// Which controller drives the plant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ControllerKind {
-    /// The simulator's own sensored speed/current controller
-    /// ([`crate::controller::SensoredController`], `f64`, true angle and speed).
-    Sensored,
     /// The `foc` crate's sensorless controller ([`crate::foc_drive::FocDrive`], `f32`):
     /// alignment, I/f start-up, hand-over to its own EKF, closed loop.
     Foc,
     /// The `foc` crate's controller in sensored mode: the true angle and speed through
-    /// `TickInput::with_sensor`, its observer running alongside.
+    /// `TickInput::with_sensor`, its observer running alongside. `"sensored"` is accepted as
+    /// another spelling (it named the simulator's own sensored controller, which this replaces).
+    #[serde(alias = "sensored")]
     FocSensored,
-}
-
-impl ControllerKind {
-    /// Whether this is one of the `foc` crate's controllers.
-    pub fn is_foc(self) -> bool {
-        matches!(self, ControllerKind::Foc | ControllerKind::FocSensored)
-    }
 }
 
 /// What the `foc` controller does when its observer is lost in closed loop.
@@ -519,19 +515,6 @@ impl Scenario {
             .unwrap_or(self.inverter.delay)
     }
 
-    /// The sensored controller's configuration.
-    pub fn controller_config(&self) -> ControllerConfig {
-        let c = &self.controller;
-        ControllerConfig::tuned(
-            &self.motor,
-            self.inverter.ts_s,
-            c.current_limit_a,
-            hz_to_rad_s(c.current_bandwidth_hz),
-            hz_to_rad_s(c.speed_bandwidth_hz),
-            self.delay_compensation(),
-        )
-    }
-
     /// The `foc` controller's configuration (module `foc_drive`): `FocConfig::new` for the
     /// observer's motor parameters (what the drive knows of the motor), `ts_s` and the
     /// nominal bus voltage, then the scenario's current limit, loop bandwidths, inertia,
@@ -670,9 +653,6 @@ impl Scenario {
             None => delay.to_string(),
         };
         match self.controller.kind {
-            ControllerKind::Sensored => {
-                format!("sensored stand-in (f64, true angle and speed), {delay}")
-            }
             ControllerKind::Foc => {
                 format!("foc, sensorless (f32; align, I/f, hand-over to its own f32 EKF), {delay}")
             }
@@ -755,12 +735,6 @@ impl Scenario {
             ));
         }
         if let Some(f) = &c.foc {
-            if !c.kind.is_foc() {
-                return Err(FieldError::new(
-                    "controller.foc",
-                    "only used with kind = \"foc\" or \"foc_sensored\"",
-                ));
-            }
             for (name, v) in [
                 ("controller.foc.u_dc_nominal_v", f.u_dc_nominal_v),
                 ("controller.foc.inertia_kg_m2", f.inertia_kg_m2),
@@ -876,9 +850,7 @@ impl Scenario {
         for (i, fault) in self.faults.iter().enumerate() {
             fault.validate(&format!("faults[{i}]"), &self.fault_context())?;
         }
-        if c.kind.is_foc() {
-            self.foc_config()?;
-        }
+        self.foc_config()?;
         Ok(())
     }
 
@@ -1022,11 +994,10 @@ mod tests {
             problem.contains("foc refuses") && problem.contains("out of range"),
             "{problem}"
         );
-        // foc settings with the sensored stand-in.
+        // "sensored" is another spelling of "foc_sensored".
         let t = default_text().replace("kind = \"foc\"", "kind = \"sensored\"");
-        let (field, problem) = error_of(&t);
-        assert_eq!(field, "controller.foc");
-        assert!(problem.contains("only used with"), "{problem}");
+        let sc = Scenario::from_toml_str(&t, "sensored").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(sc.controller.kind, ControllerKind::FocSensored);
     }
 
     #[test]

@@ -70,9 +70,7 @@ use ekf_core::{EkfError, PmsmObserver};
 use glam::DVec2;
 
 use crate::SimError;
-use crate::controller::{
-    ControllerInput, ControllerOutput, DriveController, RotorFeedback, SensoredController,
-};
+use crate::controller::{ControllerInput, ControllerOutput, DriveController, RotorFeedback};
 use crate::faults::FaultInjector;
 use crate::foc_drive::FocDrive;
 use crate::inverter::Inverter;
@@ -81,7 +79,7 @@ use crate::observer::{Observer, ObserverEstimate};
 use crate::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
 use crate::plant::{Plant, PlantState};
 use crate::profile::load_torque_nm;
-use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario, SkippedCycles};
+use crate::scenario::{RPM_PER_RAD_S, Scenario, SkippedCycles};
 use crate::sensors::CurrentSensor;
 
 pub use crate::record::{ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth};
@@ -307,19 +305,10 @@ pub fn run(scenario: &Scenario) -> Result<RunOutput, SimError> {
     }
 }
 
-/// The controller a scenario asks for: the sensored stand-in, or the `foc` crate's
-/// controller ([`FocDrive`], sensorless or sensored). Errors when `foc` refuses the
-/// configuration.
+/// The controller a scenario asks for: the `foc` crate's controller ([`FocDrive`],
+/// sensorless or sensored). Errors when `foc` refuses the configuration.
 pub fn build_controller(scenario: &Scenario) -> Result<Box<dyn DriveController>, SimError> {
-    Ok(match scenario.controller.kind {
-        ControllerKind::Sensored => Box::new(SensoredController::new(
-            scenario.controller_config(),
-            scenario.motor,
-        )),
-        ControllerKind::Foc | ControllerKind::FocSensored => {
-            Box::new(FocDrive::from_scenario(scenario)?)
-        }
-    })
+    Ok(Box::new(FocDrive::from_scenario(scenario)?))
 }
 
 /// Runs a scenario with its own controller ([`build_controller`]).

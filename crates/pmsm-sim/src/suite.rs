@@ -24,10 +24,7 @@
 //! **Interior motors** ([`SuiteMotor::INTERIOR`]): the same foc drive with its MTPA (on by
 //! default: `i_d` from the MTPA law, the reluctance torque in the torque-to-current
 //! conversion; with `i_d = 0` the traction motor's rated torque would need 208 A and a base
-//! speed of 1931 rpm, below its rated 3000 rpm). Until foc had MTPA they ran on the
-//! simulator's sensored drive ([`crate::controller::SensoredController`], which splits the
-//! current on the MTPA line); the rows moved by at most a few hundredths of a degree. Their
-//! load step is the rated torque less the fan's share (rated torque in all at rated speed,
+//! speed of 1931 rpm, below its rated 3000 rpm). Their load step is the rated torque less the fan's share (rated torque in all at rated speed,
 //! the traction motor's rated point being 4 % below its base speed); their convergence runs
 //! add the start at 180 deg (`theta + pi`, [`motor_start_angles_deg`]), with the goal
 //! [`GOAL_IPM_CONVERGENCE_S`]; the mismatch rows stay on the surface motors.

@@ -737,21 +737,18 @@ impl LoggedRun {
     pub fn read(path: &Path) -> Result<Self, TuneError> {
         let raw = mcap_read::read_log(path)?;
         let sc = raw.scenario;
-        let foc = sc.controller.kind.is_foc();
         let delay = sc.inverter.delay;
         let p = &raw.periods;
         // The simulator's rule (sim.rs): with the PWM on, the controller's expected voltage
-        // for the duties now applied (foc: its last tick's with the delay, this tick's
-        // without; the first period with the delay has none), else the commanded voltage of
-        // the applied duties; zero with the PWM off.
+        // for the duties now applied (its last tick's with the delay, this tick's without;
+        // the first period with the delay has none: the commanded voltage of the applied
+        // duties); zero with the PWM off.
         let u_ab = p
             .iter()
             .enumerate()
             .map(|(k, x)| {
                 if !x.pwm_enabled {
                     [0.0; 2]
-                } else if !foc {
-                    x.u_commanded
                 } else if !delay {
                     x.u_ab_ref
                 } else if k == 0 {

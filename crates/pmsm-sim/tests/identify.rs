@@ -227,8 +227,12 @@ fn locked_rotor_during_the_spin() {
 #[test]
 fn bus_too_low_for_the_test_current() {
     let mut sc = preset("servo-harsh");
-    // 7 V: the linear limit 3.8 V is below Rs I = 4.3 V (test current 1.5 A).
+    // 7 V: the linear limit 3.8 V is below Rs I = 4.3 V (test current 1.5 A). The drive's
+    // speed limit is set so that foc accepts its configuration on this bus.
     sc.inverter.u_dc_v = 7.0;
+    let mut f = sc.controller.foc.unwrap_or_default();
+    f.max_speed_rpm = Some(2000.0);
+    sc.controller.foc = Some(f);
     expect_failure(&sc, "bus_too_low", "align");
 }
 

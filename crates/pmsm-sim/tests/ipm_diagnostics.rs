@@ -37,12 +37,11 @@
 use ekf_core::{
     EkfError, FluxObserver, FluxObserverConfig, FluxTiming, ObserverConfig, PmsmObserver,
 };
-use pmsm_sim::controller::SensoredController;
 use pmsm_sim::observer::{Observer, ObserverEstimate};
 use pmsm_sim::profile::LoadTerm;
 use pmsm_sim::record::{ObserverSample, Sample};
 use pmsm_sim::scenario::Scenario;
-use pmsm_sim::sim::{SideObserver, run_with_side_observers};
+use pmsm_sim::sim::{SideObserver, build_controller, run_with_side_observers};
 use pmsm_sim::suite::{SuiteMotor, SuiteOptions, suite_scenario};
 
 /// The EKF, optionally fed the voltage less the `d psi_a / dt` term, scoring itself over the
@@ -162,14 +161,12 @@ fn load_step(ideal: bool) -> (f64, f64, f64, f64, f64) {
         .expect("load step");
     // The suite's transient window (short run: 0.25 s).
     let window = (step_s, step_s + 0.25);
-    let mut cfg = sc.controller_config();
-    cfg.dead_time_s = sc.inverter.dead_time_s;
-    let mut drive = SensoredController::new(cfg, sc.motor);
+    let mut drive = build_controller(&sc).unwrap_or_else(|e| panic!("{e}"));
     let mut plain = Probe::new(&sc, false, window);
     let mut comp = Probe::new(&sc, true, window);
     let out = {
         let mut side: Vec<&mut dyn SideObserver> = vec![&mut plain, &mut comp];
-        run_with_side_observers(&sc, &mut drive, Default::default(), &mut side)
+        run_with_side_observers(&sc, drive.as_mut(), Default::default(), &mut side)
             .unwrap_or_else(|e| panic!("{e}"))
     };
     assert!(out.end.is_completed(), "{}", out.end.describe());
@@ -266,15 +263,13 @@ fn the_salient_baselines_second_equilibrium_is_gone() {
         .into_iter()
         .map(|k| (k, flux(FluxTiming::Centred, k)))
         .collect();
-    let mut cfg = sc.controller_config();
-    cfg.dead_time_s = sc.inverter.dead_time_s;
-    let mut drive = SensoredController::new(cfg, sc.motor);
+    let mut drive = build_controller(&sc).unwrap_or_else(|e| panic!("{e}"));
     {
         let mut side: Vec<&mut dyn SideObserver> = vec![&mut firmware, &mut centred];
         for (_, w) in gains.iter_mut() {
             side.push(w);
         }
-        let out = run_with_side_observers(&sc, &mut drive, Default::default(), &mut side)
+        let out = run_with_side_observers(&sc, drive.as_mut(), Default::default(), &mut side)
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(out.end.is_completed());
     }
