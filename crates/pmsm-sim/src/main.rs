@@ -11,14 +11,15 @@ use std::time::{Duration, Instant};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use cpu_time::{ProcessTime, ThreadTime};
 use indicatif::{ProgressBar, ProgressStyle};
-use pmsm_sim::controller::{ControllerInput, RotorFeedback};
-use pmsm_sim::mcap_log::{LogCompression, LogEncoding, LogOptions, McapLog};
-use pmsm_sim::plot::PlotSink;
+use pmsm_sim::SimError;
+use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
+use pmsm_sim::analysis::tune::{LoggedRun, RShape, TuneError, TuneOptions, tune_logged_run};
+use pmsm_sim::drive::interface::{ControllerInput, RotorFeedback};
+use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, McapLog};
+use pmsm_sim::output::plot::PlotSink;
+use pmsm_sim::output::report;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
-use pmsm_sim::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
-use pmsm_sim::tune::{LoggedRun, RShape, TuneError, TuneOptions, tune_logged_run};
-use pmsm_sim::{SimError, report};
 
 /// Desktop simulator of a sensorless PMSM drive: plant, inverter, sensors, controller and the
 /// EKF observer, with MCAP logs, an SVG plot and the observer's metrics.
@@ -99,7 +100,7 @@ enum Command {
         #[arg(long = "motor", value_parser = parse_suite_motor)]
         motors: Vec<SuiteMotor>,
         /// Time held at each speed, s.
-        #[arg(long, default_value_t = pmsm_sim::lowspeed::HOLD_S)]
+        #[arg(long, default_value_t = pmsm_sim::analysis::low_speed::HOLD_S)]
         hold: f64,
         /// Output directory.
         #[arg(long, default_value = "out/lowspeed")]
@@ -353,7 +354,7 @@ fn identify_command(
     seed: Option<u64>,
     out: Option<PathBuf>,
 ) -> Result<ExitCode, SimError> {
-    use pmsm_sim::identify::{IdentifyOptions, identify, output_paths, table};
+    use pmsm_sim::analysis::identify::{IdentifyOptions, identify, output_paths, table};
     let scenario = load(what.unwrap_or("default"))?;
     let dir = out.unwrap_or_else(|| Path::new("out").join(dir_name(&scenario.name)));
     std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
@@ -365,7 +366,7 @@ fn identify_command(
     };
     let r = identify(&scenario, &opts)?;
     if json {
-        let text = pmsm_sim::identify::json(&r).map_err(|e| out_err(&dir, e))?;
+        let text = pmsm_sim::analysis::identify::json(&r).map_err(|e| out_err(&dir, e))?;
         println!("{text}");
     } else {
         print!("{}", table(&r));
@@ -389,8 +390,8 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         scenario.observer.seed_filter = false;
     }
     if args.identify {
-        let (sc, report) = pmsm_sim::identify::plug_and_spin(&scenario)?;
-        eprint!("{}", pmsm_sim::identify::table(&report));
+        let (sc, report) = pmsm_sim::analysis::identify::plug_and_spin(&scenario)?;
+        eprint!("{}", pmsm_sim::analysis::identify::table(&report));
         scenario = sc;
     }
     scenario.validate().map_err(|e| SimError::Scenario {
@@ -543,9 +544,9 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     })
 }
 
-/// `pmsm-sim faults` (module `pmsm_sim::fault_suite`).
+/// `pmsm-sim faults` (module `pmsm_sim::analysis::fault_suite`).
 fn faults_command(out: &Path, t_fault_s: f64, t_end_s: f64) -> Result<ExitCode, SimError> {
-    use pmsm_sim::fault_suite::{SuiteOptions, markdown, run_suite};
+    use pmsm_sim::analysis::fault_suite::{SuiteOptions, markdown, run_suite};
     let opts = SuiteOptions { t_fault_s, t_end_s };
     let results = run_suite(&opts)?;
     let md = markdown(&results, &opts);
@@ -763,8 +764,8 @@ fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitCode, SimErr
 /// Median time per call of the loop's parts, on the scenario's own trajectory.
 fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>, piped_ns: Option<f64>) {
     use ekf_core::PmsmObserver;
+    use pmsm_sim::plant::sensors::CurrentSensor;
     use pmsm_sim::plant::{Plant, PlantState};
-    use pmsm_sim::sensors::CurrentSensor;
 
     // Record the trajectory once (inputs for the parts).
     let Ok(out) = sim::run(&sc.clone().with_duration(sc.duration_s)) else {
@@ -842,7 +843,7 @@ fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>, piped_ns: Opti
     let sensor_ns = time(&mut || {
         let mut se = CurrentSensor::new(sc.sensors, sc.seed);
         for &i in &sensor_in {
-            std::hint::black_box(se.measure(pmsm_sim::svpwm::inverse_clarke(i)));
+            std::hint::black_box(se.measure(pmsm_sim::plant::frames::inverse_clarke(i)));
         }
     });
     // The encoder and the copy into the log's batch read a whole sample: they cycle over the
@@ -850,7 +851,7 @@ fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>, piped_ns: Opti
     let hot = &samples[..samples.len().min(64)];
     let hot_sample = |i: usize| hot.get(i % hot.len().max(1));
     let proto_ns = time(&mut || {
-        let mut enc = pmsm_sim::mcap_log::proto::PeriodEncoder::new();
+        let mut enc = pmsm_sim::output::mcap::proto::PeriodEncoder::new();
         for i in 0..samples.len() {
             if let Some(s) = hot_sample(i) {
                 std::hint::black_box(enc.encode(s));
@@ -976,10 +977,10 @@ fn write_table(
     Ok(ExitCode::SUCCESS)
 }
 
-/// `pmsm-sim low-speed` (module `pmsm_sim::lowspeed`): the table, printed and written to
+/// `pmsm-sim low-speed` (module `pmsm_sim::analysis::low_speed`): the table, printed and written to
 /// `out`. A missed goal is a result, not an error.
 fn low_speed_command(motors: &[SuiteMotor], hold: f64, out: &Path) -> Result<ExitCode, SimError> {
-    use pmsm_sim::lowspeed::{SPEEDS_PCT, run_motor, to_markdown};
+    use pmsm_sim::analysis::low_speed::{SPEEDS_PCT, run_motor, to_markdown};
     if !(hold.is_finite() && hold > 0.0) {
         return Err(SimError::Scenario {
             file: "command line".into(),
@@ -1071,14 +1072,16 @@ impl TuneArgs {
     }
 }
 
-/// `pmsm-sim replay` (module `pmsm_sim::replay`): the table printed, the outputs written.
+/// `pmsm-sim replay` (module `pmsm_sim::analysis::replay`): the table printed, the outputs written.
 fn replay_command(log: &Path, motor: &Path, out: &Path, scaling: ScalingArg) -> ExitCode {
-    use pmsm_sim::replay::{Scaling, markdown, read_log, read_motor, replay, write_outputs};
+    use pmsm_sim::analysis::replay::{
+        Scaling, markdown, read_log, read_motor, replay, write_outputs,
+    };
     let scaling = match scaling {
         ScalingArg::Amplitude => Scaling::Amplitude,
         ScalingArg::Power => Scaling::Power,
     };
-    let run = || -> Result<(), pmsm_sim::replay::ReplayError> {
+    let run = || -> Result<(), pmsm_sim::analysis::replay::ReplayError> {
         let m = read_motor(motor)?;
         let l = read_log(log, scaling)?;
         let r = replay(&l, &m, &log.display().to_string())?;

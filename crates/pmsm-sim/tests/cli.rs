@@ -43,7 +43,7 @@ fn read_mcap(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
             "protobuf" => {
                 let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
                 assert_eq!(schema, Some("pmsm_sim.Period"));
-                pmsm_sim::mcap_log::proto::decode_to_json("Period", &m.data)
+                pmsm_sim::output::mcap::proto::decode_to_json("Period", &m.data)
                     .unwrap_or_else(|e| panic!("bad protobuf: {e}"))
             }
             _ => serde_json::from_slice(&m.data).unwrap_or_else(|e| panic!("not JSON: {e}")),
@@ -307,7 +307,11 @@ fn faults_subcommand_prints_and_writes_its_table() {
     assert!(stdout.starts_with(&md), "{stdout}");
     // Header, separator and one row per fault.
     let rows = md.lines().filter(|l| l.starts_with("| ")).count();
-    assert_eq!(rows, 1 + pmsm_sim::fault_suite::cases().len(), "{md}");
+    assert_eq!(
+        rows,
+        1 + pmsm_sim::analysis::fault_suite::cases().len(),
+        "{md}"
+    );
     assert!(
         md.contains("| glitch, one sample at 10x rated (a) |"),
         "{md}"

@@ -3,7 +3,7 @@
 //! through. The detailed closed-loop tests of `foc` on this simulator are in the workspace's
 //! `tests/foc_closed_loop.rs`.
 
-use pmsm_sim::metrics::ObserverMetrics;
+use pmsm_sim::output::metrics::ObserverMetrics;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunOutput};
 
@@ -154,7 +154,7 @@ fn every_preset_runs() {
 /// adapter does): here the sensored one, wrapped to open the bridge for 10 ms at full speed.
 #[test]
 fn a_custom_controller_can_open_the_bridge() {
-    use pmsm_sim::controller::{ControllerInput, ControllerOutput, DriveController};
+    use pmsm_sim::drive::interface::{ControllerInput, ControllerOutput, DriveController};
     use pmsm_sim::sim::{RunOptions, run_with_controller};
 
     struct Gated(Box<dyn DriveController>);

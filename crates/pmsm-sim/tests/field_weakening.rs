@@ -21,7 +21,7 @@
 //!
 //! `cargo test -p pmsm-sim --test field_weakening -- --nocapture` prints the table.
 
-use pmsm_sim::record::Sample;
+use pmsm_sim::output::record::Sample;
 use pmsm_sim::scenario::{RPM_PER_RAD_S, Scenario};
 use pmsm_sim::sim::{RunOptions, SampleSink, run_with};
 

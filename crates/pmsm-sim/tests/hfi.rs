@@ -30,10 +30,10 @@
 use std::f64::consts::PI;
 
 use foc::{HfiConfig, HfiPhase, HfiStatus};
-use pmsm_sim::controller::{ControllerInput, ControllerOutput, DriveController};
-use pmsm_sim::foc_drive::FocDrive;
+use pmsm_sim::drive::foc_adapter::FocDrive;
+use pmsm_sim::drive::interface::{ControllerInput, ControllerOutput, DriveController};
 use pmsm_sim::plant::DSaturation;
-use pmsm_sim::profile::{LoadTerm, Profile};
+use pmsm_sim::plant::load::{LoadTerm, Profile};
 use pmsm_sim::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use pmsm_sim::sim::{self, RunOptions, Sample};
 

@@ -1,4 +1,4 @@
-//! Self-commissioning on the simulated drive (`pmsm_sim::identify`): accuracy on the
+//! Self-commissioning on the simulated drive (`pmsm_sim::analysis::identify`): accuracy on the
 //! reference motors, salient motors and motors no document names, with each scenario's
 //! realistic sensing and inverter; repeatability over seeds; every failure path ends with a
 //! typed error and the PWM off.
@@ -6,9 +6,11 @@
 //! Goals (issue 12): Rs within 2 %, Ld and Lq within 3 %, psi_f within 1 %, J within 10 %
 //! when measured, the whole sequence within 3 s.
 
-use pmsm_sim::faults::FaultSpec;
-use pmsm_sim::identify::{IdentifyOptions, IdentifyReport, identify, table, with_identified};
+use pmsm_sim::analysis::identify::{
+    IdentifyOptions, IdentifyReport, identify, table, with_identified,
+};
 use pmsm_sim::plant::MotorModel;
+use pmsm_sim::plant::fault_injection::FaultSpec;
 use pmsm_sim::scenario::Scenario;
 
 fn preset(name: &str) -> Scenario {

@@ -1,4 +1,4 @@
-//! Diagnostics of the suite's interior-motor rows (`pmsm_sim::suite`), on the traction motor's
+//! Diagnostics of the suite's interior-motor rows (`pmsm_sim::analysis::suite`), on the traction motor's
 //! short run: where the default EKF's error through the rated load step came from (6.4 deg
 //! realistic, 5.9 deg ideal, against the suite's 5 deg, before `ekf-core` modelled the term
 //! below), and where the salient baseline's large bias at rated load came from (before its gain
@@ -37,12 +37,12 @@
 use ekf_core::{
     EkfError, FluxObserver, FluxObserverConfig, FluxTiming, ObserverConfig, PmsmObserver,
 };
-use pmsm_sim::observer::{Observer, ObserverEstimate};
-use pmsm_sim::profile::LoadTerm;
-use pmsm_sim::record::{ObserverSample, Sample};
+use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, suite_scenario};
+use pmsm_sim::drive::rotor_observers::{Observer, ObserverEstimate};
+use pmsm_sim::output::record::{ObserverSample, Sample};
+use pmsm_sim::plant::load::LoadTerm;
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim::{SideObserver, build_controller, run_with_side_observers};
-use pmsm_sim::suite::{SuiteMotor, SuiteOptions, suite_scenario};
 
 /// The EKF, optionally fed the voltage less the `d psi_a / dt` term, scoring itself over the
 /// load-step window.

@@ -6,7 +6,7 @@
 //!
 //! `cargo test -p pmsm-sim --test ipm_presets -- --nocapture` prints the numbers.
 
-use pmsm_sim::record::Sample;
+use pmsm_sim::output::record::Sample;
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim::{RunOptions, SampleSink, run_with};
 

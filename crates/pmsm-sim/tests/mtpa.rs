@@ -10,8 +10,8 @@
 //!
 //! `cargo test -p pmsm-sim --test mtpa -- --nocapture` prints the numbers.
 
-use pmsm_sim::profile::{LoadTerm, Profile};
-use pmsm_sim::record::Sample;
+use pmsm_sim::output::record::Sample;
+use pmsm_sim::plant::load::{LoadTerm, Profile};
 use pmsm_sim::scenario::{ControllerKind, Scenario};
 use pmsm_sim::sim::{RunOptions, SampleSink, run_with};
 

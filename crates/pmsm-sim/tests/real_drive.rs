@@ -6,10 +6,10 @@
 
 use core::f64::consts::{PI, TAU};
 
+use pmsm_sim::plant::frames::clarke;
 use pmsm_sim::plant::{EmfHarmonics, MotorModel, Plant, PlantState};
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim::{self, RunOptions};
-use pmsm_sim::svpwm::clarke;
 
 fn default_cut(duration_s: f64) -> Scenario {
     let mut sc = Scenario::preset("default")

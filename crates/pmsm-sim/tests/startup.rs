@@ -9,19 +9,19 @@
 //! - the hand-over takes place at or below 3 % of rated speed (the hand-over speed is set to
 //!   3 % of rated here; the run checks that the hand-over happens, without a fault).
 //!
-//! The figures are pmsm-sim's own start-up metrics ([`pmsm_sim::metrics::StartupMetrics`]).
+//! The figures are pmsm-sim's own start-up metrics ([`pmsm_sim::output::metrics::StartupMetrics`]).
 //! `cargo test --release -p pmsm-sim --test startup -- --nocapture` prints the table.
 //!
 //! Each motor runs its preset's plant, inverter (delay, dead time) and sensors (noise, ADC),
 //! with `foc` sensorless in place of the preset's controller, the preset's loads and a speed
 //! command of rated speed from t = 0.
 
-use pmsm_sim::lowspeed::preset_name;
-use pmsm_sim::metrics::StartupMetrics;
-use pmsm_sim::profile::Profile;
+use pmsm_sim::analysis::low_speed::preset_name;
+use pmsm_sim::analysis::suite::SuiteMotor;
+use pmsm_sim::output::metrics::StartupMetrics;
+use pmsm_sim::plant::load::Profile;
 use pmsm_sim::scenario::{ControllerKind, Scenario};
 use pmsm_sim::sim;
-use pmsm_sim::suite::SuiteMotor;
 
 /// The three surface reference motors: (name, simulator preset).
 fn motors() -> impl Iterator<Item = (&'static str, &'static str)> {
@@ -78,7 +78,9 @@ impl Cell {
     /// The ramp deviation counts unless the hand-over came before its window opened.
     fn deviation_pct(&self) -> Option<f64> {
         let st = &self.st;
-        let opens = st.align_end_s.map(|t| t + pmsm_sim::metrics::RAMP_SETTLE_S);
+        let opens = st
+            .align_end_s
+            .map(|t| t + pmsm_sim::output::metrics::RAMP_SETTLE_S);
         match (opens, st.handover_s) {
             (Some(o), Some(h)) if h <= o => None,
             _ => Some(st.ramp_deviation_max_pct),

@@ -1,8 +1,8 @@
-//! The scenario suite (`pmsm_sim::suite`, `pmsm-sim suite`) on its short run: the goals and
+//! The scenario suite (`pmsm_sim::analysis::suite`, `pmsm-sim suite`) on its short run: the goals and
 //! limits that hold are asserted; the ones the default EKF misses on realistic sensing are
 //! named, with the weaker statement that holds there. (Debug profile: about 0.2 s per run.)
 
-use pmsm_sim::suite::{
+use pmsm_sim::analysis::suite::{
     GOAL_IPM_CONVERGENCE_S, GOAL_MEAN_DEG, GOAL_MISMATCH_PSI_PCT, GOAL_MISMATCH_RMS_DEG,
     GOAL_RMS_RATIO, LIMIT_LOAD_STEP_DEG, MISMATCHES, ObserverKind, SuiteMotor, SuiteOptions,
     SuiteReport, run_suite_motors, suite_scenario,

@@ -5,12 +5,12 @@
 //! then `R = s^2 [[1, 1/sqrt 3], [1/sqrt 3, 5/3]]` (sigma 80 / 103 mA), well above the
 //! observer's default (41 mA), so the default filter's NIS is far above 2.
 
-use pmsm_sim::mcap_log::{LogEncoding, LogOptions, McapLog};
-use pmsm_sim::scenario::{ControllerKind, Scenario};
-use pmsm_sim::sim::{self, RunOptions, SampleSink};
-use pmsm_sim::tune::{
+use pmsm_sim::analysis::tune::{
     AngleTruth, RShape, TuneError, TuneOptions, sensor_r_ab, tune_qr, tune_qr_mcap,
 };
+use pmsm_sim::output::mcap::{LogEncoding, LogOptions, McapLog};
+use pmsm_sim::scenario::{ControllerKind, Scenario};
+use pmsm_sim::sim::{self, RunOptions, SampleSink};
 
 const NOISE_A: f64 = 0.08;
 
@@ -59,15 +59,16 @@ fn record(sc: &Scenario) -> Rec {
         // the voltage foc expects of the duties now applied (its last tick's with the delay,
         // this tick's without; the first period with the delay has none: the commanded
         // voltage); zero with the PWM off.
-        u: s
-            .iter()
+        u: s.iter()
             .enumerate()
-            .map(|(k, x)| match (x.inverter.pwm_enabled, sc.inverter.delay, k) {
-                (false, _, _) => [0.0; 2],
-                (true, false, _) => x.control.telemetry.u_ab_ref_v,
-                (true, true, 0) => x.inverter.u_ab_commanded_v,
-                (true, true, _) => s[k - 1].control.telemetry.u_ab_ref_v,
-            })
+            .map(
+                |(k, x)| match (x.inverter.pwm_enabled, sc.inverter.delay, k) {
+                    (false, _, _) => [0.0; 2],
+                    (true, false, _) => x.control.telemetry.u_ab_ref_v,
+                    (true, true, 0) => x.inverter.u_ab_commanded_v,
+                    (true, true, _) => s[k - 1].control.telemetry.u_ab_ref_v,
+                },
+            )
             .collect(),
         i: s.iter().map(|x| x.measured.i_ab_a).collect(),
         th: s.iter().map(|x| x.truth.theta_e_rad).collect(),

@@ -52,7 +52,7 @@ use glam::DVec2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
-use crate::svpwm::clarke;
+use crate::plant::frames::clarke;
 
 /// Inverter settings (`[inverter]` in a scenario).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -325,7 +325,7 @@ impl Inverter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::svpwm::inverse_clarke;
+    use crate::plant::frames::inverse_clarke;
 
     /// Duties realizing `u_ab_v` on `u_dc_v` (min-max zero-sequence injection).
     fn duties(u_ab_v: [f64; 2], u_dc_v: f64) -> [f64; 3] {

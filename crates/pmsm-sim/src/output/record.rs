@@ -1,14 +1,14 @@
 //! The per-period record of a run, [`Sample`], and its schema: **the one place** where the
 //! record is described.
 //!
-//! Each message below is written once, in [`record!`](crate::record) form. From that one
+//! Each message below is written once, in [`record!`](crate::output::record) form. From that one
 //! description the macro makes
 //!
 //! - the Rust struct (with `serde::Serialize`: the JSON encoding of the log, field names as
 //!   written here),
-//! - its protobuf encoding ([`crate::mcap_log::proto::PeriodEncoder`]: straight-line code,
+//! - its protobuf encoding ([`crate::output::mcap::proto::PeriodEncoder`]: straight-line code,
 //!   field numbers as written here),
-//! - its entry in the schema table [`MESSAGES`], from which [`crate::mcap_log::proto`] builds
+//! - its entry in the schema table [`MESSAGES`], from which [`crate::output::mcap::proto`] builds
 //!   the `FileDescriptorSet` the log carries, the `.proto` text, the JSON schema, and the one
 //!   decoder (protobuf -> JSON value) that the tuner, the tests and the tools use.
 //!
@@ -32,8 +32,8 @@
 //!    `[]`, or `null`).
 //! 2. Fill it where the record is made: `sim.rs` for the run's fields; for an observer's
 //!    field (e.g. a tracked parameter), add it to [`ControllerEstimate`] as well (what every
-//!    observer returns, [`crate::observer::ObserverEstimate`], and what a controller reports
-//!    of its own), set it in the [`crate::observer::Observer`] impls and in `foc_drive.rs`, and
+//!    observer returns, [`crate::drive::rotor_observers::ObserverEstimate`], and what a controller reports
+//!    of its own), set it in the [`crate::drive::rotor_observers::Observer`] impls and in `foc_drive.rs`, and
 //!    copy it in [`ObserverSample::from_controller`]. The compiler names every struct literal
 //!    that lacks it.
 //! 3. Regenerate the checked-in schema files:

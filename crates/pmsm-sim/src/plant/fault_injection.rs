@@ -27,7 +27,7 @@
 //! ([`FaultInjector::extra_load_nm`]), the plant before and after its step
 //! ([`FaultInjector::before_step`], [`FaultInjector::after_step`]). Without faults it is not
 //! built and the loop is unchanged. The simulator's own observers (which only ride along) only
-//! predict over a missing sample (their [`Observer`](crate::observer::Observer) impl).
+//! predict over a missing sample (their [`Observer`](crate::drive::rotor_observers::Observer) impl).
 
 use rand::SeedableRng;
 use rand::rngs::Xoshiro256PlusPlus;
@@ -36,7 +36,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
 use crate::plant::Plant;
-use crate::sensors::{ChannelFaults, CurrentSample, CurrentSensor};
+use crate::plant::sensors::{ChannelFaults, CurrentSample, CurrentSensor};
 
 /// A current-sensor channel.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -784,7 +784,7 @@ channel = "a"
         .unwrap_or_else(|e| panic!("{e}"));
         let mut inj = FaultInjector::new(&sc.faults, &sc.fault_context())
             .unwrap_or_else(|| panic!("no injector"));
-        let mut sensor = CurrentSensor::new(crate::sensors::SensorConfig::default(), 1);
+        let mut sensor = CurrentSensor::new(crate::plant::sensors::SensorConfig::default(), 1);
         let i = |k: u64| {
             let a = (k as f64 * 0.01).sin();
             [a, -0.5 * a, -0.5 * a]
@@ -838,10 +838,10 @@ torque_nm = 0.5
         let s = &out.trace.samples;
         // Open phase b: its true current is zero (to rounding) after the first step.
         for x in &s[5001..5500] {
-            let ib = crate::svpwm::inverse_clarke(x.truth.i_ab_a)[1];
+            let ib = crate::plant::frames::inverse_clarke(x.truth.i_ab_a)[1];
             assert!(ib.abs() < 1e-9, "k {}: i_b {ib}", x.k);
         }
-        assert!(crate::svpwm::inverse_clarke(s[5600].truth.i_ab_a)[1].abs() > 1e-3);
+        assert!(crate::plant::frames::inverse_clarke(s[5600].truth.i_ab_a)[1].abs() > 1e-3);
         // Locked: no speed while locked (unless foc has tripped, the shaft then coasts).
         for x in &s[6001..6500] {
             assert_eq!(x.truth.speed_rpm, 0.0, "k {}", x.k);

@@ -2,7 +2,7 @@
 
 use core::fmt::Write as _;
 
-use crate::metrics::{
+use crate::output::metrics::{
     CONVERGED_DEG, LOW_SPEED_FRACTION, ObserverMetrics, RAMP_SETTLE_S, RunMetrics, SETTLE_S,
 };
 

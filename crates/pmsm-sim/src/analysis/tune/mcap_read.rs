@@ -1,7 +1,7 @@
 //! Reading a run back from a `pmsm-sim` MCAP log: the scenario (`/pmsm_sim/scenario`, JSON)
 //! and, per period (`/pmsm_sim/period`, protobuf or JSON), the few fields the tuner needs.
 //! Protobuf messages go through the one decoder of the record,
-//! [`decode_to_json`](crate::mcap_log::proto::decode_to_json), to the JSON value of the JSON
+//! [`decode_to_json`](crate::output::mcap::proto::decode_to_json), to the JSON value of the JSON
 //! encoding; the fields are then read from that value the same way for both encodings.
 //!
 //! The file is streamed (`mcap`'s sans-io `LinearReader`), so its size is bounded by the
@@ -15,8 +15,8 @@ use mcap::records::Record;
 use mcap::sans_io::{LinearReadEvent, LinearReader};
 
 use super::TuneError;
-use crate::mcap_log::proto::decode_to_json;
-use crate::mcap_log::{TOPIC_PERIOD, TOPIC_SCENARIO};
+use crate::output::mcap::proto::decode_to_json;
+use crate::output::mcap::{TOPIC_PERIOD, TOPIC_SCENARIO};
 use crate::scenario::Scenario;
 
 /// The per-period fields the tuner reads, in `pmsm_sim.Period` terms.
@@ -178,8 +178,8 @@ fn decode_period(data: &[u8], encoding: Encoding) -> Result<PeriodFields, String
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mcap_log::proto::PeriodEncoder;
-    use crate::record::Sample;
+    use crate::output::mcap::proto::PeriodEncoder;
+    use crate::output::record::Sample;
 
     /// The decoder reads back what the encoder wrote, and agrees with the JSON encoding.
     #[test]

@@ -15,7 +15,7 @@
 //!    zoomed on the converged part (`|e| < 5 deg`), so the start-up excursion is clipped;
 //! 3. dq currents in the true rotor frame and the controller's references, A;
 //! 4. the motor's `psi_f` and `Rs`: the plant's (they drift with temperature, module
-//!    [`faults`](crate::faults)) and the observers' tracked ones, % of the plant's values at
+//!    [`faults`](crate::plant::fault_injection)) and the observers' tracked ones, % of the plant's values at
 //!    the start.
 //!
 //! SVG only: plotters' SVG backend writes text as `<text>` elements and needs no font files,

@@ -37,13 +37,13 @@
 use foc::{Fault, Foc, FocConfig, State, TickInput};
 
 use crate::SimError;
-use crate::controller::{
+use crate::drive::interface::{
     ControllerEstimate, ControllerInput, ControllerOutput, ControllerTelemetry, DriveController,
 };
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
 
 /// `1 / sqrt(3)` in `f32` (the same bits as the literal `0.577_350_26`).
-const INV_SQRT3: f32 = crate::svpwm::INV_SQRT3 as f32;
+const INV_SQRT3: f32 = crate::plant::frames::INV_SQRT3 as f32;
 
 /// The `foc` controller as a [`DriveController`] (module docs).
 #[derive(Clone, Debug)]
@@ -210,7 +210,7 @@ impl DriveController for FocDrive {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::controller::RotorFeedback;
+    use crate::drive::interface::RotorFeedback;
 
     fn input(t_s: f64, rotor: Option<RotorFeedback>) -> ControllerInput {
         ControllerInput {

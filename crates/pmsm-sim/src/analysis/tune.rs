@@ -50,8 +50,8 @@ use ekf_core::{
 };
 use serde::Serialize;
 
+use crate::plant::sensors::SensorConfig;
 use crate::scenario::Scenario;
-use crate::sensors::SensorConfig;
 
 mod mcap_read;
 pub mod nelder_mead;
@@ -1007,7 +1007,7 @@ mod tests {
         assert!((r[1][1] - 0.01 * 5.0 / 3.0).abs() < 1e-15);
         assert!((r[0][1] / (r[0][0] * r[1][1]).sqrt() - 5f64.sqrt().recip()).abs() < 1e-12);
         // Against the simulator's sensor: sample covariance of 40 000 readings of zero current.
-        let mut sensor = crate::sensors::CurrentSensor::new(cfg, 3);
+        let mut sensor = crate::plant::sensors::CurrentSensor::new(cfg, 3);
         let n = 40_000;
         let mut m = [[0.0; 2]; 2];
         for _ in 0..n {

@@ -1,4 +1,4 @@
-//! The fault suite (`pmsm-sim faults`): every fault kind of [`crate::faults`] in closed loop
+//! The fault suite (`pmsm-sim faults`): every fault kind of [`crate::plant::fault_injection`] in closed loop
 //! with the `foc` sensorless controller, one run each, scored and tabulated.
 //!
 //! # The runs
@@ -35,11 +35,11 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use crate::SimError;
-use crate::controller::{ControllerInput, ControllerOutput, DriveController};
-use crate::faults::{Channel, Channels, FaultSpec, Phase};
-use crate::foc_drive::FocDrive;
-use crate::metrics::Sums;
-use crate::profile::{LoadTerm, Profile};
+use crate::drive::foc_adapter::FocDrive;
+use crate::drive::interface::{ControllerInput, ControllerOutput, DriveController};
+use crate::output::metrics::Sums;
+use crate::plant::fault_injection::{Channel, Channels, FaultSpec, Phase};
+use crate::plant::load::{LoadTerm, Profile};
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
 use crate::sim::{self, RunOptions, Sample, SampleSink};
 
@@ -411,7 +411,7 @@ impl SampleSink for Score {
             self.closed_loop.add_sample(o);
         }
         // The true phase currents from the true alpha-beta vector.
-        let abc = crate::svpwm::inverse_clarke(s.truth.i_ab_a);
+        let abc = crate::plant::frames::inverse_clarke(s.truth.i_ab_a);
         for i in abc {
             self.max_current_a = self.max_current_a.max(i.abs());
         }

@@ -22,8 +22,8 @@ use std::thread::JoinHandle;
 
 use ekf_core::{EkfError, PmsmObserver};
 
-use crate::observer::Observer;
-use crate::record::{ObserverSample, Sample, Truth};
+use crate::drive::rotor_observers::Observer;
+use crate::output::record::{ObserverSample, Sample, Truth};
 
 /// Periods per batch handed to the worker. The loop keeps the samples of up to
 /// `IN_FLIGHT + 1` batches (about 1.2 KB each) until their estimates are back: small enough
@@ -70,7 +70,7 @@ impl RunObservers {
     /// failure of the default EKF (after it nothing steps: the run ends there).
     fn step_batch(&mut self, inputs: &[ObserverInput], out: &mut Vec<ObserverOutput>) -> bool {
         for x in inputs {
-            let truth_at = |e: &crate::observer::ObserverEstimate| {
+            let truth_at = |e: &crate::drive::rotor_observers::ObserverEstimate| {
                 ObserverSample::from_controller(
                     e,
                     &Truth {

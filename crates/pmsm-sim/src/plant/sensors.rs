@@ -28,7 +28,7 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
-use crate::svpwm::clarke;
+use crate::plant::frames::clarke;
 
 /// Current-sensor settings (`[sensors]` in a scenario).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -107,7 +107,7 @@ impl SensorConfig {
 }
 
 /// Faults acting on the two channels `[a, b]` for one sample (module
-/// [`faults`](crate::faults)): `i_meas_x = Q((1 + g_x) gain_x i_x + o_x + offset_x + n_x)`,
+/// [`faults`](crate::plant::fault_injection)): `i_meas_x = Q((1 + g_x) gain_x i_x + o_x + offset_x + n_x)`,
 /// then replaced by `value_a` when that is set (a stuck channel, a missing sample as NaN, a
 /// glitch).
 #[derive(Clone, Copy, Debug, PartialEq)]

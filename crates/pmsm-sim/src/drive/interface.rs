@@ -1,6 +1,6 @@
 //! The drive-controller interface: the [`DriveController`] trait the run loop calls once per
 //! PWM period, and what goes in and out of one period. The `foc` crate's controller implements
-//! it ([`crate::foc_drive::FocDrive`], sensorless or sensored); a test can plug in its own.
+//! it ([`crate::drive::foc_adapter::FocDrive`], sensorless or sensored); a test can plug in its own.
 //!
 //! A controller sees what a real one sees: the measured phase currents (and their Clarke
 //! transform), the measured DC-bus voltage and the speed reference; in sensored mode
@@ -39,7 +39,7 @@ pub struct ControllerInput {
     pub rotor: Option<RotorFeedback>,
 }
 
-pub use crate::record::{ControllerEstimate, ControllerTelemetry};
+pub use crate::output::record::{ControllerEstimate, ControllerTelemetry};
 
 /// What a controller commands in period `k`.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -48,7 +48,7 @@
 
 use serde::Serialize;
 
-use crate::record::{ObserverSample, Sample, Truth};
+use crate::output::record::{ObserverSample, Sample, Truth};
 use crate::scenario::{RPM_PER_RAD_S, Scenario};
 
 /// `|e_th|` below which the observer counts as converged, electrical degrees.
@@ -905,7 +905,7 @@ pub fn rpm(omega_mech_rad_s: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::Sample;
+    use crate::output::record::Sample;
 
     fn sample(t: f64, th_err_deg: f64, w: f64, w_hat: f64) -> Sample {
         let mut s = Sample {

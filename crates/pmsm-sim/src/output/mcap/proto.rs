@@ -1,5 +1,5 @@
 //! The per-period message (`pmsm_sim.Period`) on the wire: its protobuf encoding, and the
-//! schema files made from the one description of the record in [`crate::record`].
+//! schema files made from the one description of the record in [`crate::output::record`].
 //!
 //! - [`PeriodEncoder`]: the protobuf encoding of a [`Sample`] (about 60 ns and 900 bytes per
 //!   message: straight-line code the `record!` macro generates, no allocation).
@@ -10,12 +10,12 @@
 //! - [`proto_text`], [`json_schema`]: the `.proto` text and the JSON schema (the schema of the
 //!   JSON encoding, [`super::LogEncoding::Json`]).
 //! - [`decode_to_json`]: the one decoder, protobuf to the JSON value of the JSON encoding, used
-//!   by the tuner ([`crate::tune`]), the tests and the tools.
+//!   by the tuner ([`crate::analysis::tune`]), the tests and the tools.
 //!
 //! `src/schemas/period.proto`, `period.desc` and `period.schema.json` are these outputs,
 //! checked in for readers and tools; unit tests fail when they are stale, and
 //! `PMSM_SIM_BLESS=1 cargo test -p pmsm-sim --lib schema` rewrites them (how to add a field:
-//! [`crate::record`]).
+//! [`crate::output::record`]).
 //!
 //! Field names are those of the JSON encoding (the [`Sample`] serialized by serde), so the
 //! Foxglove paths are the same in both (`/pmsm_sim/period.observer.angle_error_deg`,
@@ -23,7 +23,7 @@
 //! `Option` messages (`seed_filter`, `controller_observer`, `control.telemetry.estimate`) and
 //! `Option` scalars (proto3 `optional`: `control.telemetry.speed_ref_rpm`, `.fault`).
 
-use crate::record::{
+use crate::output::record::{
     Card, Enc, FieldDef, MESSAGES, MessageDef, Sample, Ty, WT_I64, WT_LEN, WT_VARINT, encode_into,
     encode_period, message_def,
 };
@@ -70,7 +70,7 @@ fn encode_vec(capacity: usize, body: impl FnOnce(&mut Enc<'_>)) -> Vec<u8> {
 /// The `FileDescriptorSet` of the schema (one file, `proto3`, package [`PACKAGE`]): the MCAP
 /// schema data of encoding `protobuf`. Byte for byte what `protoc --descriptor_set_out`
 /// writes for [`proto_text`] (checked in as `src/schemas/period.desc`; made with protoc 3.21
-/// before the table moved to [`crate::record`], and unchanged since).
+/// before the table moved to [`crate::output::record`], and unchanged since).
 pub fn file_descriptor_set() -> Vec<u8> {
     // Generous: the set is about 2 KB (a unit test keeps it under 16 KB).
     const CAP: usize = 64 << 10;
@@ -364,7 +364,7 @@ pub fn decode_to_json(message: &str, bytes: &[u8]) -> Result<serde_json::Value, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::{ControllerEstimate, ObserverSample, PERIOD_MAX_FIXED};
+    use crate::output::record::{ControllerEstimate, ObserverSample, PERIOD_MAX_FIXED};
 
     /// `s` with every optional part absent (`None`).
     fn bare(mut s: Sample) -> Sample {
@@ -512,14 +512,14 @@ mod tests {
         assert!(file_descriptor_set().len() < 16 << 10);
     }
 
-    /// Logs written before the record moved to `crate::record` (pmsm-sim 0.1.0, the
+    /// Logs written before the record moved to `crate::output::record` (pmsm-sim 0.1.0, the
     /// hand-written encoder, before the tracked parameters) read back: they decode to the JSON
     /// encoding of the same sample with the fields added since (the truth's and the
     /// observers' `psi_f`, `Rs`, deviations, temperature) at their proto3 default, 0.
     #[test]
     fn logs_written_before_still_decode() {
-        let old_full: &[u8] = include_bytes!("../../tests/data/period-full-0.1.0.pb");
-        let old_bare: &[u8] = include_bytes!("../../tests/data/period-bare-0.1.0.pb");
+        let old_full: &[u8] = include_bytes!("../../../tests/data/period-full-0.1.0.pb");
+        let old_bare: &[u8] = include_bytes!("../../../tests/data/period-bare-0.1.0.pb");
         let legacy = |mut s: Sample| {
             s.truth.psi_f_wb = 0.0;
             s.truth.rs_ohm = 0.0;

@@ -29,7 +29,7 @@
 //!    torque of `(t_k, w(t_k))` held. When the controller disables the PWM, all switches
 //!    open for that period at once and the plant coasts ([`Plant::step_open`]); the observer
 //!    then gets `u = 0` for the period. With `inverter.delay_periods` the period holds two
-//!    voltages ([`crate::inverter`]): the plant steps over each sub-interval in turn, with
+//!    voltages ([`crate::plant::inverter`]): the plant steps over each sub-interval in turn, with
 //!    the dead-time sign of the current at its start, and the record's applied voltage is
 //!    the period's mean.
 //!
@@ -49,7 +49,7 @@
 //! period with probability `probability` each (a Xoshiro256++ stream of its own, seeded from
 //! the scenario's seed: deterministic, the sensor noise unchanged), and the periods
 //! containing the times `times_s`; never period 0 (there is nothing to hold yet).
-//! [`RunMetrics::skipped_control_periods`](crate::metrics::RunMetrics::skipped_control_periods)
+//! [`RunMetrics::skipped_control_periods`](crate::output::metrics::RunMetrics::skipped_control_periods)
 //! counts them.
 //!
 //! # Stops
@@ -63,6 +63,8 @@
 //! [`run_with`] reports how it ended in [`RunOutput::end`]; [`run`] turns an abnormal end
 //! into an error.
 
+pub(crate) mod pipeline;
+
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -70,19 +72,21 @@ use ekf_core::{EkfError, PmsmObserver};
 use glam::DVec2;
 
 use crate::SimError;
-use crate::controller::{ControllerInput, ControllerOutput, DriveController, RotorFeedback};
-use crate::faults::FaultInjector;
-use crate::foc_drive::FocDrive;
-use crate::inverter::Inverter;
-use crate::metrics::{MetricsAccumulator, RunMetrics};
-use crate::observer::{Observer, ObserverEstimate};
-use crate::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
+use crate::drive::foc_adapter::FocDrive;
+use crate::drive::interface::{ControllerInput, ControllerOutput, DriveController, RotorFeedback};
+use crate::drive::rotor_observers::{Observer, ObserverEstimate};
+use crate::output::metrics::{MetricsAccumulator, RunMetrics};
+use crate::plant::fault_injection::FaultInjector;
+use crate::plant::inverter::Inverter;
+use crate::plant::load::load_torque_nm;
+use crate::plant::sensors::CurrentSensor;
 use crate::plant::{Plant, PlantState};
-use crate::profile::load_torque_nm;
 use crate::scenario::{RPM_PER_RAD_S, Scenario, SkippedCycles};
-use crate::sensors::CurrentSensor;
+use crate::sim::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
 
-pub use crate::record::{ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth};
+pub use crate::output::record::{
+    ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth,
+};
 
 /// The recorded run.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -227,7 +231,7 @@ pub struct RunOptions<'a> {
 /// Whether the run's observers should step on a thread of their own
 /// ([`RunOptions::inline_observers`] `false`) on this machine: only when every busy thread gets
 /// a core, the simulating thread, the observers' and, with `log_thread`, the MCAP log's writer
-/// ([`crate::mcap_log`]). With fewer cores the threads take turns on them and the
+/// ([`crate::output::mcap`]). With fewer cores the threads take turns on them and the
 /// hand-over between them costs more than it saves: on the 2-core VM of the README, the
 /// default run with its log ran 127x real time pipelined against 158x inline (`pmsm-sim
 /// bench`, medians of 7), while without the log the pipeline wins (229x against 215x).
@@ -379,7 +383,7 @@ pub fn run_with_side_observers(
     let mut faults = FaultInjector::new(&scenario.faults, &scenario.fault_context());
     // The run's own observers: the default EKF (its failure ends the run) and the seed's
     // filter (a comparison only: dropped when it fails). Nothing in the loop depends on them:
-    // they step pipelined on a thread of their own ([`crate::pipeline`]), and each period's
+    // they step pipelined on a thread of their own ([`crate::sim::pipeline`]), and each period's
     // sample is handed on (metrics, side observers, sinks, trace) once their estimates are
     // in it.
     let observers = RunObservers {

@@ -6,13 +6,13 @@
 //! voltage held over the previous period as the controller knows it, `i_ab_a` the currents
 //! measured now. It returns an [`ObserverEstimate`] (angle, speed, and what it can tell of its
 //! uncertainty), which the run loop scores against the truth
-//! ([`ObserverSample::from_controller`](crate::record::ObserverSample::from_controller)).
+//! ([`ObserverSample::from_controller`](crate::output::record::ObserverSample::from_controller)).
 //! A new observer (say a salient-pole EKF) is one `impl Observer` away from the run loop and
 //! the suite.
 
 use ekf_core::{EkfError, FluxObserver, PmsmObserver, Status};
 
-use crate::record::ControllerEstimate;
+use crate::output::record::ControllerEstimate;
 
 /// What an observer returns for one period: angle, speed, covariance diagonal, NIS and
 /// whether it trusts its angle (zeros and `tracking = true` for an observer without a

@@ -121,7 +121,7 @@ use glam::DVec2;
 use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
-use crate::svpwm::{inverse_park, park};
+use crate::plant::frames::{inverse_park, park};
 
 /// Mechanical and electrical parameters of a PMSM (SI units).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -627,7 +627,7 @@ impl Plant {
     }
 
     /// Changes the stator resistance and the flux linkage (parameter drift, e.g. with
-    /// temperature; module [`faults`](crate::faults)). Takes effect at the next step.
+    /// temperature; module [`faults`](crate::plant::fault_injection)). Takes effect at the next step.
     pub fn set_rs_psi(&mut self, rs_ohm: f64, psi_f_wb: f64) {
         self.motor.rs_ohm = rs_ohm;
         self.motor.psi_f_wb = psi_f_wb;
@@ -708,7 +708,7 @@ impl Plant {
 
     /// Phase currents `[i_a, i_b, i_c]`, A (inverse amplitude-invariant Clarke).
     pub fn i_abc_a(&self) -> [f64; 3] {
-        crate::svpwm::inverse_clarke(self.i_ab_a())
+        crate::plant::frames::inverse_clarke(self.i_ab_a())
     }
 
     /// Electromagnetic torque at the present state, N m.

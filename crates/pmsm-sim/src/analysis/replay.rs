@@ -80,8 +80,8 @@ use ekf_core::{
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::metrics::rpm;
-use crate::record::{ControllerTelemetry, ObserverSample, Sample};
+use crate::output::metrics::rpm;
+use crate::output::record::{ControllerTelemetry, ObserverSample, Sample};
 use crate::sim::SampleSink;
 
 /// Share of the run's largest `|omega_ref|` below which a sample is not scored.
@@ -91,7 +91,7 @@ pub const LONG_PERIOD_TS: f64 = 1.35;
 /// Time not scored after a long period, s.
 pub const SKIP_AFTER_LONG_S: f64 = 0.02;
 /// Angle error above which a sample counts as lost, electrical degrees (the simulator's).
-pub use crate::metrics::LOST_DEG;
+pub use crate::output::metrics::LOST_DEG;
 
 /// Why a log or motor file could not be read, or a replay not run.
 #[derive(Debug, Error)]
@@ -496,7 +496,7 @@ pub fn read_mcap(path: &Path) -> Result<DriveLog, ReplayError> {
     // The `mcap` crate can panic on corrupt length fields: a panic is turned into an error.
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
-    let r = std::panic::catch_unwind(move || crate::tune::LoggedRun::read(&p));
+    let r = std::panic::catch_unwind(move || crate::analysis::tune::LoggedRun::read(&p));
     std::panic::set_hook(hook);
     let run = match r {
         Ok(Ok(run)) => run,
@@ -1083,8 +1083,8 @@ pub fn write_outputs(
     sc.duration_s = log.len() as f64 * motor.ts_s;
     let sim_err = |e: crate::SimError| out_err(&mcap, e.to_string());
     let mut mlog =
-        crate::mcap_log::McapLog::create(&mcap, &sc, Default::default()).map_err(sim_err)?;
-    let mut plot = crate::plot::PlotSink::new(log.len(), motor.params.pole_pairs);
+        crate::output::mcap::McapLog::create(&mcap, &sc, Default::default()).map_err(sim_err)?;
+    let mut plot = crate::output::plot::PlotSink::new(log.len(), motor.params.pole_pairs);
     for k in 0..log.len() {
         let s = sample(log, motor, rep, k);
         mlog.record(&s).map_err(|e| out_err(&mcap, e))?;

@@ -15,7 +15,7 @@
 //! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 940 bytes
 //! per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
 //! [`proto::json_schema`] (same field names, about 40 times slower to write). All three come
-//! from the one description of the record in [`crate::record`] (how to add a field: there).
+//! from the one description of the record in [`crate::output::record`] (how to add a field: there).
 //! The other channels are JSON (`jsonschema`): one message each.
 //!
 //! Log and publish times are the simulated time `k Ts` in nanoseconds. A metadata record
@@ -61,8 +61,8 @@ use serde::Serialize;
 pub mod proto;
 
 use crate::SimError;
-use crate::metrics::RunMetrics;
-use crate::record::Sample;
+use crate::output::metrics::RunMetrics;
+use crate::output::record::Sample;
 use crate::scenario::Scenario;
 use crate::sim::SampleSink;
 

@@ -93,21 +93,21 @@ use ekf_core::{EkfError, FluxObserver, FluxObserverConfig, ObserverConfig, PmsmO
 use serde::Serialize;
 
 use crate::SimError;
-use crate::foc_drive::FocDrive;
-use crate::inverter::InverterConfig;
-use crate::metrics::{Sums, is_converged};
-use crate::observer::{Observer, ObserverEstimate};
+use crate::drive::foc_adapter::FocDrive;
+use crate::drive::rotor_observers::{Observer, ObserverEstimate};
+use crate::output::metrics::{Sums, is_converged};
+use crate::output::record::{ObserverSample, Sample};
 use crate::plant::MotorModel;
-use crate::profile::{LoadTerm, Profile};
-use crate::record::{ObserverSample, Sample};
+use crate::plant::inverter::InverterConfig;
+use crate::plant::load::{LoadTerm, Profile};
+use crate::plant::sensors::SensorConfig;
 use crate::scenario::{
     ControllerKind, ControllerSettings, FocSettings, InitialState, ObserverSettings, RPM_PER_RAD_S,
     Scenario,
 };
-use crate::sensors::SensorConfig;
 use crate::sim::{SideObserver, run_with_side_observers};
 
-pub use crate::metrics::CONVERGED_DEG;
+pub use crate::output::metrics::CONVERGED_DEG;
 /// The rotor's electrical angle at `t = 0`, rad (the observers start at 0: 115 deg off).
 pub const INITIAL_ANGLE_RAD: f64 = 2.0;
 /// Fan load at rated speed, fraction of the rated torque (quadratic in speed: 4 % at 50 %,
@@ -556,7 +556,7 @@ pub struct TransientRow {
     pub failures: usize,
     /// Share of the whole run's estimates with status `Tracking`, %.
     pub tracking_pct: f64,
-    /// Estimates with status `Tracking` while more than [`LOST_DEG`](crate::metrics::LOST_DEG) off, over the whole run
+    /// Estimates with status `Tracking` while more than [`LOST_DEG`](crate::output::metrics::LOST_DEG) off, over the whole run
     /// (convergence phase included): an honest status has none.
     pub tracking_while_lost: usize,
 }

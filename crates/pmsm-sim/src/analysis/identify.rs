@@ -24,16 +24,16 @@ use glam::DVec2;
 use serde::Serialize;
 
 use crate::SimError;
-use crate::controller::ControllerTelemetry;
-use crate::faults::FaultInjector;
-use crate::inverter::Inverter;
-use crate::mcap_log::{LogOptions, McapLog};
+use crate::drive::interface::ControllerTelemetry;
+use crate::output::mcap::{LogOptions, McapLog};
+use crate::output::plot::PlotSink;
+use crate::plant::fault_injection::FaultInjector;
+use crate::plant::frames::{inverse_park, park};
+use crate::plant::inverter::Inverter;
+use crate::plant::sensors::CurrentSensor;
 use crate::plant::{Plant, PlantState};
-use crate::plot::PlotSink;
 use crate::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
-use crate::sensors::CurrentSensor;
 use crate::sim::{ControlRecord, InverterRecord, Measured, Sample, SampleSink, Truth};
-use crate::svpwm::{inverse_park, park};
 
 /// Outputs of [`identify`].
 #[derive(Clone, Debug, Default)]

@@ -13,49 +13,55 @@ use serde::{Deserialize, Serialize};
 
 use crate::SimError;
 use crate::error::FieldError;
-use crate::faults::{FaultSpec, RunContext};
-use crate::inverter::InverterConfig;
 use crate::plant::MotorModel;
-use crate::profile::{LoadTerm, Profile};
-use crate::sensors::SensorConfig;
+use crate::plant::fault_injection::{FaultSpec, RunContext};
+use crate::plant::inverter::InverterConfig;
+use crate::plant::load::{LoadTerm, Profile};
+use crate::plant::sensors::SensorConfig;
 
 /// rpm per rad/s.
 pub const RPM_PER_RAD_S: f64 = 30.0 / PI;
 
 /// Built-in scenarios `(name, TOML text)`; the first is the default.
 pub const PRESETS: &[(&str, &str)] = &[
-    ("default", include_str!("../scenarios/default.toml")),
+    ("default", include_str!("../../scenarios/default.toml")),
     (
         "servo-sensored",
-        include_str!("../scenarios/servo-sensored.toml"),
+        include_str!("../../scenarios/servo-sensored.toml"),
     ),
-    ("servo-ideal", include_str!("../scenarios/servo-ideal.toml")),
-    ("servo-harsh", include_str!("../scenarios/servo-harsh.toml")),
+    (
+        "servo-ideal",
+        include_str!("../../scenarios/servo-ideal.toml"),
+    ),
+    (
+        "servo-harsh",
+        include_str!("../../scenarios/servo-harsh.toml"),
+    ),
     (
         "industrial-2k2",
-        include_str!("../scenarios/industrial-2k2.toml"),
+        include_str!("../../scenarios/industrial-2k2.toml"),
     ),
-    ("drone", include_str!("../scenarios/drone.toml")),
+    ("drone", include_str!("../../scenarios/drone.toml")),
     (
         "industrial-ipm",
-        include_str!("../scenarios/industrial-ipm.toml"),
+        include_str!("../../scenarios/industrial-ipm.toml"),
     ),
     (
         "traction-ipm",
-        include_str!("../scenarios/traction-ipm.toml"),
+        include_str!("../../scenarios/traction-ipm.toml"),
     ),
     (
         "industrial-ipm-fw",
-        include_str!("../scenarios/industrial-ipm-fw.toml"),
+        include_str!("../../scenarios/industrial-ipm-fw.toml"),
     ),
     (
         "traction-ipm-fw",
-        include_str!("../scenarios/traction-ipm-fw.toml"),
+        include_str!("../../scenarios/traction-ipm-fw.toml"),
     ),
-    ("servo-fw", include_str!("../scenarios/servo-fw.toml")),
+    ("servo-fw", include_str!("../../scenarios/servo-fw.toml")),
     (
         "motor-heating",
-        include_str!("../scenarios/motor-heating.toml"),
+        include_str!("../../scenarios/motor-heating.toml"),
     ),
 ];
 
@@ -68,7 +74,7 @@ pub fn hz_to_rad_s(f_hz: f64) -> f64 {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ControllerKind {
-    /// The `foc` crate's sensorless controller ([`crate::foc_drive::FocDrive`], `f32`):
+    /// The `foc` crate's sensorless controller ([`crate::drive::foc_adapter::FocDrive`], `f32`):
     /// alignment, I/f start-up, hand-over to its own EKF, closed loop.
     Foc,
     /// The `foc` crate's controller in sensored mode: the true angle and speed through
@@ -378,7 +384,7 @@ pub struct Scenario {
     /// Load torque terms, summed (default: none).
     #[serde(default)]
     pub load: Vec<LoadTerm>,
-    /// Injected faults (`[[faults]]`, module [`crate::faults`]; default: none).
+    /// Injected faults (`[[faults]]`, module [`crate::plant::fault_injection`]; default: none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub faults: Vec<FaultSpec>,
     /// Control periods the controller misses (`[skipped_cycles]`; default: none).

@@ -36,10 +36,10 @@
 use serde::Serialize;
 
 use crate::SimError;
-use crate::profile::{LoadTerm, Profile};
+use crate::analysis::suite::SuiteMotor;
+use crate::plant::load::{LoadTerm, Profile};
 use crate::scenario::{ControllerKind, Scenario};
 use crate::sim::{self, RunOptions, Sample, SampleSink};
-use crate::suite::SuiteMotor;
 
 /// Test speeds, % of rated, from the top.
 pub const SPEEDS_PCT: [f64; 9] = [10.0, 7.0, 5.0, 3.0, 2.0, 1.5, 1.0, 0.7, 0.5];
