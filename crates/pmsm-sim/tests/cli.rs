@@ -98,6 +98,19 @@ fn default_run_writes_its_outputs_and_prints_the_paths() {
 }
 
 #[test]
+fn the_reference_filter_is_turned_off_by_either_spelling() {
+    for flag in ["--no-reference-filter", "--no-seed-filter"] {
+        let dir = temp_dir(flag.trim_start_matches('-'));
+        let o = run(&["--duration", "0.01", flag], &dir);
+        assert!(o.status.success(), "{flag}: {}", text(&o.stderr));
+        let msgs = read_mcap(&dir.join("out/default/run.mcap"));
+        let periods = &msgs["/pmsm_sim/period"];
+        assert!(periods.iter().all(|p| p["seed_filter"].is_null()), "{flag}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+#[test]
 fn json_output_list_show_and_check() {
     let dir = temp_dir("json");
     let o = run(

@@ -71,7 +71,7 @@ fn observer(m: &Option<ObserverMetrics>) -> ObserverMetrics {
 /// | speed error max         | 7.85 rad/s    | 10.19 rad/s |
 /// | Tracking in window      | 100 %         | 87.4 %      |
 ///
-/// The thresholds leave about 2x margin. The seed filter's bias is its half-sample lag
+/// The thresholds leave about 2x margin. The reference filter's bias is its half-sample lag
 /// (`w_e Ts / 2` = 2.4 deg at 2000 rpm), which the default's lag-free step removes.
 #[test]
 fn sensored_scenario_observer_metrics() {
@@ -128,7 +128,7 @@ fn default_observer_converges_for_several_noise_seeds() {
             .unwrap_or_else(|e| panic!("{e}"))
             .with_duration(0.4);
         sc.seed = seed;
-        sc.observer.seed_filter = false;
+        sc.observer.reference_filter = false;
         let out = run(&sc);
         let o = observer(&out.metrics.observer);
         let t_conv = o.convergence_time_s.unwrap_or(f64::INFINITY);

@@ -74,7 +74,7 @@ fn job(
     sc.load = load;
     sc.initial.theta_e_rad = theta0;
     sc.duration_s = t_end;
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     // Diagnostics: another noise realization, another dead time.
     if let Ok(x) = std::env::var("HFI_SEED") {
         sc.seed = x.parse().unwrap_or(sc.seed);

@@ -15,7 +15,7 @@ fn default_cut(duration_s: f64) -> Scenario {
     let mut sc = Scenario::preset("default")
         .unwrap_or_else(|e| panic!("{e}"))
         .with_duration(duration_s);
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     sc
 }
 

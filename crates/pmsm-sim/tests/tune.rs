@@ -22,7 +22,7 @@ fn scenario() -> Scenario {
     sc.sensors.current_noise_std_a = NOISE_A;
     sc.controller.kind = ControllerKind::FocSensored;
     sc.controller.foc = None;
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     sc.initial.speed_rpm = 1000.0;
     sc.initial.theta_e_rad = 0.3;
     let toml = format!(

@@ -6,7 +6,7 @@
 //! The built-in default scenario's drive (servo motor, 10 kHz, 300 V, the realistic sensing
 //! and 0.5 us of compensated dead time; `foc` sensorless with its start-up), held at rated
 //! speed (2000 rpm from 0.6 s) with a passive fan load of rated torque at rated speed
-//! (1.5 N m at 2000 rpm; after a trip the shaft coasts to rest), the seed filter off.
+//! (1.5 N m at 2000 rpm; after a trip the shaft coasts to rest), the reference filter off.
 //! The fault starts at [`SuiteOptions::t_fault_s`] (default 1.2 s) and the run ends at
 //! [`SuiteOptions::t_end_s`] (default 2.0 s).
 //!
@@ -283,7 +283,7 @@ pub fn base_scenario(opts: &SuiteOptions) -> Scenario {
     sc.description =
         "fault suite: default drive at 2000 rpm, rated fan load, then one fault".into();
     sc.duration_s = opts.t_end_s;
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     sc.speed_ref_rpm = Profile::linear(vec![(0.1, 0.0), (0.6, 2000.0)]);
     // foc's classic start (align, undamped I/f): the suite's rows were measured on that
     // trajectory, and some (the stuck channel's peak current: 2.1 to 8.3 A for a fault 0 to

@@ -32,7 +32,7 @@
 //! The observers ([`ObserverKind`]; on an interior motor each takes `Ld` and `Lq`: the
 //! active-flux EKF and the salient flux baseline):
 //!
-//! - the seed's filter (`ObserverConfig::seed`: forward Euler, the seed's Q and R);
+//! - the reference filter (`ObserverConfig::seed`: forward Euler, the seed's Q and R);
 //! - the baseline: the flux observer with PLL of open firmware
 //!   (`FluxObserverConfig::new`, firmware timing, flux angle): the row to beat;
 //! - the project's default EKF (`ObserverConfig::new`: lag-free, scaled Q and R).
@@ -438,7 +438,7 @@ impl SuiteMotor {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ObserverKind {
-    /// The seed's filter, `ObserverConfig::seed`.
+    /// The reference filter, `ObserverConfig::seed`.
     SeedEkf,
     /// The baseline: flux observer with PLL, `FluxObserverConfig::new` (firmware form).
     FluxBaseline,
@@ -827,7 +827,7 @@ fn scenario_with(motor: SuiteMotor, opts: &SuiteOptions, plan: &Plan, theta0_rad
             foc: Some(FocSettings::default()),
         },
         observer: ObserverSettings {
-            seed_filter: false,
+            reference_filter: false,
             ..ObserverSettings::default()
         },
         speed_ref_rpm: Profile::linear(

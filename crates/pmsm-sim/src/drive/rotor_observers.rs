@@ -1,5 +1,5 @@
 //! The observers the simulator runs and scores: one trait, [`Observer`], for every rotor
-//! observer stepped alongside the drive (the default EKF and the seed's filter of every run,
+//! observer stepped alongside the drive (the default EKF and the reference filter of every run,
 //! the flux + PLL baseline and the EKFs of the suite).
 //!
 //! An observer steps once per period with the timing of `design.md` section 4: `u_prev` the

@@ -776,9 +776,9 @@ pub struct RunMetrics {
     pub rated_omega_e_rad_s: f64,
     /// The project's default observer (lag-free EKF, scaled noise).
     pub observer: Option<ObserverMetrics>,
-    /// The seed's filter, when it was run and did not fail.
+    /// The reference filter, when it was run and did not fail.
     pub seed_filter: Option<ObserverMetrics>,
-    /// Why and where the seed filter was dropped, if it was.
+    /// Why and where the reference filter was dropped, if it was.
     pub seed_filter_failure: Option<String>,
     /// The controller's own observer (`foc`'s `f32` EKF), when it has one.
     pub controller_observer: Option<ObserverMetrics>,
@@ -804,7 +804,7 @@ fn is_zero_u64(n: &u64) -> bool {
 #[derive(Clone, Debug, PartialEq)]
 pub struct MetricsAccumulator {
     observer: ObserverScore,
-    seed_filter: Option<ObserverScore>,
+    reference_filter: Option<ObserverScore>,
     controller_observer: Option<ObserverScore>,
     closed_loop: ClosedLoopScore,
     drive: DriveScore,
@@ -820,9 +820,9 @@ impl MetricsAccumulator {
         let rated = scenario.rated_speed_e_rad_s();
         Self {
             observer: ObserverScore::new(rated),
-            seed_filter: scenario
+            reference_filter: scenario
                 .observer
-                .seed_filter
+                .reference_filter
                 .then(|| ObserverScore::new(rated)),
             controller_observer: None,
             closed_loop: ClosedLoopScore::new(rated),
@@ -841,7 +841,7 @@ impl MetricsAccumulator {
         self.observer
             .push(s.t_s, s.truth.omega_e_rad_s, &s.observer);
         self.observer.params(&s.observer, &s.truth);
-        if let (Some(score), Some(est)) = (self.seed_filter.as_mut(), s.seed_filter.as_ref()) {
+        if let (Some(score), Some(est)) = (self.reference_filter.as_mut(), s.seed_filter.as_ref()) {
             score.push(s.t_s, s.truth.omega_e_rad_s, est);
             score.params(est, &s.truth);
         }
@@ -859,9 +859,9 @@ impl MetricsAccumulator {
         self.reversal.push(s);
     }
 
-    /// Drops the seed filter's score (it failed and was dropped from the run).
-    pub fn drop_seed_filter(&mut self) {
-        self.seed_filter = None;
+    /// Drops the reference filter's score (it failed and was dropped from the run).
+    pub fn drop_reference_filter(&mut self) {
+        self.reference_filter = None;
     }
 
     /// The metrics of the samples pushed so far.
@@ -885,7 +885,7 @@ impl MetricsAccumulator {
             real_time_factor: simulated / wall_time_s,
             rated_omega_e_rad_s: scenario.rated_speed_e_rad_s(),
             observer: self.observer.finish(ts),
-            seed_filter: self.seed_filter.as_ref().and_then(|s| s.finish(ts)),
+            seed_filter: self.reference_filter.as_ref().and_then(|s| s.finish(ts)),
             seed_filter_failure,
             controller_observer: self.controller_observer.as_ref().and_then(|s| s.finish(ts)),
             controller_observer_closed_loop: self.closed_loop.finish(ts),

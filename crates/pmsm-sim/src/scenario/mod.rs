@@ -261,8 +261,11 @@ pub struct ControllerSettings {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct ObserverSettings {
-    /// Also run the seed's filter (`ObserverConfig::seed`) alongside, for comparison.
-    pub seed_filter: bool,
+    /// Also run the reference filter (`ObserverConfig::seed`) alongside, for comparison.
+    /// TOML key `reference_filter`; `seed_filter` is accepted too, and is the name the
+    /// scenario is written out with (`show`, the MCAP log).
+    #[serde(rename = "seed_filter", alias = "reference_filter")]
+    pub reference_filter: bool,
     /// The observer's stator resistance (default: the motor's), ohm.
     pub rs_ohm: Option<f64>,
     /// The observer's inductance, both axes (a surface model; default: the motor's `Ld`
@@ -281,7 +284,7 @@ pub struct ObserverSettings {
 impl Default for ObserverSettings {
     fn default() -> Self {
         Self {
-            seed_filter: true,
+            reference_filter: true,
             rs_ohm: None,
             ls_h: None,
             ld_h: None,
@@ -674,8 +677,8 @@ impl Scenario {
             .with_sigma(self.observer.angle_sigma_limit_rad)
     }
 
-    /// The seed filter's configuration (`ObserverConfig::seed`).
-    pub fn seed_filter_config(&self) -> ekf_core::ObserverConfig<f64> {
+    /// The reference filter's configuration (`ObserverConfig::seed`).
+    pub fn reference_filter_config(&self) -> ekf_core::ObserverConfig<f64> {
         ekf_core::ObserverConfig::seed(self.observer_params(), self.inverter.ts_s)
             .with_sigma(self.observer.angle_sigma_limit_rad)
     }
@@ -977,6 +980,15 @@ mod tests {
         let (field, problem) = error_of(&t);
         assert_eq!(field, "load[1].kind");
         assert!(problem.contains("unknown variant"), "{problem}");
+    }
+
+    #[test]
+    fn the_reference_filter_key_has_two_spellings() {
+        for (key, on) in [("reference_filter", false), ("seed_filter", false)] {
+            let t = default_text().replace("reference_filter = true", &format!("{key} = {on}"));
+            let sc = Scenario::from_toml_str(&t, key).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(sc.observer.reference_filter, on, "{key}");
+        }
     }
 
     #[test]

@@ -196,8 +196,8 @@ pub struct RunOutput {
     pub metrics: RunMetrics,
     /// How the run ended.
     pub end: RunEnd,
-    /// Where the seed filter failed and was dropped, if it did.
-    pub seed_filter_failure: Option<FilterFailure>,
+    /// Where the reference filter failed and was dropped, if it did.
+    pub reference_filter_failure: Option<FilterFailure>,
     /// Wall-clock time of the simulation loop, s (not deterministic).
     pub wall_time_s: f64,
 }
@@ -222,7 +222,7 @@ pub struct RunOptions<'a> {
     /// d-axis saturation of the plant ([`crate::plant::DSaturation`]; `None`, the default:
     /// the linear plant of every scenario).
     pub d_saturation: Option<crate::plant::DSaturation>,
-    /// Step the run's own observers (the default EKF, the seed filter) on the calling thread
+    /// Step the run's own observers (the default EKF, the reference filter) on the calling thread
     /// instead of a thread of their own, pipelined (the default); the results are
     /// the same bit for bit (`pmsm-sim bench` times both).
     pub inline_observers: bool,
@@ -388,8 +388,8 @@ pub fn run_with_side_observers(
     // in it.
     let observers = RunObservers {
         observer: PmsmObserver::new(&scenario.observer_config())?,
-        seed_filter: if scenario.observer.seed_filter {
-            Some(PmsmObserver::new(&scenario.seed_filter_config())?)
+        reference_filter: if scenario.observer.reference_filter {
+            Some(PmsmObserver::new(&scenario.reference_filter_config())?)
         } else {
             None
         },
@@ -412,7 +412,7 @@ pub fn run_with_side_observers(
     let mut skips = CycleSkips::new(&scenario.skipped_cycles, scenario.seed, ts);
     let mut last_out: Option<ControllerOutput> = None;
     let mut skipped: u64 = 0;
-    let mut seed_filter_failure = None;
+    let mut reference_filter_failure = None;
     let mut side_est = Vec::with_capacity(side.len());
     // How the loop ended (interrupt, non-finite) and how the hand-on ended (observer or
     // sink failure, at an earlier or the same period: it takes precedence).
@@ -422,7 +422,7 @@ pub fn run_with_side_observers(
     let sinks = &mut opts.sinks;
     // One period, complete, in order: what a sequential run does after its observers' steps.
     let mut hand_on = |r: Ready<'_>| -> bool {
-        let (sample, input, seed_filter_error) = match r {
+        let (sample, input, reference_filter_error) = match r {
             Ready::ObserverFailed { k, error } => {
                 hand_end = Some(RunEnd::ObserverFailed {
                     k,
@@ -434,12 +434,12 @@ pub fn run_with_side_observers(
             Ready::Period {
                 sample,
                 input,
-                seed_filter_error,
-            } => (sample, input, seed_filter_error),
+                reference_filter_error,
+            } => (sample, input, reference_filter_error),
         };
-        if let Some(error) = seed_filter_error {
-            seed_filter_failure = Some(FilterFailure { k: input.k, error });
-            acc.drop_seed_filter();
+        if let Some(error) = reference_filter_error {
+            reference_filter_failure = Some(FilterFailure { k: input.k, error });
+            acc.drop_reference_filter();
         }
         side_est.clear();
         side_est.extend(side.iter_mut().map(|o| o.step(input.u_prev, input.i_ab_a)));
@@ -667,14 +667,14 @@ pub fn run_with_side_observers(
         scenario,
         end.describe(),
         wall_time_s,
-        seed_filter_failure.map(|f| format!("sample {}: {}", f.k, f.error)),
+        reference_filter_failure.map(|f| format!("sample {}: {}", f.k, f.error)),
     );
     metrics.skipped_control_periods = skipped;
     Ok(RunOutput {
         trace: Trace { ts_s: ts, samples },
         metrics,
         end,
-        seed_filter_failure,
+        reference_filter_failure,
         wall_time_s,
     })
 }

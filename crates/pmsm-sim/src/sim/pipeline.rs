@@ -1,4 +1,4 @@
-//! The run's own observers (the default EKF and the seed's filter) stepped on a thread of
+//! The run's own observers (the default EKF and the reference filter) stepped on a thread of
 //! their own, pipelined with the closed loop.
 //!
 //! Nothing in the closed loop depends on them: the loop hands their inputs (the voltage
@@ -53,16 +53,16 @@ pub(crate) struct ObserverInput {
 pub(crate) struct ObserverOutput {
     /// The default EKF (its error ends the run).
     pub observer: Result<ObserverSample, EkfError>,
-    /// The seed's filter: `None` when it is off or was dropped; its error drops it.
-    pub seed_filter: Option<Result<ObserverSample, EkfError>>,
+    /// The reference filter: `None` when it is off or was dropped; its error drops it.
+    pub reference_filter: Option<Result<ObserverSample, EkfError>>,
 }
 
 /// The run's own observers.
 pub(crate) struct RunObservers {
     /// The default EKF.
     pub observer: PmsmObserver<f64>,
-    /// The seed's filter, while it runs.
-    pub seed_filter: Option<PmsmObserver<f64>>,
+    /// The reference filter, while it runs.
+    pub reference_filter: Option<PmsmObserver<f64>>,
 }
 
 impl RunObservers {
@@ -85,26 +85,26 @@ impl RunObservers {
                 Err(error) => {
                     out.push(ObserverOutput {
                         observer: Err(error),
-                        seed_filter: None,
+                        reference_filter: None,
                     });
                     return false;
                 }
             };
-            let seed_filter = match self
-                .seed_filter
+            let reference_filter = match self
+                .reference_filter
                 .as_mut()
                 .map(|f| Observer::step(f, x.u_prev, x.i_ab_a))
             {
                 Some(Ok(e)) => Some(Ok(truth_at(&e))),
                 Some(Err(error)) => {
-                    self.seed_filter = None;
+                    self.reference_filter = None;
                     Some(Err(error))
                 }
                 None => None,
             };
             out.push(ObserverOutput {
                 observer: Ok(observer),
-                seed_filter,
+                reference_filter,
             });
         }
         true
@@ -138,8 +138,8 @@ pub(crate) enum Ready<'a> {
         sample: Option<&'a Sample>,
         /// The observers' inputs of the period.
         input: &'a ObserverInput,
-        /// The seed filter failed in this period (and was dropped).
-        seed_filter_error: Option<EkfError>,
+        /// The reference filter failed in this period (and was dropped).
+        reference_filter_error: Option<EkfError>,
     },
     /// The default EKF failed in period `k`: the run ends there (nothing after it is handed
     /// on).
@@ -345,7 +345,7 @@ impl ObserverPipeline {
                     break;
                 }
             };
-            let (seed, seed_filter_error) = match out.seed_filter {
+            let (seed, reference_filter_error) = match out.reference_filter {
                 Some(Ok(o)) => (Some(o), None),
                 Some(Err(e)) => (None, Some(e)),
                 None => (None, None),
@@ -358,7 +358,7 @@ impl ObserverPipeline {
             if !f(Ready::Period {
                 sample,
                 input,
-                seed_filter_error,
+                reference_filter_error,
             }) {
                 self.stopped = true;
                 break;
@@ -410,7 +410,7 @@ mod tests {
         let new = |c| PmsmObserver::new(&c).unwrap_or_else(|e| panic!("{e:?}"));
         RunObservers {
             observer: new(sc.observer_config()),
-            seed_filter: Some(new(sc.seed_filter_config())),
+            reference_filter: Some(new(sc.reference_filter_config())),
         }
     }
 
@@ -423,12 +423,12 @@ mod tests {
                 Ready::Period {
                     sample,
                     input,
-                    seed_filter_error,
+                    reference_filter_error,
                 } => seen.push(format!(
                     "{} {:?} {:?}",
                     input.k,
                     sample.map(|s| (s.k, s.observer, s.seed_filter)),
-                    seed_filter_error
+                    reference_filter_error
                 )),
                 Ready::ObserverFailed { k, error } => seen.push(format!("failed {k} {error:?}")),
             }
