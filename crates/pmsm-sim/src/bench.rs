@@ -68,14 +68,14 @@ pub(crate) fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitC
     let (pb, json) = (LogEncoding::Protobuf, LogEncoding::Json);
     // One untimed run first: page faults, caches and the CPU's clock settle.
     sim::run_with(&base, RunOptions::default())?;
-    // (name, seed filter, log, observers inline on the simulating thread). `pmsm-sim run`
-    // (the default run: seed filter, MCAP protobuf) and `--no-log` pipeline the observers
+    // (name, reference filter, log, observers inline on the simulating thread). `pmsm-sim run`
+    // (the default run: reference filter, MCAP protobuf) and `--no-log` pipeline the observers
     // where `sim::pipeline_pays` says so, and step them inline otherwise: their rows are
     // the pipelined or the inline ones accordingly (printed below the table).
     let configs: [(&str, bool, Option<LogOptions>, bool); 10] = [
-        ("no seed filter, no log", false, None, false),
+        ("no reference filter, no log", false, None, false),
         (
-            "seed filter, no log, observers pipelined",
+            "reference filter, no log, observers pipelined",
             true,
             None,
             false,
@@ -87,13 +87,13 @@ pub(crate) fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitC
             true,
         ),
         (
-            "no seed filter, MCAP protobuf",
+            "no reference filter, MCAP protobuf",
             false,
             log(LogCompression::None, pb),
             false,
         ),
         (
-            "seed filter, MCAP protobuf, observers pipelined",
+            "reference filter, MCAP protobuf, observers pipelined",
             true,
             log(LogCompression::None, pb),
             false,
@@ -105,25 +105,25 @@ pub(crate) fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitC
             true,
         ),
         (
-            "seed filter, MCAP protobuf lz4",
+            "reference filter, MCAP protobuf lz4",
             true,
             log(LogCompression::Lz4, pb),
             false,
         ),
         (
-            "seed filter, MCAP protobuf zstd",
+            "reference filter, MCAP protobuf zstd",
             true,
             log(LogCompression::Zstd, pb),
             false,
         ),
         (
-            "seed filter, MCAP JSON zstd",
+            "reference filter, MCAP JSON zstd",
             true,
             log(LogCompression::Zstd, json),
             false,
         ),
         (
-            "no seed filter, no log, observers inline",
+            "no reference filter, no log, observers inline",
             false,
             None,
             true,
@@ -387,7 +387,7 @@ fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>, piped_ns: Opti
             "rest of the no-log loop (record, metrics, ...)"
         );
         println!(
-            "  ({no_log:.0} CPU ns per period without the log, with the seed filter, observers \
+            "  ({no_log:.0} CPU ns per period without the log, with the reference filter, observers \
              inline: the parts above with the EKF step twice, the simulator's and the seed \
              filter's)"
         );

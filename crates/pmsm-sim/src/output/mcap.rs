@@ -61,10 +61,10 @@ use serde::Serialize;
 pub mod proto;
 
 use crate::SimError;
+use crate::output::SampleSink;
 use crate::output::metrics::RunMetrics;
 use crate::output::record::Sample;
 use crate::scenario::Scenario;
-use crate::sim::SampleSink;
 
 /// Topic of the per-period messages.
 pub const TOPIC_PERIOD: &str = "/pmsm_sim/period";

@@ -13,3 +13,11 @@ pub mod metrics;
 pub mod plot;
 pub mod record;
 pub mod report;
+
+/// Receives every sample as the run makes it (the MCAP log, the plot); the run loop
+/// ([`crate::sim`]) hands each period's [`Sample`](record::Sample) to its sinks in order.
+pub trait SampleSink {
+    /// Takes one sample; an error stops the run
+    /// ([`RunEnd::SinkFailed`](crate::sim::RunEnd::SinkFailed)).
+    fn record(&mut self, sample: &record::Sample) -> Result<(), String>;
+}

@@ -26,7 +26,8 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use crate::SimError;
-use crate::sim::{Sample, SampleSink};
+use crate::output::SampleSink;
+use crate::output::record::Sample;
 
 /// Largest number of points kept per curve.
 pub const MAX_POINTS: usize = 4000;

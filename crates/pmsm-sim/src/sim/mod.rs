@@ -84,6 +84,7 @@ use crate::plant::{Plant, PlantState};
 use crate::scenario::{RPM_PER_RAD_S, Scenario, SkippedCycles};
 use crate::sim::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
 
+pub use crate::output::SampleSink;
 pub use crate::output::record::{
     ControlRecord, InverterRecord, Measured, ObserverSample, Sample, Truth,
 };
@@ -200,12 +201,6 @@ pub struct RunOutput {
     pub reference_filter_failure: Option<FilterFailure>,
     /// Wall-clock time of the simulation loop, s (not deterministic).
     pub wall_time_s: f64,
-}
-
-/// Receives every sample as it is made (the MCAP log, the plot).
-pub trait SampleSink {
-    /// Takes one sample; an error stops the run ([`RunEnd::SinkFailed`]).
-    fn record(&mut self, sample: &Sample) -> Result<(), String>;
 }
 
 /// Options of [`run_with`].
