@@ -318,7 +318,7 @@ fn hold_zero(name: &str) -> (f64, f64, f64) {
     (rms, max, w)
 }
 
-/// The issue's goal on the industrial motor (Lq/Ld 1.4, 50 mA sensor noise), with the
+/// The goal on the industrial motor (Lq/Ld 1.4, 50 mA sensor noise), with the
 /// defaults `HfiConfig::with_current_noise` derives for that noise (`N = 7`, 714 Hz, 249 V,
 /// PLL 60 rad/s). Measured over 1-6 s, seeds 7 / 1 / 2 / 3: RMS 0.61 / 0.57 / 0.59 / 0.59,
 /// max 2.09 / 2.17 / 2.16 / 2.08 deg el.; over 7 start angles (0 to 3 rad) x 3 seeds the
@@ -546,7 +546,7 @@ fn traction_ipm_reverses_through_zero_under_rated_load() {
 /// torque steps. `HFI_NOTRACK=1` passes seed 5 (9.7 deg, 23 rpm) although the tracking is
 /// frozen there anyway: the outcome moves with the last bit of the observer's arithmetic.
 ///
-/// Tried on seeds 1-8 and reverted (issue 14 item 4), before the fusion: a weight cut when the
+/// Tried on seeds 1-8 and reverted, before the fusion: a weight cut when the
 /// observer parts from HFI by more than 20 deg (every motor worse: the control angle jumps by
 /// the cut weight's share of the error); re-seeding the observer from HFI whenever it parts
 /// from it by more than 20 deg inside the band (seeds 5 and 8 fail: the observer diverges
@@ -591,7 +591,7 @@ fn seed_sweep(name: &str, limits: Option<(f64, f64)>, track_max: f64) -> Vec<(u6
     bad
 }
 
-/// Robustness over the noise (issue 14 item 4): the reversal of the industrial IPM and the
+/// Robustness over the noise: the reversal of the industrial IPM and the
 /// traction IPM at 180 A / 300 A, each on the noise seeds 1-8 (16 runs, about 12 s in
 /// release).
 ///
@@ -615,7 +615,7 @@ fn reversal_passes_on_noise_seeds_1_to_8() {
     );
 }
 
-/// The traction IPM at the preset's sizing over the noise seeds 1-8 (issue 14 item 4): 8 of 8
+/// The traction IPM at the preset's sizing over the noise seeds 1-8: 8 of 8
 /// since HFI's angle is fused into the observer (numbers: [`traction_ipm_reverses_with_the_presets_sizing`]).
 /// Before, it failed on seed 5 (the observer diverged inside the blend band during the first
 /// acceleration, the carrier went off on HFI's speed while the observer was 44 deg off, and

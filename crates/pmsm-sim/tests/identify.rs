@@ -3,7 +3,7 @@
 //! realistic sensing and inverter; repeatability over seeds; every failure path ends with a
 //! typed error and the PWM off.
 //!
-//! Goals (issue 12): Rs within 2 %, Ld and Lq within 3 %, psi_f within 1 %, J within 10 %
+//! Goals: Rs within 2 %, Ld and Lq within 3 %, psi_f within 1 %, J within 10 %
 //! when measured, the whole sequence within 3 s.
 
 use pmsm_sim::analysis::identify::{

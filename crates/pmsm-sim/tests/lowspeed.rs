@@ -1,4 +1,4 @@
-//! The low-speed table of issue 14 item 3 (module `pmsm_sim::analysis::low_speed`, `pmsm-sim
+//! The low-speed table (module `pmsm_sim::analysis::low_speed`, `pmsm-sim
 //! low-speed`): on the three surface reference motors `foc` sensorless runs closed loop under
 //! rated load for 10 s, without a fall-back, down to at most 2 % of rated speed, drawing at
 //! most 1.15 times the rated-torque current there.

@@ -1,4 +1,4 @@
-//! MTPA in the simulator's closed loop (issue 13, item 5): `foc` (sensored, with the true
+//! MTPA in the simulator's closed loop: `foc` (sensored, with the true
 //! angle, and sensorless, on its own observer from the preset's start-up) drives each interior
 //! preset at half its rated speed against its rated torque, on the full plant, inverter (delay, dead
 //! time compensated by foc) and current sensing (noise, ADC). In steady state the torque per

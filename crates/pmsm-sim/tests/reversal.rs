@@ -1,4 +1,4 @@
-//! Speed reversal under rated active load through zero speed (issue 14 item 2), on the three
+//! Speed reversal under rated active load through zero speed, on the three
 //! surface reference motors with `foc` sensorless:
 //!
 //! - with `reversal = "closed_loop"` (foc's default) the drive leaves closed loop for at most

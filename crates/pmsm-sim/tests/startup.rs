@@ -1,7 +1,6 @@
 //! The sensorless start of `foc` (module `foc::startup`: alignment, damped I/f ramp,
 //! hand-over to its EKF) on the simulator's closed loop, over the three surface reference
-//! motors and a grid of 12 initial rotor angles (every 30 deg el.), against the goals of
-//! issue 14 item 1:
+//! motors and a grid of 12 initial rotor angles (every 30 deg el.), against the goals:
 //!
 //! - the rotor never turns backwards faster than 1 % of rated speed;
 //! - from 0.1 s after the alignment to the hand-over the speed stays within 10 % of rated
@@ -165,7 +164,7 @@ fn grid(dseed: u64) -> Vec<Cell> {
     cells
 }
 
-/// The goals of issue 14 item 1, as they stand: backward at most 1 % of rated speed, ramp
+/// The goals, as they stand: backward at most 1 % of rated speed, ramp
 /// deviation at most 10 %, hand-over at or below 3 %, no fault, on every cell, with the
 /// presets' noise seeds and with the next ones (a start that meets the goals by the luck of
 /// one noise sequence does not count).

@@ -267,7 +267,7 @@ fn report_is_deterministic_and_serializes() {
 /// windows. Asserted against this bound (measured + about 15 %) on the short run only.
 const TRACTION_10_PCT_SHORT_RATIO_BOUND: f64 = 0.66;
 
-/// The interior motors on the short run: the goals (EKF RMS at most half the salient
+/// The interior motors on the short run: the goals (EKF RMS at most half the salient
 /// baseline's in every steady row, |mean| < 0.1 deg at >= 50 % speed, every start of the
 /// convergence grid, 180 deg included, converged within 50 ms) and the suite's limits hold,
 /// but the traction motor's RMS ratio at 10 % on this short run (bounded by
@@ -347,7 +347,7 @@ fn interior_motors_goals_and_limits() {
         }
         // Every check passes but the traction motor's RMS ratio at 10 % on this short run (see
         // above) and, on realistic sensing, the industrial motor's bias at 10 % of rated speed
-        // (0.111 deg; the bias goal is at >= 50 % speed, the suite checks it wherever
+        // (0.111 deg; the bias goal is at >= 50 % speed, the suite checks it wherever
         // w_e Ts <= 0.3).
         for c in &r.checks {
             let known = (c.motor == SuiteMotor::TractionIpm

@@ -1,4 +1,4 @@
-//! The low-speed table (`pmsm-sim low-speed`, issue 14 item 3): for each reference motor, the
+//! The low-speed table (`pmsm-sim low-speed`): for each reference motor, the
 //! lowest speed at which `foc` sensorless runs closed loop under rated load for
 //! [`HOLD_S`] without a fall-back, with the current it draws per rated-torque current.
 //!

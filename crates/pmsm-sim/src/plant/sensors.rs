@@ -1,6 +1,6 @@
 //! Sensors: phase-current measurement and DC-bus voltage.
 //!
-//! Two phase currents (`a`, `b`) are sampled at `t_k`, the PWM centre (`design.md`
+//! Two phase currents (`a`, `b`) are sampled at `t_k`, the PWM centre (docs/design.md
 //! section 4; with centre-aligned PWM the low-side shunts conduct there and the current
 //! ripple crosses its mean). Each channel is
 //!

@@ -41,7 +41,7 @@ pub enum ControllerKind {
     Foc,
     /// The `foc` crate's controller in sensored mode: the true angle and speed through
     /// `TickInput::with_sensor`, its observer running alongside. `"sensored"` is accepted as
-    /// another spelling (it named the simulator's own sensored controller, which this replaces).
+    /// another spelling.
     #[serde(alias = "sensored")]
     FocSensored,
 }
@@ -427,7 +427,7 @@ impl Scenario {
     }
 
     /// The built-in default scenario (`scenarios/default.toml`): the `foc` crate's sensorless
-    /// controller on the servo motor of `design.md` section 6 at 10 kHz, from standstill to
+    /// controller on the servo motor of docs/design.md section 6 at 10 kHz, from standstill to
     /// rated speed, a rated load step and a reversal.
     ///
     /// # Panics

@@ -1,5 +1,5 @@
 //! The scenario suite (`pmsm-sim suite`): a fixed set of runs on the three reference motors
-//! of `design.md` section 6 and the two interior ones of the README's reference-motor table,
+//! of docs/design.md section 6 and the two interior ones of the README's reference-motor table,
 //! that scores every observer on identical data, and the tables that compare them over time.
 //!
 //! # What runs
@@ -52,7 +52,7 @@
 //! settle, window                                                       -> row "100 %, rated load"
 //! ```
 //!
-//! # Metrics (`design.md` section 5)
+//! # Metrics (docs/design.md section 5)
 //!
 //! Over each steady-state window: angle error `wrap(th_hat - th)` RMS, max `|.|` and mean
 //! (electrical degrees), speed error RMS (electrical rad/s and % of rated). Load step: the
@@ -78,7 +78,7 @@
 //!
 //! # Goals and limits ([`SuiteReport::checks`])
 //!
-//! The issue's goals: the default EKF's RMS angle error at most half the baseline's in every
+//! The goals: the default EKF's RMS angle error at most half the baseline's in every
 //! steady-state row, and its mean error within 0.1 deg el. where `w_e Ts <= 0.3 rad`. Sane
 //! absolute limits besides: the default EKF converges from every start angle within the
 //! convergence phase, its
@@ -380,7 +380,7 @@ impl Default for SuiteOptions {
     }
 }
 
-/// The reference motors: the three surface motors of `design.md` section 6 and the two
+/// The reference motors: the three surface motors of docs/design.md section 6 and the two
 /// interior ones of the README's reference-motor table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]

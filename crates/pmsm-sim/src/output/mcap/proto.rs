@@ -69,8 +69,7 @@ fn encode_vec(capacity: usize, body: impl FnOnce(&mut Enc<'_>)) -> Vec<u8> {
 
 /// The `FileDescriptorSet` of the schema (one file, `proto3`, package [`PACKAGE`]): the MCAP
 /// schema data of encoding `protobuf`. Byte for byte what `protoc --descriptor_set_out`
-/// writes for [`proto_text`] (checked in as `src/schemas/period.desc`; made with protoc 3.21
-/// before the table moved to [`crate::output::record`], and unchanged since).
+/// writes for [`proto_text`] (checked in as `src/schemas/period.desc`, made with protoc 3.21).
 pub fn file_descriptor_set() -> Vec<u8> {
     // Generous: the set is about 2 KB (a unit test keeps it under 16 KB).
     const CAP: usize = 64 << 10;
@@ -490,8 +489,7 @@ mod tests {
         assert_eq!(buf.len(), 4 + 20_000);
     }
 
-    /// The default's message is about 900 bytes (700 before the tracked parameters; what the
-    /// log size per period is made of),
+    /// The default's message is about 900 bytes (what the log size per period is made of),
     /// well within the buffer reserved for it.
     #[test]
     fn message_size() {
@@ -512,8 +510,8 @@ mod tests {
         assert!(file_descriptor_set().len() < 16 << 10);
     }
 
-    /// Logs written before the record moved to `crate::output::record` (pmsm-sim 0.1.0, the
-    /// hand-written encoder, before the tracked parameters) read back: they decode to the JSON
+    /// Logs written by pmsm-sim 0.1.0 (`tests/data/period-*-0.1.0.pb`, without the tracked
+    /// parameters) read back: they decode to the JSON
     /// encoding of the same sample with the fields added since (the truth's and the
     /// observers' `psi_f`, `Rs`, deviations, temperature) at their proto3 default, 0.
     #[test]

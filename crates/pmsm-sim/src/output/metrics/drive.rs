@@ -5,8 +5,8 @@ use super::*;
 /// Figures of the drive.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct DriveMetrics {
-    /// First time the controller ran on a rotor angle (`foc`: the hand-over to its observer;
-    /// the sensored stand-in: 0), s; `None`: never.
+    /// First time the controller ran on a rotor angle (for `foc` sensorless, the hand-over to
+    /// its observer), s; `None`: never.
     pub closed_loop_time_s: Option<f64>,
     /// Share of the periods in closed loop, %.
     pub closed_loop_pct: f64,

@@ -113,7 +113,7 @@ impl EmfHarmonics {
 }
 
 impl MotorModel {
-    /// Servo motor of `design.md` section 6 (Rs 2.875 ohm, Ls 8.5 mH, psi_f 0.175 Wb,
+    /// Servo motor of docs/design.md section 6 (Rs 2.875 ohm, Ls 8.5 mH, psi_f 0.175 Wb,
     /// 4 pole pairs, J 8e-4 kg m^2, B 1e-3 N m s/rad).
     pub fn servo() -> Self {
         Self {
@@ -205,7 +205,7 @@ impl MotorModel {
     }
 
     /// The d-axis current of the maximum-torque-per-ampere law for a current magnitude
-    /// `|i| = i_a` (`design.md` section 7): `i_d = (psi_f - sqrt(psi_f^2 + 8 (Lq - Ld)^2 i^2))
+    /// `|i| = i_a` (docs/design.md section 7): `i_d = (psi_f - sqrt(psi_f^2 + 8 (Lq - Ld)^2 i^2))
     /// / (4 (Lq - Ld))`, A; `0` for a surface motor (and for `Lq < Ld`, which this law does not
     /// cover). Non-positive for `Lq > Ld`, and `|i_d| <= |i|`.
     pub fn mtpa_i_d_a(&self, i_a: f64) -> f64 {
