@@ -40,7 +40,7 @@ use crate::SimError;
 use crate::drive::interface::{
     ControllerEstimate, ControllerInput, ControllerOutput, ControllerTelemetry, DriveController,
 };
-use crate::scenario::{RPM_PER_RAD_S, Scenario};
+use crate::scenario::{RPM_PER_RAD_S, RunPlan, Scenario};
 
 /// `1 / sqrt(3)` in `f32` (the same bits as the literal `0.577_350_26`).
 const INV_SQRT3: f32 = crate::plant::frames::INV_SQRT3 as f32;
@@ -90,9 +90,22 @@ impl FocDrive {
             problem,
         };
         let cfg = scenario.foc_config().map_err(|e| err(e.field, e.problem))?;
+        Self::with_config(scenario, &cfg)
+    }
+
+    /// The controller of a [`RunPlan`]: its `foc` configuration, started and stopped at the
+    /// scenario's `[controller.foc]` times.
+    pub fn from_plan(plan: &RunPlan<'_>) -> Result<Self, SimError> {
+        Self::with_config(plan.scenario, &plan.foc)
+    }
+
+    fn with_config(scenario: &Scenario, cfg: &foc::FocConfig) -> Result<Self, SimError> {
         let s = scenario.controller.foc.unwrap_or_default();
-        Self::new(&cfg, s.start_time_s, s.stop_time_s)
-            .map_err(|e| err("controller.foc".into(), e.to_string()))
+        Self::new(cfg, s.start_time_s, s.stop_time_s).map_err(|e| SimError::Scenario {
+            file: scenario.name.clone(),
+            field: "controller.foc".into(),
+            problem: e.to_string(),
+        })
     }
 
     /// The controller.

@@ -20,8 +20,10 @@ use crate::plant::load::{LoadTerm, Profile};
 use crate::plant::sensors::SensorConfig;
 
 mod configs;
+mod plan;
 mod presets;
 mod validate;
+pub use plan::RunPlan;
 pub use presets::PRESETS;
 
 /// rpm per rad/s.

@@ -76,12 +76,12 @@ use crate::drive::foc_adapter::FocDrive;
 use crate::drive::interface::{ControllerInput, ControllerOutput, DriveController, RotorFeedback};
 use crate::drive::rotor_observers::{Observer, ObserverEstimate};
 use crate::output::metrics::{MetricsAccumulator, RunMetrics};
+use crate::plant::Plant;
 use crate::plant::fault_injection::FaultInjector;
 use crate::plant::inverter::Inverter;
 use crate::plant::load::load_torque_nm;
 use crate::plant::sensors::CurrentSensor;
-use crate::plant::{Plant, PlantState};
-use crate::scenario::{RPM_PER_RAD_S, Scenario, SkippedCycles};
+use crate::scenario::{RPM_PER_RAD_S, RunPlan, Scenario, SkippedCycles};
 use crate::sim::pipeline::{ObserverInput, ObserverPipeline, Ready, RunObservers};
 
 pub use crate::output::SampleSink;
@@ -312,8 +312,9 @@ pub fn build_controller(scenario: &Scenario) -> Result<Box<dyn DriveController>,
 
 /// Runs a scenario with its own controller ([`build_controller`]).
 pub fn run_with(scenario: &Scenario, opts: RunOptions<'_>) -> Result<RunOutput, SimError> {
-    let mut controller = build_controller(scenario)?;
-    run_with_controller(scenario, controller.as_mut(), opts)
+    let plan = scenario.plan()?;
+    let mut controller = FocDrive::from_plan(&plan)?;
+    run_planned(&plan, &mut controller, opts, &mut [])
 }
 
 /// Runs a scenario with the given controller (module docs give one period's order).
@@ -347,24 +348,23 @@ pub trait SideObserver: Observer {
 pub fn run_with_side_observers(
     scenario: &Scenario,
     controller: &mut dyn DriveController,
+    opts: RunOptions<'_>,
+    side: &mut [&mut dyn SideObserver],
+) -> Result<RunOutput, SimError> {
+    run_planned(&scenario.plan()?, controller, opts, side)
+}
+
+/// The run of a [`RunPlan`] (module docs give one period's order).
+pub fn run_planned(
+    plan: &RunPlan<'_>,
+    controller: &mut dyn DriveController,
     mut opts: RunOptions<'_>,
     side: &mut [&mut dyn SideObserver],
 ) -> Result<RunOutput, SimError> {
-    scenario.validate().map_err(|e| SimError::Scenario {
-        file: scenario.name.clone(),
-        field: e.field,
-        problem: e.problem,
-    })?;
-    let ts = scenario.ts_s();
+    let scenario = plan.scenario;
+    let ts = plan.ts_s;
     let motor = scenario.motor;
-    let mut plant = Plant::new(
-        motor,
-        PlantState {
-            theta_e_rad: scenario.initial.theta_e_rad,
-            omega_mech_rad_s: scenario.initial.speed_rpm / RPM_PER_RAD_S,
-            ..PlantState::default()
-        },
-    );
+    let mut plant = Plant::new(motor, plan.initial);
     if !plant.set_d_saturation(opts.d_saturation) {
         return Err(SimError::Scenario {
             file: scenario.name.clone(),
@@ -375,18 +375,17 @@ pub fn run_with_side_observers(
     let mut inverter = Inverter::new(scenario.inverter);
     let mut sensor = CurrentSensor::new(scenario.sensors, scenario.seed);
     // Injected faults (`[[faults]]`; none: not built, the loop unchanged).
-    let mut faults = FaultInjector::new(&scenario.faults, &scenario.fault_context());
+    let mut faults = FaultInjector::new(&scenario.faults, &plan.fault_context);
     // The run's own observers: the default EKF (its failure ends the run) and the seed's
     // filter (a comparison only: dropped when it fails). Nothing in the loop depends on them:
     // they step pipelined on a thread of their own ([`crate::sim::pipeline`]), and each period's
     // sample is handed on (metrics, side observers, sinks, trace) once their estimates are
     // in it.
     let observers = RunObservers {
-        observer: PmsmObserver::new(&scenario.observer_config())?,
-        reference_filter: if scenario.observer.reference_filter {
-            Some(PmsmObserver::new(&scenario.reference_filter_config())?)
-        } else {
-            None
+        observer: PmsmObserver::new(&plan.observer)?,
+        reference_filter: match &plan.reference_filter {
+            Some(cfg) => Some(PmsmObserver::new(cfg)?),
+            None => None,
         },
     };
     let mut pipeline = if opts.inline_observers {
@@ -396,14 +395,14 @@ pub fn run_with_side_observers(
     };
     let sensored = controller.sensored();
 
-    let n = scenario.periods();
+    let n = plan.periods;
     let mut samples = Vec::with_capacity(if opts.record_trace { n } else { 0 });
     let mut acc = MetricsAccumulator::new(scenario);
     let mut u_prev = [0.0; 2];
     // The voltage the controller expects of its last duties (`ControllerOutput::expected_u_ab_v`),
     // held back like the duties when the inverter has its computation delay.
     let mut expected_pending: Option<[f64; 2]> = None;
-    let delay = scenario.inverter.delay;
+    let delay = plan.delay;
     let mut skips = CycleSkips::new(&scenario.skipped_cycles, scenario.seed, ts);
     let mut last_out: Option<ControllerOutput> = None;
     let mut skipped: u64 = 0;
