@@ -207,12 +207,8 @@ fn damped_start_meets_the_goals_on_three_motors_and_twelve_rotor_angles() {
 
 /// What the damped start achieves today, asserted with a margin (a regression guard, not
 /// the goal): every cell hands over at 3 % of rated speed without a fault, never turns
-/// backwards faster than 2 % of rated speed (measured 0.97 % at worst; 1.76 % before the
-/// kick's flux detectors, 2.47 % before the coast's back-EMF was read under a turning
-/// current, 7.8 % before the damped start from 57 deg on the servo alone, up to 28 % on
-/// this grid), stays within 2 % of the ramp (measured 0.68 %; 3.19 % before; up to 23 %
-/// with faults and no hand-over before the damped start), and the small_fast motor meets
-/// the full goals.
+/// backwards faster than 2 % of rated speed (measured 0.97 % at worst), stays within 2 % of
+/// the ramp (measured 0.68 %), and the small_fast motor meets the full goals.
 #[test]
 fn damped_start_over_three_motors_and_twelve_rotor_angles() {
     let cells = grid(0);
@@ -242,15 +238,7 @@ fn damped_start_over_three_motors_and_twelve_rotor_angles() {
 /// deg, seed + 5; the goal's 1 % is missed on 6 of these 144 cells, all small_fast: from
 /// -180 deg on all four seeds, 1.12-1.42 %, from 30 deg on seed + 2, 1.06 %, and from 0 deg
 /// on seed + 5, 1.11 %: the late detection at the dead point and the current sensors'
-/// noise in the coast, module `foc::startup`; 7 before the friction rule's smaller kick
-/// speed step, 17 before the kick's flux detectors, up to 3.93 %), worst ramp deviation
-/// 0.62 %. With the coast's limit at 0.3 s but the observer's kick threshold at
-/// the kick speed alone, its noise on industrial_2k2 started coasts of crawling rotors that
-/// ended in wrong launches: 63.4 % (-30 deg, seed + 2) and 13.7 % (-90 deg, seed + 4).
-/// Before the coast checked that the speed of
-/// the back-EMF's turn and of its magnitude agree, noise launched industrial_2k2 the wrong
-/// way on three of them: 10.8 % (30 deg, seed + 2), 11.4 % (30 deg) and 12.7 % with 13.6 %
-/// ramp deviation (-90 deg, seed + 4).
+/// noise in the coast, module `foc::startup`), worst ramp deviation 0.62 %.
 #[test]
 fn damped_start_without_a_wrong_launch_on_four_more_noise_seeds() {
     let mut failures = vec![];

@@ -129,9 +129,8 @@ fn short_run_goals_and_limits() {
 
 /// With ideal sensing and switches every goal and limit holds but the wrong-`Ls` goal
 /// (`mismatch_rows`) and the RMS ratio on the small fast motor at 10 % of rated
-/// speed: 0.509 (EKF 0.027 deg against the baseline's 0.054), 0.48 before the online flux
-/// tracking (0.025 deg), which trades 0.002 deg here for removing most of the realistic
-/// runs' low-speed bias (servo 10 %: mean 0.108 -> 0.046 deg).
+/// speed: 0.509 (EKF 0.027 deg against the baseline's 0.054; the online flux tracking costs
+/// about 0.002 deg here and removes most of the realistic runs' low-speed bias).
 #[test]
 fn short_run_with_ideal_sensing_meets_every_goal() {
     let r = short(true);
@@ -342,7 +341,6 @@ fn interior_motors_goals_and_limits() {
                 ekf.load_step_max_deg,
                 base.load_step_max_deg
             );
-            // (6.4 deg on the traction motor before ekf-core modelled `d psi_a / dt`.)
             assert!(ekf.load_step_max_deg <= LIMIT_LOAD_STEP_DEG, "{what}");
         }
         // Every check passes but the traction motor's RMS ratio at 10 % on this short run (see
