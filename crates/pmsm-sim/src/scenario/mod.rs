@@ -226,8 +226,8 @@ pub struct ControllerSettings {
 #[serde(deny_unknown_fields, default)]
 pub struct ObserverSettings {
     /// Also run the reference filter (`ObserverConfig::seed`) alongside, for comparison.
-    /// TOML key `reference_filter`; `seed_filter` is accepted too, and is the name the
-    /// scenario is written out with (`show`, the MCAP log).
+    /// TOML key `seed_filter` (the name the scenario is written out with: the presets, the
+    /// MCAP log); `reference_filter` is accepted as another spelling.
     #[serde(rename = "seed_filter", alias = "reference_filter")]
     pub reference_filter: bool,
     /// The observer's stator resistance (default: the motor's), ohm.
@@ -596,7 +596,7 @@ mod tests {
     #[test]
     fn the_reference_filter_key_has_two_spellings() {
         for (key, on) in [("reference_filter", false), ("seed_filter", false)] {
-            let t = default_text().replace("reference_filter = true", &format!("{key} = {on}"));
+            let t = default_text().replace("seed_filter = true", &format!("{key} = {on}"));
             let sc = Scenario::from_toml_str(&t, key).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(sc.observer.reference_filter, on, "{key}");
         }
