@@ -43,7 +43,7 @@ fn read_mcap(path: &Path) -> BTreeMap<String, Vec<serde_json::Value>> {
             "protobuf" => {
                 let schema = m.channel.schema.as_ref().map(|s| s.name.as_str());
                 assert_eq!(schema, Some("pmsm_sim.Period"));
-                pmsm_sim::mcap_log::proto::decode_to_json("Period", &m.data)
+                pmsm_sim::output::mcap::proto::decode_to_json("Period", &m.data)
                     .unwrap_or_else(|e| panic!("bad protobuf: {e}"))
             }
             _ => serde_json::from_slice(&m.data).unwrap_or_else(|e| panic!("not JSON: {e}")),
@@ -95,6 +95,19 @@ fn default_run_writes_its_outputs_and_prints_the_paths() {
     .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(metrics["periods"], 500);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_reference_filter_is_turned_off_by_either_spelling() {
+    for flag in ["--no-reference-filter", "--no-seed-filter"] {
+        let dir = temp_dir(flag.trim_start_matches('-'));
+        let o = run(&["--duration", "0.01", flag], &dir);
+        assert!(o.status.success(), "{flag}: {}", text(&o.stderr));
+        let msgs = read_mcap(&dir.join("out/default/run.mcap"));
+        let periods = &msgs["/pmsm_sim/period"];
+        assert!(periods.iter().all(|p| p["seed_filter"].is_null()), "{flag}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
 
 #[test]
@@ -307,7 +320,11 @@ fn faults_subcommand_prints_and_writes_its_table() {
     assert!(stdout.starts_with(&md), "{stdout}");
     // Header, separator and one row per fault.
     let rows = md.lines().filter(|l| l.starts_with("| ")).count();
-    assert_eq!(rows, 1 + pmsm_sim::fault_suite::cases().len(), "{md}");
+    assert_eq!(
+        rows,
+        1 + pmsm_sim::analysis::fault_suite::cases().len(),
+        "{md}"
+    );
     assert!(
         md.contains("| glitch, one sample at 10x rated (a) |"),
         "{md}"

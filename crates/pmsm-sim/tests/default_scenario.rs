@@ -1,9 +1,9 @@
-//! Closed-loop runs of the built-in scenarios: determinism, observer accuracy on the sensored
-//! stand-in drive (`servo-sensored`, the previous default), and the `foc` default running
+//! Closed-loop runs of the built-in scenarios: determinism, observer accuracy next to a drive
+//! given the true angle (`servo-sensored`: foc in sensored mode), and the `foc` default running
 //! through. The detailed closed-loop tests of `foc` on this simulator are in the workspace's
 //! `tests/foc_closed_loop.rs`.
 
-use pmsm_sim::metrics::ObserverMetrics;
+use pmsm_sim::output::metrics::ObserverMetrics;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunOutput};
 
@@ -58,20 +58,20 @@ fn observer(m: &Option<ObserverMetrics>) -> ObserverMetrics {
     m.unwrap_or_else(|| panic!("no observer metrics"))
 }
 
-/// The full 1.5 s `servo-sensored` scenario (the previous default: sensored stand-in drive,
-/// seed 1). Measured (release; debug gives the same):
+/// The full 1.5 s `servo-sensored` scenario (foc in sensored mode, seed 1). Measured
+/// (`pmsm-sim run servo-sensored`, release):
 ///
-/// | metric                  | EKF (default) | seed filter |
+/// | metric                  | EKF (default) | reference filter |
 /// |-------------------------|---------------|-------------|
 /// | convergence time        | 0.0578 s      | 0.0590 s    |
-/// | angle error RMS         | 0.062 deg     | 1.862 deg   |
-/// | angle error max         | 0.539 deg     | 3.391 deg   |
-/// | angle error mean        | +0.005 deg    | +1.122 deg  |
-/// | speed error RMS         | 1.755 rad/s (0.21 %) | 4.170 rad/s (0.50 %) |
-/// | speed error max         | 7.85 rad/s    | 10.19 rad/s |
+/// | angle error RMS         | 0.063 deg     | 1.862 deg   |
+/// | angle error max         | 0.522 deg     | 3.386 deg   |
+/// | angle error mean        | +0.004 deg    | +1.122 deg  |
+/// | speed error RMS         | 1.757 rad/s (0.21 %) | 4.173 rad/s (0.50 %) |
+/// | speed error max         | 8.02 rad/s    | 10.39 rad/s |
 /// | Tracking in window      | 100 %         | 87.4 %      |
 ///
-/// The thresholds leave about 2x margin. The seed filter's bias is its half-sample lag
+/// The thresholds leave about 2x margin. The reference filter's bias is its half-sample lag
 /// (`w_e Ts / 2` = 2.4 deg at 2000 rpm), which the default's lag-free step removes.
 #[test]
 fn sensored_scenario_observer_metrics() {
@@ -119,7 +119,7 @@ fn sensored_scenario_observer_metrics() {
     assert_eq!(again, m.observer);
 }
 
-/// Started 57 deg off at standstill (sensored drive), the default observer converges for every noise seed
+/// Started 57 deg off at standstill (foc sensored), the default observer converges for every noise seed
 /// tried (1-6 measured: 0.056-0.060 s, 0.068-0.071 deg RMS over the first 0.4 s).
 #[test]
 fn default_observer_converges_for_several_noise_seeds() {
@@ -128,7 +128,7 @@ fn default_observer_converges_for_several_noise_seeds() {
             .unwrap_or_else(|e| panic!("{e}"))
             .with_duration(0.4);
         sc.seed = seed;
-        sc.observer.seed_filter = false;
+        sc.observer.reference_filter = false;
         let out = run(&sc);
         let o = observer(&out.metrics.observer);
         let t_conv = o.convergence_time_s.unwrap_or(f64::INFINITY);
@@ -154,7 +154,7 @@ fn every_preset_runs() {
 /// adapter does): here the sensored one, wrapped to open the bridge for 10 ms at full speed.
 #[test]
 fn a_custom_controller_can_open_the_bridge() {
-    use pmsm_sim::controller::{ControllerInput, ControllerOutput, DriveController};
+    use pmsm_sim::drive::interface::{ControllerInput, ControllerOutput, DriveController};
     use pmsm_sim::sim::{RunOptions, run_with_controller};
 
     struct Gated(Box<dyn DriveController>);
@@ -209,7 +209,7 @@ fn a_custom_controller_can_open_the_bridge() {
 /// last-digit change of the float math, not a regression). A last-digit change moves the run
 /// onto another noise path, so the mean's bound covers its spread over noise seeds: seeds 1-8
 /// give -0.012 to +0.001 deg (RMS 0.071-0.075, max 0.32-0.51 deg), hence 0.025 deg (the
-/// issues' bias goal is 0.1).
+/// suite's bias goal is 0.1).
 #[test]
 fn default_scenario_runs_foc_sensorless_through_the_job() {
     let sc = Scenario::default_servo();

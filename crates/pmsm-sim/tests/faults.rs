@@ -2,7 +2,7 @@
 //! rated torque): the thresholds of each fault's row. The whole suite (13 runs of 2 s each)
 //! takes about 0.15 s in the dev profile, so it runs as it is, not shortened.
 
-use pmsm_sim::fault_suite::{CaseResult, SuiteOptions, cases, markdown, run_suite};
+use pmsm_sim::analysis::fault_suite::{CaseResult, SuiteOptions, cases, markdown, run_suite};
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim;
 
@@ -113,7 +113,7 @@ fn a_fault_changes_nothing_before_it_starts() {
         t_fault_s: 0.5,
         t_end_s: 0.6,
     };
-    let base = pmsm_sim::fault_suite::base_scenario(&opts);
+    let base = pmsm_sim::analysis::fault_suite::base_scenario(&opts);
     let clean = sim::run(&base).unwrap_or_else(|e| panic!("{e}"));
     for case in cases() {
         let mut sc: Scenario = base.clone();

@@ -1,4 +1,4 @@
-//! Field weakening in the simulator's closed loop (issue 13, item 5): the presets
+//! Field weakening in the simulator's closed loop: the presets
 //! `industrial-ipm-fw`, `traction-ipm-fw` (to twice the base speed) and `servo-fw` (1.5 x) run
 //! `foc` sensorless (align, I/f, hand-over to its f32 EKF) with MTPA and field weakening on
 //! the full plant, inverter (delay, dead time) and current sensing (noise, 12-bit ADC), against
@@ -21,7 +21,7 @@
 //!
 //! `cargo test -p pmsm-sim --test field_weakening -- --nocapture` prints the table.
 
-use pmsm_sim::record::Sample;
+use pmsm_sim::output::record::Sample;
 use pmsm_sim::scenario::{RPM_PER_RAD_S, Scenario};
 use pmsm_sim::sim::{RunOptions, SampleSink, run_with};
 

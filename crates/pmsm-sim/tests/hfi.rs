@@ -30,10 +30,10 @@
 use std::f64::consts::PI;
 
 use foc::{HfiConfig, HfiPhase, HfiStatus};
-use pmsm_sim::controller::{ControllerInput, ControllerOutput, DriveController};
-use pmsm_sim::foc_drive::FocDrive;
+use pmsm_sim::drive::foc_adapter::FocDrive;
+use pmsm_sim::drive::interface::{ControllerInput, ControllerOutput, DriveController};
 use pmsm_sim::plant::DSaturation;
-use pmsm_sim::profile::{LoadTerm, Profile};
+use pmsm_sim::plant::load::{LoadTerm, Profile};
 use pmsm_sim::scenario::{ControllerKind, RPM_PER_RAD_S, Scenario};
 use pmsm_sim::sim::{self, RunOptions, Sample};
 
@@ -74,7 +74,7 @@ fn job(
     sc.load = load;
     sc.initial.theta_e_rad = theta0;
     sc.duration_s = t_end;
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     // Diagnostics: another noise realization, another dead time.
     if let Ok(x) = std::env::var("HFI_SEED") {
         sc.seed = x.parse().unwrap_or(sc.seed);
@@ -318,16 +318,14 @@ fn hold_zero(name: &str) -> (f64, f64, f64) {
     (rms, max, w)
 }
 
-/// The issue's goal on the industrial motor (Lq/Ld 1.4, 50 mA sensor noise), with the
+/// The goal on the industrial motor (Lq/Ld 1.4, 50 mA sensor noise), with the
 /// defaults `HfiConfig::with_current_noise` derives for that noise (`N = 7`, 714 Hz, 249 V,
-/// PLL 60 rad/s). Measured over 1-6 s, seeds 7 / 1 / 2 / 3: RMS 0.61 / 0.57 / 0.59 / 0.59,
-/// max 2.09 / 2.17 / 2.16 / 2.08 deg el.; over 7 start angles (0 to 3 rad) x 3 seeds the
-/// worst max is 4.13 deg (mean RMS 0.81: the angle noise depends on the rotor's orientation to
-/// the two current sensors by up to sqrt 3, `foc::hfi` "Angle noise"). Ripple: 1.69 A RMS
-/// (27.4 % of the rated current), torque 0.56 N m RMS (4.0 % of rated). With the plain
-/// defaults (`HfiConfig::new`: `N = 4`, 1250 Hz, PLL 82 rad/s) the least-squares
-/// demodulation gives RMS 1.75-1.82, max 6.1-7.7 deg (before it: RMS 2.11-2.19, max
-/// 7.4-9.8 deg; ripple 0.96 A RMS, 15.7 %, torque 2.4 %).
+/// PLL 60 rad/s): held at zero speed under rated load, the angle error stays within 5 deg.
+/// Measured over 1-6 s, seeds 7 / 1 / 2 / 3: RMS 0.61 / 0.57 / 0.59 / 0.59, max 2.09 / 2.17 /
+/// 2.16 / 2.08 deg el.; over 7 start angles (0 to 3 rad) x 3 seeds the worst max is 4.13 deg
+/// (the angle noise depends on the rotor's orientation to the two current sensors by up to
+/// sqrt 3, `foc::hfi` "Angle noise"). Ripple: 1.69 A RMS (27.4 % of the rated current),
+/// torque 0.56 N m RMS (4.0 % of rated).
 #[test]
 fn industrial_ipm_holds_zero_speed_under_rated_load_within_5_deg() {
     let (rms, max, w) = hold_zero("industrial-ipm");
@@ -335,9 +333,8 @@ fn industrial_ipm_holds_zero_speed_under_rated_load_within_5_deg() {
     assert!(w < 30.0, "speed {w} rpm");
 }
 
-/// Regression guard with the bound the plain defaults met (RMS 2.11, max 7.44 deg el. before
-/// the least-squares demodulation); now RMS 0.61, max 2.27 deg, max |speed| 3.6 rpm under
-/// 14 N m.
+/// A looser regression guard at zero speed under 14 N m; measured RMS 0.61, max 2.27 deg el.,
+/// max |speed| 3.6 rpm.
 #[test]
 fn industrial_ipm_holds_zero_speed_under_rated_load() {
     let (rms, max, w) = hold_zero("industrial-ipm");
@@ -478,20 +475,13 @@ fn reversal_seeded(name: &str, limits: Option<(f64, f64)>, seed: Option<u64>) ->
     (max_hfi, track)
 }
 
-/// With the noise-derived defaults (`N = 7`) the angle error where HFI has a say is larger
-/// than with `N = 4` (5-6 deg): the largest errors sit in the blend band (observer weight
-/// ~0.6, the EKF up to 27 deg off at 240 rpm) and at 100-250 rpm, where HFI's own error grows
-/// with the half period (mean +3 deg).
-///
-/// Over the noise seeds 1-8 (`HFI_SEED=n`, and [`reversal_passes_on_noise_seeds_1_to_8`]),
-/// max angle error / worst speed error: 9.2 / 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35,
-/// 11.6 / 30, 11.7 / 43, 12.9 / 45 deg el. / rpm: 8 of 8 within the bounds, since the
-/// observer's weight follows the faster of HFI's speed and the observer's low-passed speed
-/// on this long carrier period (`foc::hfi`, "Hand-over band"). Before it: 11.3, 12.7, 8.9,
-/// **16.4**, 14.0, 11.0, 11.6, 14.7 deg (7 of 8; every seed's largest error at 1.87-1.92 s,
-/// HFI 19-26 deg off with its speed lagging the rotor's, the observer within 3 deg); 5 of 8
-/// before the observer's parameter tracking was frozen under HFI and the carrier's return
-/// was decided on the observer's low-passed speed. The preset's seed is 7.
+/// The industrial IPM reverses through zero speed under rated load with the noise-derived
+/// defaults (`N = 7`): the largest errors sit in the blend band (observer weight ~0.6) and at
+/// 100-250 rpm, where HFI's own error grows with the half period. The observer's weight
+/// follows the faster of HFI's speed and the observer's low-passed speed on this long
+/// carrier period (`foc::hfi`, "Hand-over band"). Over the noise seeds 1-8 (`HFI_SEED=n`):
+/// max angle error / worst speed error 9.2 / 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35,
+/// 11.6 / 30, 11.7 / 43, 12.9 / 45 deg el. / rpm. The preset's seed is 7.
 #[test]
 fn industrial_ipm_reverses_through_zero_under_rated_load() {
     let (max, track) = reversal("industrial-ipm");
@@ -500,13 +490,9 @@ fn industrial_ipm_reverses_through_zero_under_rated_load() {
 }
 
 /// The traction motor with the sizing the HFI defaults were tuned on (current limit 180 A,
-/// ADC full scale 300 A: the `traction-ipm` preset before it moved to foc sensorless).
-///
-/// Seeds 1-8: max angle error 1.3-2.7 deg el., worst speed error 22-29 rpm, 8 of 8 pass, with
-/// HFI's angle fused into the observer (before: 1.8-2.9 deg, 23-29 rpm; 2 of 8 before the two
-/// fixes named above: the flux estimate collapsed at 7 % of rated speed, and the carrier
-/// toggled on the observer's raw speed, re-seeding HFI's speed from it). The preset's seed 9:
-/// 2.3 deg, 25 rpm (3.4 deg, 25 rpm before the fusion).
+/// ADC full scale 300 A), HFI's angle fused into the observer while HFI has a say. Seeds
+/// 1-8: max angle error 1.3-2.7 deg el., worst speed error 22-29 rpm; the preset's seed 9:
+/// 2.3 deg, 25 rpm.
 #[test]
 fn traction_ipm_reverses_through_zero_under_rated_load() {
     let (max, track) = reversal_with("traction-ipm", Some((180.0, 300.0)));
@@ -515,48 +501,17 @@ fn traction_ipm_reverses_through_zero_under_rated_load() {
 }
 
 /// The same with the preset's current limit (250 A) and ADC full scale (400 A): the HFI
-/// defaults derived from them (carrier amplitude from the limit) and the coarser ADC.
+/// defaults derived from them (carrier amplitude from the limit) and the coarser ADC, HFI's
+/// angle fused into the observer while HFI has a say (`foc::hfi` "Hand-over band", `sigma_f`
+/// 0.03 rad): seeds 1-8 max angle error 1.3-7.0 deg el., worst speed error 23-32 rpm (seeds
+/// 9-24: 1.8-9.0 deg, 23-35 rpm); the preset's seed 9: 3.3 deg, 23 rpm.
 ///
-/// Now (HFI's angle fused into the observer while HFI has a say, `foc::hfi` "Hand-over
-/// band", `sigma_f` 0.03 rad): seeds 1-8 max angle error 1.3-7.0 deg el., worst speed error
-/// 23-32 rpm, 8 of 8 (seeds 9-24: 1.8-9.0 deg, 23-35 rpm, 16 of 16); the preset's seed 9:
-/// 3.3 deg, 23 rpm.
-///
-/// Before the fusion: seeds 1-8 4.3-9.4 deg and 24-39 rpm on 7 of 8 (seeds 9-24: 14 of 16,
-/// seeds 19 and 24 at 1515 and 1282 rpm); on seed 5 the EKF diverged inside the blend band
-/// during the first acceleration (at 60 rad/s el., its angle 26 deg off then lost, its speed
-/// estimate at 660 rad/s el.) and the rotor ran to -860 rpm before the drive recovered
-/// (1302 rpm worst speed error). 2 of 8 passed before the fixes, and the preset's seed 9
-/// narrowly (9.3 deg, 183 rpm; 3.6 deg where HFI has a say, 26 rpm, just before the fusion).
-///
-/// Why the observer failed on seed 5 (`HFI_SEED=5 HFI_DUMP=...`, fusion off): at 40-80
-/// rad/s el. this motor's back-EMF, `psi_f w` = 0.7 V at 60 rad/s el., is no larger than the
-/// resistive drop at the band's ~70 A (0.56 V) and the sensors carry 0.3 A of noise: the
-/// EKF's speed estimate swings by +-30 rad/s el. from one millisecond to the next (20 to 102
-/// rad/s el. at 0.39-0.40 s with the rotor at 51), and its angle drifts from 1.6 to 26 deg
-/// over 0.373-0.415 s while its weight rises from 0.26 to 0.67. The blended speed then read
-/// -7 rad/s el. (rotor +63): the speed loop asked for full torque, which the tracking loop
-/// takes as its feed-forward, so HFI's speed jumped from 67 to 82 rad/s el. within a
-/// millisecond, above the band's top (80): the carrier went off with the observer 46 deg off.
-/// Not the ADC: 180 A with a 400 A ADC passes seeds 1-8 at 1.6-3.3 deg, 23-28 rpm; 250 A with
-/// a 300 A ADC gives 2.0-8.4 deg and 170 rpm on seed 5. Nor the carrier's amplitude (18 V,
-/// the 180 A sizing's) or the tracking loop's bandwidth (161 rad/s, the 180 A sizing's) alone:
-/// both make it worse (seeds 1 and 8 / 2 and 8 fail). What is left of the larger limit is the
-/// speed loop's torque range, which turns the observer's speed noise in the blend into larger
-/// torque steps. `HFI_NOTRACK=1` passes seed 5 (9.7 deg, 23 rpm) although the tracking is
-/// frozen there anyway: the outcome moves with the last bit of the observer's arithmetic.
-///
-/// Tried on seeds 1-8 and reverted (issue 14 item 4), before the fusion: a weight cut when the
-/// observer parts from HFI by more than 20 deg (every motor worse: the control angle jumps by
-/// the cut weight's share of the error); re-seeding the observer from HFI whenever it parts
-/// from it by more than 20 deg inside the band (seeds 5 and 8 fail: the observer diverges
-/// again within milliseconds of each re-seed, and the industrial motor gets worse, its HFI
-/// being the one off there); keeping the carrier on until the observer agrees within 20 deg
-/// (seed 5 still fails, 796 rpm); that and re-seeding at the top of the band (882 rpm);
-/// coasting the tracker while the carrier is off and resuming from its own angle after a short
-/// gap (seed 7 fails instead); the carrier's amplitude at 16 or 19 V instead of 22 V (HFI
-/// loses the axis on most seeds); the faster-speed weight for every motor; a moved band.
-/// The fusion's own sensitivity (`HFI_FUSE`): see `foc::hfi`, "Hand-over band".
+/// Why the fusion is needed at this sizing: at 40-80 rad/s el. this motor's back-EMF
+/// (`psi_f w` = 0.7 V at 60 rad/s el.) is no larger than the resistive drop at the band's
+/// ~70 A (0.56 V), and the sensors carry 0.3 A of noise: the EKF's speed estimate alone swings
+/// by +-30 rad/s el. from one millisecond to the next, and the larger current limit turns that
+/// noise, through the speed loop, into larger torque steps. The fusion's own sensitivity
+/// (`HFI_FUSE`): `foc::hfi`, "Hand-over band".
 #[test]
 fn traction_ipm_reverses_with_the_presets_sizing() {
     let (max, track) = reversal("traction-ipm");
@@ -591,16 +546,11 @@ fn seed_sweep(name: &str, limits: Option<(f64, f64)>, track_max: f64) -> Vec<(u6
     bad
 }
 
-/// Robustness over the noise (issue 14 item 4): the reversal of the industrial IPM and the
-/// traction IPM at 180 A / 300 A, each on the noise seeds 1-8 (16 runs, about 12 s in
-/// release).
-///
-/// Max angle error where HFI has a say / worst speed error (deg el. / rpm), seeds 1-8:
-/// industrial 9.2 / 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35, 11.6 / 30, 11.7 / 43,
-/// 12.9 / 45 (before the weight followed the faster speed estimate: 11.3, 12.7, 8.9,
-/// **16.4**, 14.0, 11.0, 11.6, 14.7 deg; no fusion on its long carrier period); traction at
-/// 180 A 1.3-2.7 deg, 22-29 rpm with HFI's angle fused into the observer (1.8-2.9 deg,
-/// 23-29 rpm before; seeds 9-24 now 1.5-3.5 deg, 20-30 rpm).
+/// Robustness over the noise: the reversal of the industrial IPM and the traction IPM at
+/// 180 A / 300 A, each on the noise seeds 1-8 (16 runs, about 12 s in release). Max angle
+/// error where HFI has a say / worst speed error (deg el. / rpm), seeds 1-8: industrial 9.2 /
+/// 42, 12.8 / 35, 7.4 / 44, 13.6 / 44, 9.0 / 35, 11.6 / 30, 11.7 / 43, 12.9 / 45; traction at
+/// 180 A 1.3-2.7 deg, 22-29 rpm (seeds 9-24: 1.5-3.5 deg, 20-30 rpm).
 #[test]
 fn reversal_passes_on_noise_seeds_1_to_8() {
     let bad = seed_sweep("industrial-ipm", None, 0.05 * 1500.0);
@@ -615,11 +565,8 @@ fn reversal_passes_on_noise_seeds_1_to_8() {
     );
 }
 
-/// The traction IPM at the preset's sizing over the noise seeds 1-8 (issue 14 item 4): 8 of 8
-/// since HFI's angle is fused into the observer (numbers: [`traction_ipm_reverses_with_the_presets_sizing`]).
-/// Before, it failed on seed 5 (the observer diverged inside the blend band during the first
-/// acceleration, the carrier went off on HFI's speed while the observer was 44 deg off, and
-/// came back seeded from it; 1302 rpm worst speed error) and was ignored.
+/// The traction IPM at the preset's sizing over the noise seeds 1-8: 8 of 8 (numbers:
+/// [`traction_ipm_reverses_with_the_presets_sizing`]).
 #[test]
 fn traction_ipm_presets_sizing_passes_on_noise_seeds_1_to_8() {
     let bad = seed_sweep("traction-ipm", None, 0.08 * 3000.0);

@@ -1,49 +1,38 @@
-//! Diagnostics of the suite's interior-motor rows (`pmsm_sim::suite`), on the traction motor's
-//! short run: where the default EKF's error through the rated load step came from (6.4 deg
-//! realistic, 5.9 deg ideal, against the suite's 5 deg, before `ekf-core` modelled the term
-//! below), and where the salient baseline's large bias at rated load came from (before its gain
-//! was limited). Both are now regression tests: the EKF with its d-axis transient correction,
-//! and the stabilised baseline.
+//! Diagnostics of the suite's interior-motor rows (`pmsm_sim::analysis::suite`), on the traction
+//! motor's short run, kept as regression tests.
 //!
 //! # The EKF through the load step
 //!
 //! The active-flux model (`ekf-core`) writes the stator voltage as
-//! `u = Rs i + Lq di/dt + j w psi_a e^{j th}` with the active flux `psi_a = psi_f + (Ld - Lq) i_d`
-//! taken as constant over a step. The machine has one more term, `(d psi_a / dt) e^{j th}` =
-//! `(Ld - Lq) (di_d/dt) e^{j th}`: a voltage along the rotor's d axis, which the model can only
-//! explain by turning its angle. When MTPA moves `i_d` quickly (the traction motor's load step:
-//! -9 A to -79 A, with `Lq - Ld` = 100 uH) that term reaches a sizeable fraction of the back-EMF
-//! `w psi_a` and the angle follows it.
-//!
-//! The prototype here fed the EKF the voltage less that term,
-//! `u - (Ld - Lq) (i_d[k] - i_d[k-1]) / Ts e^{j th_mid}` (measured `i_d`): the load-step error
-//! fell to a third. `ekf-core` now models the term itself (its d-axis transient correction,
-//! `observer` module docs), so the plain EKF is the good one and the prototype, compensating
-//! twice, the worse one. Run with `--nocapture` for the numbers.
+//! `u = Rs i + Lq di/dt + j w psi_a e^{j th}` with the active flux `psi_a = psi_f + (Ld - Lq) i_d`.
+//! The machine has one more term, `(d psi_a / dt) e^{j th}` = `(Ld - Lq) (di_d/dt) e^{j th}`:
+//! a voltage along the rotor's d axis, which a model without it can only explain by turning
+//! its angle. When MTPA moves `i_d` quickly (the traction motor's load step: -9 A to -79 A,
+//! with `Lq - Ld` = 100 uH) that term reaches a sizeable fraction of the back-EMF `w psi_a`.
+//! `ekf-core` models the term (its d-axis transient correction, `observer` module docs); the
+//! test compares the plain EKF with one fed the voltage less that term,
+//! `u - (Ld - Lq) (i_d[k] - i_d[k-1]) / Ts e^{j th_mid}`, which then compensates twice and
+//! must be the worse one. Run with `--nocapture` for the numbers.
 //!
 //! # The baseline at rated load
 //!
 //! The salient flux baseline pulls its flux estimate radially towards the active-flux circle,
 //! whose radius `psi_f + (Ld - Lq) i_d` it computes with the `i_d` read along its own estimated
-//! direction. An angle error then changes the radius (at 40 deg of error the traction motor's
-//! rated current reads `i_d` = +20 A instead of -79 A: 9.9 mWb instead of 19.9 mWb), and the
-//! radial pull of a wrong radius, rotated by the rotor, can balance: a second, rotated
-//! equilibrium. Measured: 45.7 deg with the suite's firmware timing, 39.8 deg with the centred
-//! timing (so the timing is not the cause), 19.9 deg at half the observer gain, 0.00 deg at a
-//! fifth (gain 400 rad/s against `w_e` = 1257 rad/s). The default gain is `g Ts = 0.1`, i.e.
-//! 2000 rad/s at the traction motor's 20 kHz. `ekf-core`'s baseline now limits its gain where
-//! the linearised loop would be unstable (`flux` module docs): no second equilibrium.
+//! direction. An angle error then changes the radius, and the radial pull of a wrong radius,
+//! rotated by the rotor, can balance: a second, rotated equilibrium, which a too high observer
+//! gain makes stable. `ekf-core`'s baseline limits its gain where the linearised loop would be
+//! unstable (`flux` module docs); the test checks that no second equilibrium remains at the
+//! suite's firmware timing, at the centred timing, and at lower gains.
 
 use ekf_core::{
     EkfError, FluxObserver, FluxObserverConfig, FluxTiming, ObserverConfig, PmsmObserver,
 };
-use pmsm_sim::controller::SensoredController;
-use pmsm_sim::observer::{Observer, ObserverEstimate};
-use pmsm_sim::profile::LoadTerm;
-use pmsm_sim::record::{ObserverSample, Sample};
+use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, suite_scenario};
+use pmsm_sim::drive::rotor_observers::{Observer, ObserverEstimate};
+use pmsm_sim::output::record::{ObserverSample, Sample};
+use pmsm_sim::plant::load::LoadTerm;
 use pmsm_sim::scenario::Scenario;
-use pmsm_sim::sim::{SideObserver, run_with_side_observers};
-use pmsm_sim::suite::{SuiteMotor, SuiteOptions, suite_scenario};
+use pmsm_sim::sim::{SideObserver, build_controller, run_with_side_observers};
 
 /// The EKF, optionally fed the voltage less the `d psi_a / dt` term, scoring itself over the
 /// load-step window.
@@ -162,14 +151,12 @@ fn load_step(ideal: bool) -> (f64, f64, f64, f64, f64) {
         .expect("load step");
     // The suite's transient window (short run: 0.25 s).
     let window = (step_s, step_s + 0.25);
-    let mut cfg = sc.controller_config();
-    cfg.dead_time_s = sc.inverter.dead_time_s;
-    let mut drive = SensoredController::new(cfg, sc.motor);
+    let mut drive = build_controller(&sc).unwrap_or_else(|e| panic!("{e}"));
     let mut plain = Probe::new(&sc, false, window);
     let mut comp = Probe::new(&sc, true, window);
     let out = {
         let mut side: Vec<&mut dyn SideObserver> = vec![&mut plain, &mut comp];
-        run_with_side_observers(&sc, &mut drive, Default::default(), &mut side)
+        run_with_side_observers(&sc, drive.as_mut(), Default::default(), &mut side)
             .unwrap_or_else(|e| panic!("{e}"))
     };
     assert!(out.end.is_completed(), "{}", out.end.describe());
@@ -266,15 +253,13 @@ fn the_salient_baselines_second_equilibrium_is_gone() {
         .into_iter()
         .map(|k| (k, flux(FluxTiming::Centred, k)))
         .collect();
-    let mut cfg = sc.controller_config();
-    cfg.dead_time_s = sc.inverter.dead_time_s;
-    let mut drive = SensoredController::new(cfg, sc.motor);
+    let mut drive = build_controller(&sc).unwrap_or_else(|e| panic!("{e}"));
     {
         let mut side: Vec<&mut dyn SideObserver> = vec![&mut firmware, &mut centred];
         for (_, w) in gains.iter_mut() {
             side.push(w);
         }
-        let out = run_with_side_observers(&sc, &mut drive, Default::default(), &mut side)
+        let out = run_with_side_observers(&sc, drive.as_mut(), Default::default(), &mut side)
             .unwrap_or_else(|e| panic!("{e}"));
         assert!(out.end.is_completed());
     }

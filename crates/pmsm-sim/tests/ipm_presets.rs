@@ -1,12 +1,12 @@
 //! The interior presets `industrial-ipm` and `traction-ipm` run `foc` sensorless with MTPA
-//! (issue 13): from standstill through the hand-over, the rated load at rated speed and the
+//!: from standstill through the hand-over, the rated load at rated speed and the
 //! speed reduction, without a fault or a fall-back to I/f, with foc's observer within 2 deg
 //! el. of the rotor from the hand-over on, the speed on its reference at rated load and the
 //! current on the MTPA curve there.
 //!
 //! `cargo test -p pmsm-sim --test ipm_presets -- --nocapture` prints the numbers.
 
-use pmsm_sim::record::Sample;
+use pmsm_sim::output::record::Sample;
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim::{RunOptions, SampleSink, run_with};
 

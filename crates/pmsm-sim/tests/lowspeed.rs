@@ -1,4 +1,4 @@
-//! The low-speed table of issue 14 item 3 (module `pmsm_sim::lowspeed`, `pmsm-sim
+//! The low-speed table (module `pmsm_sim::analysis::low_speed`, `pmsm-sim
 //! low-speed`): on the three surface reference motors `foc` sensorless runs closed loop under
 //! rated load for 10 s, without a fall-back, down to at most 2 % of rated speed, drawing at
 //! most 1.15 times the rated-torque current there.
@@ -11,10 +11,10 @@
 //! bottom of the list).
 //! `cargo test --release -p pmsm-sim --test lowspeed -- --nocapture` prints the table.
 
-use pmsm_sim::lowspeed::{
+use pmsm_sim::analysis::low_speed::{
     GOAL_CURRENT_RATIO, GOAL_SPEED_PCT, HOLD_S, SPEEDS_PCT, run_motor, to_markdown,
 };
-use pmsm_sim::suite::SuiteMotor;
+use pmsm_sim::analysis::suite::SuiteMotor;
 
 #[test]
 fn surface_motors_run_closed_loop_at_low_speed_under_rated_load() {
@@ -61,8 +61,8 @@ fn surface_motors_run_closed_loop_at_low_speed_under_rated_load() {
 /// command of 1 % of rated leaves closed loop for I/f.
 #[test]
 fn a_command_below_the_exit_speed_fails_the_run() {
-    let mut sc =
-        pmsm_sim::lowspeed::scenario(SuiteMotor::Servo, 1.0, 1.0).unwrap_or_else(|e| panic!("{e}"));
+    let mut sc = pmsm_sim::analysis::low_speed::scenario(SuiteMotor::Servo, 1.0, 1.0)
+        .unwrap_or_else(|e| panic!("{e}"));
     let mut foc = sc.controller.foc.unwrap_or_default();
     foc.exit_speed_ratio = None;
     sc.controller.foc = Some(foc);

@@ -2,7 +2,7 @@
 //!
 //! `tests/data/motulator/gen_motulator_trace.py` (workspace root) drives motulator's
 //! synchronous machine and mechanics with an open-loop V/f voltage sequence on the 2.2 kW
-//! motor of `design.md` section 6 and records, every period, the applied `u_alpha_beta`, the
+//! motor of docs/design.md section 6 and records, every period, the applied `u_alpha_beta`, the
 //! load torque and the machine's currents, speed and angle. This test feeds the same voltages
 //! and load to [`Plant`] and compares: the currents and the speed must agree within 1 % RMS of
 //! their range over the whole trace (README of that folder: how to regenerate).

@@ -1,4 +1,4 @@
-//! MTPA in the simulator's closed loop (issue 13, item 5): `foc` (sensored, with the true
+//! MTPA in the simulator's closed loop: `foc` (sensored, with the true
 //! angle, and sensorless, on its own observer from the preset's start-up) drives each interior
 //! preset at half its rated speed against its rated torque, on the full plant, inverter (delay, dead
 //! time compensated by foc) and current sensing (noise, ADC). In steady state the torque per
@@ -10,8 +10,8 @@
 //!
 //! `cargo test -p pmsm-sim --test mtpa -- --nocapture` prints the numbers.
 
-use pmsm_sim::profile::{LoadTerm, Profile};
-use pmsm_sim::record::Sample;
+use pmsm_sim::output::record::Sample;
+use pmsm_sim::plant::load::{LoadTerm, Profile};
 use pmsm_sim::scenario::{ControllerKind, Scenario};
 use pmsm_sim::sim::{RunOptions, SampleSink, run_with};
 

@@ -1,6 +1,6 @@
 //! The run's own observers stepped on a thread of their own (the default) against the same
 //! run with them inline on the simulating thread (`RunOptions::inline_observers`): the same
-//! trace, metrics and end, bit for bit, also when a sink stops the run or the seed filter
+//! trace, metrics and end, bit for bit, also when a sink stops the run or the reference filter
 //! is off.
 
 use pmsm_sim::scenario::Scenario;
@@ -10,7 +10,7 @@ fn scenario(seed_filter: bool, duration_s: f64) -> Scenario {
     let mut sc = Scenario::preset("default")
         .unwrap_or_else(|e| panic!("{e}"))
         .with_duration(duration_s);
-    sc.observer.seed_filter = seed_filter;
+    sc.observer.reference_filter = seed_filter;
     sc
 }
 
@@ -23,7 +23,7 @@ fn fingerprint(out: &RunOutput) -> (Vec<String>, String, String) {
     (
         out.trace.samples.iter().map(|s| format!("{s:?}")).collect(),
         format!("{metrics:?}"),
-        format!("{:?} {:?}", out.end, out.seed_filter_failure),
+        format!("{:?} {:?}", out.end, out.reference_filter_failure),
     )
 }
 

@@ -6,16 +6,16 @@
 
 use core::f64::consts::{PI, TAU};
 
+use pmsm_sim::plant::frames::clarke;
 use pmsm_sim::plant::{EmfHarmonics, MotorModel, Plant, PlantState};
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim::{self, RunOptions};
-use pmsm_sim::svpwm::clarke;
 
 fn default_cut(duration_s: f64) -> Scenario {
     let mut sc = Scenario::preset("default")
         .unwrap_or_else(|e| panic!("{e}"))
         .with_duration(duration_s);
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     sc
 }
 

@@ -1,4 +1,4 @@
-//! `pmsm_sim::replay` on logs the test makes itself: a simulated run written as an MCAP log,
+//! `pmsm_sim::analysis::replay` on logs the test makes itself: a simulated run written as an MCAP log,
 //! read back, and written again as CSV in the documented format (power-invariant scaling,
 //! skipped cycles, a voltage delay); malformed CSV and corrupt MCAP files give errors naming
 //! where, never a panic.
@@ -6,10 +6,10 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use pmsm_sim::mcap_log::{LogOptions, McapLog};
-use pmsm_sim::replay::{
+use pmsm_sim::analysis::replay::{
     DriveLog, ReplayError, ReplayMotor, Scaling, parse_csv, parse_motor, read_log, replay,
 };
+use pmsm_sim::output::mcap::{LogOptions, McapLog};
 use pmsm_sim::scenario::Scenario;
 use pmsm_sim::sim::{self, RunOptions, SampleSink};
 
@@ -177,7 +177,7 @@ fn replay_of_simulated_logs() {
     assert_eq!(m.u_ab[999], exact.u_ab[1000]);
     let rm = replay(&m, &motor, "m").unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(rm.report.long_periods, 2);
-    let mask = pmsm_sim::replay::score_mask(&m, ts).unwrap_or_else(|| panic!("mask"));
+    let mask = pmsm_sim::analysis::replay::score_mask(&m, ts).unwrap_or_else(|| panic!("mask"));
     let window = (0.02 / ts).round() as usize;
     assert!(mask[1000..1000 + window].iter().all(|x| !x));
     let sm = rm.report.ekf.unwrap_or_else(|| panic!("scored"));
@@ -195,13 +195,13 @@ fn replay_of_simulated_logs() {
 
     // Outputs: the MCAP log the replay writes is itself a log read_log reads.
     let out = tmp("out");
-    let files =
-        pmsm_sim::replay::write_outputs(&out, &a, &motor, &ra).unwrap_or_else(|e| panic!("{e}"));
+    let files = pmsm_sim::analysis::replay::write_outputs(&out, &a, &motor, &ra)
+        .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(files.len(), 3);
     let back = read_log(&files[0], Scaling::Amplitude).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(back.len(), a.len());
     assert!(back.i_ab == a.i_ab);
-    let md = pmsm_sim::replay::markdown(&ra.report);
+    let md = pmsm_sim::analysis::replay::markdown(&ra.report);
     assert!(md.contains("| EKF (default) |") && md.contains("| flux + PLL |"));
     assert!(md.contains("| drive observer |"));
     // Skipped cycles: the drive observer steps over the merged periods and stays finite.

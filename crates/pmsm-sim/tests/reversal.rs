@@ -1,4 +1,4 @@
-//! Speed reversal under rated active load through zero speed (issue 14 item 2), on the three
+//! Speed reversal under rated active load through zero speed, on the three
 //! surface reference motors with `foc` sensorless:
 //!
 //! - with `reversal = "closed_loop"` (foc's default) the drive leaves closed loop for at most
@@ -12,15 +12,15 @@
 //! 0.3 s (the default scenario's, the servo's run is the default scenario itself) or at the
 //! acceleration of half the rated torque where that is slower, then held; and the same
 //! reversal four times slower (a longer stay near zero speed). The
-//! figures are pmsm-sim's reversal metrics ([`pmsm_sim::metrics::ReversalMetrics`]);
+//! figures are pmsm-sim's reversal metrics ([`pmsm_sim::output::metrics::ReversalMetrics`]);
 //! `cargo test --release -p pmsm-sim --test reversal -- --nocapture` prints the table.
 
-use pmsm_sim::lowspeed::preset_name;
-use pmsm_sim::metrics::RunMetrics;
-use pmsm_sim::profile::{LoadTerm, Profile};
+use pmsm_sim::analysis::low_speed::preset_name;
+use pmsm_sim::analysis::suite::SuiteMotor;
+use pmsm_sim::output::metrics::RunMetrics;
+use pmsm_sim::plant::load::{LoadTerm, Profile};
 use pmsm_sim::scenario::{ControllerKind, RPM_PER_RAD_S, ReversalMode, Scenario};
 use pmsm_sim::sim;
-use pmsm_sim::suite::SuiteMotor;
 
 /// The three surface reference motors: (name, simulator preset).
 fn motors() -> impl Iterator<Item = (&'static str, &'static str)> {

@@ -1,7 +1,6 @@
 //! The sensorless start of `foc` (module `foc::startup`: alignment, damped I/f ramp,
 //! hand-over to its EKF) on the simulator's closed loop, over the three surface reference
-//! motors and a grid of 12 initial rotor angles (every 30 deg el.), against the goals of
-//! issue 14 item 1:
+//! motors and a grid of 12 initial rotor angles (every 30 deg el.), against the goals:
 //!
 //! - the rotor never turns backwards faster than 1 % of rated speed;
 //! - from 0.1 s after the alignment to the hand-over the speed stays within 10 % of rated
@@ -9,19 +8,19 @@
 //! - the hand-over takes place at or below 3 % of rated speed (the hand-over speed is set to
 //!   3 % of rated here; the run checks that the hand-over happens, without a fault).
 //!
-//! The figures are pmsm-sim's own start-up metrics ([`pmsm_sim::metrics::StartupMetrics`]).
+//! The figures are pmsm-sim's own start-up metrics ([`pmsm_sim::output::metrics::StartupMetrics`]).
 //! `cargo test --release -p pmsm-sim --test startup -- --nocapture` prints the table.
 //!
 //! Each motor runs its preset's plant, inverter (delay, dead time) and sensors (noise, ADC),
 //! with `foc` sensorless in place of the preset's controller, the preset's loads and a speed
 //! command of rated speed from t = 0.
 
-use pmsm_sim::lowspeed::preset_name;
-use pmsm_sim::metrics::StartupMetrics;
-use pmsm_sim::profile::Profile;
+use pmsm_sim::analysis::low_speed::preset_name;
+use pmsm_sim::analysis::suite::SuiteMotor;
+use pmsm_sim::output::metrics::StartupMetrics;
+use pmsm_sim::plant::load::Profile;
 use pmsm_sim::scenario::{ControllerKind, Scenario};
 use pmsm_sim::sim;
-use pmsm_sim::suite::SuiteMotor;
 
 /// The three surface reference motors: (name, simulator preset).
 fn motors() -> impl Iterator<Item = (&'static str, &'static str)> {
@@ -78,7 +77,9 @@ impl Cell {
     /// The ramp deviation counts unless the hand-over came before its window opened.
     fn deviation_pct(&self) -> Option<f64> {
         let st = &self.st;
-        let opens = st.align_end_s.map(|t| t + pmsm_sim::metrics::RAMP_SETTLE_S);
+        let opens = st
+            .align_end_s
+            .map(|t| t + pmsm_sim::output::metrics::RAMP_SETTLE_S);
         match (opens, st.handover_s) {
             (Some(o), Some(h)) if h <= o => None,
             _ => Some(st.ramp_deviation_max_pct),
@@ -163,7 +164,7 @@ fn grid(dseed: u64) -> Vec<Cell> {
     cells
 }
 
-/// The goals of issue 14 item 1, as they stand: backward at most 1 % of rated speed, ramp
+/// The goals, as they stand: backward at most 1 % of rated speed, ramp
 /// deviation at most 10 %, hand-over at or below 3 %, no fault, on every cell, with the
 /// presets' noise seeds and with the next ones (a start that meets the goals by the luck of
 /// one noise sequence does not count).
@@ -206,12 +207,8 @@ fn damped_start_meets_the_goals_on_three_motors_and_twelve_rotor_angles() {
 
 /// What the damped start achieves today, asserted with a margin (a regression guard, not
 /// the goal): every cell hands over at 3 % of rated speed without a fault, never turns
-/// backwards faster than 2 % of rated speed (measured 0.97 % at worst; 1.76 % before the
-/// kick's flux detectors, 2.47 % before the coast's back-EMF was read under a turning
-/// current, 7.8 % before the damped start from 57 deg on the servo alone, up to 28 % on
-/// this grid), stays within 2 % of the ramp (measured 0.68 %; 3.19 % before; up to 23 %
-/// with faults and no hand-over before the damped start), and the small_fast motor meets
-/// the full goals.
+/// backwards faster than 2 % of rated speed (measured 0.97 % at worst), stays within 2 % of
+/// the ramp (measured 0.68 %), and the small_fast motor meets the full goals.
 #[test]
 fn damped_start_over_three_motors_and_twelve_rotor_angles() {
     let cells = grid(0);
@@ -241,15 +238,7 @@ fn damped_start_over_three_motors_and_twelve_rotor_angles() {
 /// deg, seed + 5; the goal's 1 % is missed on 6 of these 144 cells, all small_fast: from
 /// -180 deg on all four seeds, 1.12-1.42 %, from 30 deg on seed + 2, 1.06 %, and from 0 deg
 /// on seed + 5, 1.11 %: the late detection at the dead point and the current sensors'
-/// noise in the coast, module `foc::startup`; 7 before the friction rule's smaller kick
-/// speed step, 17 before the kick's flux detectors, up to 3.93 %), worst ramp deviation
-/// 0.62 %. With the coast's limit at 0.3 s but the observer's kick threshold at
-/// the kick speed alone, its noise on industrial_2k2 started coasts of crawling rotors that
-/// ended in wrong launches: 63.4 % (-30 deg, seed + 2) and 13.7 % (-90 deg, seed + 4).
-/// Before the coast checked that the speed of
-/// the back-EMF's turn and of its magnitude agree, noise launched industrial_2k2 the wrong
-/// way on three of them: 10.8 % (30 deg, seed + 2), 11.4 % (30 deg) and 12.7 % with 13.6 %
-/// ramp deviation (-90 deg, seed + 4).
+/// noise in the coast, module `foc::startup`), worst ramp deviation 0.62 %.
 #[test]
 fn damped_start_without_a_wrong_launch_on_four_more_noise_seeds() {
     let mut failures = vec![];

@@ -1,8 +1,8 @@
-//! The scenario suite (`pmsm_sim::suite`, `pmsm-sim suite`) on its short run: the goals and
+//! The scenario suite (`pmsm_sim::analysis::suite`, `pmsm-sim suite`) on its short run: the goals and
 //! limits that hold are asserted; the ones the default EKF misses on realistic sensing are
 //! named, with the weaker statement that holds there. (Debug profile: about 0.2 s per run.)
 
-use pmsm_sim::suite::{
+use pmsm_sim::analysis::suite::{
     GOAL_IPM_CONVERGENCE_S, GOAL_MEAN_DEG, GOAL_MISMATCH_PSI_PCT, GOAL_MISMATCH_RMS_DEG,
     GOAL_RMS_RATIO, LIMIT_LOAD_STEP_DEG, MISMATCHES, ObserverKind, SuiteMotor, SuiteOptions,
     SuiteReport, run_suite_motors, suite_scenario,
@@ -129,9 +129,8 @@ fn short_run_goals_and_limits() {
 
 /// With ideal sensing and switches every goal and limit holds but the wrong-`Ls` goal
 /// (`mismatch_rows`) and the RMS ratio on the small fast motor at 10 % of rated
-/// speed: 0.509 (EKF 0.027 deg against the baseline's 0.054), 0.48 before the online flux
-/// tracking (0.025 deg), which trades 0.002 deg here for removing most of the realistic
-/// runs' low-speed bias (servo 10 %: mean 0.108 -> 0.046 deg).
+/// speed: 0.509 (EKF 0.027 deg against the baseline's 0.054; the online flux tracking costs
+/// about 0.002 deg here and removes most of the realistic runs' low-speed bias).
 #[test]
 fn short_run_with_ideal_sensing_meets_every_goal() {
     let r = short(true);
@@ -267,7 +266,7 @@ fn report_is_deterministic_and_serializes() {
 /// windows. Asserted against this bound (measured + about 15 %) on the short run only.
 const TRACTION_10_PCT_SHORT_RATIO_BOUND: f64 = 0.66;
 
-/// The interior motors on the short run: the goals (EKF RMS at most half the salient
+/// The interior motors on the short run: the goals (EKF RMS at most half the salient
 /// baseline's in every steady row, |mean| < 0.1 deg at >= 50 % speed, every start of the
 /// convergence grid, 180 deg included, converged within 50 ms) and the suite's limits hold,
 /// but the traction motor's RMS ratio at 10 % on this short run (bounded by
@@ -342,12 +341,11 @@ fn interior_motors_goals_and_limits() {
                 ekf.load_step_max_deg,
                 base.load_step_max_deg
             );
-            // (6.4 deg on the traction motor before ekf-core modelled `d psi_a / dt`.)
             assert!(ekf.load_step_max_deg <= LIMIT_LOAD_STEP_DEG, "{what}");
         }
         // Every check passes but the traction motor's RMS ratio at 10 % on this short run (see
         // above) and, on realistic sensing, the industrial motor's bias at 10 % of rated speed
-        // (0.111 deg; the bias goal is at >= 50 % speed, the suite checks it wherever
+        // (0.111 deg; the bias goal is at >= 50 % speed, the suite checks it wherever
         // w_e Ts <= 0.3).
         for c in &r.checks {
             let known = (c.motor == SuiteMotor::TractionIpm

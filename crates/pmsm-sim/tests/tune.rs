@@ -1,16 +1,16 @@
 //! The offline Q/R tuner on simulated runs with a known current-sensor noise.
 //!
-//! A short servo run (sensored controller, ideal bridge, speed ramp 1000 -> 1500 rpm and a
+//! A short servo run (foc in sensored mode, ideal bridge, speed ramp 1000 -> 1500 rpm and a
 //! load step, 0.4 s at 10 kHz) with 80 mA of noise per phase channel: the alpha-beta noise is
 //! then `R = s^2 [[1, 1/sqrt 3], [1/sqrt 3, 5/3]]` (sigma 80 / 103 mA), well above the
 //! observer's default (41 mA), so the default filter's NIS is far above 2.
 
-use pmsm_sim::mcap_log::{LogEncoding, LogOptions, McapLog};
-use pmsm_sim::scenario::{ControllerKind, Scenario};
-use pmsm_sim::sim::{self, RunOptions, SampleSink};
-use pmsm_sim::tune::{
+use pmsm_sim::analysis::tune::{
     AngleTruth, RShape, TuneError, TuneOptions, sensor_r_ab, tune_qr, tune_qr_mcap,
 };
+use pmsm_sim::output::mcap::{LogEncoding, LogOptions, McapLog};
+use pmsm_sim::scenario::{ControllerKind, Scenario};
+use pmsm_sim::sim::{self, RunOptions, SampleSink};
 
 const NOISE_A: f64 = 0.08;
 
@@ -20,9 +20,9 @@ fn scenario() -> Scenario {
     sc.duration_s = 0.4;
     sc.seed = 11;
     sc.sensors.current_noise_std_a = NOISE_A;
-    sc.controller.kind = ControllerKind::Sensored;
+    sc.controller.kind = ControllerKind::FocSensored;
     sc.controller.foc = None;
-    sc.observer.seed_filter = false;
+    sc.observer.reference_filter = false;
     sc.initial.speed_rpm = 1000.0;
     sc.initial.theta_e_rad = 0.3;
     let toml = format!(
@@ -55,8 +55,21 @@ fn record(sc: &Scenario) -> Rec {
     let out = sim::run(sc).unwrap_or_else(|e| panic!("{e}"));
     let s = &out.trace.samples;
     Rec {
-        // The sensored controller leaves the observer the commanded voltage of the duties.
-        u: s.iter().map(|x| x.inverter.u_ab_commanded_v).collect(),
+        // The observer's voltage (the simulator's rule, as `LoggedRun::read`): with the PWM on,
+        // the voltage foc expects of the duties now applied (its last tick's with the delay,
+        // this tick's without; the first period with the delay has none: the commanded
+        // voltage); zero with the PWM off.
+        u: s.iter()
+            .enumerate()
+            .map(
+                |(k, x)| match (x.inverter.pwm_enabled, sc.inverter.delay, k) {
+                    (false, _, _) => [0.0; 2],
+                    (true, false, _) => x.control.telemetry.u_ab_ref_v,
+                    (true, true, 0) => x.inverter.u_ab_commanded_v,
+                    (true, true, _) => s[k - 1].control.telemetry.u_ab_ref_v,
+                },
+            )
+            .collect(),
         i: s.iter().map(|x| x.measured.i_ab_a).collect(),
         th: s.iter().map(|x| x.truth.theta_e_rad).collect(),
         w: s.iter().map(|x| x.truth.omega_e_rad_s).collect(),

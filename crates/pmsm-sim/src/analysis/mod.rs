@@ -1,0 +1,18 @@
+//! The analysis layer: commands that run the simulator many times, or read its logs, and
+//! turn the results into tables.
+//!
+//! | module | command | what it does |
+//! | --- | --- | --- |
+//! | [`suite`] | `pmsm-sim suite` | every observer on every reference motor, scored against goals |
+//! | [`fault_suite`] | `pmsm-sim faults` | each injected fault, and how the drive reacts |
+//! | [`low_speed`] | `pmsm-sim low-speed` | the observers held at low speed |
+//! | [`identify`] | `pmsm-sim identify` | the drive's self-commissioning on a simulated motor |
+//! | [`tune`] | `pmsm-sim tune` | the observer's Q and R fitted to a logged run |
+//! | [`replay`] | `pmsm-sim replay` | the observers stepped over a recorded log of a real drive |
+
+pub mod fault_suite;
+pub mod identify;
+pub mod low_speed;
+pub mod replay;
+pub mod suite;
+pub mod tune;

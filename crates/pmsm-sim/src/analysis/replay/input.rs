@@ -1,0 +1,479 @@
+//! Reading a recorded drive: the CSV format and a `pmsm-sim` MCAP log into a [`DriveLog`], and the motor file into a [`ReplayMotor`] (the module docs give the formats).
+
+use super::*;
+
+/// Clarke scaling of a CSV log (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scaling {
+    /// Amplitude-invariant (the project's).
+    #[default]
+    Amplitude,
+    /// Power-invariant: values `sqrt(3/2)` times the amplitude-invariant ones.
+    Power,
+}
+
+impl Scaling {
+    /// By name: `amplitude` or `power`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "amplitude" => Some(Self::Amplitude),
+            "power" => Some(Self::Power),
+            _ => None,
+        }
+    }
+
+    /// What a logged voltage or current is multiplied by to be amplitude-invariant.
+    pub fn factor(self) -> f64 {
+        match self {
+            Self::Amplitude => 1.0,
+            Self::Power => (2.0f64 / 3.0).sqrt(),
+        }
+    }
+}
+
+/// A drive log in the project's convention (module docs, "Alignment").
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DriveLog {
+    /// Time of each current sample, s.
+    pub t_s: Vec<f64>,
+    /// The period that ended at row `k`, s.
+    pub dt_s: Vec<f64>,
+    /// Voltage held over `[t_k, t_k+1)`, V (amplitude-invariant).
+    pub u_ab: Vec<[f64; 2]>,
+    /// Currents sampled at `t_k`, A (amplitude-invariant).
+    pub i_ab: Vec<[f64; 2]>,
+    /// Voltage over the period that ended at row 0, V.
+    pub u_prev: [f64; 2],
+    /// Reference electrical angle, rad (scoring only).
+    pub theta_ref: Option<Vec<f64>>,
+    /// Reference electrical speed, rad/s (scoring only).
+    pub omega_ref: Option<Vec<f64>>,
+}
+
+impl DriveLog {
+    /// Rows.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    /// No rows.
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Checks that every array has the rows of `t_s` and that the periods are finite and
+    /// positive (what the readers guarantee; for a log built by hand).
+    pub fn check(&self) -> Result<(), ReplayError> {
+        let n = self.len();
+        let lens = [
+            ("dt_s", self.dt_s.len()),
+            ("u_ab", self.u_ab.len()),
+            ("i_ab", self.i_ab.len()),
+            ("theta_ref", self.theta_ref.as_ref().map_or(n, Vec::len)),
+            ("omega_ref", self.omega_ref.as_ref().map_or(n, Vec::len)),
+        ];
+        for (name, l) in lens {
+            if l != n {
+                return Err(ReplayError::Inconsistent(format!(
+                    "{name} has {l} rows, t_s {n}"
+                )));
+            }
+        }
+        if let Some(k) = self.dt_s.iter().position(|d| !(d.is_finite() && *d > 0.0)) {
+            return Err(ReplayError::Inconsistent(format!(
+                "dt_s[{k}] = {} is not a positive period",
+                self.dt_s[k]
+            )));
+        }
+        Ok(())
+    }
+}
+
+pub(super) const REQUIRED: [&str; 6] = [
+    "t_s",
+    "dt_s",
+    "u_alpha_v",
+    "u_beta_v",
+    "i_alpha_a",
+    "i_beta_a",
+];
+pub(super) const OPTIONAL: [&str; 2] = ["theta_ref_rad", "omega_ref_rad_s"];
+
+/// Parses a CSV log (module docs) from `bytes`; `file` names it in errors.
+pub fn parse_csv(bytes: &[u8], file: &str, scaling: Scaling) -> Result<DriveLog, ReplayError> {
+    let err = |line: usize, column: usize, problem: String| ReplayError::Csv {
+        file: file.to_string(),
+        line,
+        column,
+        problem,
+    };
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let mut lines = bytes
+        .split(|&b| b == b'\n')
+        .enumerate()
+        .map(|(n, l)| (n + 1, l.strip_suffix(b"\r").unwrap_or(l)));
+    fn text(
+        n: usize,
+        l: &[u8],
+        err: impl Fn(usize, usize, String) -> ReplayError,
+    ) -> Result<&str, ReplayError> {
+        std::str::from_utf8(l).map_err(|e| {
+            let before = &l[..e.valid_up_to()];
+            let column = before.iter().filter(|&&b| b == b',').count() + 1;
+            err(n, column, "not UTF-8 text".into())
+        })
+    }
+    // Header: the first line that is not blank.
+    let (header_line, header) = loop {
+        match lines.next() {
+            None => return Err(err(1, 1, "empty file: no header row".into())),
+            Some((n, l)) => {
+                let s = text(n, l, err)?;
+                if !s.trim().is_empty() {
+                    break (n, s);
+                }
+            }
+        }
+    };
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    for (c, name) in names.iter().enumerate() {
+        if names[..c].contains(name) && !name.is_empty() {
+            return Err(err(header_line, c + 1, format!("column `{name}` repeated")));
+        }
+    }
+    let find = |name: &str| names.iter().position(|n| *n == name);
+    let mut idx = [0usize; 6];
+    for (slot, name) in idx.iter_mut().zip(REQUIRED) {
+        *slot = find(name).ok_or_else(|| {
+            err(
+                header_line,
+                names.len() + 1,
+                format!(
+                    "missing column `{name}` (required: {}; the header has: {})",
+                    REQUIRED.join(", "),
+                    names.join(", ")
+                ),
+            )
+        })?;
+    }
+    let opt: [Option<usize>; 2] = [find(OPTIONAL[0]), find(OPTIONAL[1])];
+    let k = scaling.factor();
+    let mut t = Vec::new();
+    let mut dt = Vec::new();
+    let mut u = Vec::new();
+    let mut i = Vec::new();
+    let mut th: Option<Vec<f64>> = opt[0].map(|_| Vec::new());
+    let mut om: Option<Vec<f64>> = opt[1].map(|_| Vec::new());
+    let mut cells: Vec<&str> = Vec::with_capacity(names.len());
+    for (n, l) in lines {
+        let s = text(n, l, err)?;
+        if s.trim().is_empty() {
+            continue;
+        }
+        cells.clear();
+        cells.extend(s.split(','));
+        if cells.len() != names.len() {
+            let column = cells.len().min(names.len()) + 1;
+            return Err(err(
+                n,
+                column,
+                format!("{} cells, the header has {}", cells.len(), names.len()),
+            ));
+        }
+        let num = |c: usize| -> Result<f64, ReplayError> {
+            let cell = cells[c].trim();
+            let v: f64 = cell.parse().map_err(|_| {
+                err(
+                    n,
+                    c + 1,
+                    format!("`{}`: {cell:?} is not a number", names[c]),
+                )
+            })?;
+            if !v.is_finite() {
+                return Err(err(
+                    n,
+                    c + 1,
+                    format!("`{}`: {cell} is not finite", names[c]),
+                ));
+            }
+            Ok(v)
+        };
+        let row: [f64; 6] = [
+            num(idx[0])?,
+            num(idx[1])?,
+            num(idx[2])?,
+            num(idx[3])?,
+            num(idx[4])?,
+            num(idx[5])?,
+        ];
+        if row[1] <= 0.0 {
+            return Err(err(
+                n,
+                idx[1] + 1,
+                format!("`dt_s` must be > 0, is {}", row[1]),
+            ));
+        }
+        if let (Some(c), Some(v)) = (opt[0], th.as_mut()) {
+            v.push(num(c)?);
+        }
+        if let (Some(c), Some(v)) = (opt[1], om.as_mut()) {
+            v.push(num(c)?);
+        }
+        t.push(row[0]);
+        dt.push(row[1]);
+        u.push([row[2] * k, row[3] * k]);
+        i.push([row[4] * k, row[5] * k]);
+    }
+    if t.is_empty() {
+        return Err(err(
+            header_line + 1,
+            1,
+            "no data rows after the header".into(),
+        ));
+    }
+    let u_prev = u[0];
+    let mut u_ab: Vec<[f64; 2]> = u[1..].to_vec();
+    u_ab.push(u[u.len() - 1]);
+    Ok(DriveLog {
+        t_s: t,
+        dt_s: dt,
+        u_ab,
+        i_ab: i,
+        u_prev,
+        theta_ref: th,
+        omega_ref: om,
+    })
+}
+
+/// Reads a CSV log (module docs).
+pub fn read_csv(path: &Path, scaling: Scaling) -> Result<DriveLog, ReplayError> {
+    let bytes = std::fs::read(path).map_err(|source| ReplayError::Io {
+        file: path.display().to_string(),
+        source,
+    })?;
+    parse_csv(&bytes, &path.display().to_string(), scaling)
+}
+
+/// The MCAP magic bytes at the start of a file.
+pub(super) const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
+pub(super) fn le_u64(b: &[u8], at: usize) -> Option<u64> {
+    Some(u64::from_le_bytes(
+        b.get(at..at.checked_add(8)?)?.try_into().ok()?,
+    ))
+}
+
+pub(super) fn le_u32(b: &[u8], at: usize) -> Option<u32> {
+    Some(u32::from_le_bytes(
+        b.get(at..at.checked_add(4)?)?.try_into().ok()?,
+    ))
+}
+
+/// Walks the records of an MCAP file (and those of uncompressed chunks) and checks every
+/// length field against the bytes that are there, so that the `mcap` reader is never asked
+/// to allocate for a corrupt length (which aborts the process, a panic that cannot be
+/// caught).
+pub(super) fn check_mcap_lengths(b: &[u8]) -> Result<(), String> {
+    fn records(b: &[u8], mut at: usize, end: usize, depth: u32) -> Result<(), String> {
+        while at < end {
+            let op = b[at];
+            let len = le_u64(b, at + 1).ok_or("truncated record header")?;
+            let body = at + 9;
+            let stop = usize::try_from(len)
+                .ok()
+                .and_then(|l| body.checked_add(l))
+                .filter(|&s| s <= end)
+                .ok_or_else(|| format!("record at byte {at}: length {len} beyond the file"))?;
+            if op == 0x06 && depth == 0 {
+                // Chunk: start, end, uncompressed size, crc, compression, records.
+                let size = le_u64(b, body + 16).ok_or("truncated chunk")?;
+                let clen = le_u32(b, body + 28).ok_or("truncated chunk")? as usize;
+                let rl_at = (body + 32).checked_add(clen).ok_or("bad chunk")?;
+                let rlen = le_u64(b, rl_at).ok_or("truncated chunk")?;
+                let r0 = rl_at + 8;
+                let r1 = usize::try_from(rlen)
+                    .ok()
+                    .and_then(|l| r0.checked_add(l))
+                    .filter(|&s| s <= stop)
+                    .ok_or_else(|| format!("chunk at byte {at}: records beyond the chunk"))?;
+                if clen == 0 {
+                    if size != rlen {
+                        return Err(format!("chunk at byte {at}: sizes disagree"));
+                    }
+                    records(b, r0, r1, 1)?;
+                } else if size > 1 << 32 || size > (rlen + (1 << 20)).saturating_mul(1024) {
+                    return Err(format!("chunk at byte {at}: implausible size {size}"));
+                }
+            } else if op == 0x09 {
+                // Attachment: times, name, media type, data.
+                let n1 = le_u32(b, body + 16).ok_or("truncated attachment")? as usize;
+                let m_at = (body + 20).checked_add(n1).ok_or("bad attachment")?;
+                let n2 = le_u32(b, m_at).ok_or("truncated attachment")? as usize;
+                let d_at = (m_at + 4).checked_add(n2).ok_or("bad attachment")?;
+                let dl = le_u64(b, d_at).ok_or("truncated attachment")?;
+                if dl > (stop - body) as u64 {
+                    return Err(format!("attachment at byte {at}: data beyond the record"));
+                }
+            }
+            at = stop;
+        }
+        Ok(())
+    }
+    if !b.starts_with(MCAP_MAGIC) {
+        return Err("not an MCAP file (no magic)".into());
+    }
+    let end = b
+        .len()
+        .checked_sub(8)
+        .filter(|&e| e >= 8)
+        .ok_or("truncated file")?;
+    if &b[end..] != MCAP_MAGIC {
+        return Err("truncated file (no closing magic)".into());
+    }
+    records(b, 8, end, 0)
+}
+
+/// Reads a `pmsm-sim` MCAP log (module docs); a corrupt file is an error, never a panic.
+pub fn read_mcap(path: &Path) -> Result<DriveLog, ReplayError> {
+    let file = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| ReplayError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    check_mcap_lengths(&bytes).map_err(|message| ReplayError::Mcap {
+        file: file.clone(),
+        message: format!("corrupt MCAP file: {message}"),
+    })?;
+    drop(bytes);
+    let p = path.to_path_buf();
+    // The `mcap` crate can panic on corrupt length fields: a panic is turned into an error.
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let r = std::panic::catch_unwind(move || crate::analysis::tune::LoggedRun::read(&p));
+    std::panic::set_hook(hook);
+    let run = match r {
+        Ok(Ok(run)) => run,
+        Ok(Err(e)) => {
+            return Err(ReplayError::Mcap {
+                file,
+                message: e.to_string(),
+            });
+        }
+        Err(_) => {
+            return Err(ReplayError::Mcap {
+                file,
+                message: "corrupt MCAP file (the reader gave up on it)".into(),
+            });
+        }
+    };
+    let n = run.u_ab.len();
+    if n == 0 {
+        return Err(ReplayError::Mcap {
+            file,
+            message: "no period messages".into(),
+        });
+    }
+    let ts = run.scenario.ts_s();
+    Ok(DriveLog {
+        t_s: (0..n).map(|k| k as f64 * ts).collect(),
+        dt_s: vec![ts; n],
+        u_ab: run.u_ab,
+        i_ab: run.i_ab,
+        u_prev: [0.0; 2],
+        theta_ref: Some(run.theta_true),
+        omega_ref: Some(run.omega_true),
+    })
+}
+
+/// Reads a log: MCAP when the file starts with the MCAP magic, else CSV (`scaling` applies
+/// to CSV only: the simulator's logs are amplitude-invariant).
+pub fn read_log(path: &Path, scaling: Scaling) -> Result<DriveLog, ReplayError> {
+    let bytes = std::fs::read(path).map_err(|source| ReplayError::Io {
+        file: path.display().to_string(),
+        source,
+    })?;
+    if bytes.starts_with(MCAP_MAGIC) {
+        drop(bytes);
+        read_mcap(path)
+    } else {
+        parse_csv(&bytes, &path.display().to_string(), scaling)
+    }
+}
+
+/// The motor of a log and its nominal period (`RUN.toml`: `rs_ohm`, `ld_h` and `lq_h` or
+/// `ls_h`, `psi_f_wb`, `pole_pairs`, `ts_s`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ReplayMotor {
+    /// Motor parameters.
+    #[serde(skip)]
+    pub params: MotorParams<f64>,
+    /// Nominal control period, s.
+    pub ts_s: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct MotorToml {
+    pub(super) rs_ohm: f64,
+    pub(super) ld_h: Option<f64>,
+    pub(super) lq_h: Option<f64>,
+    pub(super) ls_h: Option<f64>,
+    pub(super) psi_f_wb: f64,
+    pub(super) pole_pairs: u32,
+    pub(super) ts_s: f64,
+}
+
+/// Parses a motor TOML; `file` names it in errors.
+pub fn parse_motor(text: &str, file: &str) -> Result<ReplayMotor, ReplayError> {
+    let err = |problem: String| ReplayError::Motor {
+        file: file.to_string(),
+        problem,
+    };
+    let m: MotorToml = toml::from_str(text).map_err(|e| {
+        let mut p = e.message().trim().to_string();
+        if let Some(span) = e.span() {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let col = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            p = format!("{p} (line {line}, column {col})");
+        }
+        err(p)
+    })?;
+    let (ld, lq) = match (m.ls_h, m.ld_h, m.lq_h) {
+        (Some(ls), None, None) => (ls, ls),
+        (None, Some(ld), Some(lq)) => (ld, lq),
+        _ => {
+            return Err(err(
+                "give either `ls_h` (surface motor) or both `ld_h` and `lq_h`".into(),
+            ));
+        }
+    };
+    for (name, v) in [
+        ("rs_ohm", m.rs_ohm),
+        ("ld_h", ld),
+        ("lq_h", lq),
+        ("psi_f_wb", m.psi_f_wb),
+        ("ts_s", m.ts_s),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(err(format!("`{name}` must be finite and > 0, is {v}")));
+        }
+    }
+    let params = MotorParams::salient_from_f64(m.rs_ohm, ld, lq, m.psi_f_wb, m.pole_pairs);
+    params.validate().map_err(|e| err(e.to_string()))?;
+    Ok(ReplayMotor {
+        params,
+        ts_s: m.ts_s,
+    })
+}
+
+/// Reads a motor TOML.
+pub fn read_motor(path: &Path) -> Result<ReplayMotor, ReplayError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| ReplayError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    parse_motor(&text, &file)
+}

@@ -1,0 +1,367 @@
+//! The motor's parameters ([`MotorModel`]: the dq model's constants, the reference motors, the EMF harmonics) and the d-axis saturation option.
+
+use super::*;
+
+/// Mechanical and electrical parameters of a PMSM (SI units).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotorModel {
+    /// Stator resistance per phase, ohm.
+    pub rs_ohm: f64,
+    /// Direct-axis inductance, henry.
+    pub ld_h: f64,
+    /// Quadrature-axis inductance, henry (equal to `ld_h` for a surface motor).
+    pub lq_h: f64,
+    /// Permanent-magnet flux linkage, weber.
+    pub psi_f_wb: f64,
+    /// Number of pole pairs.
+    pub pole_pairs: u32,
+    /// Rotor (plus load) inertia, kg m^2.
+    pub j_kg_m2: f64,
+    /// Viscous friction coefficient, N m s/rad (on the mechanical speed).
+    pub b_nm_s_rad: f64,
+    /// Coulomb (dry) friction torque, N m (0: none).
+    #[serde(default)]
+    pub coulomb_nm: f64,
+    /// 5th and 7th harmonics of the magnet flux (`[motor.emf_harmonics]`, module docs;
+    /// default none).
+    #[serde(default, skip_serializing_if = "EmfHarmonics::is_default")]
+    pub emf_harmonics: EmfHarmonics,
+}
+
+/// RK4 sub-steps per period of the plant with back-EMF harmonics.
+pub const HARMONIC_SUBSTEPS: u32 = 8;
+
+/// Largest harmonic amplitude accepted, fraction of `psi_f`.
+pub const MAX_HARMONIC: f64 = 0.2;
+
+/// The 5th and 7th harmonics of the magnet flux (module docs): amplitudes `h5`, `h7` as
+/// fractions of `psi_f` (the EMF's are 5 and 7 times these, as fractions of its
+/// fundamental), phases in rad (of `cos(5 th + phi5)` in phase `a`'s flux).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EmfHarmonics {
+    /// 5th-harmonic flux amplitude, fraction of `psi_f`, `[0, 0.2]`.
+    pub h5: f64,
+    /// Its phase, rad.
+    pub h5_phase_rad: f64,
+    /// 7th-harmonic flux amplitude, fraction of `psi_f`, `[0, 0.2]`.
+    pub h7: f64,
+    /// Its phase, rad.
+    pub h7_phase_rad: f64,
+}
+
+impl EmfHarmonics {
+    /// No harmonics.
+    pub const NONE: Self = Self {
+        h5: 0.0,
+        h5_phase_rad: 0.0,
+        h7: 0.0,
+        h7_phase_rad: 0.0,
+    };
+
+    /// All fields zero (the default; not written to TOML).
+    pub fn is_default(&self) -> bool {
+        *self == Self::NONE
+    }
+
+    /// Whether any harmonic is present.
+    pub fn is_on(&self) -> bool {
+        self.h5 != 0.0 || self.h7 != 0.0
+    }
+
+    /// The harmonic part of the motional EMF per electrical speed, `(e_d, e_q) / w_e` less the
+    /// fundamental `(0, psi_f)`, at the electrical angle `th` (module docs), Wb.
+    #[inline]
+    pub fn emf_per_speed(&self, psi_f_wb: f64, th: f64) -> (f64, f64) {
+        let (s6, c6) = (6.0 * th).sin_cos();
+        let (s5p, c5p) = self.h5_phase_rad.sin_cos();
+        let (s7p, c7p) = self.h7_phase_rad.sin_cos();
+        // a = 6 th + phi: sin a, cos a by the angle-addition formula.
+        let (s5, c5) = (s6 * c5p + c6 * s5p, c6 * c5p - s6 * s5p);
+        let (s7, c7) = (s6 * c7p + c6 * s7p, c6 * c7p - s6 * s7p);
+        let (a5, a7) = (5.0 * self.h5, 7.0 * self.h7);
+        (
+            -psi_f_wb * (a5 * s5 + a7 * s7),
+            psi_f_wb * (-a5 * c5 + a7 * c7),
+        )
+    }
+
+    /// Checks the amplitudes and phases; errors name `<prefix>.<field>`.
+    pub fn validate(&self, prefix: &str) -> Result<(), FieldError> {
+        for (name, v) in [("h5", self.h5), ("h7", self.h7)] {
+            if !(v.is_finite() && (0.0..=MAX_HARMONIC).contains(&v)) {
+                return Err(FieldError::new(
+                    format!("{prefix}.{name}"),
+                    format!("must be in [0, {MAX_HARMONIC}] (a fraction of psi_f), is {v}"),
+                ));
+            }
+        }
+        for (name, v) in [
+            ("h5_phase_rad", self.h5_phase_rad),
+            ("h7_phase_rad", self.h7_phase_rad),
+        ] {
+            if !v.is_finite() {
+                return Err(FieldError::new(
+                    format!("{prefix}.{name}"),
+                    format!("must be finite, is {v}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl MotorModel {
+    /// Servo motor of docs/design.md section 6 (Rs 2.875 ohm, Ls 8.5 mH, psi_f 0.175 Wb,
+    /// 4 pole pairs, J 8e-4 kg m^2, B 1e-3 N m s/rad).
+    pub fn servo() -> Self {
+        Self {
+            rs_ohm: 2.875,
+            ld_h: 8.5e-3,
+            lq_h: 8.5e-3,
+            psi_f_wb: 0.175,
+            pole_pairs: 4,
+            j_kg_m2: 8e-4,
+            b_nm_s_rad: 1e-3,
+            coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
+        }
+    }
+
+    /// Industrial 2.2 kW motor, surface variant (Rs 3.6 ohm, Ls 36 mH, psi_f 0.545 Wb,
+    /// 3 pole pairs, J 0.015 kg m^2). The design gives no friction; `B = 1e-3 N m s/rad` is
+    /// chosen here (0.16 N m at 1500 rpm, about 1 % of a 2.2 kW motor's rated torque).
+    pub fn industrial_2k2() -> Self {
+        Self {
+            rs_ohm: 3.6,
+            ld_h: 36e-3,
+            lq_h: 36e-3,
+            psi_f_wb: 0.545,
+            pole_pairs: 3,
+            j_kg_m2: 0.015,
+            b_nm_s_rad: 1e-3,
+            coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
+        }
+    }
+
+    /// Small fast (drone class) motor (Rs 0.12 ohm, Ls 0.15 mH, psi_f 6 mWb, 7 pole pairs,
+    /// J 2e-5 kg m^2). The design gives no friction; `B = 1e-6 N m s/rad` is chosen here,
+    /// scaled down with the motor.
+    pub fn small_fast() -> Self {
+        Self {
+            rs_ohm: 0.12,
+            ld_h: 0.15e-3,
+            lq_h: 0.15e-3,
+            psi_f_wb: 0.006,
+            pole_pairs: 7,
+            j_kg_m2: 2e-5,
+            b_nm_s_rad: 1e-6,
+            coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
+        }
+    }
+
+    /// Industrial interior PMSM, 2.2 kW class (Rs 3.6 ohm, Ld 30 mH, Lq 42 mH, Lq/Ld 1.4,
+    /// psi_f 0.50 Wb, 3 pole pairs: `ekf_core::MotorParams::industrial_ipm`). Mechanics chosen
+    /// here: J 0.012 kg m^2 (rotor plus a coupled load), B 1e-3 N m s/rad (0.16 N m at
+    /// 1500 rpm, about 1 % of the rated torque). Rated (README's reference-motor table): 540 V
+    /// bus, 1500 rpm, 14 N m (2.2 kW) at 6.16 A on the MTPA line (`i_d` -0.87 A), 275 V of the
+    /// 312 V limit; base speed 1719 rpm at rated torque.
+    pub fn industrial_ipm() -> Self {
+        Self {
+            rs_ohm: 3.6,
+            ld_h: 30e-3,
+            lq_h: 42e-3,
+            psi_f_wb: 0.50,
+            pole_pairs: 3,
+            j_kg_m2: 0.012,
+            b_nm_s_rad: 1e-3,
+            coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
+        }
+    }
+
+    /// Strongly salient traction-class interior PMSM, 48 V (Rs 8 mohm, Ld 50 uH, Lq 150 uH,
+    /// Lq/Ld 3, psi_f 12 mWb, 4 pole pairs: `ekf_core::MotorParams::traction_ipm`). Mechanics
+    /// chosen here: J 2e-3 kg m^2, B 3e-4 N m s/rad (0.09 N m at 3000 rpm, 0.6 % of the rated
+    /// torque). Rated (README's reference-motor table): 48 V bus, 20 kHz PWM, 3000 rpm,
+    /// 15 N m (4.7 kW) at 148 A peak on the MTPA line (`i_d` -79 A, reluctance torque 40 % of
+    /// the total), 26.7 V of the 27.7 V limit; base speed 3116 rpm at rated torque. With
+    /// `i_d = 0` the same torque takes 208 A and its base speed is 1931 rpm.
+    pub fn traction_ipm() -> Self {
+        Self {
+            rs_ohm: 0.008,
+            ld_h: 50e-6,
+            lq_h: 150e-6,
+            psi_f_wb: 0.012,
+            pole_pairs: 4,
+            j_kg_m2: 2e-3,
+            b_nm_s_rad: 3e-4,
+            coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
+        }
+    }
+
+    /// The d-axis current of the maximum-torque-per-ampere law for a current magnitude
+    /// `|i| = i_a` (docs/design.md section 7): `i_d = (psi_f - sqrt(psi_f^2 + 8 (Lq - Ld)^2 i^2))
+    /// / (4 (Lq - Ld))`, A; `0` for a surface motor (and for `Lq < Ld`, which this law does not
+    /// cover). Non-positive for `Lq > Ld`, and `|i_d| <= |i|`.
+    pub fn mtpa_i_d_a(&self, i_a: f64) -> f64 {
+        let dl = self.lq_h - self.ld_h;
+        if dl <= 0.0 {
+            return 0.0;
+        }
+        let psi = self.psi_f_wb;
+        // The same value as the textbook form, written without its cancellation at small i:
+        // (psi - r) / (4 dl) = -8 dl^2 i^2 / ((psi + r) 4 dl) = -2 dl i^2 / (psi + r).
+        let r = (psi * psi + 8.0 * dl * dl * i_a * i_a).sqrt();
+        -2.0 * dl * i_a * i_a / (psi + r)
+    }
+
+    /// The dq currents on the MTPA line for the torque `t_nm` (sign included), and their
+    /// magnitude: `(i_d, i_q, |i|)`, A, by bisection on `|i|` (`i_d = 0` for a surface motor).
+    pub fn mtpa_currents_for_torque(&self, t_nm: f64) -> (f64, f64, f64) {
+        let target = t_nm.abs();
+        let at = |i: f64| {
+            let id = self.mtpa_i_d_a(i);
+            let iq = (i * i - id * id).max(0.0).sqrt();
+            (id, iq)
+        };
+        let mut hi = target / self.torque_constant_nm_a();
+        let mut lo = 0.0;
+        // |i| at i_d = 0 gives at least the torque (MTPA only adds reluctance torque).
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            let (id, iq) = at(mid);
+            if self.torque_nm(id, iq) < target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let (id, iq) = at(hi);
+        (id, iq.copysign(t_nm), hi)
+    }
+
+    /// Magnitude of the steady-state stator voltage at the dq currents and electrical speed
+    /// `w_e`, V: `|(Rs i_d - w Lq i_q, Rs i_q + w (Ld i_d + psi_f))|`.
+    pub fn steady_voltage_v(&self, i_d_a: f64, i_q_a: f64, omega_e_rad_s: f64) -> f64 {
+        let w = omega_e_rad_s;
+        let u_d = self.rs_ohm * i_d_a - w * self.lq_h * i_q_a;
+        let u_q = self.rs_ohm * i_q_a + w * (self.ld_h * i_d_a + self.psi_f_wb);
+        u_d.hypot(u_q)
+    }
+
+    /// Base speed, mechanical rpm: the speed at which the steady voltage at the MTPA currents
+    /// of `t_nm` reaches the linear SVPWM limit `u_dc / sqrt 3` (bisection).
+    pub fn base_speed_rpm(&self, t_nm: f64, u_dc_v: f64) -> f64 {
+        let (id, iq, _) = self.mtpa_currents_for_torque(t_nm);
+        let u_max = u_dc_v / 3f64.sqrt();
+        let (mut lo, mut hi) = (0.0, 10.0 * u_max / self.psi_f_wb);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if self.steady_voltage_v(id, iq, mid) < u_max {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo / self.p() * 30.0 / PI
+    }
+
+    /// The surface-motor inductance the observer's model uses: `(Ld + Lq) / 2`.
+    pub fn ls_mean_h(&self) -> f64 {
+        0.5 * (self.ld_h + self.lq_h)
+    }
+
+    /// The electrical parameters as the observer takes them (`Ls = (Ld + Lq) / 2`).
+    pub fn params(&self) -> MotorParams<f64> {
+        MotorParams::from_f64(
+            self.rs_ohm,
+            self.ls_mean_h(),
+            self.psi_f_wb,
+            self.pole_pairs,
+        )
+    }
+
+    /// Pole pairs as `f64`.
+    pub fn p(&self) -> f64 {
+        f64::from(self.pole_pairs)
+    }
+
+    /// Torque constant `1.5 p psi_f`, N m per ampere of `i_q` (at `i_d = 0`).
+    pub fn torque_constant_nm_a(&self) -> f64 {
+        1.5 * self.p() * self.psi_f_wb
+    }
+
+    /// Electromagnetic torque at the dq currents, N m.
+    pub fn torque_nm(&self, i_d_a: f64, i_q_a: f64) -> f64 {
+        1.5 * self.p() * (self.psi_f_wb + (self.ld_h - self.lq_h) * i_d_a) * i_q_a
+    }
+
+    /// Checks that every parameter is physically valid; the error names the field
+    /// (`motor.<name>`).
+    pub fn validate(&self) -> Result<(), FieldError> {
+        let positive = [
+            ("rs_ohm", self.rs_ohm),
+            ("ld_h", self.ld_h),
+            ("lq_h", self.lq_h),
+            ("psi_f_wb", self.psi_f_wb),
+            ("j_kg_m2", self.j_kg_m2),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(FieldError::new(
+                    format!("motor.{name}"),
+                    format!("must be finite and > 0, is {v}"),
+                ));
+            }
+        }
+        for (name, v) in [
+            ("b_nm_s_rad", self.b_nm_s_rad),
+            ("coulomb_nm", self.coulomb_nm),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(FieldError::new(
+                    format!("motor.{name}"),
+                    format!("must be finite and >= 0, is {v}"),
+                ));
+            }
+        }
+        if self.pole_pairs == 0 {
+            return Err(FieldError::new("motor.pole_pairs", "must be at least 1"));
+        }
+        self.emf_harmonics.validate("motor.emf_harmonics")
+    }
+}
+
+/// d-axis saturation for positive `i_d` (module docs): the incremental inductance falls by
+/// the fraction `drop` of `Ld` at `current_a`, linearly from zero current.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DSaturation {
+    /// Fraction of `Ld` lost at `current_a` (and above), in `[0, 1)`.
+    pub drop: f64,
+    /// d current at which the drop is complete, A (positive).
+    pub current_a: f64,
+}
+
+impl DSaturation {
+    /// Incremental d inductance at `i_d`, H.
+    pub fn ld_inc_h(&self, ld_h: f64, i_d_a: f64) -> f64 {
+        ld_h * (1.0 - self.drop * (i_d_a / self.current_a).clamp(0.0, 1.0))
+    }
+
+    /// d flux linkage at `i_d`, Wb.
+    pub fn psi_d_wb(&self, ld_h: f64, psi_f_wb: f64, i_d_a: f64) -> f64 {
+        let (k, is) = (self.drop, self.current_a);
+        if i_d_a <= 0.0 {
+            psi_f_wb + ld_h * i_d_a
+        } else if i_d_a <= is {
+            psi_f_wb + ld_h * (i_d_a - k * i_d_a * i_d_a / (2.0 * is))
+        } else {
+            psi_f_wb + ld_h * (is * (1.0 - 0.5 * k) + (1.0 - k) * (i_d_a - is))
+        }
+    }
+}
