@@ -27,6 +27,8 @@ def test_python_md_example_runs_and_prints_what_the_page_shows(tmp_path, monkeyp
         for block in code:
             exec(compile(block, str(DOC), "exec"), ns)  # noqa: S102 - the page's own code
     assert out.getvalue() == shown[0]
-    # Beyond the printed digits: the replay equals the logged observer, and it tracks.
-    assert np.array_equal(ns["out"]["theta"], ns["theta_logged"])
+    # Beyond the printed digits: the replay is the logged observer to the f32 rounding of the
+    # voltage it was given (the page says why), and it tracks.
+    d = (ns["out"]["theta"] - ns["theta_logged"] + np.pi) % (2 * np.pi) - np.pi
+    assert np.max(np.abs(d)) < 2e-6
     assert np.sqrt(np.mean(ns["err_deg"][ns["tracking"]] ** 2)) < 0.5

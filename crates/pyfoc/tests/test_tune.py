@@ -71,9 +71,10 @@ def test_simulated_run_recovers_the_sensor_r(simulated):
     ts = sim["metrics"]["ts_s"]
     motor = pyfoc.Motor(**SERVO)
     # The ideal bridge applies what was commanded: the default filter on these arrays is the
-    # simulator's observer.
+    # simulator's observer, which is given the voltage foc expects of its duties (f32): the
+    # two agree to that rounding (measured 3e-7 rad).
     ref = pyfoc.Ekf(motor, ts).run(sim["u_ab"], sim["i_ab_meas"])
-    np.testing.assert_allclose(wrap(ref["theta"] - sim["theta_est"]), 0.0, atol=1e-9)
+    np.testing.assert_allclose(wrap(ref["theta"] - sim["theta_est"]), 0.0, atol=2e-6)
     rep = pyfoc.tune_qr(motor, ts, sim["u_ab"], sim["i_ab_meas"], theta_true=sim["theta"],
                         omega_true=sim["omega"], skip=500)
     s2 = NOISE_A**2
@@ -102,8 +103,10 @@ def test_mcap_log_gives_the_same_proposal(simulated):
     np.testing.assert_allclose(m["sensor_r"], NOISE_A**2 * np.array([[1, 3**-0.5], [3**-0.5, 5 / 3]]))
     a = pyfoc.tune_qr(pyfoc.Motor(**SERVO), ts, sim["u_ab"], sim["i_ab_meas"], theta_true=sim["theta"],
                       omega_true=sim["omega"], skip=500, min_speed=0.05 * rated)
-    np.testing.assert_array_equal(m["r"], a["r"])
-    np.testing.assert_array_equal(m["q"], a["q"])
-    assert m["after"]["angle_error"] == a["after"]["angle_error"]
+    # The log gives the tuner the observer's voltage (foc's f32 expectation of its duties),
+    # the arrays the applied one: the proposals agree to that rounding.
+    np.testing.assert_allclose(m["r"], a["r"], rtol=1e-6)
+    np.testing.assert_allclose(m["q"], a["q"], rtol=1e-6)
+    assert abs(m["after"]["angle_error"]["rms_deg"] - a["after"]["angle_error"]["rms_deg"]) < 1e-5
     # os.PathLike and str both work.
     assert pyfoc.tune_qr_mcap(str(path), skip=500, max_evals=10)["evaluations"] >= 10
