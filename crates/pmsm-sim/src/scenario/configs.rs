@@ -16,7 +16,7 @@ impl Scenario {
     /// foc's own defaults) and the other `[controller.foc]` settings. Validated by `foc`
     /// itself.
     pub fn foc_config(&self) -> Result<foc::FocConfig, FieldError> {
-        use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy, Reversal};
+        use foc::{ComputationDelay, FocConfig, Mode, ObserverLossPolicy, Reversal, StartupConfig};
         let c = &self.controller;
         let s = c.foc.unwrap_or_default();
         let p = self.observer_params();
@@ -58,12 +58,15 @@ impl Scenario {
         }
         st.handover_speed_rad_s = match s.handover_speed_rpm {
             Some(rpm) => rpm_to_e(rpm),
-            None => (2.0 * motor.rs_ohm * st.if_current_a / motor.psi_f_wb)
-                .max(0.02 * cfg.max_speed_rad_s),
+            None => StartupConfig::default_handover_speed_rad_s(
+                &motor,
+                st.if_current_a,
+                cfg.max_speed_rad_s,
+            ),
         };
         st.accel_rad_s2 = match s.startup_accel_rpm_per_s {
             Some(a) => rpm_to_e(a),
-            None => st.handover_speed_rad_s / 0.5,
+            None => StartupConfig::default_accel_rad_s2(st.handover_speed_rad_s),
         };
         // The damped start reads the observer near 1 % of rated speed, where an
         // uncompensated dead time biases it: on by default only with the dead time
@@ -72,10 +75,15 @@ impl Scenario {
         let damped = self.inverter.dead_time_s == 0.0 || dead_time >= self.inverter.dead_time_s;
         let on = if damped { 1.0 } else { 0.0 };
         st.damping_ratio = s.startup_damping_ratio.unwrap_or(on) as f32;
-        // The kick at 0.6 % of rated speed (a fifth of a hand-over at 3 %), whatever the
-        // hand-over speed.
-        let kick = 0.006 * self.rated_speed_e_rad_s() / f64::from(st.handover_speed_rad_s);
-        st.kick_speed_ratio = s.startup_kick_speed_ratio.unwrap_or(on * kick.min(1.0)) as f32;
+        // foc's kick at 0.6 % of rated speed, whatever the hand-over speed.
+        let kick = StartupConfig::kick_speed_ratio_for(
+            self.rated_speed_e_rad_s(),
+            st.handover_speed_rad_s,
+        );
+        st.kick_speed_ratio = match s.startup_kick_speed_ratio {
+            Some(r) => r as f32,
+            None => on as f32 * kick,
+        };
         st.reversal = match s.reversal {
             ReversalMode::ClosedLoop => Reversal::ClosedLoop,
             ReversalMode::OpenLoop => Reversal::OpenLoop,

@@ -417,15 +417,21 @@ impl SuiteMotor {
     /// The interior motors (`Lq > Ld`).
     pub const INTERIOR: [SuiteMotor; 2] = [SuiteMotor::IndustrialIpm, SuiteMotor::TractionIpm];
 
-    /// Name in the tables (the `ekf_core::MotorParams` preset's).
-    pub fn name(self) -> &'static str {
+    /// The motor's catalog entry (`ekf_core::catalog`).
+    pub fn reference(self) -> &'static ekf_core::catalog::ReferenceMotor {
+        use ekf_core::catalog;
         match self {
-            SuiteMotor::Servo => "servo",
-            SuiteMotor::Industrial2k2 => "industrial_2k2",
-            SuiteMotor::SmallFast => "small_fast",
-            SuiteMotor::IndustrialIpm => "industrial_ipm",
-            SuiteMotor::TractionIpm => "traction_ipm",
+            SuiteMotor::Servo => &catalog::SERVO,
+            SuiteMotor::Industrial2k2 => &catalog::INDUSTRIAL_2K2,
+            SuiteMotor::SmallFast => &catalog::SMALL_FAST,
+            SuiteMotor::IndustrialIpm => &catalog::INDUSTRIAL_IPM,
+            SuiteMotor::TractionIpm => &catalog::TRACTION_IPM,
         }
+    }
+
+    /// Name in the tables (the catalog's).
+    pub fn name(self) -> &'static str {
+        self.reference().name
     }
 
     /// The motor of a name ([`SuiteMotor::name`]).

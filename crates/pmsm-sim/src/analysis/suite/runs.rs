@@ -84,73 +84,29 @@ impl Plan {
 pub(super) fn setting(
     m: SuiteMotor,
 ) -> (MotorModel, f64, f64, f64, f64, f64, f64, f64, f64, f64, f64) {
-    match m {
-        SuiteMotor::Servo => (
-            MotorModel::servo(),
-            2000.0,
-            1.5,
-            300.0,
-            0.5e-6,
-            0.02,
-            10.0,
-            4.5,
-            500.0,
-            20.0,
-            TS_S,
-        ),
-        SuiteMotor::Industrial2k2 => (
-            MotorModel::industrial_2k2(),
-            1500.0,
-            10.0,
-            540.0,
-            1e-6,
-            0.05,
-            25.0,
-            8.0,
-            300.0,
-            10.0,
-            TS_S,
-        ),
-        SuiteMotor::SmallFast => (
-            MotorModel::small_fast(),
-            3429.0,
-            0.4,
-            48.0,
-            0.2e-6,
-            0.1,
-            40.0,
-            15.0,
-            800.0,
-            40.0,
-            TS_S,
-        ),
-        SuiteMotor::IndustrialIpm => (
-            MotorModel::industrial_ipm(),
-            1500.0,
-            14.0,
-            540.0,
-            1e-6,
-            0.05,
-            25.0,
-            9.0,
-            300.0,
-            10.0,
-            TS_S,
-        ),
-        SuiteMotor::TractionIpm => (
-            MotorModel::traction_ipm(),
-            3000.0,
-            15.0,
-            48.0,
-            0.2e-6,
-            0.3,
-            300.0,
-            180.0,
-            1000.0,
-            30.0,
-            TS_S_TRACTION,
-        ),
-    }
+    let r = m.reference();
+    // The drive each motor runs on: (dead time s, noise A, ADC full scale A, current limit
+    // A, current bandwidth Hz, speed bandwidth Hz).
+    let (dead, noise, fs, i_lim, bw_i, bw_w) = match m {
+        SuiteMotor::Servo => (0.5e-6, 0.02, 10.0, 4.5, 500.0, 20.0),
+        SuiteMotor::Industrial2k2 => (1e-6, 0.05, 25.0, 8.0, 300.0, 10.0),
+        SuiteMotor::SmallFast => (0.2e-6, 0.1, 40.0, 15.0, 800.0, 40.0),
+        SuiteMotor::IndustrialIpm => (1e-6, 0.05, 25.0, 9.0, 300.0, 10.0),
+        SuiteMotor::TractionIpm => (0.2e-6, 0.3, 300.0, 180.0, 1000.0, 30.0),
+    };
+    (
+        MotorModel::from_catalog(r),
+        r.rated_speed_rpm,
+        r.rated_torque_nm,
+        r.u_dc_v,
+        dead,
+        noise,
+        fs,
+        i_lim,
+        bw_i,
+        bw_w,
+        r.ts_s,
+    )
 }
 
 /// The main scenario of one motor (module docs).

@@ -1,10 +1,17 @@
 //! The motor's parameters ([`MotorModel`]: the dq model's constants, the reference motors, the EMF harmonics) and the d-axis saturation option.
 
 use super::*;
+use ekf_core::catalog::{self, ReferenceMotor};
 
 /// Mechanical and electrical parameters of a PMSM (SI units).
+///
+/// In a scenario's `[motor]` table, `catalog = "servo"` (any name of `ekf_core::catalog`:
+/// `servo`, `industrial_2k2`, `small_fast`, `industrial_ipm`, `traction_ipm`) starts from that
+/// reference motor; the keys given beside it override its values. Without `catalog` every
+/// key except `coulomb_nm` and `emf_harmonics` is required. Written out, a scenario lists
+/// the resolved values.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(try_from = "MotorSection")]
 pub struct MotorModel {
     /// Stator resistance per phase, ohm.
     pub rs_ohm: f64,
@@ -27,6 +34,60 @@ pub struct MotorModel {
     /// default none).
     #[serde(default, skip_serializing_if = "EmfHarmonics::is_default")]
     pub emf_harmonics: EmfHarmonics,
+}
+
+/// The `[motor]` table as written: a catalog name and any values ([`MotorModel`]).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MotorSection {
+    catalog: Option<String>,
+    rs_ohm: Option<f64>,
+    ld_h: Option<f64>,
+    lq_h: Option<f64>,
+    psi_f_wb: Option<f64>,
+    pole_pairs: Option<u32>,
+    j_kg_m2: Option<f64>,
+    b_nm_s_rad: Option<f64>,
+    #[serde(default)]
+    coulomb_nm: f64,
+    #[serde(default)]
+    emf_harmonics: EmfHarmonics,
+}
+
+impl TryFrom<MotorSection> for MotorModel {
+    type Error = String;
+
+    fn try_from(s: MotorSection) -> Result<Self, String> {
+        let base = match &s.catalog {
+            Some(name) => Some(catalog::by_name(name).ok_or_else(|| {
+                let known: Vec<&str> = catalog::ALL.iter().map(|m| m.name).collect();
+                format!(
+                    "motor.catalog: no reference motor named {name:?} (known: {})",
+                    known.join(", ")
+                )
+            })?),
+            None => None,
+        };
+        let pick = |v: Option<f64>, from: fn(&ReferenceMotor) -> f64, key: &str| {
+            v.or(base.map(from)).ok_or_else(|| {
+                format!("motor.{key} is missing (give it, or motor.catalog = a reference motor)")
+            })
+        };
+        Ok(Self {
+            rs_ohm: pick(s.rs_ohm, |m| m.rs_ohm, "rs_ohm")?,
+            ld_h: pick(s.ld_h, |m| m.ld_h, "ld_h")?,
+            lq_h: pick(s.lq_h, |m| m.lq_h, "lq_h")?,
+            psi_f_wb: pick(s.psi_f_wb, |m| m.psi_f_wb, "psi_f_wb")?,
+            pole_pairs: s.pole_pairs.or(base.map(|m| m.pole_pairs)).ok_or_else(|| {
+                "motor.pole_pairs is missing (give it, or motor.catalog = a reference motor)"
+                    .to_string()
+            })?,
+            j_kg_m2: pick(s.j_kg_m2, |m| m.j_kg_m2, "j_kg_m2")?,
+            b_nm_s_rad: pick(s.b_nm_s_rad, |m| m.b_nm_s_rad, "b_nm_s_rad")?,
+            coulomb_nm: s.coulomb_nm,
+            emf_harmonics: s.emf_harmonics,
+        })
+    }
 }
 
 /// RK4 sub-steps per period of the plant with back-EMF harmonics.
@@ -113,95 +174,45 @@ impl EmfHarmonics {
 }
 
 impl MotorModel {
-    /// Servo motor of docs/design.md section 6 (Rs 2.875 ohm, Ls 8.5 mH, psi_f 0.175 Wb,
-    /// 4 pole pairs, J 8e-4 kg m^2, B 1e-3 N m s/rad).
+    /// A reference motor of the catalog (`ekf_core::catalog`, docs/design.md section 6):
+    /// its electrical data and mechanics, no Coulomb friction, a sinusoidal EMF.
+    pub fn from_catalog(m: &ReferenceMotor) -> Self {
+        Self {
+            rs_ohm: m.rs_ohm,
+            ld_h: m.ld_h,
+            lq_h: m.lq_h,
+            psi_f_wb: m.psi_f_wb,
+            pole_pairs: m.pole_pairs,
+            j_kg_m2: m.j_kg_m2,
+            b_nm_s_rad: m.b_nm_s_rad,
+            coulomb_nm: 0.0,
+            emf_harmonics: EmfHarmonics::NONE,
+        }
+    }
+
+    /// The catalog's servo motor.
     pub fn servo() -> Self {
-        Self {
-            rs_ohm: 2.875,
-            ld_h: 8.5e-3,
-            lq_h: 8.5e-3,
-            psi_f_wb: 0.175,
-            pole_pairs: 4,
-            j_kg_m2: 8e-4,
-            b_nm_s_rad: 1e-3,
-            coulomb_nm: 0.0,
-            emf_harmonics: EmfHarmonics::NONE,
-        }
+        Self::from_catalog(&catalog::SERVO)
     }
 
-    /// Industrial 2.2 kW motor, surface variant (Rs 3.6 ohm, Ls 36 mH, psi_f 0.545 Wb,
-    /// 3 pole pairs, J 0.015 kg m^2). The design gives no friction; `B = 1e-3 N m s/rad` is
-    /// chosen here (0.16 N m at 1500 rpm, about 1 % of a 2.2 kW motor's rated torque).
+    /// The catalog's industrial 2.2 kW motor, surface variant.
     pub fn industrial_2k2() -> Self {
-        Self {
-            rs_ohm: 3.6,
-            ld_h: 36e-3,
-            lq_h: 36e-3,
-            psi_f_wb: 0.545,
-            pole_pairs: 3,
-            j_kg_m2: 0.015,
-            b_nm_s_rad: 1e-3,
-            coulomb_nm: 0.0,
-            emf_harmonics: EmfHarmonics::NONE,
-        }
+        Self::from_catalog(&catalog::INDUSTRIAL_2K2)
     }
 
-    /// Small fast (drone class) motor (Rs 0.12 ohm, Ls 0.15 mH, psi_f 6 mWb, 7 pole pairs,
-    /// J 2e-5 kg m^2). The design gives no friction; `B = 1e-6 N m s/rad` is chosen here,
-    /// scaled down with the motor.
+    /// The catalog's small fast (drone class) motor.
     pub fn small_fast() -> Self {
-        Self {
-            rs_ohm: 0.12,
-            ld_h: 0.15e-3,
-            lq_h: 0.15e-3,
-            psi_f_wb: 0.006,
-            pole_pairs: 7,
-            j_kg_m2: 2e-5,
-            b_nm_s_rad: 1e-6,
-            coulomb_nm: 0.0,
-            emf_harmonics: EmfHarmonics::NONE,
-        }
+        Self::from_catalog(&catalog::SMALL_FAST)
     }
 
-    /// Industrial interior PMSM, 2.2 kW class (Rs 3.6 ohm, Ld 30 mH, Lq 42 mH, Lq/Ld 1.4,
-    /// psi_f 0.50 Wb, 3 pole pairs: `ekf_core::MotorParams::industrial_ipm`). Mechanics chosen
-    /// here: J 0.012 kg m^2 (rotor plus a coupled load), B 1e-3 N m s/rad (0.16 N m at
-    /// 1500 rpm, about 1 % of the rated torque). Rated (README's reference-motor table): 540 V
-    /// bus, 1500 rpm, 14 N m (2.2 kW) at 6.16 A on the MTPA line (`i_d` -0.87 A), 275 V of the
-    /// 312 V limit; base speed 1719 rpm at rated torque.
+    /// The catalog's industrial interior PMSM (Lq/Ld 1.4).
     pub fn industrial_ipm() -> Self {
-        Self {
-            rs_ohm: 3.6,
-            ld_h: 30e-3,
-            lq_h: 42e-3,
-            psi_f_wb: 0.50,
-            pole_pairs: 3,
-            j_kg_m2: 0.012,
-            b_nm_s_rad: 1e-3,
-            coulomb_nm: 0.0,
-            emf_harmonics: EmfHarmonics::NONE,
-        }
+        Self::from_catalog(&catalog::INDUSTRIAL_IPM)
     }
 
-    /// Strongly salient traction-class interior PMSM, 48 V (Rs 8 mohm, Ld 50 uH, Lq 150 uH,
-    /// Lq/Ld 3, psi_f 12 mWb, 4 pole pairs: `ekf_core::MotorParams::traction_ipm`). Mechanics
-    /// chosen here: J 2e-3 kg m^2, B 3e-4 N m s/rad (0.09 N m at 3000 rpm, 0.6 % of the rated
-    /// torque). Rated (README's reference-motor table): 48 V bus, 20 kHz PWM, 3000 rpm,
-    /// 15 N m (4.7 kW) at 148 A peak on the MTPA line (`i_d` -79 A, reluctance torque 40 % of
-    /// the total), 26.7 V of the 27.7 V limit; base speed 3116 rpm at rated torque. With
-    /// `i_d = 0` the same torque takes 208 A and its base speed is 1931 rpm.
+    /// The catalog's traction interior PMSM (Lq/Ld 3).
     pub fn traction_ipm() -> Self {
-        Self {
-            rs_ohm: 0.008,
-            ld_h: 50e-6,
-            lq_h: 150e-6,
-            psi_f_wb: 0.012,
-            pole_pairs: 4,
-            j_kg_m2: 2e-3,
-            b_nm_s_rad: 3e-4,
-            coulomb_nm: 0.0,
-            emf_harmonics: EmfHarmonics::NONE,
-        }
+        Self::from_catalog(&catalog::TRACTION_IPM)
     }
 
     /// The d-axis current of the maximum-torque-per-ampere law for a current magnitude
