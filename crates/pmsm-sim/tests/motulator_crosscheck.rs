@@ -65,7 +65,7 @@ fn rms_of_range(a: &[f64], b: &[f64]) -> f64 {
 fn plant_agrees_with_motulator() {
     let rows = rows();
     assert_eq!(rows.len(), 4000);
-    // The 2.2 kW motor of design section 6, with the large friction the fixture's script
+    // The 2.2 kW motor of docs/design.md section 6, with the large friction the fixture's script
     // uses to damp open-loop hunting.
     let motor = MotorModel {
         b_nm_s_rad: 0.1,
