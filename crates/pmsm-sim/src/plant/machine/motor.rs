@@ -7,9 +7,10 @@ use ekf_core::catalog::{self, ReferenceMotor};
 ///
 /// In a scenario's `[motor]` table, `catalog = "servo"` (any name of `ekf_core::catalog`:
 /// `servo`, `industrial_2k2`, `small_fast`, `industrial_ipm`, `traction_ipm`) starts from that
-/// reference motor; the keys given beside it override its values. Without `catalog` every
-/// key except `coulomb_nm` and `emf_harmonics` is required. Written out, a scenario lists
-/// the resolved values.
+/// reference motor; the keys given beside it override its values. `ls_h` sets both `ld_h` and
+/// `lq_h` (a surface motor), as it does in `[observer]`; `ld_h` or `lq_h` given beside it wins
+/// for its axis. Without `catalog` every key except `coulomb_nm` and `emf_harmonics` is
+/// required. Written out, a scenario lists the resolved values.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "MotorSection")]
 pub struct MotorModel {
@@ -42,6 +43,7 @@ pub struct MotorModel {
 struct MotorSection {
     catalog: Option<String>,
     rs_ohm: Option<f64>,
+    ls_h: Option<f64>,
     ld_h: Option<f64>,
     lq_h: Option<f64>,
     psi_f_wb: Option<f64>,
@@ -75,8 +77,8 @@ impl TryFrom<MotorSection> for MotorModel {
         };
         Ok(Self {
             rs_ohm: pick(s.rs_ohm, |m| m.rs_ohm, "rs_ohm")?,
-            ld_h: pick(s.ld_h, |m| m.ld_h, "ld_h")?,
-            lq_h: pick(s.lq_h, |m| m.lq_h, "lq_h")?,
+            ld_h: pick(s.ld_h.or(s.ls_h), |m| m.ld_h, "ld_h")?,
+            lq_h: pick(s.lq_h.or(s.ls_h), |m| m.lq_h, "lq_h")?,
             psi_f_wb: pick(s.psi_f_wb, |m| m.psi_f_wb, "psi_f_wb")?,
             pole_pairs: s.pole_pairs.or(base.map(|m| m.pole_pairs)).ok_or_else(|| {
                 "motor.pole_pairs is missing (give it, or motor.catalog = a reference motor)"
