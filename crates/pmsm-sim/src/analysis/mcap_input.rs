@@ -76,7 +76,10 @@ impl Cursor {
 
     /// Moves to `to` (at or after the current offset).
     fn skip_to(&mut self, to: u64) -> Result<(), String> {
-        let d = i64::try_from(to - self.at).map_err(|_| format!("bad offset {to}"))?;
+        let d = to
+            .checked_sub(self.at)
+            .and_then(|d| i64::try_from(d).ok())
+            .ok_or_else(|| format!("bad offset {to} (at byte {})", self.at))?;
         self.r
             .seek_relative(d)
             .map_err(|e| format!("read error at byte {}: {e}", self.at))?;
