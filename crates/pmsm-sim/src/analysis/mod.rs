@@ -13,6 +13,7 @@
 pub mod fault_suite;
 pub mod identify;
 pub mod low_speed;
+pub(crate) mod mcap_input;
 pub mod replay;
 pub mod suite;
 pub mod tune;

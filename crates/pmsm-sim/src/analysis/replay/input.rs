@@ -256,117 +256,20 @@ pub fn read_csv(path: &Path, scaling: Scaling) -> Result<DriveLog, ReplayError> 
 }
 
 /// The MCAP magic bytes at the start of a file.
-pub(super) const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+pub(super) const MCAP_MAGIC: &[u8] = crate::analysis::mcap_input::MCAP_MAGIC;
 
-pub(super) fn le_u64(b: &[u8], at: usize) -> Option<u64> {
-    Some(u64::from_le_bytes(
-        b.get(at..at.checked_add(8)?)?.try_into().ok()?,
-    ))
-}
-
-pub(super) fn le_u32(b: &[u8], at: usize) -> Option<u32> {
-    Some(u32::from_le_bytes(
-        b.get(at..at.checked_add(4)?)?.try_into().ok()?,
-    ))
-}
-
-/// Walks the records of an MCAP file (and those of uncompressed chunks) and checks every
-/// length field against the bytes that are there, so that the `mcap` reader is never asked
-/// to allocate for a corrupt length (which aborts the process, a panic that cannot be
-/// caught).
-pub(super) fn check_mcap_lengths(b: &[u8]) -> Result<(), String> {
-    fn records(b: &[u8], mut at: usize, end: usize, depth: u32) -> Result<(), String> {
-        while at < end {
-            let op = b[at];
-            let len = le_u64(b, at + 1).ok_or("truncated record header")?;
-            let body = at + 9;
-            let stop = usize::try_from(len)
-                .ok()
-                .and_then(|l| body.checked_add(l))
-                .filter(|&s| s <= end)
-                .ok_or_else(|| format!("record at byte {at}: length {len} beyond the file"))?;
-            if op == 0x06 && depth == 0 {
-                // Chunk: start, end, uncompressed size, crc, compression, records.
-                let size = le_u64(b, body + 16).ok_or("truncated chunk")?;
-                let clen = le_u32(b, body + 28).ok_or("truncated chunk")? as usize;
-                let rl_at = (body + 32).checked_add(clen).ok_or("bad chunk")?;
-                let rlen = le_u64(b, rl_at).ok_or("truncated chunk")?;
-                let r0 = rl_at + 8;
-                let r1 = usize::try_from(rlen)
-                    .ok()
-                    .and_then(|l| r0.checked_add(l))
-                    .filter(|&s| s <= stop)
-                    .ok_or_else(|| format!("chunk at byte {at}: records beyond the chunk"))?;
-                if clen == 0 {
-                    if size != rlen {
-                        return Err(format!("chunk at byte {at}: sizes disagree"));
-                    }
-                    records(b, r0, r1, 1)?;
-                } else if size > 1 << 32 || size > (rlen + (1 << 20)).saturating_mul(1024) {
-                    return Err(format!("chunk at byte {at}: implausible size {size}"));
-                }
-            } else if op == 0x09 {
-                // Attachment: times, name, media type, data.
-                let n1 = le_u32(b, body + 16).ok_or("truncated attachment")? as usize;
-                let m_at = (body + 20).checked_add(n1).ok_or("bad attachment")?;
-                let n2 = le_u32(b, m_at).ok_or("truncated attachment")? as usize;
-                let d_at = (m_at + 4).checked_add(n2).ok_or("bad attachment")?;
-                let dl = le_u64(b, d_at).ok_or("truncated attachment")?;
-                if dl > (stop - body) as u64 {
-                    return Err(format!("attachment at byte {at}: data beyond the record"));
-                }
-            }
-            at = stop;
-        }
-        Ok(())
-    }
-    if !b.starts_with(MCAP_MAGIC) {
-        return Err("not an MCAP file (no magic)".into());
-    }
-    let end = b
-        .len()
-        .checked_sub(8)
-        .filter(|&e| e >= 8)
-        .ok_or("truncated file")?;
-    if &b[end..] != MCAP_MAGIC {
-        return Err("truncated file (no closing magic)".into());
-    }
-    records(b, 8, end, 0)
-}
-
-/// Reads a `pmsm-sim` MCAP log (module docs); a corrupt file is an error, never a panic.
+/// Reads a `pmsm-sim` MCAP log (module docs) through the tuner's reader
+/// ([`LoggedRun::read`](crate::analysis::tune::LoggedRun::read), streamed and bounded: a
+/// corrupt file is an error naming the file and what is wrong, never a panic).
 pub fn read_mcap(path: &Path) -> Result<DriveLog, ReplayError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| ReplayError::Io {
+    let run = crate::analysis::tune::LoggedRun::read(path).map_err(|e| ReplayError::Mcap {
         file: file.clone(),
-        source,
+        message: match e {
+            crate::analysis::tune::TuneError::Log { message, .. } => message,
+            e => e.to_string(),
+        },
     })?;
-    check_mcap_lengths(&bytes).map_err(|message| ReplayError::Mcap {
-        file: file.clone(),
-        message: format!("corrupt MCAP file: {message}"),
-    })?;
-    drop(bytes);
-    let p = path.to_path_buf();
-    // The `mcap` crate can panic on corrupt length fields: a panic is turned into an error.
-    let hook = std::panic::take_hook();
-    std::panic::set_hook(Box::new(|_| {}));
-    let r = std::panic::catch_unwind(move || crate::analysis::tune::LoggedRun::read(&p));
-    std::panic::set_hook(hook);
-    let run = match r {
-        Ok(Ok(run)) => run,
-        Ok(Err(e)) => {
-            return Err(ReplayError::Mcap {
-                file,
-                message: e.to_string(),
-            });
-        }
-        Err(_) => {
-            return Err(ReplayError::Mcap {
-                file,
-                message: "corrupt MCAP file (the reader gave up on it)".into(),
-            });
-        }
-    };
     let n = run.u_ab.len();
     if n == 0 {
         return Err(ReplayError::Mcap {
@@ -389,14 +292,24 @@ pub fn read_mcap(path: &Path) -> Result<DriveLog, ReplayError> {
 /// Reads a log: MCAP when the file starts with the MCAP magic, else CSV (`scaling` applies
 /// to CSV only: the simulator's logs are amplitude-invariant).
 pub fn read_log(path: &Path, scaling: Scaling) -> Result<DriveLog, ReplayError> {
-    let bytes = std::fs::read(path).map_err(|source| ReplayError::Io {
+    let io = |source| ReplayError::Io {
         file: path.display().to_string(),
         source,
-    })?;
-    if bytes.starts_with(MCAP_MAGIC) {
-        drop(bytes);
+    };
+    // The first bytes decide; an MCAP file is streamed, not read whole.
+    let mut head = Vec::with_capacity(MCAP_MAGIC.len());
+    std::fs::File::open(path)
+        .and_then(|f| {
+            std::io::Read::read_to_end(
+                &mut std::io::Read::take(f, MCAP_MAGIC.len() as u64),
+                &mut head,
+            )
+        })
+        .map_err(io)?;
+    if head == MCAP_MAGIC {
         read_mcap(path)
     } else {
+        let bytes = std::fs::read(path).map_err(io)?;
         parse_csv(&bytes, &path.display().to_string(), scaling)
     }
 }

@@ -4,17 +4,17 @@
 //! [`decode_to_json`](crate::output::mcap::proto::decode_to_json), to the JSON value of the JSON
 //! encoding; the fields are then read from that value the same way for both encodings.
 //!
-//! The file is streamed (`mcap`'s sans-io `LinearReader`), so its size is bounded by the
-//! memory of the extracted columns (about 90 bytes per period), not by the file's.
+//! The file is streamed by the safe MCAP reader ([`read_records`]: a structure check, then
+//! `mcap`'s sans-io `LinearReader` with bounded record lengths), so the memory is that of the
+//! extracted columns (about 90 bytes per period), not the file's size; a corrupt file is a
+//! [`TuneError::Log`] naming the file, never a panic.
 
-use std::fs::File;
-use std::io::Read;
 use std::path::Path;
 
 use mcap::records::Record;
-use mcap::sans_io::{LinearReadEvent, LinearReader};
 
 use super::TuneError;
+use crate::analysis::mcap_input::read_records;
 use crate::output::mcap::proto::decode_to_json;
 use crate::output::mcap::{TOPIC_PERIOD, TOPIC_SCENARIO};
 use crate::scenario::Scenario;
@@ -53,55 +53,43 @@ enum Encoding {
     Json,
 }
 
-/// Reads the scenario and the period fields of a log (periods sorted by `k`).
+/// Reads the scenario and the period fields of a log (periods sorted by `k`); the records
+/// come from [`read_records`] (a corrupt file is an error, never a panic).
 pub(crate) fn read_log(path: &Path) -> Result<RawLog, TuneError> {
-    let mut file = File::open(path).map_err(|e| err(path, format!("cannot open: {e}")))?;
-    let mut reader = LinearReader::new();
     let mut channels: std::collections::HashMap<u16, (String, Encoding)> =
         std::collections::HashMap::new();
     let mut scenario: Option<Scenario> = None;
     let mut periods = Vec::new();
-    while let Some(event) = reader.next_event() {
-        let event = event.map_err(|e| err(path, format!("not a readable MCAP file: {e}")))?;
-        match event {
-            LinearReadEvent::ReadRequest(need) => {
-                let n = file
-                    .read(reader.insert(need))
-                    .map_err(|e| err(path, format!("read error: {e}")))?;
-                reader.notify_read(n);
+    read_records(path, |opcode, data| {
+        let record =
+            mcap::parse_record(opcode, data).map_err(|e| format!("bad MCAP record: {e}"))?;
+        match record {
+            Record::Channel(c) => {
+                let enc = match c.message_encoding.as_str() {
+                    "protobuf" => Encoding::Protobuf,
+                    _ => Encoding::Json,
+                };
+                channels.insert(c.id, (c.topic.clone(), enc));
             }
-            LinearReadEvent::Record { opcode, data } => {
-                let record = mcap::parse_record(opcode, data)
-                    .map_err(|e| err(path, format!("bad MCAP record: {e}")))?;
-                match record {
-                    Record::Channel(c) => {
-                        let enc = match c.message_encoding.as_str() {
-                            "protobuf" => Encoding::Protobuf,
-                            _ => Encoding::Json,
-                        };
-                        channels.insert(c.id, (c.topic.clone(), enc));
-                    }
-                    Record::Message { header, data } => {
-                        let Some((topic, enc)) = channels.get(&header.channel_id) else {
-                            continue;
-                        };
-                        if topic == TOPIC_PERIOD {
-                            let p = decode_period(&data, *enc).map_err(|e| {
-                                err(path, format!("period message {}: {e}", periods.len()))
-                            })?;
-                            periods.push(p);
-                        } else if topic == TOPIC_SCENARIO && scenario.is_none() {
-                            scenario = Some(
-                                scenario_from_json(&data)
-                                    .map_err(|e| err(path, format!("scenario message: {e}")))?,
-                            );
-                        }
-                    }
-                    _ => {}
+            Record::Message { header, data } => {
+                let Some((topic, enc)) = channels.get(&header.channel_id) else {
+                    return Ok(());
+                };
+                if topic == TOPIC_PERIOD {
+                    let p = decode_period(&data, *enc)
+                        .map_err(|e| format!("period message {}: {e}", periods.len()))?;
+                    periods.push(p);
+                } else if topic == TOPIC_SCENARIO && scenario.is_none() {
+                    scenario = Some(
+                        scenario_from_json(&data).map_err(|e| format!("scenario message: {e}"))?,
+                    );
                 }
             }
+            _ => {}
         }
-    }
+        Ok(())
+    })
+    .map_err(|m| err(path, m))?;
     let scenario = scenario.ok_or_else(|| {
         err(
             path,
