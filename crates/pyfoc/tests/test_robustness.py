@@ -433,7 +433,7 @@ MALFORMED = [
     mutate(("motor", "rs_ohm"), -1.0),
     mutate(("motor", "pole_pairs"), -4),
     mutate(("motor", "pole_pairs"), 2**70),
-    mutate(("motor", "lq_h"), KeyError),
+    mutate(("motor", "catalog"), KeyError),  # the motor's values then missing
     mutate(("inverter", "ts_s"), 0.0),
     mutate(("inverter", "ts_s"), 1e-300),
     mutate(("duration_s",), -1.0),
