@@ -548,15 +548,8 @@ mod tests {
         }
     }
 
-    /// The default preset with its motor written out key by key (not by catalog name).
-    fn default_text() -> String {
-        Scenario::preset_text("default")
-            .unwrap_or_default()
-            .replace(
-                "catalog = \"servo\"",
-                "rs_ohm = 2.875\nld_h = 8.5e-3\nlq_h = 8.5e-3\npsi_f_wb = 0.175\npole_pairs = 4\n\
-                 j_kg_m2 = 8e-4\nb_nm_s_rad = 1e-3\n#",
-            )
+    fn default_text() -> &'static str {
+        Scenario::preset_text("default").unwrap_or_default()
     }
 
     #[test]
