@@ -301,12 +301,17 @@ fn load(what: &str) -> Result<Scenario, SimError> {
     }
 }
 
+/// `pmsm-sim list`: one preset a line, the name column as wide as the longest name.
 fn list() {
     println!("built-in scenarios (pmsm-sim run NAME; pmsm-sim show NAME prints the TOML):");
+    let width = PRESETS.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
     for (name, _) in PRESETS {
         match Scenario::preset(name) {
-            Ok(s) => println!("  {name:<16} {:>5.2} s  {}", s.duration_s, s.description),
-            Err(e) => println!("  {name:<16} (invalid: {e})"),
+            Ok(s) => println!(
+                "  {name:<width$}  {:>6.2} s  {}",
+                s.duration_s, s.description
+            ),
+            Err(e) => println!("  {name:<width$}  (invalid: {e})"),
         }
     }
 }

@@ -357,3 +357,21 @@ fn suite_runs_the_chosen_motors_and_refuses_an_unknown_one() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn list_prints_aligned_columns() {
+    let dir = temp_dir("list");
+    let o = run(&["list"], &dir);
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}");
+    let rows: Vec<&str> = out.lines().skip(1).collect();
+    assert_eq!(rows.len(), pmsm_sim::scenario::PRESETS.len(), "{out}");
+    // The duration column (" s  " after the number) starts at the same place on every row.
+    let at: Vec<usize> = rows
+        .iter()
+        .map(|r| r.find(" s  ").unwrap_or_else(|| panic!("no duration: {r}")))
+        .collect();
+    assert!(at.iter().all(|&a| a == at[0]), "{out}");
+    assert!(out.contains("industrial-ipm-fw"), "{out}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
