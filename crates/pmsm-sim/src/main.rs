@@ -170,8 +170,8 @@ struct RunArgs {
     /// Output directory (default: out/<scenario name>/, relative to the current directory).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Do not write the MCAP log.
-    #[arg(long)]
+    /// Do not write the MCAP log (refused together with --log-compression or --log-encoding).
+    #[arg(long, conflicts_with_all = ["log_compression", "log_encoding"])]
     no_log: bool,
     /// Do not draw the plot.
     #[arg(long)]

@@ -375,3 +375,24 @@ fn list_prints_aligned_columns() {
     assert!(out.contains("industrial-ipm-fw"), "{out}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn no_log_with_a_log_option_is_refused() {
+    let dir = temp_dir("nolog");
+    for (opt, val) in [("--log-compression", "zstd"), ("--log-encoding", "json")] {
+        for prefix in [&[][..], &["run"][..]] {
+            let mut args = prefix.to_vec();
+            args.extend(["--no-log", opt, val, "--duration", "0.01", "--out", "o"]);
+            let o = run(&args, &dir);
+            let err = text(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.contains("--no-log") && err.contains(opt), "{err}");
+        }
+    }
+    assert!(!dir.join("o").exists());
+    // Without the log options --no-log runs.
+    let o = run(&["--no-log", "--duration", "0.01", "--out", "o"], &dir);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(!dir.join("o/run.mcap").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
