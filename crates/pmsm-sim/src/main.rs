@@ -73,8 +73,8 @@ enum Command {
     /// filter, the flux + PLL baseline and the default EKF (printed, and written as suite.md
     /// and suite.json).
     Suite {
-        /// Only this motor (repeatable): servo, industrial_2k2, small_fast, industrial_ipm,
-        /// traction_ipm. Default: all.
+        /// Only this motor (repeatable; a repeat runs once): servo, industrial_2k2,
+        /// small_fast, industrial_ipm, traction_ipm. Default: all.
         #[arg(long = "motor", value_parser = parse_suite_motor)]
         motors: Vec<SuiteMotor>,
         /// Shortened windows (about half the simulated time).
@@ -95,8 +95,8 @@ enum Command {
     /// fall-back, with its RMS current per rated-torque current (printed, and written as
     /// lowspeed.md and lowspeed.json).
     LowSpeed {
-        /// Only this motor (repeatable): servo, industrial_2k2, small_fast, industrial_ipm,
-        /// traction_ipm. Default: the three surface motors.
+        /// Only this motor (repeatable; a repeat runs once): servo, industrial_2k2,
+        /// small_fast, industrial_ipm, traction_ipm. Default: the three surface motors.
         #[arg(long = "motor", value_parser = parse_suite_motor)]
         motors: Vec<SuiteMotor>,
         /// Time held at each speed, s.
@@ -563,6 +563,17 @@ fn faults_command(out: &Path, t_fault_s: f64, t_end_s: f64) -> Result<ExitCode, 
     Ok(ExitCode::SUCCESS)
 }
 
+/// The `--motor` list with repeats dropped, first occurrences kept in order.
+fn dedup(motors: &[SuiteMotor]) -> Vec<SuiteMotor> {
+    let mut out: Vec<SuiteMotor> = Vec::with_capacity(motors.len());
+    for &m in motors {
+        if !out.contains(&m) {
+            out.push(m);
+        }
+    }
+    out
+}
+
 /// A `--motor` name of `pmsm-sim suite`.
 fn parse_suite_motor(name: &str) -> Result<SuiteMotor, String> {
     SuiteMotor::from_name(name).ok_or_else(|| {
@@ -578,7 +589,7 @@ fn suite(opts: SuiteOptions, motors: &[SuiteMotor], out: &Path) -> Result<ExitCo
     let report = if motors.is_empty() {
         run_suite(&opts)?
     } else {
-        run_suite_motors(&opts, motors)?
+        run_suite_motors(&opts, &dedup(motors))?
     };
     write_table(out, "suite", &report.to_markdown(), &report)
 }
@@ -614,12 +625,12 @@ fn low_speed_command(motors: &[SuiteMotor], hold: f64, out: &Path) -> Result<Exi
         });
     }
     let motors = if motors.is_empty() {
-        &SuiteMotor::SURFACE[..]
+        SuiteMotor::SURFACE.to_vec()
     } else {
-        motors
+        dedup(motors)
     };
     let mut rows = vec![];
-    for &m in motors {
+    for &m in &motors {
         rows.push(run_motor(m, &SPEEDS_PCT, hold)?);
     }
     write_table(out, "lowspeed", &to_markdown(&rows), &rows)

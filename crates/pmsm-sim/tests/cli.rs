@@ -336,14 +336,26 @@ fn faults_subcommand_prints_and_writes_its_table() {
 #[test]
 fn suite_runs_the_chosen_motors_and_refuses_an_unknown_one() {
     let dir = temp_dir("suite-motor");
+    // A motor named twice runs once.
     let o = run(
-        &["suite", "--short", "--motor", "traction_ipm", "--out", "s"],
+        &[
+            "suite",
+            "--short",
+            "--motor",
+            "traction_ipm",
+            "--motor",
+            "traction_ipm",
+            "--out",
+            "s",
+        ],
         &dir,
     );
     let out = text(&o.stdout);
     assert!(o.status.success(), "{}", text(&o.stderr));
-    assert!(
-        out.contains("| traction_ipm | foc sensored, MTPA | 20 |"),
+    assert_eq!(
+        out.matches("| traction_ipm | foc sensored, MTPA | 20 |")
+            .count(),
+        1,
         "{out}"
     );
     assert!(!out.contains("| servo |"), "{out}");
@@ -394,5 +406,30 @@ fn no_log_with_a_log_option_is_refused() {
     let o = run(&["--no-log", "--duration", "0.01", "--out", "o"], &dir);
     assert!(o.status.success(), "{}", text(&o.stderr));
     assert!(!dir.join("o/run.mcap").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn low_speed_runs_a_repeated_motor_once() {
+    let dir = temp_dir("lowspeed-dup");
+    let o = run(
+        &[
+            "low-speed",
+            "--motor",
+            "servo",
+            "--motor",
+            "servo",
+            "--hold",
+            "0.05",
+            "--out",
+            "l",
+        ],
+        &dir,
+    );
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{out}\n{}", text(&o.stderr));
+    let json = std::fs::read_to_string(dir.join("l/lowspeed.json")).unwrap_or_default();
+    let rows: serde_json::Value = serde_json::from_str(&json).unwrap_or_default();
+    assert_eq!(rows.as_array().map(Vec::len), Some(1), "{json}");
     let _ = std::fs::remove_dir_all(&dir);
 }
