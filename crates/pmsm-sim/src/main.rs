@@ -7,6 +7,7 @@ mod bench;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -232,8 +233,44 @@ impl From<Compress> for LogCompression {
     }
 }
 
-/// Set by the Ctrl-C handler; the run loop checks it every period.
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+/// The signals that stop a run (`signal_hook::flag::register`): each sets the run loop's
+/// stop flag, checked every period, and a flag of its own, so that the exit code can follow
+/// the shell's convention of 128 + the signal's number (SIGINT 130, SIGTERM 143, SIGHUP 129).
+struct StopSignals {
+    /// Set by any of them: the run stops at the next period and finishes its files.
+    stop: Arc<AtomicBool>,
+    /// `(exit code, name, flag)` of each signal.
+    each: Vec<(u8, &'static str, Arc<AtomicBool>)>,
+}
+
+impl StopSignals {
+    /// Registers the handlers; a signal that cannot be registered keeps its default action.
+    fn register() -> Self {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        use signal_hook::flag::register;
+        let stop = Arc::new(AtomicBool::new(false));
+        let mut wanted: Vec<(i32, u8, &'static str)> =
+            vec![(SIGINT, 130, "SIGINT"), (SIGTERM, 143, "SIGTERM")];
+        #[cfg(unix)]
+        wanted.push((signal_hook::consts::SIGHUP, 129, "SIGHUP"));
+        let mut each = Vec::new();
+        for (sig, code, name) in wanted {
+            let own = Arc::new(AtomicBool::new(false));
+            if register(sig, Arc::clone(&stop)).is_ok() && register(sig, Arc::clone(&own)).is_ok() {
+                each.push((code, name, own));
+            }
+        }
+        Self { stop, each }
+    }
+
+    /// The exit code and name of the first signal that came, if any did.
+    fn received(&self) -> Option<(u8, &'static str)> {
+        self.each
+            .iter()
+            .find(|(_, _, f)| f.load(Ordering::Relaxed))
+            .map(|(code, name, _)| (*code, *name))
+    }
+}
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -414,10 +451,9 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     let plot_path = dir.join("plot.svg");
     let metrics_path = dir.join("metrics.json");
 
-    // Ctrl-C (SIGINT) and SIGTERM (ctrlc's `termination` feature) set the flag; the run
-    // stops at the next period and the files are finished.
-    // A second handler cannot be installed (e.g. in tests calling this twice): ignore that.
-    let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::Relaxed));
+    // SIGINT (Ctrl-C), SIGTERM and SIGHUP set the stop flag; the run stops at the next
+    // period and the files are finished.
+    let signals = StopSignals::register();
 
     let mut log = if args.no_log {
         None
@@ -472,7 +508,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         RunOptions {
             record_trace: false,
             sinks,
-            interrupt: Some(&INTERRUPTED),
+            interrupt: Some(&signals.stop),
             progress: Some(&mut progress),
             inline_observers,
             ..RunOptions::default()
@@ -533,11 +569,12 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     Ok(match &out.end {
         RunEnd::Completed => ExitCode::SUCCESS,
         RunEnd::Interrupted { .. } => {
+            let (code, name) = signals.received().unwrap_or((130, "a signal"));
             eprintln!(
-                "pmsm-sim: {} (outputs cover the part simulated)",
+                "pmsm-sim: {} by {name} (outputs cover the part simulated)",
                 out.end.describe()
             );
-            ExitCode::from(130)
+            ExitCode::from(code)
         }
         other => {
             eprintln!(

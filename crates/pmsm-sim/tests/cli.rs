@@ -267,6 +267,7 @@ fn ctrl_c_leaves_a_readable_log() {
     let (o, log, dir) = interrupted_run("sigint", "INT");
     let err = text(&o.stderr);
     assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("SIGINT"), "{err}");
     assert!(err.contains("interrupted"), "{err}");
     let msgs = read_mcap(&log);
     let n = msgs["/pmsm_sim/period"].len();
@@ -282,7 +283,8 @@ fn sigterm_leaves_a_readable_log() {
     // Ctrl-C and the log is finished.
     let (o, log, dir) = interrupted_run("sigterm", "TERM");
     let err = text(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert_eq!(o.status.code(), Some(143), "{err}");
+    assert!(err.contains("SIGTERM"), "{err}");
     assert!(err.contains("interrupted"), "{err}");
     let msgs = read_mcap(&log);
     let n = msgs["/pmsm_sim/period"].len();
@@ -291,6 +293,24 @@ fn sigterm_leaves_a_readable_log() {
     assert_eq!(last["k"], (n - 1) as u64);
     assert_eq!(msgs["/pmsm_sim/event"][0]["level"], "warning");
     assert_eq!(msgs["/pmsm_sim/metrics"][0]["periods"], n);
+    // The Python reader too, when `PYTHON` names an interpreter with the `mcap` package
+    // (as for scripts/same-outputs.sh): its summary counts every message.
+    if let Ok(py) = std::env::var("PYTHON") {
+        let code = "import sys; from mcap.reader import make_reader; \
+                    s = make_reader(open(sys.argv[1], 'rb')).get_summary(); \
+                    print(s.statistics.message_count)";
+        let o = Command::new(py)
+            .args(["-c", code, &log.display().to_string()])
+            .output()
+            .unwrap_or_else(|e| panic!("PYTHON: {e}"));
+        let total: usize = msgs.values().map(Vec::len).sum();
+        assert_eq!(
+            text(&o.stdout).trim(),
+            total.to_string(),
+            "{}",
+            text(&o.stderr)
+        );
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
