@@ -539,8 +539,16 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         written.push(("plot", plot_path.clone()));
     }
     let json = report::json(metrics).map_err(|e| out_err(&metrics_path, e))?;
-    std::fs::write(&metrics_path, format!("{json}\n")).map_err(|e| out_err(&metrics_path, e))?;
+    // metrics.json: the same for identical runs; the wall-clock fields go to timing.json.
+    let (metrics_json, timing_json) =
+        report::json_split(metrics).map_err(|e| out_err(&metrics_path, e))?;
+    std::fs::write(&metrics_path, format!("{metrics_json}\n"))
+        .map_err(|e| out_err(&metrics_path, e))?;
     written.push(("metrics", metrics_path.clone()));
+    let timing_path = dir.join("timing.json");
+    std::fs::write(&timing_path, format!("{timing_json}\n"))
+        .map_err(|e| out_err(&timing_path, e))?;
+    written.push(("timing", timing_path.clone()));
 
     if args.json {
         println!("{json}");

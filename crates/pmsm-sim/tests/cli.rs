@@ -503,3 +503,33 @@ fn suite_exit_code_tells_known_limits_from_failures() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn identical_runs_write_identical_metrics_and_their_timing_apart() {
+    let dir = temp_dir("metrics-bytes");
+    let mut files = Vec::new();
+    for out in ["a", "b"] {
+        let o = run(
+            &["--duration", "0.05", "--no-log", "--no-plot", "--out", out],
+            &dir,
+        );
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let m = std::fs::read(dir.join(out).join("metrics.json")).unwrap_or_default();
+        let t = std::fs::read_to_string(dir.join(out).join("timing.json")).unwrap_or_default();
+        let metrics: serde_json::Value =
+            serde_json::from_slice(&m).unwrap_or_else(|e| panic!("metrics.json: {e}"));
+        let timing: serde_json::Value =
+            serde_json::from_str(&t).unwrap_or_else(|e| panic!("timing.json: {e}: {t}"));
+        for f in pmsm_sim::output::report::TIMING_FIELDS {
+            assert!(metrics.get(f).is_none(), "{f} in metrics.json");
+            assert!(timing[f].as_f64().is_some_and(|v| v > 0.0), "{t}");
+        }
+        assert_eq!(metrics["periods"], 500);
+        files.push(m);
+    }
+    assert!(
+        files[0] == files[1],
+        "metrics.json differs between identical runs"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
