@@ -728,9 +728,15 @@ struct TuneArgs {
 }
 
 impl TuneArgs {
-    /// Runs the subcommand: the report on stdout, errors on stderr.
+    /// Runs the subcommand: the report on stdout, errors on stderr; on a terminal, the
+    /// search's progress (filter runs so far, of `--max-evals`) on stderr, updated in place.
     fn run(&self) -> std::process::ExitCode {
-        match self.report() {
+        let result = if std::io::stderr().is_terminal() {
+            self.report_with_progress()
+        } else {
+            self.report()
+        };
+        match result {
             Ok(text) => {
                 print!("{text}");
                 std::process::ExitCode::SUCCESS
@@ -740,6 +746,33 @@ impl TuneArgs {
                 std::process::ExitCode::FAILURE
             }
         }
+    }
+
+    /// [`Self::report`] with a counter of the filter runs on stderr
+    /// (`pmsm_sim::analysis::tune::FILTER_PASSES`, polled every 100 ms), cleared at the end.
+    fn report_with_progress(&self) -> Result<String, TuneError> {
+        use pmsm_sim::analysis::tune::FILTER_PASSES;
+        let done = AtomicBool::new(false);
+        let start = FILTER_PASSES.load(Ordering::Relaxed);
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                let bar = ProgressBar::new(self.max_evals as u64);
+                if let Ok(style) = ProgressStyle::with_template(
+                    "tune: [{elapsed_precise}] {pos}/{len} filter runs (at most)",
+                ) {
+                    bar.set_style(style);
+                }
+                while !done.load(Ordering::Relaxed) {
+                    let n = FILTER_PASSES.load(Ordering::Relaxed) - start;
+                    bar.set_position(n as u64);
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+                bar.finish_and_clear();
+            });
+            let r = self.report();
+            done.store(true, Ordering::Relaxed);
+            r
+        })
     }
 
     fn report(&self) -> Result<String, TuneError> {

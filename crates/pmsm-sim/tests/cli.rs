@@ -533,3 +533,37 @@ fn identical_runs_write_identical_metrics_and_their_timing_apart() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A short run's MCAP log in `dir/o/run.mcap`, for `tune`.
+fn short_log(dir: &Path) -> PathBuf {
+    let o = run(&["--duration", "0.3", "--no-plot", "--out", "o"], dir);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    dir.join("o/run.mcap")
+}
+
+#[test]
+fn tune_shows_progress_on_a_terminal_only() {
+    let dir = temp_dir("tune-progress");
+    let log = short_log(&dir);
+    let log = log.display().to_string();
+    // Piped: nothing but the report's errors (none) on stderr.
+    let o = run(&["tune", &log, "--max-evals", "60"], &dir);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(text(&o.stderr), "");
+    assert!(text(&o.stdout).contains("[observer_noise]"));
+    // On a terminal (util-linux `script` gives the command a pseudo-terminal): the counter.
+    let cmd = format!("{BIN} tune {log} --max-evals 300 >/dev/null");
+    match Command::new("script")
+        .args(["-qec", &cmd, "/dev/null"])
+        .current_dir(&dir)
+        .output()
+    {
+        Ok(o) => {
+            let shown = text(&o.stdout);
+            assert!(o.status.success(), "{shown}");
+            assert!(shown.contains("filter runs"), "{shown:?}");
+        }
+        Err(e) => eprintln!("no `script` ({e}): the terminal case is not checked"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

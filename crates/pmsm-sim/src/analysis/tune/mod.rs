@@ -161,6 +161,11 @@ impl Default for NormalizedNoise {
 }
 
 /// Convergence tolerance of the search on the log-parameters (1 % on a sigma).
+/// Filter passes run by the searches of this process ([`tune_qr`] and the functions built on
+/// it), counted as they run, for a progress display: a reader polls it from another thread
+/// (`pmsm-sim tune` on a terminal). Only ever increased; results never depend on it.
+pub static FILTER_PASSES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 const X_TOL: f64 = 1e-2;
 
 /// Largest `|atanh(rho)|` the search uses (`|rho| <= 0.999`).
@@ -649,6 +654,7 @@ pub fn tune_qr(
     // excess: the objective keeps a minimum (on the box) along a direction the data do not
     // pin down, and the simplex can contract there.
     let objective = |x: &[f64]| {
+        FILTER_PASSES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let c = clamp(x);
         let excess: f64 = x.iter().zip(&c).map(|(a, b)| (a - b) * (a - b)).sum();
         problem
