@@ -153,9 +153,11 @@ fn json_output_list_show_and_check() {
 fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
     let dir = temp_dir("bad");
     let good = text(&run(&["show"], &dir).stdout);
+    let catalog = "catalog = \"servo\"  # ekf_core::catalog; keys given here override it";
+    assert!(good.contains(catalog), "{good}");
     let cases = [
         (
-            good.replace("psi_f_wb = 0.175", "psi_f_wb = -0.175"),
+            good.replace(catalog, "catalog = \"servo\"\npsi_f_wb = -0.175"),
             "motor.psi_f_wb",
             "> 0",
         ),
@@ -170,14 +172,19 @@ fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
             "period",
         ),
         (
-            good.replace("j_kg_m2 = 8e-4", ""),
+            good.replace(catalog, ""),
             "motor",
-            "missing field `j_kg_m2`",
+            "motor.rs_ohm is missing",
         ),
         (
             good.replace("adc_bits = 12", "adc_bits = 12.5"),
             "sensors.adc_bits",
-            "invalid type",
+            "expected a whole number >= 0, got the number 12.5 (line",
+        ),
+        (
+            good.replace(catalog, "catalog = \"servo\"\npole_pairs = \"abc\""),
+            "motor.pole_pairs",
+            "expected a whole number >= 0, got the string \"abc\" (line 42, column 14)",
         ),
         (
             good.replace("[controller]", "[controler]"),
@@ -565,5 +572,34 @@ fn tune_shows_progress_on_a_terminal_only() {
         }
         Err(e) => eprintln!("no `script` ({e}): the terminal case is not checked"),
     }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The `[observer_noise]` block `tune` prints (to the end of the report).
+fn printed_noise_block(report: &str) -> String {
+    let at = report
+        .find("[observer_noise]")
+        .unwrap_or_else(|| panic!("no [observer_noise] in {report}"));
+    report[at..].to_string()
+}
+
+#[test]
+fn tune_prints_plain_numbers() {
+    let dir = temp_dir("tune-numbers");
+    let log = short_log(&dir);
+    let o = run(
+        &["tune", &log.display().to_string(), "--max-evals", "60"],
+        &dir,
+    );
+    let out = text(&o.stdout);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let block = printed_noise_block(&out);
+    // Numbers as TOML floats, shortest round-trip: no Rust `2.875000e0`, no zero padding
+    // before an exponent.
+    assert!(!block.contains("e0"), "{block}");
+    assert!(!block.contains("0e-"), "{block}");
+    let v: toml::Table = toml::from_str(&block).unwrap_or_else(|e| panic!("{e}: {block}"));
+    let q = v["observer_noise"]["q"].as_array().map(Vec::len);
+    assert_eq!(q, Some(4), "{block}");
     let _ = std::fs::remove_dir_all(&dir);
 }

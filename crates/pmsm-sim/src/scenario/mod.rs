@@ -20,6 +20,7 @@ use crate::plant::load::{LoadTerm, Profile};
 use crate::plant::sensors::SensorConfig;
 
 mod configs;
+mod messages;
 mod plan;
 mod presets;
 mod validate;
@@ -361,7 +362,7 @@ pub struct Scenario {
 
 /// A problem in a TOML text, as `(field path, message)`.
 fn toml_problem(text: &str, path: &str, err: &toml::de::Error) -> (String, String) {
-    let mut problem = err.message().trim().to_string();
+    let mut problem = messages::user_words(err.message().trim());
     if let Some(span) = err.span() {
         let start = span.start.min(text.len());
         let before = &text[..start];

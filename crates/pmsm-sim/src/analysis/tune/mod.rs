@@ -376,7 +376,7 @@ impl TuneReport {
     /// such field): the table is for `ObserverConfig::noise` or `pyfoc.Ekf(q=..., r=...)`.
     pub fn toml_snippet(&self) -> String {
         let row = |r: &[f64]| {
-            let v: Vec<String> = r.iter().map(|x| format!("{x:.6e}")).collect();
+            let v: Vec<String> = r.iter().map(|x| plain(*x)).collect();
             format!("[{}]", v.join(", "))
         };
         let mat = |m: &[&[f64]]| {
@@ -392,22 +392,38 @@ impl TuneReport {
              [observer_noise]\n\
              q = {}\n\
              r = {}\n\
-             # normalized (ekf_core::noise units, I_c = {:.6} A, Ts = {:e} s)\n\
+             # normalized (ekf_core::noise units, I_c = {} A, Ts = {} s)\n\
              sigma_z = {}\n\
-             rho_z = {:.4}\n\
-             sigma_i = {:.6e}\n\
-             sigma_w = {:.6e}\n\
-             sigma_th = {:.6e}\n",
+             rho_z = {}\n\
+             sigma_i = {}\n\
+             sigma_w = {}\n\
+             sigma_th = {}\n",
             mat(&q),
             mat(&r),
-            self.characteristic_current_a,
-            self.ts_s,
+            plain(self.characteristic_current_a),
+            plain(self.ts_s),
             row(&t.sigma_z),
-            t.rho_z,
-            t.sigma_i,
-            t.sigma_w,
-            t.sigma_th,
+            plain(t.rho_z),
+            plain(t.sigma_i),
+            plain(t.sigma_w),
+            plain(t.sigma_th),
         )
+    }
+}
+
+/// `x` as a TOML float, shortest round-trip: plain decimals (`2.875`, `0.001`, `1.0`) from
+/// 1e-4 to 1e16, exponent form outside (`1.5e-9`); never Rust's `2.875000e0`.
+pub fn plain(x: f64) -> String {
+    let a = x.abs();
+    let s = if a == 0.0 || (1e-4..1e16).contains(&a) || !a.is_finite() {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    };
+    if x.is_finite() && !s.contains(['.', 'e']) {
+        format!("{s}.0")
+    } else {
+        s
     }
 }
 
