@@ -603,3 +603,40 @@ fn tune_prints_plain_numbers() {
     assert_eq!(q, Some(4), "{block}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_scenario_file_takes_the_block_tune_prints() {
+    let dir = temp_dir("tune-block");
+    let log = short_log(&dir);
+    let o = run(
+        &["tune", &log.display().to_string(), "--max-evals", "60"],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let block = printed_noise_block(&text(&o.stdout));
+    let scenario = format!("{}\n{block}", text(&run(&["show"], &dir).stdout));
+    std::fs::write(dir.join("tuned.toml"), &scenario).unwrap_or_else(|e| panic!("{e}"));
+    let o = run(&["check", "tuned.toml"], &dir);
+    assert!(o.status.success(), "{}\n{scenario}", text(&o.stderr));
+    assert!(text(&o.stdout).contains(": ok"), "{}", text(&o.stdout));
+    // The simulator's EKF runs on it; a broken R is refused naming the table.
+    let o = run(
+        &["run", "tuned.toml", "--duration", "0.05", "--out", "t"],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let r_line = block
+        .lines()
+        .find(|l| l.starts_with("r = "))
+        .unwrap_or_else(|| panic!("{block}"));
+    let bad = scenario.replace(r_line, "r = [[0.0, 0.0], [0.0, 0.0]]");
+    std::fs::write(dir.join("bad.toml"), bad).unwrap_or_else(|e| panic!("{e}"));
+    let o = run(&["check", "bad.toml"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("observer_noise"),
+        "{}",
+        text(&o.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

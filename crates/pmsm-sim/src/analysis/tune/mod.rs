@@ -372,8 +372,9 @@ pub struct TuneReport {
 
 impl TuneReport {
     /// The proposal as a TOML table (`[observer_noise]`, SI `q` and `r` and the normalized
-    /// values). Scenario files do not take the observer's noise (their `[observer]` has no
-    /// such field): the table is for `ObserverConfig::noise` or `pyfoc.Ekf(q=..., r=...)`.
+    /// values): a scenario file takes it as it is (`pmsm_sim::scenario::ObserverNoise`: the
+    /// simulator's EKF uses `q` and `r`), and the numbers serve `ObserverConfig::noise` or
+    /// `pyfoc.Ekf(q=..., r=...)`.
     pub fn toml_snippet(&self) -> String {
         let row = |r: &[f64]| {
             let v: Vec<String> = r.iter().map(|x| plain(*x)).collect();
@@ -387,8 +388,8 @@ impl TuneReport {
         let q: Vec<&[f64]> = self.q.iter().map(|r| r.as_slice()).collect();
         let r: Vec<&[f64]> = self.r.iter().map(|r| r.as_slice()).collect();
         format!(
-            "# Proposed by pmsm-sim tune (innovation likelihood). Scenario files cannot set the\n\
-             # observer's noise; use these for ObserverConfig::noise or pyfoc.Ekf(q=..., r=...).\n\
+            "# Proposed by pmsm-sim tune (innovation likelihood). Paste into a scenario file (the\n\
+             # simulator's EKF takes q and r), or use for ObserverConfig::noise or pyfoc.Ekf(q=, r=).\n\
              [observer_noise]\n\
              q = {}\n\
              r = {}\n\
