@@ -12,8 +12,10 @@ sim="${CARGO_TARGET_DIR:-target}/release/pmsm-sim"
 $sim run --out "$out/run" --json >"$out/run.stdout" 2>/dev/null
 $sim identify --out "$out/identify" --json >"$out/identify.stdout" 2>/dev/null
 $sim tune "$out/run/run.mcap" --json --max-evals 400 >"$out/tune.stdout" 2>/dev/null
-$sim suite --out "$out/suite" >"$out/suite.stdout" 2>/dev/null
-$sim faults --out "$out/faults" >"$out/faults.stdout" 2>/dev/null
+# suite and faults exit 1 when a check fails that is no documented known limit (a result,
+# compared like the rest): tolerated here, any other failure stops the gate
+$sim suite --out "$out/suite" >"$out/suite.stdout" 2>/dev/null || [ $? -eq 1 ]
+$sim faults --out "$out/faults" >"$out/faults.stdout" 2>/dev/null || [ $? -eq 1 ]
 # wall-clock and path fields vary between identical runs; MCAP files are compared
 # by their messages, schemas and metadata (the summary's clock fields left out)
 py=${PYTHON:-python3}; [ -x .venv/bin/python ] && py=.venv/bin/python

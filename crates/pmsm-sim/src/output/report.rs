@@ -307,3 +307,31 @@ pub fn table(m: &RunMetrics) -> String {
 pub fn json(m: &RunMetrics) -> Result<String, serde_json::Error> {
     serde_json::to_string_pretty(m)
 }
+
+/// The fields of [`RunMetrics`] that measure the wall clock (they differ between identical
+/// runs): `wall_time_s`, `real_time_factor`.
+pub const TIMING_FIELDS: [&str; 2] = ["wall_time_s", "real_time_factor"];
+
+/// The metrics split for the run's files: `(metrics.json, timing.json)`. The first is
+/// [`json`] without the [`TIMING_FIELDS`] (so identical runs give identical bytes), the
+/// second holds those, with the scenario's name and the simulated time they refer to.
+pub fn json_split(m: &RunMetrics) -> Result<(String, String), serde_json::Error> {
+    let full = json(m)?;
+    // Pretty-printing puts each top-level field on its own line, indented by two spaces;
+    // neither timing field is the last, so the commas stay right.
+    let metrics: Vec<&str> = full
+        .lines()
+        .filter(|l| {
+            !TIMING_FIELDS
+                .iter()
+                .any(|f| l.starts_with(&format!("  \"{f}\": ")))
+        })
+        .collect();
+    let timing = serde_json::to_string_pretty(&serde_json::json!({
+        "scenario": m.scenario,
+        "simulated_s": m.simulated_s,
+        "wall_time_s": m.wall_time_s,
+        "real_time_factor": m.real_time_factor,
+    }))?;
+    Ok((metrics.join("\n"), timing))
+}

@@ -162,9 +162,14 @@ impl Scenario {
     }
 
     /// The observer's configuration (`ObserverConfig::new` on the observer's parameters).
+    /// With `[observer_noise]`, its `q` and `r` replace the default noise.
     pub fn observer_config(&self) -> ekf_core::ObserverConfig<f64> {
-        ekf_core::ObserverConfig::new(self.observer_params(), self.inverter.ts_s)
-            .with_sigma(self.observer.angle_sigma_limit_rad)
+        let mut cfg = ekf_core::ObserverConfig::new(self.observer_params(), self.inverter.ts_s)
+            .with_sigma(self.observer.angle_sigma_limit_rad);
+        if let Some(n) = &self.observer_noise {
+            cfg.noise = n.covariances();
+        }
+        cfg
     }
 
     /// The reference filter's configuration (`ObserverConfig::seed`).

@@ -20,6 +20,9 @@ use crate::plant::load::{LoadTerm, Profile};
 use crate::plant::sensors::SensorConfig;
 
 mod configs;
+mod messages;
+mod noise;
+pub use noise::ObserverNoise;
 mod plan;
 mod presets;
 mod validate;
@@ -357,11 +360,15 @@ pub struct Scenario {
     /// Control periods the controller misses (`[skipped_cycles]`; default: none).
     #[serde(default, skip_serializing_if = "SkippedCycles::is_default")]
     pub skipped_cycles: SkippedCycles,
+    /// The simulator's EKF noise (`[observer_noise]`, the block `pmsm-sim tune` prints;
+    /// [`ObserverNoise`]; default: `ObserverConfig::new`'s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub observer_noise: Option<ObserverNoise>,
 }
 
 /// A problem in a TOML text, as `(field path, message)`.
 fn toml_problem(text: &str, path: &str, err: &toml::de::Error) -> (String, String) {
-    let mut problem = err.message().trim().to_string();
+    let mut problem = messages::user_words(err.message().trim());
     if let Some(span) = err.span() {
         let start = span.start.min(text.len());
         let before = &text[..start];
@@ -554,16 +561,22 @@ mod tests {
 
     #[test]
     fn malformed_and_invalid_files_name_the_field() {
-        // Missing field.
-        let t = default_text().replace("lq_h = ", "# lq_h = ");
+        // The default preset takes its motor from the catalog; keys beside it override.
+        let catalog = "catalog = \"servo\"  # ekf_core::catalog; keys given here override it";
+        assert!(default_text().contains(catalog));
+        let with = |extra: &str| default_text().replace(catalog, &format!("{catalog}\n{extra}"));
+        // Missing field (no catalog, no data).
+        let t = default_text().replace(catalog, "");
         let (field, problem) = error_of(&t);
         assert_eq!(field, "motor");
-        assert!(problem.contains("missing field `lq_h`"), "{problem}");
-        // Wrong type.
-        let t = default_text().replace("pole_pairs = 4", "pole_pairs = \"four\"");
-        let (field, problem) = error_of(&t);
+        assert!(problem.contains("motor.rs_ohm is missing"), "{problem}");
+        // Wrong type, in the file's words.
+        let (field, problem) = error_of(&with("pole_pairs = \"four\""));
         assert_eq!(field, "motor.pole_pairs");
-        assert!(problem.contains("line"), "{problem}");
+        assert!(
+            problem.starts_with("expected a whole number >= 0, got the string \"four\" (line"),
+            "{problem}"
+        );
         // Unknown field (a typo).
         let t = default_text().replace("dead_time_s", "deadtime_s");
         let (field, problem) = error_of(&t);
@@ -573,8 +586,7 @@ mod tests {
         let (field, _) = error_of("name = \n");
         assert_eq!(field, "-");
         // Physically invalid values, refused before the run.
-        let t = default_text().replace("ld_h = 8.5e-3", "ld_h = -8.5e-3");
-        assert_eq!(error_of(&t).0, "motor.ld_h");
+        assert_eq!(error_of(&with("ld_h = -8.5e-3")).0, "motor.ld_h");
         let t = default_text().replace("ts_s = 1e-4", "ts_s = 0.0");
         assert_eq!(error_of(&t).0, "inverter.ts_s");
         let t = default_text().replace("dead_time_s = 0.5e-6", "dead_time_s = 2e-4");

@@ -26,6 +26,12 @@ impl Scenario {
         self.inverter.validate()?;
         self.sensors.validate()?;
         self.skipped_cycles.validate()?;
+        if self.observer_noise.is_some() {
+            // The observer's own checks of Q and R (symmetric, PSD, R definite, finite).
+            self.observer_config()
+                .validate()
+                .map_err(|e| FieldError::new("observer_noise", e.to_string()))?;
+        }
         let c = &self.controller;
         positive("controller.current_limit_a", c.current_limit_a)?;
         positive("controller.current_bandwidth_hz", c.current_bandwidth_hz)?;

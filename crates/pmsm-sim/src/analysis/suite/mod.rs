@@ -86,6 +86,21 @@
 //! the load step below 5 deg and its speed RMS below 1 % of rated. On the interior motors also
 //! the goal that it converges from every start (`theta + pi` included) within 50 ms. The
 //! report states which hold; nothing is loosened to pass.
+//!
+//! # Known limits
+//!
+//! A failing check is a regression, except where it fails for a documented property of the
+//! method; the tables name it there ([`Check::known_limit`]) and `pmsm-sim suite` exits 0
+//! when every failure is one of these, 1 otherwise:
+//!
+//! - [`KNOWN_LIMIT_LS`]: the EKF does not track `Ls` online. Told an inductance off by
+//!   `dL`, its model's voltage drop `w_e dL i_q` is attributed to the back-EMF, whose angle
+//!   then lags or leads by about `atan(dL i_q / psi_f)`: under rated load (rated `i_q`) and
+//!   `Ls` +-20 % that is 1.0-3.8 deg el. on the three surface motors, above the 1 deg goal
+//!   (the README's "Known limitations"). Without load (`i_q` small) the goal holds.
+//!
+//! The small fast motor's "EKF RMS / baseline RMS" at 50 % speed (0.546 against 0.5 with
+//! seed 1) is not one: no cause in the motor has been shown, so it fails the exit code.
 
 use std::time::Instant;
 
@@ -143,6 +158,9 @@ pub const LIMIT_SPEED_PCT: f64 = 1.0;
 
 /// Goal: EKF angle RMS (deg el.) told a wrong `psi_f`, `Rs` or temperature, at >= 50 % speed.
 pub const GOAL_MISMATCH_RMS_DEG: f64 = 0.5;
+/// The known limit of a failing "told a wrong Ls" check (module docs, "Known limits").
+pub const KNOWN_LIMIT_LS: &str =
+    "known limit: Ls is not tracked online, bias about atan(dL i_q / psi_f) under load";
 /// Goal: EKF angle RMS (deg el.) told a wrong `Ls`, at >= 50 % speed.
 pub const GOAL_MISMATCH_LS_RMS_DEG: f64 = 1.0;
 /// Goal: the tracked `psi_f` within this of the truth (%) when told a wrong `psi_f`, at
@@ -587,6 +605,10 @@ pub struct Check {
     pub limit: f64,
     /// Whether it holds.
     pub pass: bool,
+    /// When it fails as a documented known limit (module docs, "Known limits"): which one.
+    /// A failure without one is a regression (`pmsm-sim suite` exits 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub known_limit: Option<&'static str>,
 }
 
 /// Everything the suite measured.

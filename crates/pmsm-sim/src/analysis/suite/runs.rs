@@ -223,6 +223,7 @@ pub(super) fn scenario_with(
         },
         faults: Vec::new(),
         skipped_cycles: Default::default(),
+        observer_noise: None,
     }
 }
 

@@ -161,6 +161,11 @@ impl Default for NormalizedNoise {
 }
 
 /// Convergence tolerance of the search on the log-parameters (1 % on a sigma).
+/// Filter passes run by the searches of this process ([`tune_qr`] and the functions built on
+/// it), counted as they run, for a progress display: a reader polls it from another thread
+/// (`pmsm-sim tune` on a terminal). Only ever increased; results never depend on it.
+pub static FILTER_PASSES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
 const X_TOL: f64 = 1e-2;
 
 /// Largest `|atanh(rho)|` the search uses (`|rho| <= 0.999`).
@@ -367,11 +372,12 @@ pub struct TuneReport {
 
 impl TuneReport {
     /// The proposal as a TOML table (`[observer_noise]`, SI `q` and `r` and the normalized
-    /// values). Scenario files do not take the observer's noise (their `[observer]` has no
-    /// such field): the table is for `ObserverConfig::noise` or `pyfoc.Ekf(q=..., r=...)`.
+    /// values): a scenario file takes it as it is (`pmsm_sim::scenario::ObserverNoise`: the
+    /// simulator's EKF uses `q` and `r`), and the numbers serve `ObserverConfig::noise` or
+    /// `pyfoc.Ekf(q=..., r=...)`.
     pub fn toml_snippet(&self) -> String {
         let row = |r: &[f64]| {
-            let v: Vec<String> = r.iter().map(|x| format!("{x:.6e}")).collect();
+            let v: Vec<String> = r.iter().map(|x| plain(*x)).collect();
             format!("[{}]", v.join(", "))
         };
         let mat = |m: &[&[f64]]| {
@@ -382,27 +388,43 @@ impl TuneReport {
         let q: Vec<&[f64]> = self.q.iter().map(|r| r.as_slice()).collect();
         let r: Vec<&[f64]> = self.r.iter().map(|r| r.as_slice()).collect();
         format!(
-            "# Proposed by pmsm-sim tune (innovation likelihood). Scenario files cannot set the\n\
-             # observer's noise; use these for ObserverConfig::noise or pyfoc.Ekf(q=..., r=...).\n\
+            "# Proposed by pmsm-sim tune (innovation likelihood). Paste into a scenario file (the\n\
+             # simulator's EKF takes q and r), or use for ObserverConfig::noise or pyfoc.Ekf(q=, r=).\n\
              [observer_noise]\n\
              q = {}\n\
              r = {}\n\
-             # normalized (ekf_core::noise units, I_c = {:.6} A, Ts = {:e} s)\n\
+             # normalized (ekf_core::noise units, I_c = {} A, Ts = {} s)\n\
              sigma_z = {}\n\
-             rho_z = {:.4}\n\
-             sigma_i = {:.6e}\n\
-             sigma_w = {:.6e}\n\
-             sigma_th = {:.6e}\n",
+             rho_z = {}\n\
+             sigma_i = {}\n\
+             sigma_w = {}\n\
+             sigma_th = {}\n",
             mat(&q),
             mat(&r),
-            self.characteristic_current_a,
-            self.ts_s,
+            plain(self.characteristic_current_a),
+            plain(self.ts_s),
             row(&t.sigma_z),
-            t.rho_z,
-            t.sigma_i,
-            t.sigma_w,
-            t.sigma_th,
+            plain(t.rho_z),
+            plain(t.sigma_i),
+            plain(t.sigma_w),
+            plain(t.sigma_th),
         )
+    }
+}
+
+/// `x` as a TOML float, shortest round-trip: plain decimals (`2.875`, `0.001`, `1.0`) from
+/// 1e-4 to 1e16, exponent form outside (`1.5e-9`); never Rust's `2.875000e0`.
+pub fn plain(x: f64) -> String {
+    let a = x.abs();
+    let s = if a == 0.0 || (1e-4..1e16).contains(&a) || !a.is_finite() {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    };
+    if x.is_finite() && !s.contains(['.', 'e']) {
+        format!("{s}.0")
+    } else {
+        s
     }
 }
 
@@ -649,6 +671,7 @@ pub fn tune_qr(
     // excess: the objective keeps a minimum (on the box) along a direction the data do not
     // pin down, and the simplex can contract there.
     let objective = |x: &[f64]| {
+        FILTER_PASSES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let c = clamp(x);
         let excess: f64 = x.iter().zip(&c).map(|(a, b)| (a - b) * (a - b)).sum();
         problem

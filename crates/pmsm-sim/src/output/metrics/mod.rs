@@ -28,7 +28,10 @@
 //!
 //! For the run: simulated time, wall time and the real-time factor, and figures of the drive:
 //! time to closed loop, the first fault, the speed error once settled (the reference constant
-//! and no load step for [`SETTLE_S`]), peak current, tracking errors.
+//! and no load step for [`SETTLE_S`]), peak current, tracking errors. The wall time and the
+//! real-time factor are the only fields that differ between identical runs: `pmsm-sim run`
+//! writes them to `timing.json`, the rest to `metrics.json`
+//! ([`report::json_split`](crate::output::report::json_split)).
 //!
 //! For a sensorless start (`foc`: states `align`, then `open_loop`, then `handover`), the
 //! **start-up** figures ([`StartupMetrics`]), over the first start of the run (from the first
