@@ -3,6 +3,7 @@
 #![forbid(unsafe_code)]
 
 mod bench;
+mod motor_command;
 mod tune_command;
 
 use tune_command::TuneArgs;
@@ -54,6 +55,9 @@ enum Command {
         /// Preset name (default: "default").
         preset: Option<String>,
     },
+    /// Print a `[motor]` table from datasheet values (line-to-line R and L; Kv or Kt), for a
+    /// scenario file (docs/first-motor.md).
+    Motor(motor_command::MotorArgs),
     /// Check a scenario file without running it.
     Check {
         /// Scenario file or preset name.
@@ -279,6 +283,16 @@ fn main() -> ExitCode {
     let result = match cli.command {
         None => run_command(None, &cli.run),
         Some(Command::Run { scenario, args }) => run_command(scenario.as_deref(), &args),
+        Some(Command::Motor(a)) => match motor_command::motor_block(&a) {
+            Ok(block) => {
+                print!("{block}");
+                Ok(ExitCode::SUCCESS)
+            }
+            Err(e) => {
+                eprintln!("pmsm-sim: error: {e}");
+                Ok(ExitCode::from(1))
+            }
+        },
         Some(Command::List) => {
             list();
             Ok(ExitCode::SUCCESS)
