@@ -162,13 +162,13 @@ impl McapTuneReport {
         );
         let _ = writeln!(
             s,
-            "  default filter replayed on the log: {} (largest angle difference {:e} rad)",
+            "  default filter replayed on the log: {} (largest angle difference {} rad)",
             if self.replay_matches_log {
                 "matches the logged observer"
             } else {
                 "DIFFERS from the logged observer (the record may not be what the observer saw)"
             },
-            self.replay_max_diff_rad
+            super::plain(four_digits(self.replay_max_diff_rad))
         );
         let _ = writeln!(
             s,
@@ -190,7 +190,7 @@ impl McapTuneReport {
         let mut row = |name: &str, a: String, b: String| {
             let _ = writeln!(s, "  {name:<34} {a:>13} {b:>13}");
         };
-        let e = |v: f64| format!("{v:.4e}");
+        let e = |v: f64| super::plain(four_digits(v));
         let (a, b) = (&r.start, &r.tuned);
         let cov_a = [a.sigma_z[0], a.sigma_z[1]].map(|x| (x * r.characteristic_current_a).powi(2));
         row("sigma_z alpha (x I_c)", e(a.sigma_z[0]), e(b.sigma_z[0]));
@@ -242,10 +242,18 @@ impl McapTuneReport {
         let sr = &self.sensor_r;
         let _ = writeln!(
             s,
-            "  R of the scenario's current sensor: [[{:.4e}, {:.4e}], [{:.4e}, {:.4e}]] A^2",
-            sr[0][0], sr[0][1], sr[1][0], sr[1][1]
+            "  R of the scenario's current sensor: [[{}, {}], [{}, {}]] A^2",
+            e(sr[0][0]),
+            e(sr[0][1]),
+            e(sr[1][0]),
+            e(sr[1][1])
         );
         let _ = writeln!(s, "\n{}", r.toml_snippet());
         s
     }
+}
+
+/// `v` rounded to four significant digits (printed with [`super::plain`]).
+fn four_digits(v: f64) -> f64 {
+    format!("{v:.3e}").parse().unwrap_or(v)
 }
