@@ -604,6 +604,13 @@ mod tests {
         (i_d, i_q, pd, pq)
     }
 
+    /// The test map on an `n_d x n_q` grid, in `f32`.
+    fn f32_map<const N: usize>(n_d: usize, n_q: usize) -> FluxMap<f32, N> {
+        let (i_d, i_q, pd, pq) = grid(n_d, n_q);
+        let f = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<_>>();
+        FluxMap::new(&f(&i_d), &f(&i_q), &f(&pd), &f(&pq)).unwrap()
+    }
+
     /// Worst flux error (Wb) and worst relative `l_qq` error between the nodes of a grid.
     fn interpolation_errors(n_d: usize, n_q: usize) -> (f64, f64) {
         let (i_d, i_q, pd, pq) = grid(n_d, n_q);
@@ -669,14 +676,7 @@ mod tests {
 
     #[test]
     fn inverse_finds_the_currents() {
-        let (i_d, i_q, pd, pq) = grid(9, 9);
-        let map = FluxMap::<f32, 12>::new(
-            &i_d.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-            &i_q.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-            &pd.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-            &pq.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-        )
-        .unwrap();
+        let map = f32_map::<12>(9, 9);
         for &(d, q) in &[(-10.0f32, 12.0f32), (3.0, -20.0), (-25.0, 28.0)] {
             let p = map.eval(d, q);
             let (a, b) = map
@@ -789,14 +789,7 @@ mod tests {
 
     #[test]
     fn non_finite_currents_give_non_finite_output_without_panic() {
-        let (i_d, i_q, pd, pq) = grid(5, 6);
-        let map = FluxMap::<f32, 8>::new(
-            &i_d.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-            &i_q.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-            &pd.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-            &pq.iter().map(|&x| x as f32).collect::<Vec<_>>(),
-        )
-        .unwrap();
+        let map = f32_map::<8>(5, 6);
         for x in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
             assert!(!map.eval(x, 1.0).psi_d.is_finite());
             assert!(!map.eval(1.0, x).psi_q.is_finite());
