@@ -156,6 +156,11 @@ class Ekf:
     before the first sample. tracking: "default" tracks the flux linkage online and the
     resistance by the split filter with the thermal link (ekf-core's ObserverConfig::new),
     "flux" the flux only (rs fixed), "off" uses the motor's parameters as given.
+    voltage_delay_s: the delay of the voltage the inverter applied behind the u_ab given for
+    the period, s; negative when the applied voltage leads it (a firmware that turns its
+    command ahead by the speed times the time to the PWM update). The prediction turns each
+    u_ab row by -omega * voltage_delay_s. Within [-2 ts, 2 ts] (ConfigError otherwise); 0 uses
+    u_ab as given.
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -199,6 +204,7 @@ class Ekf:
         dtype: Literal["float64", "float32"] = "float64",
         covariance_update: Literal["joseph", "standard"] = "joseph",
         tracking: Literal["default", "flux", "off"] = "default",
+        voltage_delay_s: float = 0.0,
     ) -> Ekf: ...
     def run(
         self,

@@ -53,6 +53,14 @@ pub enum Param {
     ConsistencyRatio,
     /// Ceiling of the consistency check's baseline, `ConsistencyCheck::max_baseline`.
     ConsistencyMaxBaseline,
+    /// Delay of the applied voltage, `ObserverConfig::voltage_delay_s` (within `[-2 Ts, 2 Ts]`).
+    VoltageDelay,
+    /// Samples of the speed noise adaptation's NIS mean, `SpeedNoiseAdaptation::samples`.
+    AdaptationSamples,
+    /// Reference NIS of the speed noise adaptation, `SpeedNoiseAdaptation::nis_reference`.
+    AdaptationReference,
+    /// Largest factor of the speed noise adaptation, `SpeedNoiseAdaptation::max_factor`.
+    AdaptationMaxFactor,
     /// A noise level of the drive observer (`DriveConfig::sigma_*`).
     DriveNoise,
     /// A prior of the drive observer's input errors (`DriveConfig::sigma_tau_s`,
@@ -161,6 +169,10 @@ impl fmt::Display for Param {
             Param::ConsistencySlowSamples => "consistency.slow_samples",
             Param::ConsistencyRatio => "consistency.ratio",
             Param::ConsistencyMaxBaseline => "consistency.max_baseline",
+            Param::VoltageDelay => "voltage_delay_s",
+            Param::AdaptationSamples => "speed_noise_adaptation.samples",
+            Param::AdaptationReference => "speed_noise_adaptation.nis_reference",
+            Param::AdaptationMaxFactor => "speed_noise_adaptation.max_factor",
             Param::DriveNoise => "drive.sigma (noise level)",
             Param::DrivePrior => "drive.sigma (input error prior)",
             Param::DriveTime => "drive.settle_s / restart_s",

@@ -171,6 +171,39 @@
 //! such a start `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the
 //! parts; the check's effect on recorded drives is in `docs/accuracy.md`.)
 //!
+//! **Speed noise adaptation** ([`SpeedNoiseAdaptation`]; on in [`ObserverConfig::new`], off in
+//! foc's drive configuration and in [`ObserverConfig::seed`]). The model holds the speed constant
+//! between samples, with a random walk sized for a steady drive; a recorded ESC can go from
+//! 150 to 4000 rad/s in 25 ms, and a filter that cannot follow falls behind until the angle slips
+//! by a turn or lands on `theta + pi`. An acceleration the model does not know shows as
+//! innovations larger than the filter expects. The adaptation keeps a running mean `m` of the NIS
+//! (8 samples; the samples the innovation gate rejects left out) and multiplies `Q_ww` of the next prediction by
+//! `clamp((m / (4 b / 2))^2, 1, 10^4)`, where `b` is the consistency check's baseline (the
+//! innovation level learnt from the data, 2 for a consistent filter): the speed's process noise
+//! grows only while the innovations are more than twice their usual level, and at most a hundred
+//! times in standard deviation. A persistent model error (a wrong `psi_f`, a recording's
+//! unmodelled voltage error) raises the baseline, not the factor; only a change does. It acts
+//! once the filter has settled (256 tracked steps in a row at the reference level) and stops
+//! whenever the angle is not tracked, so the initial convergence and a restart keep their own
+//! covariance. Why the speed: an unmodelled acceleration leaves innovations along the back-EMF
+//! that grow with time (the angle error is the integral of the speed error), which is what the
+//! speed's variance lets the gain correct; inflating the current or angle noise instead would
+//! make the filter follow the measurement noise. It cannot tell a burst of sensor noise from an
+//! acceleration: foc's drive turns it off (a closed speed loop amplifies the speed noise; the
+//! drive knows its own torque command).
+//!
+//! **Voltage timing** ([`ObserverConfig::voltage_delay_s`], default 0). The model takes `u_prev`
+//! as the voltage held over the period. A drive's log may not hold that: firmware that updates
+//! the PWM part-way through the next period and turns its command ahead by the speed times the
+//! time to the update applies a vector that leads the logged one; a computation delay makes it
+//! lag. For a vector turning with the rotor, a delay `d` is a rotation: the prediction uses
+//! `u_prev e^(-j w d)`, `w` the speed estimate at the period's start (negative `d`: a lead). What
+//! a wrong `d` does: the angle estimate moves by about `-w d` (the back-EMF the model infers
+//! turns with the voltage), an error proportional to the speed. At one speed it cannot be told
+//! from an angle offset, so it is not observable from the voltages and currents at constant
+//! speed; only the drive's timing (or a reference angle at two speeds) gives it. On three
+//! recorded ESC runs the firmware's lead is 0.3-0.6 periods (`docs/accuracy.md`).
+//!
 //! **Irregular periods.** [`PmsmObserver::step_dt`] predicts over the period that actually ended
 //! at the sample (a skipped control cycle, a log's time stamps) with the model for that period
 //! ([`PmsmModel::with_period`]); at `dt == Ts` it is [`PmsmObserver::step`] itself.
@@ -186,11 +219,13 @@
 //! | `observer/step.rs` | one step: prediction, correction, gate and branch test |
 //! | `observer/fusion.rs` | [`PmsmObserver::correct_angle`]: an external angle fused |
 //! | `observer/safeguards.rs` | the safeguards' configuration and running state |
+//! | `observer/adaptation.rs` | [`SpeedNoiseAdaptation`]: `Q_ww` raised through transients |
 //! | `observer/recovery.rs` | what the safeguards do: rejection, flip, self-reset |
 //! | `observer/estimate.rs` | [`Estimate`], [`Status`], [`ObserverCounters`]: what is reported |
 //! | `observer/tracking.rs` | [`ParameterTracking`]: online `psi_f` and `Rs` |
 //! | `observer/host.rs` | the step compiled for AVX2 and FMA (x86-64 hosts) |
 
+mod adaptation;
 mod config;
 mod estimate;
 mod fusion;
@@ -206,6 +241,8 @@ mod step;
 pub(crate) mod structured;
 pub mod tracking;
 
+pub(crate) use adaptation::AdaptationState;
+pub use adaptation::SpeedNoiseAdaptation;
 pub use config::{
     MAX_COVARIANCE_ENTRY, MAX_TS_S, MIN_TS_S, ObserverConfig, check_covariance, default_p0,
 };

@@ -62,9 +62,11 @@ fn build<T: Float>(
     disc: Discretization,
     update: CovarianceUpdate,
     tracking: Tracking,
+    voltage_delay_s: f64,
 ) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
     let conv = |v: f64| T::from_subset(&v);
     let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
+    cfg.voltage_delay_s = conv(voltage_delay_s);
     cfg.discretization = disc;
     cfg.covariance_update = update;
     match tracking {
@@ -107,7 +109,7 @@ impl Ekf {
     #[new]
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
-        tracking = "default"))]
+        tracking = "default", voltage_delay_s = 0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -120,6 +122,7 @@ impl Ekf {
         dtype: &str,
         covariance_update: &str,
         tracking: &str,
+        voltage_delay_s: f64,
     ) -> PyResult<Self> {
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
@@ -157,13 +160,37 @@ impl Ekf {
         let (observer, dtype) = match dtype {
             "float64" => (
                 Observer::F64(
-                    build(motor, ts, q, r, x0, p0, disc, update, tracking).map_err(cfg_err)?,
+                    build(
+                        motor,
+                        ts,
+                        q,
+                        r,
+                        x0,
+                        p0,
+                        disc,
+                        update,
+                        tracking,
+                        voltage_delay_s,
+                    )
+                    .map_err(cfg_err)?,
                 ),
                 "float64",
             ),
             "float32" => (
                 Observer::F32(
-                    build(motor, ts, q, r, x0, p0, disc, update, tracking).map_err(cfg_err)?,
+                    build(
+                        motor,
+                        ts,
+                        q,
+                        r,
+                        x0,
+                        p0,
+                        disc,
+                        update,
+                        tracking,
+                        voltage_delay_s,
+                    )
+                    .map_err(cfg_err)?,
                 ),
                 "float32",
             ),

@@ -4,7 +4,7 @@ use nalgebra::{Cholesky, Matrix4, SMatrix, Vector4};
 
 use super::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization, InnovationGate,
-    ParameterTracking,
+    ParameterTracking, SpeedNoiseAdaptation,
 };
 use crate::ekf::{CovarianceUpdate, all_finite};
 use crate::motor::positive;
@@ -46,6 +46,14 @@ pub struct ObserverConfig<T: Float> {
     /// Online tracking of `psi_f` and `Rs` (module [`tracking`](super::tracking) docs);
     /// `None` turns it off (the configured values are used as they are).
     pub parameter_tracking: Option<ParameterTracking<T>>,
+    /// The delay of the applied voltage behind the `u_prev` given to a step, seconds
+    /// (negative: the applied voltage leads it). The prediction turns `u_prev` by
+    /// `-w voltage_delay_s` (module docs, "Voltage timing"); 0 (the default) uses it as
+    /// given. Within `[-2 Ts, 2 Ts]`.
+    pub voltage_delay_s: T,
+    /// Speed noise adaptation: `Q_ww` raised while the innovations are larger than a
+    /// consistent filter's (module docs, "Speed noise adaptation"); `None` keeps `Q` fixed.
+    pub speed_noise_adaptation: Option<SpeedNoiseAdaptation<T>>,
 }
 
 impl<T: Float> ObserverConfig<T> {
@@ -69,6 +77,8 @@ impl<T: Float> ObserverConfig<T> {
             covariance_health: Some(CovarianceHealth::default()),
             consistency: Some(ConsistencyCheck::default_for(ts_s)),
             parameter_tracking: Some(ParameterTracking::default_for(ts_s)),
+            speed_noise_adaptation: Some(SpeedNoiseAdaptation::default()),
+            voltage_delay_s: T::zero(),
         }
     }
 
@@ -86,6 +96,7 @@ impl<T: Float> ObserverConfig<T> {
             covariance_health: None,
             consistency: None,
             parameter_tracking: None,
+            speed_noise_adaptation: None,
             ..Self::new(motor, ts_s)
         }
     }
@@ -128,6 +139,16 @@ impl<T: Float> ObserverConfig<T> {
         }
         if let Some(c) = &self.consistency {
             c.validate()?;
+        }
+        if let Some(a) = &self.speed_noise_adaptation {
+            a.validate()?;
+        }
+        let two_ts = self.ts_s + self.ts_s;
+        if !self.voltage_delay_s.is_finite() {
+            return Err(ConfigError::NonFinite(Param::VoltageDelay));
+        }
+        if !(self.voltage_delay_s >= -two_ts && self.voltage_delay_s <= two_ts) {
+            return Err(ConfigError::OutOfRange(Param::VoltageDelay));
         }
         if let Some(t) = &self.parameter_tracking {
             t.validate_for(self.motor.psi_f_wb, self.motor.rs_ohm, self.ts_s)?;

@@ -1,6 +1,6 @@
 //! The observer type [`PmsmObserver`]: its state, its construction and its accessors.
 
-use super::{ObserverConfig, ObserverCounters, PmsmModel};
+use super::{AdaptationState, ObserverConfig, ObserverCounters, PmsmModel};
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
 use super::model::Discrete;
@@ -34,6 +34,12 @@ pub struct PmsmObserver<T: Float> {
     pub(super) gate: Option<GateState<T>>,
     pub(super) health: Option<HealthState<T>>,
     pub(super) consistency: Option<ConsistencyState<T>>,
+    pub(super) adaptation: Option<AdaptationState<T>>,
+    /// `ObserverConfig::voltage_delay_s`.
+    pub(super) voltage_delay: T,
+    /// A voltage delay or the speed noise adaptation is configured (their code runs out of
+    /// line, behind this one test).
+    pub(super) extras: bool,
     /// Steps left in which a fused angle ([`Self::correct_angle`]) makes the angle observable
     /// at any speed.
     pub(super) fused: u32,
@@ -118,6 +124,12 @@ impl<T: Float> PmsmObserver<T> {
                 divergence_samples: h.divergence_samples,
             }),
             consistency: cfg.consistency.as_ref().map(ConsistencyState::new),
+            adaptation: cfg
+                .speed_noise_adaptation
+                .as_ref()
+                .map(AdaptationState::new),
+            voltage_delay: cfg.voltage_delay_s,
+            extras: cfg.voltage_delay_s != T::zero() || cfg.speed_noise_adaptation.is_some(),
             fused: 0,
             tracker,
             slow,

@@ -153,11 +153,15 @@ impl<T: Float> PmsmObserver<T> {
         self.counters.covariance_resets = self.counters.covariance_resets.saturating_add(1);
     }
 
-    /// Clears the gate's and the branch check's running state.
+    /// Clears the gate's, the branch check's, the consistency check's and the speed noise
+    /// adaptation's running state.
     pub(super) fn restart_safeguards(&mut self) {
         self.locked = false;
         if let Some(w) = &mut self.consistency {
             w.restart();
+        }
+        if let Some(a) = &mut self.adaptation {
+            a.restart();
         }
         if let Some(g) = &mut self.gate {
             g.inconsistent = 0;

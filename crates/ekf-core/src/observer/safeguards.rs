@@ -220,6 +220,8 @@ pub(crate) struct ConsistencyState<T> {
     pub(crate) max_baseline: T,
     pub(crate) fast: T,
     pub(crate) baseline: T,
+    /// `2 / baseline` (refreshed with it): the speed noise adaptation's scale.
+    pub(crate) two_over_baseline: T,
     /// Limits from the baseline (refreshed with it): `ratio b`, `ratio b / 2`,
     /// `single_ratio b`, `4 b`.
     pub(crate) limit: T,
@@ -250,6 +252,7 @@ impl<T: Float> ConsistencyState<T> {
             max_baseline: c.max_baseline,
             fast: two,
             baseline: two,
+            two_over_baseline: T::one(),
             limit: T::zero(),
             half_limit: T::zero(),
             single: T::zero(),
@@ -272,6 +275,7 @@ impl<T: Float> ConsistencyState<T> {
         self.half_limit = self.limit * to_t(0.5);
         self.single = self.single_ratio * self.baseline;
         self.clamp = self.baseline * to_t(4.0);
+        self.two_over_baseline = to_t::<T>(2.0) / self.baseline;
     }
 
     /// Restarts after a reset: untrusted until the hold has passed; the baseline is kept.

@@ -4,7 +4,7 @@
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 use super::host;
 use super::{Estimate, PmsmObserver};
-use nalgebra::Vector4;
+use nalgebra::{Matrix4, Vector4};
 
 use super::safeguards::{Events, Verdict, gate_accepted_high, gate_verdict};
 use super::structured::{self, Outcome, Sym4};
@@ -114,7 +114,22 @@ impl<T: Float> PmsmObserver<T> {
         &self,
         u_prev: [T; 2],
     ) -> (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>) {
-        let q = self.model.q_sym();
+        // One test on the common path for the voltage timing and the speed noise adaptation
+        // (both off in foc's drive); their work is out of line.
+        let q_adapted;
+        let mut q = self.model.q_sym();
+        let mut u_prev = u_prev;
+        if self.extras {
+            if self.voltage_delay != T::zero() {
+                u_prev = self.delayed(u_prev);
+            }
+            if let Some(a) = &self.adaptation
+                && a.factor > T::one()
+            {
+                q_adapted = self.adapted_q(a.factor);
+                q = &q_adapted;
+            }
+        }
         match (&self.tracker, &self.slow) {
             (Some(tr), Some(slow)) if TRACK => {
                 let k = &slow.k;
@@ -143,6 +158,38 @@ impl<T: Float> PmsmObserver<T> {
                 );
                 (xm, pm, None)
             }
+        }
+    }
+
+    /// `u` turned by `-w voltage_delay_s` (the voltage applied over the period, from the
+    /// logged one; module docs, "Voltage timing"), at the speed estimate of the period's start.
+    #[cold]
+    #[inline(never)]
+    fn delayed(&self, u: [T; 2]) -> [T; 2] {
+        let (s, c) = crate::trig::sin_cos_small(-(self.x[2] * self.voltage_delay));
+        [c * u[0] - s * u[1], s * u[0] + c * u[1]]
+    }
+
+    /// `Q` with `Q_ww` raised by the speed noise adaptation's `factor`.
+    #[cold]
+    #[inline(never)]
+    fn adapted_q(&self, factor: T) -> Matrix4<T> {
+        let mut q = *self.model.q_sym();
+        q[(2, 2)] *= factor;
+        q
+    }
+
+    /// The speed noise adaptation's bookkeeping after an accepted correction.
+    #[inline(always)]
+    fn extras_watch(&mut self, nis: T, tracking: bool) {
+        if let Some(a) = &mut self.adaptation {
+            a.watch(
+                nis,
+                self.consistency
+                    .as_ref()
+                    .map_or(T::one(), |w| w.two_over_baseline),
+                tracking,
+            );
         }
     }
 
@@ -300,6 +347,9 @@ impl<T: Float> PmsmObserver<T> {
             if self.fused != 0 {
                 self.fused -= 1;
             }
+        }
+        if self.extras {
+            self.extras_watch(c.nis, tracking);
         }
         self.last = c;
         self.events = Events::default();

@@ -315,7 +315,9 @@ pub fn read_log(path: &Path, scaling: Scaling) -> Result<DriveLog, ReplayError> 
 }
 
 /// The motor of a log and its nominal period (`RUN.toml`: `rs_ohm`, `ld_h` and `lq_h` or
-/// `ls_h`, `psi_f_wb`, `pole_pairs`, `ts_s`).
+/// `ls_h`, `psi_f_wb`, `pole_pairs`, `ts_s`; optional `voltage_delay_s`, the drive's delay of
+/// the applied voltage behind the logged one, negative for a lead, within `[-2 ts_s, 2 ts_s]`,
+/// default 0: [`ekf_core::ObserverConfig::voltage_delay_s`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ReplayMotor {
     /// Motor parameters.
@@ -323,6 +325,8 @@ pub struct ReplayMotor {
     pub params: MotorParams<f64>,
     /// Nominal control period, s.
     pub ts_s: f64,
+    /// Delay of the applied voltage behind the logged one, s (negative: a lead).
+    pub voltage_delay_s: f64,
 }
 
 #[derive(Deserialize)]
@@ -335,6 +339,7 @@ pub(super) struct MotorToml {
     pub(super) psi_f_wb: f64,
     pub(super) pole_pairs: u32,
     pub(super) ts_s: f64,
+    pub(super) voltage_delay_s: Option<f64>,
 }
 
 /// Parses a motor TOML; `file` names it in errors.
@@ -375,9 +380,18 @@ pub fn parse_motor(text: &str, file: &str) -> Result<ReplayMotor, ReplayError> {
     }
     let params = MotorParams::salient_from_f64(m.rs_ohm, ld, lq, m.psi_f_wb, m.pole_pairs);
     params.validate().map_err(|e| err(e.to_string()))?;
+    let voltage_delay_s = m.voltage_delay_s.unwrap_or(0.0);
+    if !(voltage_delay_s.is_finite() && voltage_delay_s.abs() <= 2.0 * m.ts_s) {
+        return Err(err(format!(
+            "`voltage_delay_s` must be within [-2 ts_s, 2 ts_s] = [{}, {}] s, is {voltage_delay_s}",
+            -2.0 * m.ts_s,
+            2.0 * m.ts_s
+        )));
+    }
     Ok(ReplayMotor {
         params,
         ts_s: m.ts_s,
+        voltage_delay_s,
     })
 }
 

@@ -202,10 +202,14 @@ fn trace(
     tr
 }
 
-/// Runs the default EKF (`ObserverConfig::new(motor, ts)`) over `log`.
+/// Runs the default EKF (`ObserverConfig::new(motor, ts)` with the motor file's
+/// `voltage_delay_s`) over `log`.
 pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
     log.check()?;
-    let cfg = ObserverConfig::new(motor.params, motor.ts_s);
+    let cfg = ObserverConfig {
+        voltage_delay_s: motor.voltage_delay_s,
+        ..ObserverConfig::new(motor.params, motor.ts_s)
+    };
     let mut obs = PmsmObserver::new(&cfg)?;
     Ok(trace(log, |u_prev, i, dt| {
         // The period that ended at this row (refused beyond 64 Ts: a rejected row).
