@@ -92,6 +92,12 @@ fn ndfeb() -> f64 {
     -0.0012
 }
 
+/// Largest temperature rise of `param_drift`, K (either sign).
+pub const MAX_TEMPERATURE_RISE_K: f64 = 500.0;
+/// Largest relative change per kelvin of `param_drift` (`rs_per_k`, `psi_f_per_k`; copper
+/// is 0.00393, NdFeB -0.0012).
+pub const MAX_PER_K: f64 = 0.02;
+
 /// One injected fault (`[[faults]]`; module docs list the kinds).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -373,9 +379,22 @@ impl FaultSpec {
                         );
                     }
                 }
-                finite("temperature_rise_k", temperature_rise_k)?;
-                finite("rs_per_k", rs_per_k)?;
-                finite("psi_f_per_k", psi_f_per_k)?;
+                let within = |name: &str, v: f64, max: f64, unit: &str| {
+                    if v.abs() <= max {
+                        Ok(())
+                    } else {
+                        let v = crate::error::plain(v);
+                        err(name, format!("allowed: abs(x) <= {max} {unit}, is {v}"))
+                    }
+                };
+                within(
+                    "temperature_rise_k",
+                    temperature_rise_k,
+                    MAX_TEMPERATURE_RISE_K,
+                    "K",
+                )?;
+                within("rs_per_k", rs_per_k, MAX_PER_K, "per K")?;
+                within("psi_f_per_k", psi_f_per_k, MAX_PER_K, "per K")?;
                 if 1.0 + rs_per_k * temperature_rise_k <= 0.0 {
                     return err(
                         "temperature_rise_k",

@@ -19,6 +19,11 @@ use crate::plant::inverter::InverterConfig;
 use crate::plant::load::{LoadTerm, Profile};
 use crate::plant::sensors::SensorConfig;
 
+mod bounds;
+pub use bounds::{
+    MAX_ANGLE_RAD, MAX_RATED_SPEED_RPM, MAX_RATED_TORQUE_NM, MAX_TIME_S, SPEED_FACTOR,
+    TORQUE_FACTOR,
+};
 mod configs;
 mod messages;
 mod noise;
@@ -405,6 +410,32 @@ impl Scenario {
         Ok(sc)
     }
 
+    /// Reads and validates a scenario from any serde data with the TOML file's layout (a
+    /// Python dict through pythonize, JSON, ...): errors name the key path as for a file
+    /// (`motor.pole_pairs: expected a whole number >= 0, got the string "four"`), `origin`
+    /// the source.
+    pub fn from_deserializer<'de, D: serde::Deserializer<'de>>(
+        de: D,
+        origin: &str,
+    ) -> Result<Self, SimError> {
+        let err = |field: String, problem: String| SimError::Scenario {
+            file: origin.to_string(),
+            field,
+            problem,
+        };
+        let sc: Scenario = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = e.path().to_string();
+            let field = if path.is_empty() || path == "." {
+                "-".to_string()
+            } else {
+                path
+            };
+            err(field, messages::user_words(e.inner().to_string().trim()))
+        })?;
+        sc.validate().map_err(|e| err(e.field, e.problem))?;
+        Ok(sc)
+    }
+
     /// Reads, parses and validates a scenario file.
     pub fn from_file(path: &std::path::Path) -> Result<Self, SimError> {
         let file = path.display().to_string();
@@ -629,10 +660,13 @@ mod tests {
         // Refused by foc itself (the I/f current above the current limit).
         let t = default_text().replace("if_current_a = 2.5", "if_current_a = 5.0");
         let (field, problem) = error_of(&t);
-        assert_eq!(field, "controller.foc");
-        // (the alignment current follows the I/f current and is checked first)
+        // (the alignment current follows the I/f current and is checked first: named by
+        // the key it follows, with foc's allowed range)
+        assert_eq!(field, "controller.foc.if_current_a");
         assert!(
-            problem.contains("foc refuses") && problem.contains("out of range"),
+            problem.contains("foc refuses")
+                && problem.contains("out of range")
+                && problem.contains("allowed: 0 < x <= controller.current_limit_a"),
             "{problem}"
         );
         // "sensored" is another spelling of "foc_sensored".
