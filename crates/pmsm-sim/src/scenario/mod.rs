@@ -411,9 +411,10 @@ impl Scenario {
     }
 
     /// Reads and validates a scenario from any serde data with the TOML file's layout (a
-    /// Python dict through pythonize, JSON, ...): errors name the key path as for a file
-    /// (`motor.pole_pairs: expected a whole number >= 0, got the string "four"`), `origin`
-    /// the source.
+    /// Python dict through pythonize, JSON, ...), with a file's messages: the data become a
+    /// TOML table first (what TOML cannot hold, a `None`, is refused there by its key path),
+    /// then the table is read as a file's is (`motor.pole_pairs: expected a whole number >= 0,
+    /// got the string "four"`). `origin` names the source in errors.
     pub fn from_deserializer<'de, D: serde::Deserializer<'de>>(
         de: D,
         origin: &str,
@@ -423,14 +424,20 @@ impl Scenario {
             field,
             problem,
         };
-        let sc: Scenario = serde_path_to_error::deserialize(de).map_err(|e| {
-            let path = e.path().to_string();
-            let field = if path.is_empty() || path == "." {
+        let field_of = |path: String| {
+            if path.is_empty() || path == "." {
                 "-".to_string()
             } else {
                 path
-            };
-            err(field, messages::user_words(e.inner().to_string().trim()))
+            }
+        };
+        let table: toml::Value = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = field_of(e.path().to_string());
+            err(path, messages::user_words(e.inner().to_string().trim()))
+        })?;
+        let sc: Scenario = serde_path_to_error::deserialize(table).map_err(|e| {
+            let path = field_of(e.path().to_string());
+            err(path, messages::user_words(e.inner().message().trim()))
         })?;
         sc.validate().map_err(|e| err(e.field, e.problem))?;
         Ok(sc)
@@ -634,6 +641,28 @@ mod tests {
         let (field, problem) = error_of(&t);
         assert_eq!(field, "load[1].kind");
         assert!(problem.contains("unknown variant"), "{problem}");
+    }
+
+    #[test]
+    fn other_serde_sources_get_a_files_messages() {
+        let table: toml::Value = toml::from_str(default_text()).unwrap_or_else(|e| panic!("{e}"));
+        let mut v = serde_json::to_value(&table).unwrap_or_else(|e| panic!("{e}"));
+        let sc = Scenario::from_deserializer(v.clone(), "dict").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(sc, Scenario::default_servo());
+        v["motor"]["pole_pairs"] = "four".into();
+        let e = Scenario::from_deserializer(v.clone(), "dict").map_err(|e| e.to_string());
+        assert_eq!(
+            e.err().as_deref(),
+            Some("dict: motor.pole_pairs: expected a whole number >= 0, got the string \"four\"")
+        );
+        v["motor"]["pole_pairs"] = 4.into();
+        v["duration_s"] = serde_json::Value::Null;
+        let e = Scenario::from_deserializer(v, "dict").map_err(|e| e.to_string());
+        assert!(
+            e.as_ref()
+                .is_err_and(|e| e.starts_with("dict: duration_s: ")),
+            "{e:?}"
+        );
     }
 
     #[test]
