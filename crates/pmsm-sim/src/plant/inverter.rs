@@ -54,6 +54,8 @@ use serde::{Deserialize, Serialize};
 use crate::error::FieldError;
 use crate::plant::frames::clarke;
 
+/// Smallest DC-bus voltage, V.
+pub const MIN_U_DC_V: f64 = 1.0;
 /// Largest DC-bus voltage, V.
 pub const MAX_U_DC_V: f64 = 1e5;
 
@@ -105,11 +107,12 @@ impl InverterConfig {
                 ),
             ));
         }
-        if !(self.u_dc_v > 0.0 && self.u_dc_v <= MAX_U_DC_V) {
+        if !(self.u_dc_v >= MIN_U_DC_V && self.u_dc_v <= MAX_U_DC_V) {
             return Err(FieldError::new(
                 f("u_dc_v"),
                 format!(
-                    "allowed: 0 < x <= {} V, is {}",
+                    "allowed: {} <= x <= {} V, is {}",
+                    plain(MIN_U_DC_V),
                     plain(MAX_U_DC_V),
                     plain(self.u_dc_v)
                 ),

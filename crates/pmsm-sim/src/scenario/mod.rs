@@ -33,6 +33,7 @@ mod presets;
 mod validate;
 pub use plan::RunPlan;
 pub use presets::PRESETS;
+pub use validate::{MIN_CURRENT_BANDWIDTH_HZ, MIN_SPEED_BANDWIDTH_HZ};
 
 /// rpm per rad/s.
 pub const RPM_PER_RAD_S: f64 = 30.0 / PI;

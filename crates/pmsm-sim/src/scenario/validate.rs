@@ -2,6 +2,12 @@
 //! refuses, is an error naming the field before anything runs.
 
 use super::*;
+use crate::error::plain;
+
+/// Smallest current-loop bandwidth, Hz.
+pub const MIN_CURRENT_BANDWIDTH_HZ: f64 = 1.0;
+/// Smallest speed-loop bandwidth, Hz.
+pub const MIN_SPEED_BANDWIDTH_HZ: f64 = 0.01;
 
 impl Scenario {
     /// Checks the scenario before a run; the error names the field.
@@ -30,6 +36,26 @@ impl Scenario {
         positive("controller.current_limit_a", c.current_limit_a)?;
         positive("controller.current_bandwidth_hz", c.current_bandwidth_hz)?;
         positive("controller.speed_bandwidth_hz", c.speed_bandwidth_hz)?;
+        // Plausible lower ends, before the relations between the loops.
+        for (name, v, min) in [
+            (
+                "controller.current_bandwidth_hz",
+                c.current_bandwidth_hz,
+                MIN_CURRENT_BANDWIDTH_HZ,
+            ),
+            (
+                "controller.speed_bandwidth_hz",
+                c.speed_bandwidth_hz,
+                MIN_SPEED_BANDWIDTH_HZ,
+            ),
+        ] {
+            if v < min {
+                return Err(FieldError::new(
+                    name,
+                    format!("allowed: x >= {} Hz, is {}", plain(min), plain(v)),
+                ));
+            }
+        }
         let f_pwm = 1.0 / self.inverter.ts_s;
         if c.current_bandwidth_hz > 0.1 * f_pwm {
             return Err(FieldError::new(
