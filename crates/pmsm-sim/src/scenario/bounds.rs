@@ -10,6 +10,11 @@
 //!
 //! | keys | allowed |
 //! |---|---|
+//! | `motor.rs_ohm`, `ld_h`, `lq_h`, `psi_f_wb`, `pole_pairs` | the observer's plausible ranges: `0 < Rs <= 1000` ohm, `1e-8 <= L <= 10` H, `0 < psi_f <= 100` Wb, `1 <= p <= 1000` ([`MotorModel::validate`]) |
+//! | `motor.j_kg_m2`, `b_nm_s_rad`, `coulomb_nm` | `1e-10 <= J <= 1e6` kg m^2, `0 <= B <= 1e6` N m s/rad, `0 <= Tc <= 1e6` N m |
+//! | `inverter.ts_s`, `u_dc_v` | `1e-7 <= ts <= 1` s (the observer's range), `1 <= u_dc <= 1e5` V ([`InverterConfig::validate`]) |
+//! | `controller.current_bandwidth_hz`, `speed_bandwidth_hz` | `>= 1` Hz and `<=` a tenth of the PWM frequency, `>= 0.01` Hz and `<=` a fifth of the current loop's |
+//! | `faults[i]` of `param_drift`: `temperature_rise_k`, `rs_per_k`, `psi_f_per_k` | `abs(x) <= 500` K, `abs(x) <= 0.02` per K |
 //! | `rated_speed_rpm` | `0 < x <= 1e6` rpm |
 //! | `rated_torque_nm` | `0 < x <= 1e6` N m |
 //! | `initial.speed_rpm`, `speed_ref_rpm.points[i]` speeds | `abs(x) <= 10 rated_speed_rpm` |
@@ -21,7 +26,8 @@
 //! | times of load terms and profiles (`time_s`, `start_s`, `end_s`, `ramp_s`, points' times) | `abs(x) <= 1e9` s |
 //! | `faults[i].value_a` (stuck, glitch) | `abs(x) <= 100` rated currents |
 //!
-//! (`w_rated` is `rated_speed_rpm` in mechanical rad/s.) The observers' refusals
+//! (`w_rated` is `rated_speed_rpm` in mechanical rad/s.) Values `foc` derives its own settings
+//! from (currents, speeds, times of `[controller.foc]`) are also checked by `foc`. The observers' refusals
 //! (`ekf_core::ConfigError`) and `foc`'s (`foc::ConfigError`) name an internal parameter; they
 //! are reported under the key the value came from (`Scenario::observer_error`,
 //! `Scenario::foc_error`): an
@@ -30,6 +36,8 @@
 
 use super::*;
 use crate::error::plain;
+#[cfg(doc)]
+use crate::plant::{MotorModel, inverter::InverterConfig};
 use ekf_core::{Matrix, Param};
 
 /// Largest rated speed, rpm.
