@@ -15,6 +15,7 @@
 //! | `inverter.ts_s`, `u_dc_v` | `1e-7 <= ts <= 1` s (the observer's range), `1 <= u_dc <= 1e5` V ([`InverterConfig::validate`]) |
 //! | `controller.current_bandwidth_hz`, `speed_bandwidth_hz` | `>= 1` Hz and `<=` a tenth of the PWM frequency, `>= 0.01` Hz and `<=` a fifth of the current loop's |
 //! | `faults[i]` of `param_drift`: `temperature_rise_k`, `rs_per_k`, `psi_f_per_k` | `abs(x) <= 500` K, `abs(x) <= 0.02` per K |
+//! | `faults[i].duration_s`, `time_constant_s` | `0 < x <= 1e9` s |
 //! | `rated_speed_rpm` | `0 < x <= 1e6` rpm |
 //! | `rated_torque_nm` | `0 < x <= 1e6` N m |
 //! | `initial.speed_rpm`, `speed_ref_rpm.points[i]` speeds | `abs(x) <= 10 rated_speed_rpm` |
