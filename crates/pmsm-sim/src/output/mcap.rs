@@ -19,8 +19,9 @@
 //! The other channels are JSON (`jsonschema`): one message each.
 //!
 //! Log and publish times are the simulated time `k Ts` in nanoseconds. A metadata record
-//! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks of 1 MiB, not
-//! compressed by default ([`LogCompression`]: this data compresses only 1.5-1.8x, and
+//! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks of at most 1 MiB
+//! (finished every 1024 periods: "Write errors" below), not compressed by default
+//! ([`LogCompression`]: this data compresses only 1.5-1.8x, and
 //! compressing a 700-byte message with lz4 or zstd, 1.3-1.8 us, costs several times what
 //! writing it to the file does, about 0.3 us).
 //! Chunk and data-section CRCs are not computed (0, "not computed" in the MCAP spec: the
