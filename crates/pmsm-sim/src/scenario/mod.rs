@@ -626,6 +626,13 @@ mod tests {
         assert_eq!(field, "-");
         // Physically invalid values, refused before the run.
         assert_eq!(error_of(&with("ld_h = -8.5e-3")).0, "motor.ld_h");
+        // ls_h (both axes) is resolved on reading: named as written.
+        let (field, problem) = error_of(&with("ls_h = 1e300"));
+        assert_eq!(field, "motor");
+        assert!(
+            problem.starts_with("motor.ls_h: allowed: 1e-8 <= x <= 10.0 H, is 1e300"),
+            "{problem}"
+        );
         let t = default_text().replace("ts_s = 1e-4", "ts_s = 0.0");
         assert_eq!(error_of(&t).0, "inverter.ts_s");
         let t = default_text().replace("dead_time_s = 0.5e-6", "dead_time_s = 2e-4");

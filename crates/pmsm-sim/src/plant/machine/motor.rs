@@ -70,6 +70,20 @@ impl TryFrom<MotorSection> for MotorModel {
             })?),
             None => None,
         };
+        // `ls_h` is resolved into `ld_h` and `lq_h` here: checked here, by its own name, where
+        // it sets an axis (the other keys are checked by `MotorModel::validate`).
+        if let Some(ls) = s.ls_h
+            && (s.ld_h.is_none() || s.lq_h.is_none())
+            && !(ekf_core::MIN_INDUCTANCE_H..=ekf_core::MAX_INDUCTANCE_H).contains(&ls)
+        {
+            use crate::error::plain;
+            return Err(format!(
+                "motor.ls_h: allowed: {} <= x <= {} H, is {}",
+                plain(ekf_core::MIN_INDUCTANCE_H),
+                plain(ekf_core::MAX_INDUCTANCE_H),
+                plain(ls)
+            ));
+        }
         let pick = |v: Option<f64>, from: fn(&ReferenceMotor) -> f64, key: &str| {
             v.or(base.map(from)).ok_or_else(|| {
                 format!("motor.{key} is missing (give it, or motor.catalog = a reference motor)")
