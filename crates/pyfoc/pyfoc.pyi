@@ -48,7 +48,13 @@ class Status(enum.IntEnum):
     """The filter ran but the angle is not trustworthy: not converged, near standstill, or the
     innovations far out of line (the model no longer explains the currents: a lost filter)."""
     REJECTED = 2
-    """Non-finite voltage or current: the sample was refused and the state kept."""
+    """The step was refused and the state kept: a voltage or current that is not finite (NaN,
+    +-inf); one so large, though finite, that the step's arithmetic overflows (the predicted
+    state or covariance would not be finite, e.g. 1e300 V or A); a singular innovation
+    covariance; with ``dt``, a period not in (0, 64 ts]. Finite samples the filter can
+    compute with are filtered, however implausible (they show as large innovations, NIS, and
+    UNCERTAIN). A refused row is data, not an error: one corrupt sample costs its row, not
+    the call."""
 
 class PyfocError(ValueError):
     """Base class of pyfoc's errors."""
@@ -167,7 +173,8 @@ class Ekf:
     sequences of numbers); None, str, and ndarrays of complex, object, string, datetime or
     structured dtype raise TypeError, wrong shapes ValueError (naming the argument), records
     too large for the machine's memory MemoryError (before anything is allocated).
-    Non-finite samples are rejected rows (Status.REJECTED).
+    Samples the filter refuses are rejected rows (Status.REJECTED: non-finite, or so large
+    that the step overflows), not errors.
 
     Properties are read-only; ``state``, ``covariance`` and ``u_last`` return copies.
 

@@ -73,3 +73,20 @@ pub enum SimError {
         message: String,
     },
 }
+
+/// `x` as a TOML float, shortest round-trip: plain decimals (`2.875`, `0.001`, `1.0`) from
+/// 1e-4 to 1e16, exponent form outside (`1.5e-9`); never Rust's `2.875000e0`. The numbers of
+/// error messages and of tune's proposals.
+pub fn plain(x: f64) -> String {
+    let a = x.abs();
+    let s = if a == 0.0 || (1e-4..1e16).contains(&a) || !a.is_finite() {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    };
+    if x.is_finite() && !s.contains(['.', 'e']) {
+        format!("{s}.0")
+    } else {
+        s
+    }
+}

@@ -19,6 +19,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::SimError;
 use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
+use pmsm_sim::output::file::write_bytes;
 use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::output::plot::PlotSink;
 use pmsm_sim::output::report;
@@ -547,6 +548,8 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         }
         written.push(("MCAP log", l.finish(Some(metrics))?));
     }
+    // Whole files: written under a temporary name and renamed when complete, removed on an
+    // error (output::file): never an empty or cut plot.svg or metrics.json.
     if let Some(p) = &plot {
         p.write_svg(
             &plot_path,
@@ -558,12 +561,10 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     // metrics.json: the same for identical runs; the wall-clock fields go to timing.json.
     let (metrics_json, timing_json) =
         report::json_split(metrics).map_err(|e| out_err(&metrics_path, e))?;
-    std::fs::write(&metrics_path, format!("{metrics_json}\n"))
-        .map_err(|e| out_err(&metrics_path, e))?;
+    write_bytes(&metrics_path, format!("{metrics_json}\n").as_bytes())?;
     written.push(("metrics", metrics_path.clone()));
     let timing_path = dir.join("timing.json");
-    std::fs::write(&timing_path, format!("{timing_json}\n"))
-        .map_err(|e| out_err(&timing_path, e))?;
+    write_bytes(&timing_path, format!("{timing_json}\n").as_bytes())?;
     written.push(("timing", timing_path.clone()));
 
     if args.json {
@@ -618,7 +619,7 @@ fn faults_command(out: &Path, t_fault_s: f64, t_end_s: f64) -> Result<ExitCode, 
     let md = markdown(&results, &opts);
     std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
     let path = out.join("faults.md");
-    std::fs::write(&path, &md).map_err(|e| out_err(&path, e))?;
+    write_bytes(&path, md.as_bytes())?;
     print!("{md}");
     println!("\nwritten to {}", path.display());
     let unexpected: Vec<&str> = results
@@ -693,10 +694,10 @@ fn write_table(
     print!("{md}");
     std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
     let md_path = out.join(format!("{stem}.md"));
-    std::fs::write(&md_path, md).map_err(|e| out_err(&md_path, e))?;
+    write_bytes(&md_path, md.as_bytes())?;
     let json_path = out.join(format!("{stem}.json"));
     let json = serde_json::to_string_pretty(value).map_err(|e| out_err(&json_path, e))?;
-    std::fs::write(&json_path, format!("{json}\n")).map_err(|e| out_err(&json_path, e))?;
+    write_bytes(&json_path, format!("{json}\n").as_bytes())?;
     println!("\noutputs: {} {}", md_path.display(), json_path.display());
     Ok(ExitCode::SUCCESS)
 }

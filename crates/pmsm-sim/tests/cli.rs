@@ -1,4 +1,4 @@
-//! The command line: outputs, bad input, non-finite stops and Ctrl-C, with the MCAP files
+//! The command line: outputs, bad input, values refused before the run and Ctrl-C, with the MCAP files
 //! read back (finished: summary and footer present).
 
 use std::collections::BTreeMap;
@@ -159,12 +159,12 @@ fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
         (
             good.replace(catalog, "catalog = \"servo\"\npsi_f_wb = -0.175"),
             "motor.psi_f_wb",
-            "> 0",
+            "allowed: 0.0 < x <= 100.0 Wb, is -0.175",
         ),
         (
             good.replace("ts_s = 1e-4", "ts_s = 0.0"),
             "inverter.ts_s",
-            "> 0",
+            "allowed: 1e-7 <= x <= 1.0 s",
         ),
         (
             good.replace("dead_time_s = 0.5e-6", "dead_time_s = 1e-3"),
@@ -213,29 +213,27 @@ fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
 }
 
 #[test]
-fn a_non_finite_run_stops_with_a_diagnostic_and_a_readable_log() {
+fn a_value_that_would_blow_up_the_plant_is_refused_before_the_run() {
+    // A load of 1e300 N m made the plant's currents NaN one period after it acted; it is now
+    // refused by its key, with the allowed range, before anything is written.
     let dir = temp_dir("nonfinite");
     let body = text(&run(&["show"], &dir).stdout)
         .replace("after_nm = 1.5", "after_nm = 1e300")
         .replace("time_s = 0.9", "time_s = 0.02");
     std::fs::write(dir.join("blow.toml"), body).unwrap_or_else(|e| panic!("{e}"));
-    let o = run(
+    for args in [
+        &["check", "blow.toml"][..],
         &["run", "blow.toml", "--duration", "0.1", "--out", "o"],
-        &dir,
-    );
-    let err = text(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("non-finite") && err.contains("t = 0.02"),
-        "{err}"
-    );
-    let msgs = read_mcap(&dir.join("o/run.mcap"));
-    let n = msgs["/pmsm_sim/period"].len();
-    assert!((200..1000).contains(&n), "{n} periods");
-    let ev = &msgs["/pmsm_sim/event"][0];
-    assert_eq!(ev["level"], "error");
-    assert!(ev["message"].as_str().unwrap_or("").contains("non-finite"));
-    assert_eq!(msgs["/pmsm_sim/metrics"].len(), 1);
+    ] {
+        let o = run(args, &dir);
+        let err = text(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("blow.toml: load[0].after_nm: allowed: abs(x) <= 100 rated_torque_nm"),
+            "{err}"
+        );
+        assert!(!dir.join("o").exists(), "{err}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -23,11 +23,10 @@ pub(crate) fn scenario_of(obj: &Bound<'_, PyAny>) -> PyResult<pmsm_sim::scenario
         // Deserialization recurses with the data (internally tagged enums buffer whole
         // values): a recursive or absurdly deep dict is refused before it can exhaust the stack.
         nesting_within(obj, 32, "scenario dict")?;
-        let sc: Scenario = pythonize::depythonize(obj)
-            .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
-        sc.validate()
-            .map_err(|e| ConfigError::new_err(format!("scenario dict: {e}")))?;
-        return Ok(sc);
+        // Errors name the key path as for a TOML file ("scenario dict: motor.pole_pairs:
+        // expected a whole number >= 0, got the string \"four\"").
+        let mut de = pythonize::Depythonizer::from_object(obj);
+        return Scenario::from_deserializer(&mut de, "scenario dict").map_err(err);
     }
     let text: String = py
         .import("os")?

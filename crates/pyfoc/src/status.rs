@@ -54,8 +54,10 @@ impl RowStatus {
             "Status of an estimate: the value of each row of `Ekf.run(...)[\"status\"]` (int8) \
              and the `status` of `Ekf.step`. TRACKING: the angle's standard deviation is below \
              its limit; UNCERTAIN: the filter ran but the angle is not trustworthy yet (not \
-             converged, or near standstill); REJECTED: non-finite voltage or current, the sample \
-             was refused and the state kept.",
+             converged, or near standstill); REJECTED: the step was refused and the state kept (a \
+             voltage or current that is not finite, or so large that the step's arithmetic \
+             overflows, e.g. 1e300; a singular innovation covariance; with dt, a period not in \
+             (0, 64 ts]).",
         )?;
         Ok(cls)
     }

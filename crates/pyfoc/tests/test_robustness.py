@@ -184,6 +184,35 @@ def test_non_finite_and_extreme_samples(value, where):
         assert pyfoc.Status.REJECTED in out["status"]
 
 
+@pytest.mark.parametrize("u_prev, i", [
+    ([1e300, 0.0], [0.0, 0.0]), ([0.0, 0.0], [1e300, 0.0]), ([0.0, -1e300], [0.0, 1e300])])
+def test_a_finite_sample_that_overflows_the_step_is_rejected_and_the_state_kept(u_prev, i):
+    # REJECTED covers every refused step (docs/python.md, "Errors"): here a finite sample so
+    # large that the step's arithmetic overflows. Not an exception: it costs its row.
+    f = ekf()
+    f.run(*good(50))
+    x, p = f.state, f.covariance
+    assert f.step(u_prev, i)["status"] is pyfoc.Status.REJECTED
+    np.testing.assert_array_equal(f.state, x)
+    np.testing.assert_array_equal(f.covariance, p)
+    # In a record: a voltage acts on the next row (run's timing), a current on its own.
+    u, i_ab = good(20)
+    u[5], i_ab[5] = u_prev, i
+    out = f.run(u, i_ab)
+    expected = ([5] if max(map(abs, i)) > 1e200 else []) + ([6] if max(map(abs, u_prev)) > 1e200 else [])
+    assert sorted(set(expected)) == np.flatnonzero(out["status"] == pyfoc.Status.REJECTED).tolist()
+    assert np.all(np.isfinite(f.state)) and np.all(np.isfinite(f.covariance))
+
+
+@pytest.mark.parametrize("u_prev, i", [([1e4, 0.0], [0.0, 0.0]), ([0.0, 0.0], [0.0, 1e20])])
+def test_a_large_sample_the_filter_can_compute_with_is_filtered(u_prev, i):
+    f = ekf()
+    f.run(*good(50))
+    est = f.step(u_prev, i)
+    assert est["status"] is not pyfoc.Status.REJECTED
+    assert np.all(np.isfinite(f.state)) and np.all(np.isfinite(f.covariance))
+
+
 def test_all_nan_record():
     f = ekf()
     out = f.run(np.full((20, 2), np.nan), np.full((20, 2), np.nan))
@@ -456,6 +485,32 @@ def test_malformed_scenario_dicts_are_config_errors(fn):
     d = fn(scenario_dict())
     with pytest.raises(pyfoc.ConfigError):
         pyfoc.simulate(d, duration=0.01)
+
+
+@pytest.mark.parametrize("path, value, key, problem", [
+    # The messages of a TOML file (tests/cli.rs), without its line and column.
+    (("motor", "pole_pairs"), "four", "motor.pole_pairs",
+     'expected a whole number >= 0, got the string "four"'),
+    (("motor", "pole_pairs"), 2.5, "motor.pole_pairs",
+     "expected a whole number >= 0, got the number 2.5"),
+    (("inverter", "ts_s"), "fast", "inverter.ts_s", 'expected a number, got the string "fast"'),
+    (("controller", "foc", "if_current_a"), [1.0], "controller.foc.if_current_a",
+     "expected a number, got an array"),
+    # (a load term is read whole, by its kind: a file names it as load[0] too)
+    (("load", 0, "after_nm"), "1.5", "load[0]", 'expected a number, got the string "1.5"'),
+    (("speed_ref_rpm", "points"), "ramp", "speed_ref_rpm.points", "ramp"),
+    (("duration_s",), None, "duration_s", ""),
+    # Values refused by the validation name their key and the allowed range.
+    (("load", 0, "after_nm"), 1e300, "load[0].after_nm", "allowed"),
+    (("initial", "speed_rpm"), 1e300, "initial.speed_rpm", "allowed"),
+])
+def test_dict_errors_name_the_key_path_as_toml_does(path, value, key, problem):
+    d = mutate(path, value)(scenario_dict())
+    with pytest.raises(pyfoc.ConfigError) as e:
+        pyfoc.simulate(d, duration=0.01)
+    text = str(e.value)
+    assert text.startswith(f"scenario dict: {key}: "), text
+    assert problem in text, text
 
 
 @pytest.mark.parametrize("bad", [

@@ -19,8 +19,9 @@
 //! The other channels are JSON (`jsonschema`): one message each.
 //!
 //! Log and publish times are the simulated time `k Ts` in nanoseconds. A metadata record
-//! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks of 1 MiB, not
-//! compressed by default ([`LogCompression`]: this data compresses only 1.5-1.8x, and
+//! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks of at most 1 MiB
+//! (finished every 1024 periods: "Write errors" below), not compressed by default
+//! ([`LogCompression`]: this data compresses only 1.5-1.8x, and
 //! compressing a 700-byte message with lz4 or zstd, 1.3-1.8 us, costs several times what
 //! writing it to the file does, about 0.3 us).
 //! Chunk and data-section CRCs are not computed (0, "not computed" in the MCAP spec: the
@@ -46,22 +47,32 @@
 //! state, Ctrl-C) still ends in `finish`, after an `/pmsm_sim/event` message; and should the
 //! log be dropped without it (a panic), its `Drop` writes the periods still queued and the
 //! `mcap` writer's `Drop` finishes the file.
+//!
+//! # Write errors (a full disk)
+//!
+//! The writer finishes a chunk every [`CHUNK_BATCHES`] batches (1024 periods, about 1 MB) and
+//! after the scenario message, and the file ([`LogFile`]) remembers where the last complete
+//! chunk ends. On a write error the file is cut back there and closed with a footer without
+//! a summary ([`LogFile::salvage`]): a valid MCAP file with every period up to that chunk,
+//! which pmsm-sim's readers and the Python `mcap` package read (linearly). The error names
+//! the file and the operating system's cause ("No space left on device (os error 28)").
+//! A log that cannot even be started is removed.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use mcap::records::{MessageHeader, Metadata};
-use mcap::{Compression, WriteOptions, Writer};
+use mcap::{Compression, McapError, WriteOptions, Writer};
 use serde::Serialize;
 
 pub mod proto;
 
 use crate::SimError;
 use crate::output::SampleSink;
+use crate::output::file::LogFile;
 use crate::output::metrics::RunMetrics;
 use crate::output::record::Sample;
 use crate::scenario::Scenario;
@@ -128,6 +139,9 @@ const BATCH: usize = 256;
 /// Batches in flight (queued for the writer thread or being written) before
 /// [`SampleSink::record`] waits for it: bounds the memory and keeps the writer close behind.
 const IN_FLIGHT: usize = 4;
+/// Batches per chunk: the writer finishes a chunk (and marks the file complete up to it)
+/// after this many batches, so that a write error loses at most these periods.
+pub const CHUNK_BATCHES: u32 = 4;
 
 /// An open MCAP log (module docs).
 ///
@@ -157,7 +171,11 @@ struct WriterThread {
 /// The writer and its state: on the writer thread while the run goes, back on the caller's
 /// thread for the last messages.
 struct Inner {
-    writer: Writer<BufWriter<File>>,
+    writer: Writer<BufWriter<LogFile>>,
+    /// The file (shared with the writer): chunk marks and salvage.
+    file: LogFile,
+    /// Batches written since the last complete chunk.
+    batches: u32,
     encoding: LogEncoding,
     period: u16,
     scenario: u16,
@@ -193,7 +211,32 @@ struct EventMessage<'a> {
 impl McapLog {
     /// Creates the log at `path`, writes the scenario, and starts the writer thread.
     pub fn create(path: &Path, scenario: &Scenario, options: LogOptions) -> Result<Self, SimError> {
-        let file = File::create(path).map_err(|e| out_err(path, e))?;
+        Self::create_limited(path, scenario, options, None)
+    }
+
+    /// [`McapLog::create`] on a disk of `limit` bytes: writes past it fail as on a full disk
+    /// (the tests' injected write error; `None`: the real disk). A log that cannot be
+    /// started is removed.
+    pub fn create_limited(
+        path: &Path,
+        scenario: &Scenario,
+        options: LogOptions,
+        limit: Option<u64>,
+    ) -> Result<Self, SimError> {
+        let r = Self::start(path, scenario, options, limit);
+        if r.is_err() {
+            let _ = std::fs::remove_file(path);
+        }
+        r
+    }
+
+    fn start(
+        path: &Path,
+        scenario: &Scenario,
+        options: LogOptions,
+        limit: Option<u64>,
+    ) -> Result<Self, SimError> {
+        let file = LogFile::create(path, limit).map_err(|e| out_err(path, e))?;
         let opts = WriteOptions::new()
             .compression(options.compression.to_mcap())
             .compression_threads(0)
@@ -204,17 +247,17 @@ impl McapLog {
             .profile("")
             .library(format!("pmsm-sim {}", env!("CARGO_PKG_VERSION")));
         let mut writer = opts
-            .create(BufWriter::with_capacity(1 << 20, file))
-            .map_err(|e| out_err(path, e))?;
+            .create(BufWriter::with_capacity(1 << 20, file.clone()))
+            .map_err(|e| out_err(path, io_text(e)))?;
         let no_meta = BTreeMap::new();
         // (schema name, schema encoding, schema, topic, message encoding)
         let mut add = |name: &str, encoding: &str, schema: &[u8], topic: &str, message_encoding| {
             let id = writer
                 .add_schema(name, encoding, schema)
-                .map_err(|e| out_err(path, e))?;
+                .map_err(|e| out_err(path, io_text(e)))?;
             writer
                 .add_channel(id, topic, message_encoding, &no_meta)
-                .map_err(|e| out_err(path, e))
+                .map_err(|e| out_err(path, io_text(e)))
         };
         let period = match options.encoding {
             LogEncoding::Protobuf => {
@@ -242,10 +285,12 @@ impl McapLog {
                     ("scenario_toml".to_string(), toml.clone()),
                 ]),
             })
-            .map_err(|e| out_err(path, e))?;
+            .map_err(|e| out_err(path, io_text(e)))?;
         let ts_ns = (scenario.ts_s() * 1e9).round() as u64;
         let mut inner = Inner {
             writer,
+            file,
+            batches: 0,
             encoding: options.encoding,
             period,
             scenario: scenario_ch,
@@ -264,6 +309,7 @@ impl McapLog {
         let ch = inner.scenario;
         inner
             .write_json(ch, 0, &msg)
+            .and_then(|()| inner.chunk_done())
             .map_err(|e| out_err(path, e))?;
         let thread = WriterThread::spawn(inner).map_err(|e| out_err(path, e))?;
         Ok(Self {
@@ -394,12 +440,18 @@ impl McapLog {
             let ch = inner.metrics;
             inner.write_json(ch, t, m).map_err(|e| out_err(&path, e))?;
         }
-        inner.writer.finish().map_err(|e| out_err(&path, e))?;
+        if let Err(e) = inner.writer.finish() {
+            return Err(out_err(&path, inner.fail(e)));
+        }
         let Some(inner) = self.inner.take() else {
             return Err(out_err(&path, "log already finished"));
         };
-        let mut file = inner.writer.into_inner();
-        file.flush().map_err(|e| out_err(&path, e))?;
+        let file = inner.file.clone();
+        let mut buffered = inner.writer.into_inner();
+        if let Err(e) = buffered.flush() {
+            let _ = file.salvage();
+            return Err(out_err(&path, format!("{e}{KEPT}")));
+        }
         Ok(path)
     }
 }
@@ -425,6 +477,10 @@ impl WriterThread {
                     for s in &batch {
                         inner.period(s)?;
                     }
+                    inner.batches += 1;
+                    if inner.batches >= CHUNK_BATCHES {
+                        inner.chunk_done()?;
+                    }
                     batch.clear();
                     // The caller may have stopped taking them back: then it is dropped.
                     let _ = give_back.try_send(batch);
@@ -439,7 +495,44 @@ impl WriterThread {
     }
 }
 
+/// What a write error's message adds: the log's state.
+const KEPT: &str = "; the log is kept up to its last complete chunk";
+
+/// The text of an `mcap` error: the I/O error's own ("No space left on device (os error
+/// 28)"), not mcap's wrapper ("I/O error from writing, or reading a compression stream").
+fn io_text(e: McapError) -> String {
+    match e {
+        McapError::Io(io) => io.to_string(),
+        other => other.to_string(),
+    }
+}
+
 impl Inner {
+    /// A write error: the file is cut back to its last complete chunk and closed there
+    /// (module docs, "Write errors"); the error's text.
+    fn fail(&mut self, e: McapError) -> String {
+        let salvaged = self.file.salvage();
+        match salvaged {
+            Ok(()) => format!("{}{KEPT}", io_text(e)),
+            Err(s) => format!(
+                "{}; the log ends after its last complete chunk, unclosed ({s})",
+                io_text(e)
+            ),
+        }
+    }
+
+    /// Finishes the current chunk, flushes it to the file and marks it complete.
+    fn chunk_done(&mut self) -> Result<(), String> {
+        match self.writer.flush() {
+            Ok(()) => {
+                self.file.mark_complete();
+                self.batches = 0;
+                Ok(())
+            }
+            Err(e) => Err(self.fail(e)),
+        }
+    }
+
     fn write_json<T: Serialize>(
         &mut self,
         channel: u16,
@@ -449,9 +542,10 @@ impl Inner {
         self.buf.clear();
         serde_json::to_writer(&mut self.buf, value).map_err(|e| e.to_string())?;
         let header = self.header(channel, t_ns);
-        self.writer
-            .write_to_known_channel(&header, &self.buf)
-            .map_err(|e| e.to_string())
+        match self.writer.write_to_known_channel(&header, &self.buf) {
+            Ok(()) => Ok(()),
+            Err(e) => Err(self.fail(e)),
+        }
     }
 
     /// The header of the next message (sequence numbers count every message of the file).
@@ -475,9 +569,10 @@ impl Inner {
             LogEncoding::Protobuf => {
                 let header = self.header(ch, t_ns);
                 let data = self.proto.encode(sample);
-                self.writer
-                    .write_to_known_channel(&header, data)
-                    .map_err(|e| e.to_string())
+                match self.writer.write_to_known_channel(&header, data) {
+                    Ok(()) => Ok(()),
+                    Err(e) => Err(self.fail(e)),
+                }
             }
             LogEncoding::Json => self.write_json(ch, t_ns, sample),
         }

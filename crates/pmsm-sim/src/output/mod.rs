@@ -5,9 +5,11 @@
 //! | [`record`] | one period's record ([`Sample`](record::Sample)): truth, measurements, control, observers |
 //! | [`metrics`] | the run's metrics (tracking, observer accuracy, start-up) |
 //! | [`mcap`] | the MCAP log (protobuf or JSON period channel, scenario and metrics) |
+//! | [`file`](mod@file) | writing files so that an I/O error leaves no cut file: whole files renamed into place, the log cut back to its last complete chunk |
 //! | [`plot`] | the SVG plot |
 //! | [`report`] | the text and Markdown summaries |
 
+pub mod file;
 pub mod mcap;
 pub mod metrics;
 pub mod plot;

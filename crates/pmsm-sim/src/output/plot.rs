@@ -114,11 +114,11 @@ impl PlotSink {
 
     /// Draws the SVG at `path` with `title` on top.
     pub fn write_svg(&self, path: &Path, title: &str) -> Result<(), SimError> {
-        let err = |e: &dyn core::fmt::Display| SimError::Output {
-            path: path.display().to_string(),
-            message: format!("cannot draw the plot: {e}"),
-        };
-        self.draw(path, title).map_err(|e| err(&e))
+        // Drawn under a temporary name, renamed when complete (crate::output::file).
+        crate::output::file::write_whole(path, |tmp| {
+            self.draw(tmp, title)
+                .map_err(|e| format!("cannot draw the plot: {e}"))
+        })
     }
 
     fn draw(&self, path: &Path, title: &str) -> Result<(), Box<dyn std::error::Error>> {

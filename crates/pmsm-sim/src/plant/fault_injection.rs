@@ -92,6 +92,14 @@ fn ndfeb() -> f64 {
     -0.0012
 }
 
+/// Longest fault duration (and `param_drift` time constant), s.
+pub const MAX_FAULT_DURATION_S: f64 = 1e9;
+/// Largest temperature rise of `param_drift`, K (either sign).
+pub const MAX_TEMPERATURE_RISE_K: f64 = 500.0;
+/// Largest relative change per kelvin of `param_drift` (`rs_per_k`, `psi_f_per_k`; copper
+/// is 0.00393, NdFeB -0.0012).
+pub const MAX_PER_K: f64 = 0.02;
+
 /// One injected fault (`[[faults]]`; module docs list the kinds).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -312,8 +320,16 @@ impl FaultSpec {
         }
         if let Some(d) = self.duration_s() {
             let drift = matches!(self, FaultSpec::ParamDrift { .. });
-            if !(d.is_finite() && (d > 0.0 || drift && d == 0.0)) {
-                return err("duration_s", format!("must be finite and > 0, is {d}"));
+            if !(d <= MAX_FAULT_DURATION_S && (d > 0.0 || drift && d == 0.0)) {
+                let lo = if drift { "0 <=" } else { "0 <" };
+                return err(
+                    "duration_s",
+                    format!(
+                        "allowed: {lo} x <= {} s, is {}",
+                        crate::error::plain(MAX_FAULT_DURATION_S),
+                        crate::error::plain(d)
+                    ),
+                );
             }
         }
         let finite = |name: &str, v: f64| {
@@ -363,8 +379,15 @@ impl FaultSpec {
                 ..
             } => {
                 if let Some(tau) = time_constant_s {
-                    if !(tau.is_finite() && tau > 0.0) {
-                        return err("time_constant_s", format!("must be positive, is {tau}"));
+                    if !(tau > 0.0 && tau <= MAX_FAULT_DURATION_S) {
+                        return err(
+                            "time_constant_s",
+                            format!(
+                                "allowed: 0 < x <= {} s, is {}",
+                                crate::error::plain(MAX_FAULT_DURATION_S),
+                                crate::error::plain(tau)
+                            ),
+                        );
                     }
                     if duration_s.is_some() {
                         return err(
@@ -373,9 +396,22 @@ impl FaultSpec {
                         );
                     }
                 }
-                finite("temperature_rise_k", temperature_rise_k)?;
-                finite("rs_per_k", rs_per_k)?;
-                finite("psi_f_per_k", psi_f_per_k)?;
+                let within = |name: &str, v: f64, max: f64, unit: &str| {
+                    if v.abs() <= max {
+                        Ok(())
+                    } else {
+                        let v = crate::error::plain(v);
+                        err(name, format!("allowed: abs(x) <= {max} {unit}, is {v}"))
+                    }
+                };
+                within(
+                    "temperature_rise_k",
+                    temperature_rise_k,
+                    MAX_TEMPERATURE_RISE_K,
+                    "K",
+                )?;
+                within("rs_per_k", rs_per_k, MAX_PER_K, "per K")?;
+                within("psi_f_per_k", psi_f_per_k, MAX_PER_K, "per K")?;
                 if 1.0 + rs_per_k * temperature_rise_k <= 0.0 {
                     return err(
                         "temperature_rise_k",
@@ -477,8 +513,9 @@ impl FaultInjector {
                 let k1 = match (spec, spec.duration_s()) {
                     (FaultSpec::Glitch { .. }, _) | (FaultSpec::Dropout { .. }, None) => k0 + 1,
                     (FaultSpec::ParamDrift { .. }, None) => k0,
-                    (FaultSpec::ParamDrift { .. }, Some(d)) => k0 + periods(d),
-                    (_, Some(d)) => k0 + periods(d).max(1),
+                    // (saturating: a window past the run's end is "to the end")
+                    (FaultSpec::ParamDrift { .. }, Some(d)) => k0.saturating_add(periods(d)),
+                    (_, Some(d)) => k0.saturating_add(periods(d).max(1)),
                     (_, None) => u64::MAX,
                 };
                 let tau_periods = match spec {

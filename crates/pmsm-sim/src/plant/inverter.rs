@@ -54,6 +54,11 @@ use serde::{Deserialize, Serialize};
 use crate::error::FieldError;
 use crate::plant::frames::clarke;
 
+/// Smallest DC-bus voltage, V.
+pub const MIN_U_DC_V: f64 = 1.0;
+/// Largest DC-bus voltage, V.
+pub const MAX_U_DC_V: f64 = 1e5;
+
 /// Inverter settings (`[inverter]` in a scenario).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -89,16 +94,28 @@ impl InverterConfig {
     /// Checks the settings; errors name the field (`inverter.<name>`).
     pub fn validate(&self) -> Result<(), FieldError> {
         let f = |name: &str| format!("inverter.{name}");
-        if !(self.ts_s.is_finite() && self.ts_s > 0.0) {
+        use crate::error::plain;
+        use ekf_core::observer::{MAX_TS_S, MIN_TS_S};
+        if !(self.ts_s >= MIN_TS_S && self.ts_s <= MAX_TS_S) {
             return Err(FieldError::new(
                 f("ts_s"),
-                format!("must be finite and > 0, is {}", self.ts_s),
+                format!(
+                    "allowed: {} <= x <= {} s (the observer's range), is {}",
+                    plain(MIN_TS_S),
+                    plain(MAX_TS_S),
+                    plain(self.ts_s)
+                ),
             ));
         }
-        if !(self.u_dc_v.is_finite() && self.u_dc_v > 0.0) {
+        if !(self.u_dc_v >= MIN_U_DC_V && self.u_dc_v <= MAX_U_DC_V) {
             return Err(FieldError::new(
                 f("u_dc_v"),
-                format!("must be finite and > 0, is {}", self.u_dc_v),
+                format!(
+                    "allowed: {} <= x <= {} V, is {}",
+                    plain(MIN_U_DC_V),
+                    plain(MAX_U_DC_V),
+                    plain(self.u_dc_v)
+                ),
             ));
         }
         if !(self.dead_time_s.is_finite() && self.dead_time_s >= 0.0) {

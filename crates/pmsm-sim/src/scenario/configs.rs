@@ -123,12 +123,7 @@ impl Scenario {
         if let Some(rpm) = s.max_speed_rpm {
             cfg.max_speed_rad_s = rpm_to_e(rpm);
         }
-        cfg.validate().map_err(|e| {
-            FieldError::new(
-                "controller.foc",
-                format!("foc refuses the configuration: {e}"),
-            )
-        })?;
+        cfg.validate().map_err(|e| self.foc_error(e))?;
         Ok(cfg)
     }
 

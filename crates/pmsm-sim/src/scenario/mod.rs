@@ -19,6 +19,11 @@ use crate::plant::inverter::InverterConfig;
 use crate::plant::load::{LoadTerm, Profile};
 use crate::plant::sensors::SensorConfig;
 
+mod bounds;
+pub use bounds::{
+    MAX_ANGLE_RAD, MAX_RATED_SPEED_RPM, MAX_RATED_TORQUE_NM, MAX_TIME_S, SPEED_FACTOR,
+    TORQUE_FACTOR,
+};
 mod configs;
 mod messages;
 mod noise;
@@ -28,6 +33,7 @@ mod presets;
 mod validate;
 pub use plan::RunPlan;
 pub use presets::PRESETS;
+pub use validate::{MIN_CURRENT_BANDWIDTH_HZ, MIN_SPEED_BANDWIDTH_HZ};
 
 /// rpm per rad/s.
 pub const RPM_PER_RAD_S: f64 = 30.0 / PI;
@@ -405,6 +411,39 @@ impl Scenario {
         Ok(sc)
     }
 
+    /// Reads and validates a scenario from any serde data with the TOML file's layout (a
+    /// Python dict through pythonize, JSON, ...), with a file's messages: the data become a
+    /// TOML table first (what TOML cannot hold, a `None`, is refused there by its key path),
+    /// then the table is read as a file's is (`motor.pole_pairs: expected a whole number >= 0,
+    /// got the string "four"`). `origin` names the source in errors.
+    pub fn from_deserializer<'de, D: serde::Deserializer<'de>>(
+        de: D,
+        origin: &str,
+    ) -> Result<Self, SimError> {
+        let err = |field: String, problem: String| SimError::Scenario {
+            file: origin.to_string(),
+            field,
+            problem,
+        };
+        let field_of = |path: String| {
+            if path.is_empty() || path == "." {
+                "-".to_string()
+            } else {
+                path
+            }
+        };
+        let table: toml::Value = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = field_of(e.path().to_string());
+            err(path, messages::user_words(e.inner().to_string().trim()))
+        })?;
+        let sc: Scenario = serde_path_to_error::deserialize(table).map_err(|e| {
+            let path = field_of(e.path().to_string());
+            err(path, messages::user_words(e.inner().message().trim()))
+        })?;
+        sc.validate().map_err(|e| err(e.field, e.problem))?;
+        Ok(sc)
+    }
+
     /// Reads, parses and validates a scenario file.
     pub fn from_file(path: &std::path::Path) -> Result<Self, SimError> {
         let file = path.display().to_string();
@@ -587,6 +626,13 @@ mod tests {
         assert_eq!(field, "-");
         // Physically invalid values, refused before the run.
         assert_eq!(error_of(&with("ld_h = -8.5e-3")).0, "motor.ld_h");
+        // ls_h (both axes) is resolved on reading: named as written.
+        let (field, problem) = error_of(&with("ls_h = 1e300"));
+        assert_eq!(field, "motor");
+        assert!(
+            problem.starts_with("motor.ls_h: allowed: 1e-8 <= x <= 10.0 H, is 1e300"),
+            "{problem}"
+        );
         let t = default_text().replace("ts_s = 1e-4", "ts_s = 0.0");
         assert_eq!(error_of(&t).0, "inverter.ts_s");
         let t = default_text().replace("dead_time_s = 0.5e-6", "dead_time_s = 2e-4");
@@ -603,6 +649,28 @@ mod tests {
         let (field, problem) = error_of(&t);
         assert_eq!(field, "load[1].kind");
         assert!(problem.contains("unknown variant"), "{problem}");
+    }
+
+    #[test]
+    fn other_serde_sources_get_a_files_messages() {
+        let table: toml::Value = toml::from_str(default_text()).unwrap_or_else(|e| panic!("{e}"));
+        let mut v = serde_json::to_value(&table).unwrap_or_else(|e| panic!("{e}"));
+        let sc = Scenario::from_deserializer(v.clone(), "dict").unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(sc, Scenario::default_servo());
+        v["motor"]["pole_pairs"] = "four".into();
+        let e = Scenario::from_deserializer(v.clone(), "dict").map_err(|e| e.to_string());
+        assert_eq!(
+            e.err().as_deref(),
+            Some("dict: motor.pole_pairs: expected a whole number >= 0, got the string \"four\"")
+        );
+        v["motor"]["pole_pairs"] = 4.into();
+        v["duration_s"] = serde_json::Value::Null;
+        let e = Scenario::from_deserializer(v, "dict").map_err(|e| e.to_string());
+        assert!(
+            e.as_ref()
+                .is_err_and(|e| e.starts_with("dict: duration_s: ")),
+            "{e:?}"
+        );
     }
 
     #[test]
@@ -629,10 +697,13 @@ mod tests {
         // Refused by foc itself (the I/f current above the current limit).
         let t = default_text().replace("if_current_a = 2.5", "if_current_a = 5.0");
         let (field, problem) = error_of(&t);
-        assert_eq!(field, "controller.foc");
-        // (the alignment current follows the I/f current and is checked first)
+        // (the alignment current follows the I/f current and is checked first: named by
+        // the key it follows, with foc's allowed range)
+        assert_eq!(field, "controller.foc.if_current_a");
         assert!(
-            problem.contains("foc refuses") && problem.contains("out of range"),
+            problem.contains("foc refuses")
+                && problem.contains("out of range")
+                && problem.contains("allowed: 0 < x <= controller.current_limit_a"),
             "{problem}"
         );
         // "sensored" is another spelling of "foc_sensored".

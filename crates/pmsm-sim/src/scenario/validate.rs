@@ -2,6 +2,12 @@
 //! refuses, is an error naming the field before anything runs.
 
 use super::*;
+use crate::error::plain;
+
+/// Smallest current-loop bandwidth, Hz.
+pub const MIN_CURRENT_BANDWIDTH_HZ: f64 = 1.0;
+/// Smallest speed-loop bandwidth, Hz.
+pub const MIN_SPEED_BANDWIDTH_HZ: f64 = 0.01;
 
 impl Scenario {
     /// Checks the scenario before a run; the error names the field.
@@ -26,16 +32,30 @@ impl Scenario {
         self.inverter.validate()?;
         self.sensors.validate()?;
         self.skipped_cycles.validate()?;
-        if self.observer_noise.is_some() {
-            // The observer's own checks of Q and R (symmetric, PSD, R definite, finite).
-            self.observer_config()
-                .validate()
-                .map_err(|e| FieldError::new("observer_noise", e.to_string()))?;
-        }
         let c = &self.controller;
         positive("controller.current_limit_a", c.current_limit_a)?;
         positive("controller.current_bandwidth_hz", c.current_bandwidth_hz)?;
         positive("controller.speed_bandwidth_hz", c.speed_bandwidth_hz)?;
+        // Plausible lower ends, before the relations between the loops.
+        for (name, v, min) in [
+            (
+                "controller.current_bandwidth_hz",
+                c.current_bandwidth_hz,
+                MIN_CURRENT_BANDWIDTH_HZ,
+            ),
+            (
+                "controller.speed_bandwidth_hz",
+                c.speed_bandwidth_hz,
+                MIN_SPEED_BANDWIDTH_HZ,
+            ),
+        ] {
+            if v < min {
+                return Err(FieldError::new(
+                    name,
+                    format!("allowed: x >= {} Hz, is {}", plain(min), plain(v)),
+                ));
+            }
+        }
         let f_pwm = 1.0 / self.inverter.ts_s;
         if c.current_bandwidth_hz > 0.1 * f_pwm {
             return Err(FieldError::new(
@@ -150,6 +170,16 @@ impl Scenario {
                 return Err(FieldError::new(name, format!("must be finite, is {v}")));
             }
         }
+        // The observers' own checks (motor parameters in their plausible ranges, ts_s, Q and
+        // R of [observer_noise]), under the keys the values came from.
+        self.observer_config()
+            .validate()
+            .map_err(|e| self.observer_error(e))?;
+        if self.observer.reference_filter {
+            self.reference_filter_config()
+                .validate()
+                .map_err(|e| self.observer_error(e))?;
+        }
         let n = self.duration_s / self.inverter.ts_s;
         if n.round() < 1.0 {
             return Err(FieldError::new(
@@ -166,6 +196,8 @@ impl Scenario {
                 format!("{} s is more than 1e9 PWM periods", self.duration_s),
             ));
         }
+        // Magnitudes first: an absurd value is named, not the relation it breaks.
+        self.check_bounds()?;
         self.speed_ref_rpm.validate("speed_ref_rpm")?;
         for (i, term) in self.load.iter().enumerate() {
             term.validate(&format!("load[{i}]"))?;

@@ -270,3 +270,29 @@ def test_fault_run_logs_the_trip(sim_bin, tmp_path):
     assert periods[4504]["control"]["telemetry"]["fault"] == "non_finite_input"
     assert not periods[4504]["inverter"]["pwm_enabled"]
     assert all(0.0 <= d <= 1.0 for p in periods for d in p["inverter"]["duties"])
+
+
+def test_a_write_error_leaves_a_readable_log(sim_bin, tmp_path):
+    """A write error while the log grows (here the file size limit, RLIMIT_FSIZE, which fails
+    writes as a full disk does, without root): exit 1 naming the file and the cause; the log is
+    cut back to its last complete chunk (1024 periods each) and closed, and reads back here; no
+    plot.svg or metrics.json, complete or not, is left."""
+    import resource
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1_500_000, 1_500_000))
+
+    out = tmp_path / "o"
+    r = subprocess.run(
+        [sim_bin, "run", "--duration", "0.5", "--out", str(out)],
+        capture_output=True, text=True, preexec_fn=limit,
+    )
+    assert r.returncode == 1, r.stderr
+    assert "run.mcap" in r.stderr and "File too large" in r.stderr, r.stderr
+    assert sorted(os.listdir(out)) == ["run.mcap"], r.stderr
+    assert (out / "run.mcap").stat().st_size <= 1_500_000
+    with open(out / "run.mcap", "rb") as f:
+        reader = make_reader(f, decoder_factories=[ProtobufDecoderFactory()])
+        ks = [m.k for _, _, _, m in reader.iter_decoded_messages(topics=["/pmsm_sim/period"])]
+    assert ks == list(range(len(ks))) and len(ks) >= 1024 and len(ks) % 1024 == 0, len(ks)

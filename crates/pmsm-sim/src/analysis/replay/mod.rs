@@ -632,6 +632,12 @@ pub fn write_outputs(
     mlog.finish(None).map_err(sim_err)?;
     plot.write_svg(&svg, &format!("pmsm-sim replay: {}", rep.report.log))
         .map_err(|e| out_err(&svg, e.to_string()))?;
-    std::fs::write(&json, format!("{text}\n")).map_err(|e| out_err(&json, e.to_string()))?;
+    // Complete or absent (output::file): never an empty or cut metrics.json.
+    crate::output::file::write_bytes(&json, format!("{text}\n").as_bytes()).map_err(
+        |e| match e {
+            crate::SimError::Output { message, .. } => out_err(&json, message),
+            other => out_err(&json, other.to_string()),
+        },
+    )?;
     Ok(vec![mcap, svg, json])
 }

@@ -412,21 +412,8 @@ impl TuneReport {
     }
 }
 
-/// `x` as a TOML float, shortest round-trip: plain decimals (`2.875`, `0.001`, `1.0`) from
-/// 1e-4 to 1e16, exponent form outside (`1.5e-9`); never Rust's `2.875000e0`.
-pub fn plain(x: f64) -> String {
-    let a = x.abs();
-    let s = if a == 0.0 || (1e-4..1e16).contains(&a) || !a.is_finite() {
-        format!("{x}")
-    } else {
-        format!("{x:e}")
-    };
-    if x.is_finite() && !s.contains(['.', 'e']) {
-        format!("{s}.0")
-    } else {
-        s
-    }
-}
+/// `x` as a TOML float, shortest round-trip ([`crate::error::plain`]).
+pub use crate::error::plain;
 
 /// The measurement noise `R` (alpha-beta, A^2) that a current sensor configuration
 /// produces: per-phase variance `s^2` (noise plus quantization, `LSB^2 / 12`), two phases

@@ -70,6 +70,20 @@ impl TryFrom<MotorSection> for MotorModel {
             })?),
             None => None,
         };
+        // `ls_h` is resolved into `ld_h` and `lq_h` here: checked here, by its own name, where
+        // it sets an axis (the other keys are checked by `MotorModel::validate`).
+        if let Some(ls) = s.ls_h
+            && (s.ld_h.is_none() || s.lq_h.is_none())
+            && !(ekf_core::MIN_INDUCTANCE_H..=ekf_core::MAX_INDUCTANCE_H).contains(&ls)
+        {
+            use crate::error::plain;
+            return Err(format!(
+                "motor.ls_h: allowed: {} <= x <= {} H, is {}",
+                plain(ekf_core::MIN_INDUCTANCE_H),
+                plain(ekf_core::MAX_INDUCTANCE_H),
+                plain(ls)
+            ));
+        }
         let pick = |v: Option<f64>, from: fn(&ReferenceMotor) -> f64, key: &str| {
             v.or(base.map(from)).ok_or_else(|| {
                 format!("motor.{key} is missing (give it, or motor.catalog = a reference motor)")
@@ -91,6 +105,15 @@ impl TryFrom<MotorSection> for MotorModel {
         })
     }
 }
+
+/// Smallest rotor inertia, kg m^2 (a 10 mm hobby motor has about 1e-8).
+pub const MIN_J_KG_M2: f64 = 1e-10;
+/// Largest rotor-plus-load inertia, kg m^2.
+pub const MAX_J_KG_M2: f64 = 1e6;
+/// Largest viscous friction coefficient, N m s/rad.
+pub const MAX_B_NM_S_RAD: f64 = 1e6;
+/// Largest Coulomb friction torque, N m.
+pub const MAX_COULOMB_NM: f64 = 1e6;
 
 /// RK4 sub-steps per period of the plant with back-EMF harmonics.
 pub const HARMONIC_SUBSTEPS: u32 = 8;
@@ -314,37 +337,71 @@ impl MotorModel {
         1.5 * self.p() * (self.psi_f_wb + (self.ld_h - self.lq_h) * i_d_a) * i_q_a
     }
 
-    /// Checks that every parameter is physically valid; the error names the field
-    /// (`motor.<name>`).
+    /// Checks that every parameter is physically valid and one a motor can have; the error
+    /// names the field (`motor.<name>`) and the allowed range. The electrical bounds are the
+    /// observer's (`ekf_core::MAX_RS_OHM`, ...): `0 < Rs <= 1000` ohm,
+    /// `1e-8 <= Ld, Lq <= 10` H, `0 < psi_f <= 100` Wb, `1 <= p <= 1000`; the mechanical ones
+    /// [`MIN_J_KG_M2`] `<= J <=` [`MAX_J_KG_M2`], `0 <= B <=` [`MAX_B_NM_S_RAD`],
+    /// `0 <= Tc <=` [`MAX_COULOMB_NM`].
     pub fn validate(&self) -> Result<(), FieldError> {
-        let positive = [
-            ("rs_ohm", self.rs_ohm),
-            ("ld_h", self.ld_h),
-            ("lq_h", self.lq_h),
-            ("psi_f_wb", self.psi_f_wb),
-            ("j_kg_m2", self.j_kg_m2),
+        use crate::error::plain;
+        use ekf_core::{
+            MAX_INDUCTANCE_H, MAX_POLE_PAIRS, MAX_PSI_F_WB, MAX_RS_OHM, MIN_INDUCTANCE_H,
+        };
+        let (l_lo, l_hi) = (MIN_INDUCTANCE_H, MAX_INDUCTANCE_H);
+        let checks = [
+            ("rs_ohm", self.rs_ohm, 0.0, false, MAX_RS_OHM, "ohm"),
+            ("ld_h", self.ld_h, l_lo, true, l_hi, "H"),
+            ("lq_h", self.lq_h, l_lo, true, l_hi, "H"),
+            ("psi_f_wb", self.psi_f_wb, 0.0, false, MAX_PSI_F_WB, "Wb"),
+            (
+                "j_kg_m2",
+                self.j_kg_m2,
+                MIN_J_KG_M2,
+                true,
+                MAX_J_KG_M2,
+                "kg m^2",
+            ),
+            (
+                "b_nm_s_rad",
+                self.b_nm_s_rad,
+                0.0,
+                true,
+                MAX_B_NM_S_RAD,
+                "N m s/rad",
+            ),
+            (
+                "coulomb_nm",
+                self.coulomb_nm,
+                0.0,
+                true,
+                MAX_COULOMB_NM,
+                "N m",
+            ),
         ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
+        for (name, v, lo, closed, hi, unit) in checks {
+            let above = if closed { v >= lo } else { v > lo };
+            if !(above && v <= hi) {
+                let op = if closed { "<=" } else { "<" };
                 return Err(FieldError::new(
                     format!("motor.{name}"),
-                    format!("must be finite and > 0, is {v}"),
+                    format!(
+                        "allowed: {} {op} x <= {} {unit}, is {}",
+                        plain(lo),
+                        plain(hi),
+                        plain(v)
+                    ),
                 ));
             }
         }
-        for (name, v) in [
-            ("b_nm_s_rad", self.b_nm_s_rad),
-            ("coulomb_nm", self.coulomb_nm),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(FieldError::new(
-                    format!("motor.{name}"),
-                    format!("must be finite and >= 0, is {v}"),
-                ));
-            }
-        }
-        if self.pole_pairs == 0 {
-            return Err(FieldError::new("motor.pole_pairs", "must be at least 1"));
+        if !(1..=MAX_POLE_PAIRS).contains(&self.pole_pairs) {
+            return Err(FieldError::new(
+                "motor.pole_pairs",
+                format!(
+                    "allowed: 1 <= x <= {MAX_POLE_PAIRS}, is {}",
+                    self.pole_pairs
+                ),
+            ));
         }
         self.emf_harmonics.validate("motor.emf_harmonics")
     }
