@@ -95,6 +95,8 @@ pub use crate::output::metrics::LOST_DEG;
 
 mod input;
 pub use input::*;
+mod reference;
+pub use reference::{MechanicalComponent, mechanical_component};
 
 /// Why a log or motor file could not be read, or a replay not run.
 #[derive(Debug, Error)]
@@ -421,6 +423,9 @@ pub struct ReplayReport {
     pub drive: Option<Score>,
     /// The flux + PLL baseline's score.
     pub flux: Option<Score>,
+    /// The part of the default EKF's error periodic in the reference's mechanical angle
+    /// (module `reference`: the reference's own error; `null` without a reference).
+    pub ekf_reference_periodic: Option<MechanicalComponent>,
     /// Samples refused by the EKF (non-finite result).
     pub ekf_rejected: usize,
     /// Samples refused by the drive observer.
@@ -477,6 +482,13 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
         ekf: ekf_score,
         drive: drive_score,
         flux: flux_score,
+        ekf_reference_periodic: mechanical_component(
+            log,
+            ts,
+            &ekf.theta,
+            ekf_score.map_or(0.0, |s| s.offset_deg.to_radians()),
+            motor.params.pole_pairs,
+        ),
         ekf_rejected: rejected(&ekf),
         drive_rejected: rejected(&drive),
     };
@@ -533,6 +545,15 @@ pub fn markdown(r: &ReplayReport) -> String {
             )),
             None => s.push_str(&format!("| {name} | 0 | | | | | | | | |\n")),
         }
+    }
+    if let Some(m) = &r.ekf_reference_periodic {
+        s.push_str(&format!(
+            "\nThe EKF's error periodic in the reference's mechanical angle (the reference's own \
+             error: an encoder's eccentricity, which no observer of the voltages and currents \
+             sees): {:.2} deg at once and {:.2} deg at twice the mechanical frequency, {:.2} deg \
+             RMS; the EKF's RMS without it {:.2} deg.\n",
+            m.first_deg, m.second_deg, m.rms_deg, m.rms_without_deg
+        ));
     }
     s
 }
