@@ -167,6 +167,9 @@ class Ekf:
     command ahead by the speed times the time to the PWM update). The prediction turns each
     u_ab row by -omega * voltage_delay_s. Within [-2 ts, 2 ts] (ConfigError otherwise); 0 uses
     u_ab as given.
+    inverter_voltage_v: the inverter's voltage error (dead time), V, as foc's self-commissioning
+    reports it (the voltage lost along a current aligned with a phase axis); subtracted along
+    the signs of the estimated phase currents. Within [0, 100] (ConfigError otherwise); 0: none.
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -212,6 +215,7 @@ class Ekf:
         covariance_update: Literal["joseph", "standard"] = "joseph",
         tracking: Literal["default", "flux", "off"] = "default",
         voltage_delay_s: float = 0.0,
+        inverter_voltage_v: float = 0.0,
     ) -> Ekf: ...
     def run(
         self,

@@ -55,6 +55,8 @@ pub enum Param {
     ConsistencyMaxBaseline,
     /// Delay of the applied voltage, `ObserverConfig::voltage_delay_s` (within `[-2 Ts, 2 Ts]`).
     VoltageDelay,
+    /// Inverter voltage error, `ObserverConfig::inverter_voltage_v` (within `[0, 100]` V).
+    InverterVoltage,
     /// Samples of the speed noise adaptation's NIS mean, `SpeedNoiseAdaptation::samples`.
     AdaptationSamples,
     /// Reference NIS of the speed noise adaptation, `SpeedNoiseAdaptation::nis_reference`.
@@ -170,6 +172,7 @@ impl fmt::Display for Param {
             Param::ConsistencyRatio => "consistency.ratio",
             Param::ConsistencyMaxBaseline => "consistency.max_baseline",
             Param::VoltageDelay => "voltage_delay_s",
+            Param::InverterVoltage => "inverter_voltage_v",
             Param::AdaptationSamples => "speed_noise_adaptation.samples",
             Param::AdaptationReference => "speed_noise_adaptation.nis_reference",
             Param::AdaptationMaxFactor => "speed_noise_adaptation.max_factor",

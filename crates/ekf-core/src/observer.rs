@@ -203,6 +203,12 @@
 //! from an angle offset, so it is not observable from the voltages and currents at constant
 //! speed; only the drive's timing (or a reference angle at two speeds) gives it. On three
 //! recorded ESC runs the firmware's lead is 0.3-0.6 periods (`docs/accuracy.md`).
+//! [`ObserverConfig::inverter_voltage_v`] subtracts the inverter's voltage error (dead time)
+//! that a log's commanded voltage does not show: `v (sgn i_a + sgn i_b e^(j2pi/3) +
+//! sgn i_c e^(j4pi/3)) / 2` with the phase currents estimated at mid-period (the posterior
+//! currents turned by `w Ts / 2`), each sign linear within `0.02 I_c` of zero; `v` is the value
+//! foc's self-commissioning reports (the loss along a current aligned with a phase). Untold, it
+//! reads as a resistance that falls with the current (`v / |i|` on top of `Rs`).
 //!
 //! **Irregular periods.** [`PmsmObserver::step_dt`] predicts over the period that actually ended
 //! at the sample (a skipped control cycle, a log's time stamps) with the model for that period

@@ -197,3 +197,62 @@ fn default_observer_told_the_voltage_lead() {
         assert!(PmsmObserver::new(&cfg).is_err(), "{bad} accepted");
     }
 }
+
+/// The inverter's voltage error: a log whose voltage is the applied one plus 2 V along the
+/// signs of the phase currents (a dead time the firmware did not compensate; the servo at
+/// 15 % of `I_c`, 30-90 % of rated speed). The default observer told `inverter_voltage_v = 2`
+/// against the same observer told nothing. Measured (`cargo test --release -p ekf-core --test
+/// drive inverter -- --nocapture`): told, 0.23 deg about a mean of +0.00 deg; untold, 0.68 deg
+/// about +0.35 deg. A value outside `[0, 100]` V or non-finite is refused.
+#[test]
+fn default_observer_told_the_inverter_voltage() {
+    let (tr, applied) = record(0.0);
+    let motor = MotorParams::servo();
+    let ts = tr.ts;
+    let v = 2.0;
+    let r3 = 3f64.sqrt() / 2.0;
+    let logged: Vec<[f64; 2]> = applied
+        .iter()
+        .zip(&tr.i_meas)
+        .map(|(u, i)| {
+            let (pa, pb, pc) = (i[0], -0.5 * i[0] + r3 * i[1], -0.5 * i[0] - r3 * i[1]);
+            let s = |x: f64| x.signum();
+            let da = 0.5 * (s(pa) - 0.5 * (s(pb) + s(pc)));
+            let db = 0.5 * r3 * (s(pb) - s(pc));
+            [u[0] + v * da, u[1] + v * db]
+        })
+        .collect();
+    let run = |told: f64| {
+        let cfg = ObserverConfig {
+            inverter_voltage_v: told,
+            ..ObserverConfig::new(motor, ts)
+        };
+        let mut obs = PmsmObserver::new(&cfg).unwrap();
+        let mut u_prev = [0.0; 2];
+        let mut err = vec![];
+        for (k, i) in tr.i_meas.iter().enumerate() {
+            let e = obs.step(u_prev, *i).unwrap();
+            err.push(wrap_angle(e.theta_rad - tr.th[k]).to_degrees());
+            u_prev = logged[k];
+        }
+        spread(&err)
+    };
+    let (rms_told, mean_told) = run(v);
+    let (rms_untold, mean_untold) = run(0.0);
+    println!(
+        "inverter voltage 2 V: told rms {rms_told:.3} deg about mean {mean_told:+.3}; untold rms \
+         {rms_untold:.3} about {mean_untold:+.3}"
+    );
+    let total = |r: f64, m: f64| (r * r + m * m).sqrt();
+    assert!(
+        total(rms_told, mean_told) < 0.5 * total(rms_untold, mean_untold),
+        "told {rms_told}/{mean_told}, untold {rms_untold}/{mean_untold}"
+    );
+    for bad in [-0.1, 101.0, f64::NAN] {
+        let cfg = ObserverConfig {
+            inverter_voltage_v: bad,
+            ..ObserverConfig::new(motor, ts)
+        };
+        assert!(PmsmObserver::new(&cfg).is_err(), "{bad} accepted");
+    }
+}

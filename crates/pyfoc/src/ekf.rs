@@ -63,10 +63,12 @@ fn build<T: Float>(
     update: CovarianceUpdate,
     tracking: Tracking,
     voltage_delay_s: f64,
+    inverter_voltage_v: f64,
 ) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
     let conv = |v: f64| T::from_subset(&v);
     let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
     cfg.voltage_delay_s = conv(voltage_delay_s);
+    cfg.inverter_voltage_v = conv(inverter_voltage_v);
     cfg.discretization = disc;
     cfg.covariance_update = update;
     match tracking {
@@ -109,7 +111,7 @@ impl Ekf {
     #[new]
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
-        tracking = "default", voltage_delay_s = 0.0))]
+        tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -123,6 +125,7 @@ impl Ekf {
         covariance_update: &str,
         tracking: &str,
         voltage_delay_s: f64,
+        inverter_voltage_v: f64,
     ) -> PyResult<Self> {
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
@@ -171,6 +174,7 @@ impl Ekf {
                         update,
                         tracking,
                         voltage_delay_s,
+                        inverter_voltage_v,
                     )
                     .map_err(cfg_err)?,
                 ),
@@ -189,6 +193,7 @@ impl Ekf {
                         update,
                         tracking,
                         voltage_delay_s,
+                        inverter_voltage_v,
                     )
                     .map_err(cfg_err)?,
                 ),

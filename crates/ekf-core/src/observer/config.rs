@@ -51,6 +51,14 @@ pub struct ObserverConfig<T: Float> {
     /// `-w voltage_delay_s` (module docs, "Voltage timing"); 0 (the default) uses it as
     /// given. Within `[-2 Ts, 2 Ts]`.
     pub voltage_delay_s: T,
+    /// The inverter's voltage error (dead time, switch drops), V: the voltage lost along a
+    /// current aligned with a phase axis, as `foc`'s self-commissioning reports it
+    /// (`inverter_voltage_error_v`). The prediction subtracts
+    /// `inverter_voltage_v * (sgn(i_a) + sgn(i_b) e^(j 2pi/3) + sgn(i_c) e^(j 4pi/3)) / 2` from
+    /// `u_prev`, the signs of the estimated phase currents at mid-period, linear within
+    /// `0.02 I_c` of zero (module docs, "Voltage timing"). 0 (the default): none. Within
+    /// `[0, 100]` V.
+    pub inverter_voltage_v: T,
     /// Speed noise adaptation: `Q_ww` raised while the innovations are larger than a
     /// consistent filter's (module docs, "Speed noise adaptation"); `None` keeps `Q` fixed.
     pub speed_noise_adaptation: Option<SpeedNoiseAdaptation<T>>,
@@ -79,6 +87,7 @@ impl<T: Float> ObserverConfig<T> {
             parameter_tracking: Some(ParameterTracking::default_for(ts_s)),
             speed_noise_adaptation: Some(SpeedNoiseAdaptation::default()),
             voltage_delay_s: T::zero(),
+            inverter_voltage_v: T::zero(),
         }
     }
 
@@ -149,6 +158,12 @@ impl<T: Float> ObserverConfig<T> {
         }
         if !(self.voltage_delay_s >= -two_ts && self.voltage_delay_s <= two_ts) {
             return Err(ConfigError::OutOfRange(Param::VoltageDelay));
+        }
+        if !self.inverter_voltage_v.is_finite() {
+            return Err(ConfigError::NonFinite(Param::InverterVoltage));
+        }
+        if !(self.inverter_voltage_v >= T::zero() && self.inverter_voltage_v <= to_t(100.0)) {
+            return Err(ConfigError::OutOfRange(Param::InverterVoltage));
         }
         if let Some(t) = &self.parameter_tracking {
             t.validate_for(self.motor.psi_f_wb, self.motor.rs_ohm, self.ts_s)?;

@@ -37,7 +37,9 @@ pub struct PmsmObserver<T: Float> {
     pub(super) adaptation: Option<AdaptationState<T>>,
     /// `ObserverConfig::voltage_delay_s`.
     pub(super) voltage_delay: T,
-    /// A voltage delay or the speed noise adaptation is configured (their code runs out of
+    /// `ObserverConfig::inverter_voltage_v` and the linear band of its signs, A.
+    pub(super) inverter: (T, T),
+    /// A voltage delay, an inverter voltage or the speed noise adaptation is configured (their code runs out of
     /// line, behind this one test).
     pub(super) extras: bool,
     /// Steps left in which a fused angle ([`Self::correct_angle`]) makes the angle observable
@@ -129,7 +131,13 @@ impl<T: Float> PmsmObserver<T> {
                 .as_ref()
                 .map(AdaptationState::new),
             voltage_delay: cfg.voltage_delay_s,
-            extras: cfg.voltage_delay_s != T::zero() || cfg.speed_noise_adaptation.is_some(),
+            inverter: (
+                cfg.inverter_voltage_v,
+                cfg.motor.characteristic_current_a() * to_t(0.02),
+            ),
+            extras: cfg.voltage_delay_s != T::zero()
+                || cfg.inverter_voltage_v != T::zero()
+                || cfg.speed_noise_adaptation.is_some(),
             fused: 0,
             tracker,
             slow,

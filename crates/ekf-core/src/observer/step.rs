@@ -120,8 +120,8 @@ impl<T: Float> PmsmObserver<T> {
         let mut q = self.model.q_sym();
         let mut u_prev = u_prev;
         if self.extras {
-            if self.voltage_delay != T::zero() {
-                u_prev = self.delayed(u_prev);
+            if self.voltage_delay != T::zero() || self.inverter.0 != T::zero() {
+                u_prev = self.applied(u_prev);
             }
             if let Some(a) = &self.adaptation
                 && a.factor > T::one()
@@ -161,13 +161,45 @@ impl<T: Float> PmsmObserver<T> {
         }
     }
 
-    /// `u` turned by `-w voltage_delay_s` (the voltage applied over the period, from the
-    /// logged one; module docs, "Voltage timing"), at the speed estimate of the period's start.
+    /// The voltage applied over the period from the logged `u` (module docs, "Voltage
+    /// timing"): turned by `-w voltage_delay_s` at the speed estimate of the period's start,
+    /// less the inverter's voltage error along the signs of the phase currents estimated at
+    /// mid-period (the posterior currents turned by `w Ts / 2`).
     #[cold]
     #[inline(never)]
-    fn delayed(&self, u: [T; 2]) -> [T; 2] {
-        let (s, c) = crate::trig::sin_cos_small(-(self.x[2] * self.voltage_delay));
-        [c * u[0] - s * u[1], s * u[0] + c * u[1]]
+    fn applied(&self, u: [T; 2]) -> [T; 2] {
+        let w = self.x[2];
+        let mut u = u;
+        if self.voltage_delay != T::zero() {
+            let (s, c) = crate::trig::sin_cos_small(-(w * self.voltage_delay));
+            u = [c * u[0] - s * u[1], s * u[0] + c * u[1]];
+        }
+        let (v, band) = self.inverter;
+        if v != T::zero() {
+            let half: T = to_t(0.5);
+            let (s, c) = crate::trig::sin_cos_small(w * self.model.ts() * half);
+            let (ia, ib) = (self.x[0], self.x[1]);
+            let (ma, mb) = (c * ia - s * ib, s * ia + c * ib);
+            // Phase currents of the amplitude-invariant transform.
+            let r3: T = to_t(0.866_025_403_784_438_6);
+            let (pa, pb, pc) = (ma, -half * ma + r3 * mb, -half * ma - r3 * mb);
+            let sgn = |x: T| {
+                let y = x / band;
+                if y > T::one() {
+                    T::one()
+                } else if y < -T::one() {
+                    -T::one()
+                } else {
+                    y
+                }
+            };
+            let (sa, sb, sc) = (sgn(pa), sgn(pb), sgn(pc));
+            // (sa + sb e^(j 2pi/3) + sc e^(j 4pi/3)) / 2
+            let da = half * (sa - half * (sb + sc));
+            let db = half * r3 * (sb - sc);
+            u = [u[0] - v * da, u[1] - v * db];
+        }
+        u
     }
 
     /// `Q` with `Q_ww` raised by the speed noise adaptation's `factor`.

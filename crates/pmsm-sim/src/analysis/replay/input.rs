@@ -317,7 +317,9 @@ pub fn read_log(path: &Path, scaling: Scaling) -> Result<DriveLog, ReplayError> 
 /// The motor of a log and its nominal period (`RUN.toml`: `rs_ohm`, `ld_h` and `lq_h` or
 /// `ls_h`, `psi_f_wb`, `pole_pairs`, `ts_s`; optional `voltage_delay_s`, the drive's delay of
 /// the applied voltage behind the logged one, negative for a lead, within `[-2 ts_s, 2 ts_s]`,
-/// default 0: [`ekf_core::ObserverConfig::voltage_delay_s`]).
+/// default 0: [`ekf_core::ObserverConfig::voltage_delay_s`]; optional `inverter_voltage_v`,
+/// the inverter's voltage error as self-commissioning reports it, within `[0, 100]` V, default
+/// 0: [`ekf_core::ObserverConfig::inverter_voltage_v`]).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct ReplayMotor {
     /// Motor parameters.
@@ -327,6 +329,8 @@ pub struct ReplayMotor {
     pub ts_s: f64,
     /// Delay of the applied voltage behind the logged one, s (negative: a lead).
     pub voltage_delay_s: f64,
+    /// The inverter's voltage error, V.
+    pub inverter_voltage_v: f64,
 }
 
 #[derive(Deserialize)]
@@ -340,6 +344,7 @@ pub(super) struct MotorToml {
     pub(super) pole_pairs: u32,
     pub(super) ts_s: f64,
     pub(super) voltage_delay_s: Option<f64>,
+    pub(super) inverter_voltage_v: Option<f64>,
 }
 
 /// Parses a motor TOML; `file` names it in errors.
@@ -388,10 +393,17 @@ pub fn parse_motor(text: &str, file: &str) -> Result<ReplayMotor, ReplayError> {
             2.0 * m.ts_s
         )));
     }
+    let inverter_voltage_v = m.inverter_voltage_v.unwrap_or(0.0);
+    if !(inverter_voltage_v.is_finite() && (0.0..=100.0).contains(&inverter_voltage_v)) {
+        return Err(err(format!(
+            "`inverter_voltage_v` must be within [0, 100] V, is {inverter_voltage_v}"
+        )));
+    }
     Ok(ReplayMotor {
         params,
         ts_s: m.ts_s,
         voltage_delay_s,
+        inverter_voltage_v,
     })
 }
 

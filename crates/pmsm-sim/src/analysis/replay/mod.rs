@@ -205,11 +205,12 @@ fn trace(
 }
 
 /// Runs the default EKF (`ObserverConfig::new(motor, ts)` with the motor file's
-/// `voltage_delay_s`) over `log`.
+/// `voltage_delay_s` and `inverter_voltage_v`) over `log`.
 pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
     log.check()?;
     let cfg = ObserverConfig {
         voltage_delay_s: motor.voltage_delay_s,
+        inverter_voltage_v: motor.inverter_voltage_v,
         ..ObserverConfig::new(motor.params, motor.ts_s)
     };
     let mut obs = PmsmObserver::new(&cfg)?;
