@@ -294,7 +294,7 @@ fn sensorless_default_job_without_compensation() {
 }
 
 /// `Scenario::foc_config` passes the inverter's dead time to foc; `[controller.foc]` overrides
-/// it (0: off) and sets the band; foc's validation refuses a bad value as a scenario error.
+/// it (0: off) and sets the band; foc's validation refuses a bad value as an error naming the key.
 #[test]
 fn dead_time_setting_reaches_foc() {
     let mut sc = preset("default");
@@ -314,7 +314,7 @@ fn dead_time_setting_reaches_foc() {
         f.dead_time_s = Some(bad);
         sc.controller.foc = Some(f);
         let e = sc.foc_config().map(|_| ()).unwrap_err();
-        assert_eq!(e.field, "controller.foc", "{bad}: {e:?}");
+        assert_eq!(e.field, "controller.foc.dead_time_s", "{bad}: {e:?}");
         assert!(sc.validate().is_err());
     }
 }
