@@ -321,6 +321,10 @@ fn motor_toml_is_validated() {
     assert_eq!(m.params.pole_pairs, 7);
     let surface = "rs_ohm = 0.1\nls_h = 3e-5\npsi_f_wb = 0.0025\npole_pairs = 7\nts_s = 1e-4\n";
     assert!(parse_motor(surface, "s").is_ok());
+    assert_eq!((m.voltage_delay_s, m.inverter_voltage_v), (0.0, 0.0));
+    let timed = format!("{good}voltage_delay_s = -1.1e-4\ninverter_voltage_v = 0.3\n");
+    let t = parse_motor(&timed, "t").unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((t.voltage_delay_s, t.inverter_voltage_v), (-1.1e-4, 0.3));
     for bad in [
         good.replace("rs_ohm = 0.1", "rs_ohm = -0.1"),
         good.replace("ts_s = 2.2e-4", "ts_s = 0"),
@@ -328,6 +332,10 @@ fn motor_toml_is_validated() {
         good.replace("lq_h = 4.4e-5\n", ""),
         format!("{good}ls_h = 1e-5\n"),
         format!("{good}colour = 1\n"),
+        format!("{good}voltage_delay_s = 5e-4\n"),
+        format!("{good}voltage_delay_s = nan\n"),
+        format!("{good}inverter_voltage_v = -0.1\n"),
+        format!("{good}inverter_voltage_v = 1e3\n"),
         good.replace("psi_f_wb = 0.0025", "psi_f_wb = \"x\""),
         "rs_ohm = [".to_string(),
     ] {
