@@ -53,6 +53,20 @@ fn spread(err: &[f64]) -> (f64, f64) {
     (var.sqrt(), mean)
 }
 
+/// The default observer with `cfg` over `tr` given the `logged` voltages: (RMS about the
+/// mean, mean) of the angle error over the last half, deg.
+fn default_spread(cfg: &ObserverConfig<f64>, tr: &Trace, logged: &[[f64; 2]]) -> (f64, f64) {
+    let mut obs = PmsmObserver::new(cfg).unwrap();
+    let mut u_prev = [0.0; 2];
+    let mut err = vec![];
+    for (k, i) in tr.i_meas.iter().enumerate() {
+        let e = obs.step(u_prev, *i).unwrap();
+        err.push(wrap_angle(e.theta_rad - tr.th[k]).to_degrees());
+        u_prev = logged[k];
+    }
+    spread(&err)
+}
+
 /// Runs both observers on a record with `lead`; returns the drive's last estimate, the
 /// (RMS about the mean, mean) of both, and the drive's tracking share of the last half.
 fn compare(lead: f64) -> (ekf_core::DriveEstimate<f64>, (f64, f64), (f64, f64), f64) {
@@ -170,15 +184,7 @@ fn default_observer_told_the_voltage_lead() {
             voltage_delay_s: delay,
             ..ObserverConfig::new(motor, ts)
         };
-        let mut obs = PmsmObserver::new(&cfg).unwrap();
-        let mut u_prev = [0.0; 2];
-        let mut err = vec![];
-        for (k, i) in tr.i_meas.iter().enumerate() {
-            let e = obs.step(u_prev, *i).unwrap();
-            err.push(wrap_angle(e.theta_rad - tr.th[k]).to_degrees());
-            u_prev = logged[k];
-        }
-        spread(&err)
+        default_spread(&cfg, &tr, &logged)
     };
     let (rms_told, mean_told) = run(-0.5 * ts);
     let (rms_untold, mean_untold) = run(0.0);
@@ -227,15 +233,7 @@ fn default_observer_told_the_inverter_voltage() {
             inverter_voltage_v: told,
             ..ObserverConfig::new(motor, ts)
         };
-        let mut obs = PmsmObserver::new(&cfg).unwrap();
-        let mut u_prev = [0.0; 2];
-        let mut err = vec![];
-        for (k, i) in tr.i_meas.iter().enumerate() {
-            let e = obs.step(u_prev, *i).unwrap();
-            err.push(wrap_angle(e.theta_rad - tr.th[k]).to_degrees());
-            u_prev = logged[k];
-        }
-        spread(&err)
+        default_spread(&cfg, &tr, &logged)
     };
     let (rms_told, mean_told) = run(v);
     let (rms_untold, mean_untold) = run(0.0);

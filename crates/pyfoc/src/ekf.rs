@@ -51,10 +51,9 @@ impl Ekf {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn build<T: Float>(
-    motor: &Motor,
-    ts: f64,
+/// What an [`Ekf`]'s constructor was given, checked for shape (the observer's configuration
+/// checks the values).
+struct Settings {
     q: Option<[[f64; 4]; 4]>,
     r: Option<[[f64; 2]; 2]>,
     x0: Option<[f64; 4]>,
@@ -64,7 +63,24 @@ fn build<T: Float>(
     tracking: Tracking,
     voltage_delay_s: f64,
     inverter_voltage_v: f64,
+}
+
+fn build<T: Float>(
+    motor: &Motor,
+    ts: f64,
+    s: &Settings,
 ) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
+    let Settings {
+        q,
+        r,
+        x0,
+        p0,
+        disc,
+        update,
+        tracking,
+        voltage_delay_s,
+        inverter_voltage_v,
+    } = *s;
     let conv = |v: f64| T::from_subset(&v);
     let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
     cfg.voltage_delay_s = conv(voltage_delay_s);
@@ -159,44 +175,25 @@ impl Ekf {
         let r = r.map(|o| square::<2>(o, "r")).transpose()?;
         let p0 = p0.map(|o| square::<4>(o, "p0")).transpose()?;
         let x0 = x0.map(|o| fixed::<4>(o, "x0")).transpose()?;
+        let settings = Settings {
+            q,
+            r,
+            x0,
+            p0,
+            disc,
+            update,
+            tracking,
+            voltage_delay_s,
+            inverter_voltage_v,
+        };
         let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
         let (observer, dtype) = match dtype {
             "float64" => (
-                Observer::F64(
-                    build(
-                        motor,
-                        ts,
-                        q,
-                        r,
-                        x0,
-                        p0,
-                        disc,
-                        update,
-                        tracking,
-                        voltage_delay_s,
-                        inverter_voltage_v,
-                    )
-                    .map_err(cfg_err)?,
-                ),
+                Observer::F64(build(motor, ts, &settings).map_err(cfg_err)?),
                 "float64",
             ),
             "float32" => (
-                Observer::F32(
-                    build(
-                        motor,
-                        ts,
-                        q,
-                        r,
-                        x0,
-                        p0,
-                        disc,
-                        update,
-                        tracking,
-                        voltage_delay_s,
-                        inverter_voltage_v,
-                    )
-                    .map_err(cfg_err)?,
-                ),
+                Observer::F32(build(motor, ts, &settings).map_err(cfg_err)?),
                 "float32",
             ),
             other => {
