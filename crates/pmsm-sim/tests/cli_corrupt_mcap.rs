@@ -2,12 +2,13 @@
 //! corrupt (`2^64 - 1`, `2^63`, `2^32`): exit status 1 and one error line naming the file,
 //! no panic message and no backtrace (even with `RUST_BACKTRACE=1`).
 
+mod support;
+
 use std::path::PathBuf;
 use std::process::Command;
 
-use pmsm_sim::output::mcap::{LogOptions, McapLog};
+use pmsm_sim::output::mcap::LogOptions;
 use pmsm_sim::scenario::Scenario;
-use pmsm_sim::sim::{self, RunOptions, SampleSink};
 
 const BIN: &str = env!("CARGO_BIN_EXE_pmsm-sim");
 
@@ -23,20 +24,7 @@ fn corrupt_record_length_is_an_error_naming_the_file() {
     let d = temp_dir();
     let good = d.join("run.mcap");
     let sc = Scenario::default_servo().with_duration(0.01);
-    let mut log =
-        McapLog::create(&good, &sc, LogOptions::default()).unwrap_or_else(|e| panic!("{e}"));
-    {
-        let sinks: Vec<&mut dyn SampleSink> = vec![&mut log];
-        sim::run_with(
-            &sc,
-            RunOptions {
-                sinks,
-                ..RunOptions::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-    }
-    log.finish(None).unwrap_or_else(|e| panic!("{e}"));
+    support::log_run(&sc, &good, LogOptions::default());
     let bytes = std::fs::read(&good).unwrap_or_else(|e| panic!("{e}"));
     // The third record (after the header and the first chunk): its length field.
     let mut at = 8;

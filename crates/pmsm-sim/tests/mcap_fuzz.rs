@@ -13,14 +13,15 @@
 //! `MCAP_FUZZ_SECONDS` seconds (default 3; seed `MCAP_FUZZ_SEED`, default 1); the counts and the time are printed
 //! (`cargo test -p pmsm-sim --release --test mcap_fuzz -- --nocapture`).
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use pmsm_sim::analysis::replay::{Scaling, read_log};
 use pmsm_sim::analysis::tune::{LoggedRun, TuneError};
-use pmsm_sim::output::mcap::{LogCompression, LogOptions, McapLog};
+use pmsm_sim::output::mcap::{LogCompression, LogOptions};
 use pmsm_sim::scenario::Scenario;
-use pmsm_sim::sim::{self, RunOptions, SampleSink};
 
 /// splitmix64: a small deterministic generator.
 struct Rng(u64);
@@ -52,19 +53,7 @@ fn simulated(path: &Path, compression: LogCompression) -> Vec<u8> {
         compression,
         ..LogOptions::default()
     };
-    let mut log = McapLog::create(path, &sc, opts).unwrap_or_else(|e| panic!("{e}"));
-    {
-        let sinks: Vec<&mut dyn SampleSink> = vec![&mut log];
-        sim::run_with(
-            &sc,
-            RunOptions {
-                sinks,
-                ..RunOptions::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-    }
-    log.finish(None).unwrap_or_else(|e| panic!("{e}"));
+    support::log_run(&sc, path, opts);
     std::fs::read(path).unwrap_or_else(|e| panic!("{e}"))
 }
 

@@ -3,15 +3,16 @@
 //! skipped cycles, a voltage delay); malformed CSV and corrupt MCAP files give errors naming
 //! where, never a panic.
 
+mod support;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use pmsm_sim::analysis::replay::{
     DriveLog, ReplayError, ReplayMotor, Scaling, parse_csv, parse_motor, read_log, replay,
 };
-use pmsm_sim::output::mcap::{LogOptions, McapLog};
+use pmsm_sim::output::mcap::LogOptions;
 use pmsm_sim::scenario::Scenario;
-use pmsm_sim::sim::{self, RunOptions, SampleSink};
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("pmsm-sim-replay-{}", std::process::id()));
@@ -23,20 +24,7 @@ fn tmp(name: &str) -> PathBuf {
 fn simulated() -> (PathBuf, ReplayMotor, Scenario) {
     let sc = Scenario::default_servo().with_duration(0.35);
     let path = tmp("run.mcap");
-    let mut log =
-        McapLog::create(&path, &sc, LogOptions::default()).unwrap_or_else(|e| panic!("{e}"));
-    {
-        let sinks: Vec<&mut dyn SampleSink> = vec![&mut log];
-        sim::run_with(
-            &sc,
-            RunOptions {
-                sinks,
-                ..RunOptions::default()
-            },
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-    }
-    log.finish(None).unwrap_or_else(|e| panic!("{e}"));
+    support::log_run(&sc, &path, LogOptions::default());
     let m = sc.observer_params();
     let toml = format!(
         "rs_ohm = {}\nld_h = {}\nlq_h = {}\npsi_f_wb = {}\npole_pairs = {}\nts_s = {}\n",

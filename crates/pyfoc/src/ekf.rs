@@ -70,24 +70,13 @@ fn build<T: Float>(
     ts: f64,
     s: &Settings,
 ) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
-    let Settings {
-        q,
-        r,
-        x0,
-        p0,
-        disc,
-        update,
-        tracking,
-        voltage_delay_s,
-        inverter_voltage_v,
-    } = *s;
     let conv = |v: f64| T::from_subset(&v);
     let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
-    cfg.voltage_delay_s = conv(voltage_delay_s);
-    cfg.inverter_voltage_v = conv(inverter_voltage_v);
-    cfg.discretization = disc;
-    cfg.covariance_update = update;
-    match tracking {
+    cfg.voltage_delay_s = conv(s.voltage_delay_s);
+    cfg.inverter_voltage_v = conv(s.inverter_voltage_v);
+    cfg.discretization = s.disc;
+    cfg.covariance_update = s.update;
+    match s.tracking {
         Tracking::Default => {}
         Tracking::Flux => {
             if let Some(t) = &mut cfg.parameter_tracking {
@@ -96,16 +85,16 @@ fn build<T: Float>(
         }
         Tracking::Off => cfg.parameter_tracking = None,
     }
-    if let Some(q) = q {
+    if let Some(q) = s.q {
         cfg.noise.q = Matrix4::from_fn(|i, j| conv(q[i][j]));
     }
-    if let Some(r) = r {
+    if let Some(r) = s.r {
         cfg.noise.r = Matrix2::from_fn(|i, j| conv(r[i][j]));
     }
-    if let Some(x0) = x0 {
+    if let Some(x0) = s.x0 {
         cfg.x0 = Vector4::from_fn(|i, _| conv(x0[i]));
     }
-    if let Some(p0) = p0 {
+    if let Some(p0) = s.p0 {
         cfg.p0 = Matrix4::from_fn(|i, j| conv(p0[i][j]));
     }
     PmsmObserver::new(&cfg)
