@@ -142,6 +142,9 @@ pub enum ConfigError {
     TooLargeInitialCovariance,
     /// The parameter is outside its documented range.
     OutOfRange(Param),
+    /// Parameter tracking was asked of the observer on a flux map, whose map is the model
+    /// ([`MapObserver`](crate::saturated::MapObserver)).
+    TrackingWithFluxMap,
 }
 
 impl fmt::Display for Param {
@@ -239,6 +242,10 @@ impl fmt::Display for ConfigError {
                 Some(range) => write!(f, "{p} is outside its accepted range {range}"),
                 None => write!(f, "{p} is outside its documented range"),
             },
+            ConfigError::TrackingWithFluxMap => f.write_str(
+                "parameter_tracking is not available on a flux map (the map is the motor's \
+                 model): set it to None",
+            ),
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",
             ),

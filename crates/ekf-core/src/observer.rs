@@ -237,6 +237,7 @@ mod estimate;
 mod fusion;
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 mod host;
+mod mapstep;
 pub(crate) mod model;
 #[doc(hidden)]
 pub mod parts;

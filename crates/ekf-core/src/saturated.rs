@@ -31,20 +31,29 @@
 //! The transition Jacobian is that of the formulas above with `L` held (the map's second
 //! derivatives are left out, as an EKF leaves out what the first-order expansion drops).
 //!
-//! Cost on the Cortex-M4F (`f32`, 9 x 11 map; `map_observer_step` of
-//! `bash scripts/qemu-firmware.sh`): 2286 instructions per step on the generic [`Ekf`], of
-//! which the map's evaluation is 505; the constant-parameter salient step is 1143 on its
-//! hand-scheduled update.
+//! [`MapObserver`] runs this prediction, written out in scalars
+//! (`observer/mapstep.rs`), on the constant-parameter observer's structured covariance
+//! schedule, followed by that observer's correction, safeguards and status. [`MapModel`] is
+//! the same prediction in matrix form for the generic [`Ekf`](crate::Ekf) (a reference: the
+//! scalar step equals it to rounding, tested).
+//!
+//! Cost on the Cortex-M4F (`f32`, 9 x 11 map; `bash scripts/qemu-firmware.sh`): the
+//! [`MapObserver`] step is 1412 instructions (median; max 1533), the constant-parameter salient
+//! step 1221 (`ekf_step_salient`, with tracking); the map's evaluation is 505 of them
+//! (`fluxmap_eval`).
 //!
 //! The noise covariances are those of the constant-parameter observer
 //! ([`NoiseCovariances::scaled`]) for the map's small-signal parameters
 //! ([`MapModel::small_signal`]).
 
-use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
+use nalgebra::{Matrix2, Matrix4, SMatrix, SVector, Vector2, Vector4};
 
-use crate::ekf::{CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
+use crate::ekf::{EkfError, MeasurementModel, ProcessModel};
 use crate::fluxmap::FluxMap;
-use crate::{ConfigError, Float, MotorParams, NoiseCovariances, Param, wrap_angle};
+use crate::{
+    ConfigError, Estimate, Float, MotorParams, NoiseCovariances, ObserverConfig, Param,
+    PmsmObserver, to_t, wrap_angle,
+};
 
 /// The prediction of a saturating machine (module docs), for the generic [`Ekf`].
 #[derive(Clone, Debug)]
@@ -99,14 +108,7 @@ impl<T: Float, const N: usize> MapModel<T, N> {
     /// `Lq = dPsi_q/di_q` and `psi_f = Psi_d(0, 0)` (what a low-current commissioning
     /// measures).
     pub fn small_signal(&self) -> MotorParams<T> {
-        let p = self.map.eval(T::zero(), T::zero());
-        MotorParams {
-            rs_ohm: self.rs_ohm,
-            ld_h: p.l_dd,
-            lq_h: p.l_qq,
-            psi_f_wb: p.psi_d,
-            pole_pairs: self.pole_pairs,
-        }
+        small_signal(&self.map, self.rs_ohm, self.pole_pairs)
     }
 
     /// The flux map.
@@ -197,73 +199,119 @@ impl<T: Float, const N: usize> MeasurementModel<T, 4, 2> for MapModel<T, N> {
     }
 }
 
-/// What [`MapObserver::step`] returns.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MapEstimate<T> {
-    /// Electrical angle, rad, in `[-pi, pi)`.
-    pub theta_rad: T,
-    /// Electrical speed, rad/s.
-    pub omega_e_rad_s: T,
-    /// Normalized innovation squared of the correction.
-    pub nis: T,
-}
-
-/// The EKF on a [`MapModel`]: predict with the last voltage, correct with the currents
-/// (docs/design.md section 4 timing). A refused step leaves the filter as it was.
-#[derive(Clone, Debug)]
+/// The PMSM observer on a flux map: the prediction of the module docs, written out for the
+/// constant-parameter observer's structured covariance schedule, then that observer's
+/// correction, safeguards (innovation gate, branch check, covariance health), consistency
+/// check and status. A refused step leaves the observer as it was.
+///
+/// The configuration is an [`ObserverConfig`] for the map's small-signal parameters
+/// ([`MapObserver::default_config`]): its noise, initial covariance, safeguards and voltage
+/// timing apply as they do to the constant-parameter observer, whose motor parameters serve
+/// only to scale them. Parameter tracking is refused ([`ConfigError::TrackingWithFluxMap`]):
+/// the map is the model.
+#[derive(Clone, Debug, PartialEq)]
 pub struct MapObserver<T: Float, const N: usize> {
-    model: MapModel<T, N>,
-    ekf: Ekf<T, 4, 2>,
+    observer: PmsmObserver<T>,
+    map: FluxMap<T, N>,
 }
 
 impl<T: Float, const N: usize> MapObserver<T, N> {
-    /// A filter at rest (zero currents and speed, angle `theta0_rad`) with the default initial
-    /// covariance of the constant-parameter observer for the map's small-signal parameters.
-    pub fn new(model: MapModel<T, N>, theta0_rad: T) -> Self {
-        let small = model.small_signal();
-        let p0 = crate::default_p0(&small, model.ts_s);
-        let mut x0 = SVector::<T, 4>::zeros();
-        x0[3] = wrap_angle(theta0_rad);
-        Self {
-            model,
-            ekf: Ekf::new(x0, p0, CovarianceUpdate::Joseph),
+    /// The default configuration on `map`: [`ObserverConfig::new`] for the map's small-signal
+    /// parameters ([`small_signal`]) with parameter tracking off.
+    pub fn default_config(
+        map: &FluxMap<T, N>,
+        rs_ohm: T,
+        pole_pairs: u32,
+        ts_s: T,
+    ) -> ObserverConfig<T> {
+        ObserverConfig {
+            parameter_tracking: None,
+            ..ObserverConfig::new(small_signal(map, rs_ohm, pole_pairs), ts_s)
         }
     }
 
-    /// One period: predict with the voltage of the last period `u_prev`, correct with the
-    /// currents sampled now `i_meas`.
-    pub fn step(&mut self, u_prev: [T; 2], i_meas: [T; 2]) -> Result<MapEstimate<T>, EkfError> {
-        let before = self.ekf.clone();
-        let u = Vector2::new(u_prev[0], u_prev[1]);
-        let z = Vector2::new(i_meas[0], i_meas[1]);
-        let out = self
-            .ekf
-            .predict(&self.model, &u)
-            .and_then(|()| self.ekf.correct(&self.model, &z));
-        match out {
-            Ok(c) => {
-                let x = self.ekf.state();
-                Ok(MapEstimate {
-                    theta_rad: x[3],
-                    omega_e_rad_s: x[2],
-                    nis: c.nis,
-                })
-            }
-            Err(e) => {
-                self.ekf = before;
-                Err(e)
-            }
+    /// Validates `cfg` (whose `motor.rs_ohm` is the resistance the prediction uses) and builds
+    /// the observer at `cfg.x0`, `cfg.p0`.
+    pub fn new(cfg: &ObserverConfig<T>, map: FluxMap<T, N>) -> Result<Self, ConfigError> {
+        if cfg.parameter_tracking.is_some() {
+            return Err(ConfigError::TrackingWithFluxMap);
         }
+        Ok(Self {
+            observer: PmsmObserver::new(cfg)?,
+            map,
+        })
     }
 
-    /// The state `[i_a, i_b, w, th]`.
-    pub fn state(&self) -> [T; 4] {
-        let x = self.ekf.state();
-        [x[0], x[1], x[2], x[3]]
+    /// One sample: predict on the map with `u_prev` (V, held over the previous period), then
+    /// correct with the currents `i` sampled now, then the safeguards (as
+    /// [`PmsmObserver::step`]).
+    pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        let ts = self.observer.model().ts();
+        self.observer.map_step(&self.map, u_prev, i, ts)
     }
 
-    /// The model.
-    pub fn model(&self) -> &MapModel<T, N> {
-        &self.model
+    /// [`step`](Self::step) over a period of `dt_s` seconds that ended at this sample (as
+    /// [`PmsmObserver::step_dt`]: `Q` scaled by `dt_s / Ts`; refused with
+    /// [`EkfError::InvalidPeriod`], state kept, outside `(0, MAX_PERIOD_FACTOR Ts]`).
+    pub fn step_dt(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) -> Result<Estimate<T>, EkfError> {
+        let ts = self.observer.model().ts();
+        if !(dt_s > T::zero() && dt_s <= ts * to_t(crate::observer::MAX_PERIOD_FACTOR)) {
+            return Err(EkfError::InvalidPeriod);
+        }
+        self.observer.map_step(&self.map, u_prev, i, dt_s)
+    }
+
+    /// Prediction only (to coast over a missing current sample), as
+    /// [`PmsmObserver::predict`].
+    pub fn predict(&mut self, u_prev: [T; 2]) -> Result<(), EkfError> {
+        self.observer.map_predict(&self.map, u_prev)
+    }
+
+    /// Correction only, as [`PmsmObserver::correct`].
+    pub fn correct(&mut self, i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        self.observer.correct(i)
+    }
+
+    /// Fuses an external angle measurement, as [`PmsmObserver::correct_angle`].
+    pub fn correct_angle(&mut self, theta_rad: T, variance_rad2: T) -> Result<(), EkfError> {
+        self.observer.correct_angle(theta_rad, variance_rad2)
+    }
+
+    /// Replaces the estimate and covariance, as [`PmsmObserver::reset`].
+    pub fn reset(&mut self, x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
+        self.observer.reset(x, p)
+    }
+
+    /// The current estimate, as [`PmsmObserver::estimate`].
+    pub fn estimate(&self) -> Estimate<T> {
+        self.observer.estimate()
+    }
+
+    /// The underlying observer (state, covariance, last correction, counters). Its own
+    /// `step` and `predict` use the constant small-signal model: step through `self`.
+    pub fn observer(&self) -> &PmsmObserver<T> {
+        &self.observer
+    }
+
+    /// The flux map.
+    pub fn map(&self) -> &FluxMap<T, N> {
+        &self.map
+    }
+}
+
+/// The constant parameters a map gives at zero current: `Ld = dPsi_d/di_d`,
+/// `Lq = dPsi_q/di_q`, `psi_f = Psi_d(0, 0)` (what a low-current commissioning measures).
+pub fn small_signal<T: Float, const N: usize>(
+    map: &FluxMap<T, N>,
+    rs_ohm: T,
+    pole_pairs: u32,
+) -> MotorParams<T> {
+    let p = map.eval(T::zero(), T::zero());
+    MotorParams {
+        rs_ohm,
+        ld_h: p.l_dd,
+        lq_h: p.l_qq,
+        psi_f_wb: p.psi_d,
+        pole_pairs,
     }
 }

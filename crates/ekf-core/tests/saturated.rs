@@ -17,7 +17,7 @@
 
 #![allow(clippy::needless_range_loop)] // index-aligned traces
 
-use ekf_core::saturated::{MapModel, MapObserver};
+use ekf_core::saturated::MapObserver;
 use ekf_core::saturation::PM_SYRM_5K6;
 use ekf_core::testing::Rng;
 use ekf_core::{MotorParams, ObserverConfig, PmsmObserver, wrap_angle};
@@ -158,8 +158,10 @@ fn run_map(tr: &Trace) -> Vec<f64> {
     let i_d: Vec<f64> = (0..12).map(|k| -20.0 + 30.0 * k as f64 / 11.0).collect();
     let i_q: Vec<f64> = (0..16).map(|k| -30.0 + 60.0 * k as f64 / 15.0).collect();
     let map = PM_SYRM_5K6.flux_map::<f64, 16>(&i_d, &i_q).unwrap();
-    let model = MapModel::new(map, RS, P, TS).unwrap();
-    let mut obs = MapObserver::new(model, tr.th[START] + 30f64.to_radians());
+    let cfg = MapObserver::default_config(&map, RS, P, TS);
+    let mut obs = MapObserver::new(&cfg, map).unwrap();
+    let x0 = ekf_core::nalgebra::Vector4::new(0.0, 0.0, 0.0, tr.th[START] + 30f64.to_radians());
+    obs.reset(x0, cfg.p0).unwrap();
     let mut out = vec![0.0; tr.th.len()];
     for k in START..tr.th.len() {
         out[k] = obs.step(tr.u[k], tr.i[k]).unwrap().theta_rad;

@@ -167,7 +167,7 @@ impl<T: Float> PmsmObserver<T> {
     /// mid-period (the posterior currents turned by `w Ts / 2`).
     #[cold]
     #[inline(never)]
-    fn applied(&self, u: [T; 2]) -> [T; 2] {
+    pub(super) fn applied(&self, u: [T; 2]) -> [T; 2] {
         let w = self.x[2];
         let mut u = u;
         if self.voltage_delay != T::zero() {
@@ -205,7 +205,7 @@ impl<T: Float> PmsmObserver<T> {
     /// `Q` with `Q_ww` raised by the speed noise adaptation's `factor`.
     #[cold]
     #[inline(never)]
-    fn adapted_q(&self, factor: T) -> Matrix4<T> {
+    pub(super) fn adapted_q(&self, factor: T) -> Matrix4<T> {
         let mut q = *self.model.q_sym();
         q[(2, 2)] *= factor;
         q
@@ -252,6 +252,20 @@ impl<T: Float> PmsmObserver<T> {
             (true, true) => self.prior::<true, true>(u_prev),
             (false, true) => self.prior::<false, true>(u_prev),
         };
+        self.commit_prediction(x, p, tm)
+    }
+
+    /// Stores a prediction `(x, p)` (and the tracker's prior `tm`) as the new estimate, with
+    /// the checks of [`predict`](Self::predict): a non-finite result is refused (or resets
+    /// the observer when the covariance health check asks for it), and the health check runs
+    /// after it.
+    #[inline(always)]
+    pub(super) fn commit_prediction(
+        &mut self,
+        x: Vector4<T>,
+        p: Sym4<T>,
+        tm: Option<TrackerStep<T>>,
+    ) -> Result<(), EkfError> {
         let tracker_finite = match (&tm, &self.tracker) {
             (Some(s), Some(t)) => t.finite_with(s, t.psi),
             _ => true,

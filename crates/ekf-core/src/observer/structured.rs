@@ -182,7 +182,7 @@ pub(crate) fn predict<T: Float, const S: bool>(
 /// `P- = Phi P Phi^T + Q` for a salient motor, whose current block of `Phi` is a full 2 x 2
 /// (`a00..a11` of the terms) instead of `decay I`; otherwise the schedule of [`predict`].
 #[inline(always)]
-fn predict_cov_salient<T: Float>(
+pub(crate) fn predict_cov_salient<T: Float>(
     t: &TransitionTerms<T>,
     ts: T,
     q: &Matrix4<T>,

@@ -1,0 +1,224 @@
+//! The prediction of the observer on a flux map ([`MapObserver`](crate::saturated::MapObserver);
+//! the formulation is in the module docs of [`saturated`](crate::saturated)), written out in
+//! scalars for the structured covariance schedule; the correction and the safeguards are
+//! those of the constant-parameter observer.
+
+use nalgebra::{Matrix4, Vector4};
+
+use super::model::TransitionTerms;
+use super::structured::{self, Sym4};
+use super::{Estimate, PmsmObserver};
+use crate::ekf::{EkfError, finite};
+use crate::fluxmap::FluxMap;
+use crate::trig::sin_cos_small;
+use crate::{Float, to_t, wrap_angle};
+
+/// The map's flux-consistent step from the posterior `x` over a period `ts` with the stator
+/// voltage `u` held, and its Jacobian (the incremental inductances held over the step) in the
+/// form the structured covariance schedule takes: `(x-, terms)`.
+#[inline(always)]
+pub(crate) fn map_transition<T: Float, const N: usize>(
+    map: &FluxMap<T, N>,
+    rs: T,
+    ts: T,
+    x: &Vector4<T>,
+    u: [T; 2],
+) -> (Vector4<T>, TransitionTerms<T>) {
+    let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
+    let (s0, c0) = th.sin_cos_angle();
+    // Rotation over the period by its half angle: sin, and cos - 1 without cancellation.
+    let (sh, ch) = sin_cos_small(w * ts * to_t(0.5));
+    let two = T::one() + T::one();
+    let sw = two * sh * ch;
+    let cwm1 = -two * sh * sh;
+    let cw = T::one() + cwm1;
+    let (s1, c1) = (s0 * cw + c0 * sw, c0 * cw - s0 * sw);
+    // Rotor-frame currents at the start, the map there.
+    let id = c0 * ia + s0 * ib;
+    let iq = c0 * ib - s0 * ia;
+    let p = map.eval(id, iq);
+    let inv_det = T::one() / (p.l_dd * p.l_qq - p.l_dq * p.l_qd);
+    let (g00, g01, g10, g11) = (
+        p.l_qq * inv_det,
+        -p.l_dq * inv_det,
+        -p.l_qd * inv_det,
+        p.l_dd * inv_det,
+    );
+    // Voltage less the resistive drop, in the end-of-period rotor frame.
+    let (va, vb) = (u[0] - rs * ia, u[1] - rs * ib);
+    let vd1 = c1 * va + s1 * vb;
+    let vq1 = c1 * vb - s1 * va;
+    // The start flux turned back by the period's rotation, R(-w Ts) psi.
+    let pwd = cw * p.psi_d + sw * p.psi_q;
+    let pwq = cw * p.psi_q - sw * p.psi_d;
+    // Flux change seen in the end frame: (R(-w Ts) - I) psi + Ts R1^T v.
+    let ed = (cwm1 * p.psi_d + sw * p.psi_q) + ts * vd1;
+    let eq = (cwm1 * p.psi_q - sw * p.psi_d) + ts * vq1;
+    let id1 = id + (g00 * ed + g01 * eq);
+    let iq1 = iq + (g10 * ed + g11 * eq);
+    let ia1 = c1 * id1 - s1 * iq1;
+    let ib1 = s1 * id1 + c1 * iq1;
+    // d i1 / d i = R(w Ts) + R1 G N, N = (R(-w Ts) - I) L R0^T - Ts Rs R1^T.
+    // K L with K = [[cw - 1, sw], [-sw, cw - 1]].
+    let m00 = cwm1 * p.l_dd + sw * p.l_qd;
+    let m01 = cwm1 * p.l_dq + sw * p.l_qq;
+    let m10 = cwm1 * p.l_qd - sw * p.l_dd;
+    let m11 = cwm1 * p.l_qq - sw * p.l_dq;
+    let tr = ts * rs;
+    // (K L) R0^T - Ts Rs R1^T, R0^T = [[c0, s0], [-s0, c0]].
+    let n00 = m00 * c0 - m01 * s0 - tr * c1;
+    let n01 = m00 * s0 + m01 * c0 - tr * s1;
+    let n10 = m10 * c0 - m11 * s0 + tr * s1;
+    let n11 = m10 * s0 + m11 * c0 - tr * c1;
+    // G N.
+    let q00 = g00 * n00 + g01 * n10;
+    let q01 = g00 * n01 + g01 * n11;
+    let q10 = g10 * n00 + g11 * n10;
+    let q11 = g10 * n01 + g11 * n11;
+    // d / d th = J i1 + R1 [ -J i0 + G (K L (-J i0) - Ts J R1^T v) ], -J i0 = (iq, -id).
+    let kd = m00 * iq - m01 * id + ts * vq1;
+    let kq = m10 * iq - m11 * id - ts * vd1;
+    let hd = iq + (g00 * kd + g01 * kq);
+    let hq = -id + (g10 * kd + g11 * kq);
+    // d / d w = Ts J i1 + R1 Ts G ((pwq, -pwd) + Ts (vq1, -vd1)).
+    let (fd, fq) = (ts * (pwq + ts * vq1), -ts * (pwd + ts * vd1));
+    let wd = g00 * fd + g01 * fq;
+    let wq = g10 * fd + g11 * fq;
+    let t = TransitionTerms {
+        ea: T::zero(),
+        eb: T::zero(),
+        ea_w: -ts * ib1 + (c1 * wd - s1 * wq),
+        eb_w: ts * ia1 + (s1 * wd + c1 * wq),
+        ea_th: -ib1 + (c1 * hd - s1 * hq),
+        eb_th: ia1 + (s1 * hd + c1 * hq),
+        ea_psi: T::zero(),
+        eb_psi: T::zero(),
+        da: T::zero(),
+        db: T::zero(),
+        a00: cw + (c1 * q00 - s1 * q10),
+        a01: -sw + (c1 * q01 - s1 * q11),
+        a10: sw + (s1 * q00 + c1 * q10),
+        a11: cw + (s1 * q01 + c1 * q11),
+        sin_th: s0,
+        cos_th: c0,
+    };
+    (Vector4::new(ia1, ib1, w, wrap_angle(th + ts * w)), t)
+}
+
+impl<T: Float> PmsmObserver<T> {
+    /// The prediction on the map over a period `dt_s` (`Ts` for the regular step), with the
+    /// voltage timing, the inverter voltage and the speed noise adaptation applied as in the
+    /// constant-parameter prior; `Q` scaled by `dt_s / Ts`.
+    #[inline(always)]
+    fn map_prior<const N: usize>(
+        &self,
+        map: &FluxMap<T, N>,
+        u_prev: [T; 2],
+        dt_s: T,
+    ) -> (Vector4<T>, Sym4<T>) {
+        let ts = self.model.ts();
+        let q_owned: Matrix4<T>;
+        let mut q = self.model.q_sym();
+        let mut u = u_prev;
+        if self.extras {
+            if self.voltage_delay != T::zero() || self.inverter.0 != T::zero() {
+                u = self.applied(u);
+            }
+            if let Some(a) = &self.adaptation
+                && a.factor > T::one()
+            {
+                q_owned = self.adapted_q(a.factor);
+                q = &q_owned;
+            }
+        }
+        let scaled: Matrix4<T>;
+        if dt_s != ts {
+            scaled = q * (dt_s / ts);
+            q = &scaled;
+        }
+        let (xm, t) = map_transition(map, self.nominal.1, dt_s, &self.x, u);
+        (xm, structured::predict_cov_salient(&t, dt_s, q, &self.p))
+    }
+
+    /// One step on the map over a period `dt_s` (the body of
+    /// [`MapObserver::step`](crate::saturated::MapObserver::step)); inputs checked as in
+    /// [`step`](Self::step).
+    pub(crate) fn map_step<const N: usize>(
+        &mut self,
+        map: &FluxMap<T, N>,
+        u_prev: [T; 2],
+        i: [T; 2],
+        dt_s: T,
+    ) -> Result<Estimate<T>, EkfError> {
+        if !finite(&u_prev) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        if !finite(&i) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        let (xm, pm) = self.map_prior(map, u_prev, dt_s);
+        self.correct_prior::<false, true>(xm, pm, None, i)
+    }
+
+    /// Prediction only on the map (the body of
+    /// [`MapObserver::predict`](crate::saturated::MapObserver::predict)).
+    pub(crate) fn map_predict<const N: usize>(
+        &mut self,
+        map: &FluxMap<T, N>,
+        u_prev: [T; 2],
+    ) -> Result<(), EkfError> {
+        if !finite(&u_prev) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        let (x, p) = self.map_prior(map, u_prev, self.model.ts());
+        self.commit_prediction(x, p, None)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ekf::ProcessModel;
+    use crate::saturated::MapModel;
+    use crate::saturation::PM_SYRM_5K6;
+    use nalgebra::Vector2;
+
+    /// The scalar step and its Jacobian are the generic model's ([`MapModel`], matrix form)
+    /// to rounding, over operating points across the map, both speed signs and both
+    /// directions of the voltage.
+    #[test]
+    fn scalar_step_is_the_matrix_models() {
+        let i_d: [f64; 12] = core::array::from_fn(|k| -20.0 + 30.0 * k as f64 / 11.0);
+        let i_q: [f64; 16] = core::array::from_fn(|k| -30.0 + 60.0 * k as f64 / 15.0);
+        let map = PM_SYRM_5K6.flux_map::<f64, 16>(&i_d, &i_q).unwrap();
+        let (rs, ts) = (0.63, 1e-4);
+        let model = MapModel::new(map.clone(), rs, 2, ts).unwrap();
+        let mut worst = 0.0f64;
+        for k in 0..200 {
+            let f = k as f64;
+            let x = Vector4::new(
+                12.0 * (0.37 * f).sin(),
+                12.0 * (0.91 * f + 1.0).cos(),
+                700.0 * (0.13 * f).sin(),
+                3.0 * (0.71 * f).sin(),
+            );
+            let u = [300.0 * (0.5 * f).cos(), 250.0 * (0.29 * f).sin()];
+            let (xs, t) = map_transition(&map, rs, ts, &x, u);
+            let (xm, phi) = model.transition(&x, &Vector2::new(u[0], u[1]));
+            let scalar = [
+                [t.a00, t.a01, t.ea_w, t.ea_th],
+                [t.a10, t.a11, t.eb_w, t.eb_th],
+            ];
+            for r in 0..2 {
+                worst = worst.max((xs[r] - xm[r]).abs() / (1.0 + xm[r].abs()));
+                for c in 0..4 {
+                    let scale = 1.0 + phi[(r, c)].abs();
+                    worst = worst.max((scalar[r][c] - phi[(r, c)]).abs() / scale);
+                }
+            }
+            assert_eq!(xs[2], xm[2]);
+            assert!((wrap_angle(xs[3] - xm[3])).abs() < 1e-12);
+        }
+        assert!(worst < 1e-9, "largest relative difference {worst:e}");
+    }
+}
