@@ -260,7 +260,7 @@ fn components(sc: &Scenario, runs: usize, no_log_ns: Option<f64>, piped_ns: Opti
     };
     let ts = sc.ts_s();
     let plant_ns = time(&mut || {
-        let mut p = Plant::new(sc.motor, PlantState::default());
+        let mut p = Plant::new(sc.motor.clone(), PlantState::default());
         for &(u, load) in &plant_in {
             p.step(u, load, ts);
         }

@@ -64,6 +64,8 @@ fn unnamed() -> Vec<Scenario> {
         b_nm_s_rad: 2e-3,
         coulomb_nm: 0.0,
         emf_harmonics: Default::default(),
+        saturation: None,
+        flux_map: None,
     };
     let spindle = MotorModel {
         rs_ohm: 1.2,
@@ -75,6 +77,8 @@ fn unnamed() -> Vec<Scenario> {
         b_nm_s_rad: 1e-4,
         coulomb_nm: 0.0,
         emf_harmonics: Default::default(),
+        saturation: None,
+        flux_map: None,
     };
     let fan = MotorModel {
         rs_ohm: 8.0,
@@ -86,6 +90,8 @@ fn unnamed() -> Vec<Scenario> {
         b_nm_s_rad: 5e-5,
         coulomb_nm: 0.0,
         emf_harmonics: Default::default(),
+        saturation: None,
+        flux_map: None,
     };
     vec![
         custom("hub-48v", hub, 48.0, 20.0, 600.0),

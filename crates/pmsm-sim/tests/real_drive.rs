@@ -102,7 +102,7 @@ fn emf_harmonics_show_at_5x_and_7x_with_the_set_amplitude() {
     for j in 0..n {
         let th = -PI + TAU * j as f64 / n as f64;
         let mut p = Plant::new(
-            motor,
+            motor.clone(),
             PlantState {
                 theta_e_rad: th,
                 omega_mech_rad_s: w_mech,

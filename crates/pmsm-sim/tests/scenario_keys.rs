@@ -31,7 +31,7 @@ const DURATION_S: f64 = 2e-3;
 /// The default scenario with every key set (module docs).
 fn full_scenario() -> Scenario {
     let mut sc = Scenario::default_servo().with_duration(DURATION_S);
-    let m = sc.motor;
+    let m = sc.motor.clone();
     sc.motor.coulomb_nm = 0.01;
     sc.motor.emf_harmonics.h5 = 0.01;
     sc.motor.emf_harmonics.h5_phase_rad = 0.1;

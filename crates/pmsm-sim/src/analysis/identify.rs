@@ -224,9 +224,9 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
         field: e.field,
         problem: e.problem,
     })?;
-    let motor = sc.motor;
+    let motor = sc.motor.clone();
     let mut plant = Plant::new(
-        motor,
+        motor.clone(),
         PlantState {
             theta_e_rad: sc.initial.theta_e_rad,
             ..PlantState::default()

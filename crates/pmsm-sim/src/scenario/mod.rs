@@ -571,7 +571,7 @@ mod tests {
     fn default_scenario_is_within_the_voltage_limit() {
         let sc = Scenario::default_servo();
         assert_eq!(sc.periods(), 20_000);
-        let m = sc.motor;
+        let m = sc.motor.clone();
         let we = sc.rated_speed_e_rad_s();
         let iq = sc.rated_torque_nm / m.torque_constant_nm_a();
         assert!(iq < sc.controller.current_limit_a);

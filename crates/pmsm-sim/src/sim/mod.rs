@@ -363,8 +363,8 @@ pub fn run_planned(
 ) -> Result<RunOutput, SimError> {
     let scenario = plan.scenario;
     let ts = plan.ts_s;
-    let motor = scenario.motor;
-    let mut plant = Plant::new(motor, plan.initial);
+    let motor = &scenario.motor;
+    let mut plant = Plant::new(motor.clone(), plan.initial);
     if !plant.set_d_saturation(opts.d_saturation) {
         return Err(SimError::Scenario {
             file: scenario.name.clone(),

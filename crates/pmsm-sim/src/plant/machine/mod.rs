@@ -122,8 +122,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::FieldError;
 use crate::plant::frames::{inverse_park, park};
+use saturation::Saturation;
 
 mod motor;
+pub mod saturation;
 pub use motor::*;
 
 /// State of the plant.
@@ -154,6 +156,9 @@ pub struct Plant {
     locked: bool,
     /// Optional d-axis saturation (module docs); `None`: the linear model, exactly.
     d_saturation: Option<DSaturation>,
+    /// The saturating motor's flux-current relation and its stator flux `(psi_d, psi_q)`,
+    /// the state its step integrates (module [`saturation`]); `None`: the linear model.
+    magnetics: Option<(Saturation, (f64, f64))>,
 }
 
 /// `(C, S)` of `e^{N t} = C I + S N` for a traceless 2 x 2 `N` with `N^2 = disc I`.
@@ -242,6 +247,13 @@ impl Plant {
     /// A plant at the given state (angle wrapped).
     pub fn new(motor: MotorModel, mut state: PlantState) -> Self {
         state.theta_e_rad = wrap_angle(state.theta_e_rad);
+        let magnetics = motor.magnetics().map(|m| {
+            let i = (state.i_d_a, state.i_q_a);
+            let flux = m
+                .flux(i, (motor.psi_f_wb, 0.0))
+                .unwrap_or((motor.psi_f_wb + motor.ld_h * i.0, motor.lq_h * i.1));
+            (m, flux)
+        });
         Self {
             motor,
             state,
@@ -250,6 +262,7 @@ impl Plant {
             steps: 0,
             locked: false,
             d_saturation: None,
+            magnetics,
         }
     }
 
@@ -257,7 +270,8 @@ impl Plant {
     /// outside `[0, 1)` or a non-positive `current_a` (returns `false`, nothing changed).
     pub fn set_d_saturation(&mut self, sat: Option<DSaturation>) -> bool {
         if let Some(s) = sat
-            && !((0.0..1.0).contains(&s.drop) && s.current_a > 0.0 && s.current_a.is_finite())
+            && (!((0.0..1.0).contains(&s.drop) && s.current_a > 0.0 && s.current_a.is_finite())
+                || self.magnetics.is_some())
         {
             return false;
         }
@@ -267,6 +281,7 @@ impl Plant {
 
     /// Changes the stator resistance and the flux linkage (parameter drift, e.g. with
     /// temperature; module [`faults`](crate::plant::fault_injection)). Takes effect at the next step.
+    /// A saturating motor takes the resistance only (its flux is its saturation model's).
     pub fn set_rs_psi(&mut self, rs_ohm: f64, psi_f_wb: f64) {
         self.motor.rs_ohm = rs_ohm;
         self.motor.psi_f_wb = psi_f_wb;
@@ -307,6 +322,7 @@ impl Plant {
         let dq = park(DVec2::new(ia, ib), self.rot());
         self.state.i_d_a = dq.x;
         self.state.i_q_a = dq.y;
+        self.refresh_flux();
     }
 
     /// The motor.
@@ -353,6 +369,9 @@ impl Plant {
     /// Electromagnetic torque at the present state, N m.
     pub fn torque_nm(&self) -> f64 {
         let (id, iq) = (self.state.i_d_a, self.state.i_q_a);
+        if let Some((_, (pd, pq))) = &self.magnetics {
+            return 1.5 * self.motor.p() * (pd * iq - pq * id);
+        }
         let te = match self.d_saturation {
             None => self.motor.torque_nm(id, iq),
             Some(sat) => sat_torque(&self.motor, &sat, id, iq),
@@ -400,11 +419,15 @@ impl Plant {
     /// Advances by `h_s` with the stationary-frame stator voltage `u_ab_v` (V) and the load
     /// torque `t_load_nm` (N m) held constant (module docs give the method).
     pub fn step(&mut self, u_ab_v: [f64; 2], t_load_nm: f64, h_s: f64) {
+        if self.magnetics.is_some() {
+            self.step_saturated(u_ab_v, t_load_nm, h_s);
+            return;
+        }
         if self.d_saturation.is_some() || self.motor.emf_harmonics.is_on() {
             self.step_rk4(u_ab_v, t_load_nm, h_s, HARMONIC_SUBSTEPS);
             return;
         }
-        let m = self.motor;
+        let m = &self.motor;
         let p = m.p();
         let x = self.state;
         let (s0, c0) = self.sc;
@@ -549,6 +572,7 @@ impl Plant {
             theta_e_rad: th1,
         };
         self.sc = th1.sin_cos();
+        self.refresh_flux();
     }
 
     /// Reference integrator: classic RK4 on the dq equations over `substeps` equal sub-steps
@@ -561,7 +585,7 @@ impl Plant {
         let h = h_s / f64::from(n);
         let s = self.state;
         let mut x = [s.i_d_a, s.i_q_a, s.omega_mech_rad_s, s.theta_e_rad];
-        let m = self.motor;
+        let m = &self.motor;
         let sat = self.d_saturation;
         let locked = self.locked;
         let deriv = |x: &[f64; 4]| -> [f64; 4] {
@@ -569,11 +593,11 @@ impl Plant {
             let (sn, cs) = th.sin_cos();
             let DVec2 { x: ud, y: uq } = park(DVec2::from(u_ab_v), DVec2::new(cs, sn));
             let mut d = if let Some(sat) = sat {
-                sat_derivative(&m, &sat, [id, iq, wm], [ud, uq], t_load_nm)
+                sat_derivative(m, &sat, [id, iq, wm], [ud, uq], t_load_nm)
             } else {
                 let we = m.p() * wm;
                 let te = m.torque_nm(id, iq);
-                let fr = coulomb_nm(&m, wm);
+                let fr = coulomb_nm(m, wm);
                 [
                     (ud - m.rs_ohm * id + we * m.lq_h * iq) / m.ld_h,
                     (uq - m.rs_ohm * iq - we * m.ld_h * id - we * m.psi_f_wb) / m.lq_h,
@@ -583,7 +607,7 @@ impl Plant {
             };
             let h = &m.emf_harmonics;
             if h.is_on() {
-                add_harmonics(&m, h, [id, iq, wm, th], &mut d);
+                add_harmonics(m, h, [id, iq, wm, th], &mut d);
             }
             if locked {
                 d[2] = 0.0;
@@ -712,8 +736,8 @@ mod tests {
         // 1 s at 10 kHz; reference RK4 with 64 sub-steps per period (6.4 us).
         let ts = 1e-4;
         let n = 10_000;
-        let exact = driven_run(motor, uq, load, n, ts, 0);
-        let fine = driven_run(motor, uq, load, n, ts, 64);
+        let exact = driven_run(motor.clone(), uq, load, n, ts, 0);
+        let fine = driven_run(motor.clone(), uq, load, n, ts, 64);
         let w_max = fine
             .iter()
             .map(|s| s.omega_mech_rad_s.abs())
@@ -748,7 +772,7 @@ mod tests {
     fn rk4_reference_converges() {
         // The reference itself: 64 and 256 sub-steps agree far below 0.1 %.
         let m = MotorModel::servo();
-        let a = driven_run(m, 60.0, 0.5, 3000, 1e-4, 64);
+        let a = driven_run(m.clone(), 60.0, 0.5, 3000, 1e-4, 64);
         let b = driven_run(m, 60.0, 0.5, 3000, 1e-4, 256);
         let (di, dw, dth) = worst_relative(&a, &b);
         assert!(
@@ -762,7 +786,7 @@ mod tests {
         // Locked rotor (huge inertia), held voltage: the current settles at u / Rs.
         let mut m = MotorModel::servo();
         m.j_kg_m2 = 1e30;
-        let mut plant = Plant::new(m, PlantState::default());
+        let mut plant = Plant::new(m.clone(), PlantState::default());
         for _ in 0..2000 {
             plant.step([10.0, -5.0], 0.0, 1e-4);
         }
@@ -818,8 +842,8 @@ mod tests {
             omega_mech_rad_s: 5.0,
             theta_e_rad: 0.4,
         };
-        let mut lin = Plant::new(m, x0);
-        let mut sp = Plant::new(m, x0);
+        let mut lin = Plant::new(m.clone(), x0);
+        let mut sp = Plant::new(m.clone(), x0);
         assert!(sp.set_d_saturation(Some(sat)));
         assert!(!sp.set_d_saturation(Some(DSaturation {
             drop: 1.0,
@@ -844,7 +868,7 @@ mod tests {
         assert!(close(a.omega_mech_rad_s, b.omega_mech_rad_s), "{a:?} {b:?}");
         // A positive d step at standstill: the current rises faster than on the linear plant.
         let x0 = PlantState::default();
-        let (mut lin, mut sp) = (Plant::new(m, x0), Plant::new(m, x0));
+        let (mut lin, mut sp) = (Plant::new(m.clone(), x0), Plant::new(m, x0));
         sp.set_d_saturation(Some(sat));
         for _ in 0..100 {
             lin.step([100.0, 0.0], 0.0, 1e-4);
@@ -895,7 +919,7 @@ mod tests {
             );
             // The plant's torque at that state is the same.
             let plant = Plant::new(
-                m,
+                m.clone(),
                 PlantState {
                     i_d_a: id,
                     i_q_a: iq,
@@ -906,7 +930,7 @@ mod tests {
             assert!((plant.torque_nm() - te).abs() < 1e-12 * te.abs().max(1.0));
         }
         // The RK4 step of the plant with harmonics agrees with a much finer one.
-        let a = driven_run(m, 200.0, 3.0, 2000, 1e-4, 0);
+        let a = driven_run(m.clone(), 200.0, 3.0, 2000, 1e-4, 0);
         let b = driven_run(m, 200.0, 3.0, 2000, 1e-4, 64);
         let (di, dw, dth) = worst_relative(&a, &b);
         assert!(
@@ -920,7 +944,7 @@ mod tests {
         let mut m = MotorModel::servo();
         m.coulomb_nm = 0.2;
         // At rest, a load of 0.1 N m does not move it.
-        let mut plant = Plant::new(m, PlantState::default());
+        let mut plant = Plant::new(m.clone(), PlantState::default());
         for _ in 0..1000 {
             plant.step([0.0, 0.0], 0.1, 1e-4);
         }

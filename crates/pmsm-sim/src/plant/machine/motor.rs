@@ -1,7 +1,11 @@
 //! The motor's parameters ([`MotorModel`]: the dq model's constants, the reference motors, the EMF harmonics) and the d-axis saturation option.
 
+use std::sync::Arc;
+
+use super::saturation::{FluxMapTable, Saturation, SaturationSection, TabulatedMap};
 use super::*;
 use ekf_core::catalog::{self, ReferenceMotor};
+use ekf_core::saturation::{SATURATED, SaturatedMotor, SaturationModel, saturated_by_name};
 
 /// Mechanical and electrical parameters of a PMSM (SI units).
 ///
@@ -11,7 +15,7 @@ use ekf_core::catalog::{self, ReferenceMotor};
 /// `lq_h` (a surface motor), as it does in `[observer]`; `ld_h` or `lq_h` given beside it wins
 /// for its axis. Without `catalog` every key except `coulomb_nm` and `emf_harmonics` is
 /// required. Written out, a scenario lists the resolved values.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "MotorSection")]
 pub struct MotorModel {
     /// Stator resistance per phase, ohm.
@@ -35,6 +39,21 @@ pub struct MotorModel {
     /// default none).
     #[serde(default, skip_serializing_if = "EmfHarmonics::is_default")]
     pub emf_harmonics: EmfHarmonics,
+    /// Magnetic saturation by an algebraic model (`[motor.saturation]`, module
+    /// [`saturation`](super::saturation)); default none.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        serialize_with = "super::saturation::serialize_model"
+    )]
+    pub saturation: Option<SaturationModel>,
+    /// Magnetic saturation by a tabulated flux map (`[motor.flux_map]`); default none.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        serialize_with = "super::saturation::serialize_map"
+    )]
+    pub flux_map: Option<Arc<TabulatedMap>>,
 }
 
 /// The `[motor]` table as written: a catalog name and any values ([`MotorModel`]).
@@ -54,21 +73,68 @@ struct MotorSection {
     coulomb_nm: f64,
     #[serde(default)]
     emf_harmonics: EmfHarmonics,
+    saturation: Option<SaturationSection>,
+    flux_map: Option<FluxMapTable>,
 }
 
 impl TryFrom<MotorSection> for MotorModel {
     type Error = String;
 
     fn try_from(s: MotorSection) -> Result<Self, String> {
-        let base = match &s.catalog {
-            Some(name) => Some(catalog::by_name(name).ok_or_else(|| {
-                let known: Vec<&str> = catalog::ALL.iter().map(|m| m.name).collect();
-                format!(
-                    "motor.catalog: no reference motor named {name:?} (known: {})",
-                    known.join(", ")
-                )
-            })?),
+        let saturated = match &s.catalog {
+            Some(name) => saturated_by_name(name),
             None => None,
+        };
+        let base = match &s.catalog {
+            Some(name) => Some(
+                catalog::by_name(name)
+                    .or(saturated.map(|m| &m.reference))
+                    .ok_or_else(|| {
+                        let known: Vec<&str> = catalog::ALL
+                            .iter()
+                            .chain(SATURATED.iter().map(|m| &m.reference))
+                            .map(|m| m.name)
+                            .collect();
+                        format!(
+                            "motor.catalog: no reference motor named {name:?} (known: {})",
+                            known.join(", ")
+                        )
+                    })?,
+            ),
+            None => None,
+        };
+        // Saturation: given, or the saturating reference motor's own model.
+        let saturation = match &s.saturation {
+            Some(sec) => Some(sec.resolve()?),
+            None if s.flux_map.is_none() => saturated.map(|m| m.model),
+            None => None,
+        };
+        let flux_map = match &s.flux_map {
+            Some(table) => Some(Arc::new(TabulatedMap {
+                map: table.build()?,
+                table: table.clone(),
+            })),
+            None => None,
+        };
+        if saturation.is_some() && flux_map.is_some() {
+            return Err("motor: give either [motor.saturation] or [motor.flux_map]".into());
+        }
+        let magnetics = match (&saturation, &flux_map) {
+            (Some(m), _) => Some(Saturation::Algebraic(*m)),
+            (_, Some(t)) => Some(Saturation::Map(t.clone())),
+            _ => None,
+        };
+        if magnetics.is_some() && s.emf_harmonics.is_on() {
+            return Err(
+                "motor.emf_harmonics: not available on a saturating motor (its flux is the \
+                 saturation model's)"
+                    .into(),
+            );
+        }
+        // A saturating motor's small-signal values come from its model unless given.
+        let small = match &magnetics {
+            Some(m) if s.catalog.is_none() => Some(m.small_signal()?),
+            _ => None,
         };
         // `ls_h` is resolved into `ld_h` and `lq_h` here: checked here, by its own name, where
         // it sets an axis (the other keys are checked by `MotorModel::validate`).
@@ -91,9 +157,9 @@ impl TryFrom<MotorSection> for MotorModel {
         };
         Ok(Self {
             rs_ohm: pick(s.rs_ohm, |m| m.rs_ohm, "rs_ohm")?,
-            ld_h: pick(s.ld_h.or(s.ls_h), |m| m.ld_h, "ld_h")?,
-            lq_h: pick(s.lq_h.or(s.ls_h), |m| m.lq_h, "lq_h")?,
-            psi_f_wb: pick(s.psi_f_wb, |m| m.psi_f_wb, "psi_f_wb")?,
+            ld_h: pick(s.ld_h.or(s.ls_h).or(small.map(|v| v.0)), |m| m.ld_h, "ld_h")?,
+            lq_h: pick(s.lq_h.or(s.ls_h).or(small.map(|v| v.1)), |m| m.lq_h, "lq_h")?,
+            psi_f_wb: pick(s.psi_f_wb.or(small.map(|v| v.2)), |m| m.psi_f_wb, "psi_f_wb")?,
             pole_pairs: s.pole_pairs.or(base.map(|m| m.pole_pairs)).ok_or_else(|| {
                 "motor.pole_pairs is missing (give it, or motor.catalog = a reference motor)"
                     .to_string()
@@ -102,6 +168,8 @@ impl TryFrom<MotorSection> for MotorModel {
             b_nm_s_rad: pick(s.b_nm_s_rad, |m| m.b_nm_s_rad, "b_nm_s_rad")?,
             coulomb_nm: s.coulomb_nm,
             emf_harmonics: s.emf_harmonics,
+            saturation,
+            flux_map,
         })
     }
 }
@@ -212,6 +280,27 @@ impl MotorModel {
             b_nm_s_rad: m.b_nm_s_rad,
             coulomb_nm: 0.0,
             emf_harmonics: EmfHarmonics::NONE,
+            saturation: None,
+            flux_map: None,
+        }
+    }
+
+    /// A reference saturating motor (`ekf_core::saturation::SATURATED`): its small-signal
+    /// parameters, mechanics and algebraic saturation model.
+    pub fn from_saturated(m: &SaturatedMotor) -> Self {
+        Self {
+            saturation: Some(m.model),
+            ..Self::from_catalog(&m.reference)
+        }
+    }
+
+    /// The flux-current relation when the motor saturates (`[motor.saturation]` or
+    /// `[motor.flux_map]`), else `None`: the linear model.
+    pub fn magnetics(&self) -> Option<Saturation> {
+        match (&self.saturation, &self.flux_map) {
+            (Some(m), _) => Some(Saturation::Algebraic(*m)),
+            (_, Some(t)) => Some(Saturation::Map(t.clone())),
+            _ => None,
         }
     }
 

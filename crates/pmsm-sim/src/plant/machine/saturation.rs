@@ -1,0 +1,385 @@
+//! Magnetic saturation of the plant: the stator flux as a function of the currents, from an
+//! algebraic model (`[motor.saturation]`) or a tabulated flux map (`[motor.flux_map]`).
+//!
+//! # Plant equations with saturation (rotor frame, SI)
+//!
+//! The stator flux `psi = (psi_d, psi_q)` is the state; the currents follow from it:
+//!
+//! ```text
+//! dpsi_d/dt = u_d - Rs i_d + w_e psi_q        i = f(psi)
+//! dpsi_q/dt = u_q - Rs i_q - w_e psi_d        Te = 1.5 p (psi_d i_q - psi_q i_d)
+//! ```
+//!
+//! `f` is the algebraic model's current map (`ekf_core::saturation`, closed form) or the
+//! inverse of the tabulated map (Newton's method on the map from the last currents,
+//! `ekf_core::FluxMap::currents`). The plant steps by RK4 with [`SATURATION_SUBSTEPS`]
+//! sub-steps per period on `(psi_d, psi_q, w_mech, th)` with the stationary voltage held,
+//! Coulomb friction as in the plant's RK4 reference. The magnet flux is the model's flux at
+//! zero current (`psi_d(0, 0)`); the motor's `ld_h`, `lq_h` and `psi_f_wb` are its
+//! small-signal values there (derived from the model when the scenario does not give them).
+//! Not combined with the EMF harmonics or the d-axis saturation option (refused).
+//!
+//! # Scenario keys
+//!
+//! ```toml
+//! [motor.saturation]        # an algebraic model: a named fit ...
+//! fit = "pm_syrm"           # pm_syrm (Lelli, Hinkkanen et al. 2024), saturating_ipm
+//! # ... or its 14 coefficients: a_d0, a_dd, s, a_q0, a_qq, t, a_dq, u, v, psi_n, a_b, a_bp, w, k_q
+//!
+//! [motor.flux_map]          # or a table: ascending current axes, A ...
+//! i_d = [-20.0, -10.0, 0.0]
+//! i_q = [-20.0, 0.0, 20.0]
+//! psi_d = [[...], [...], [...]]   # one row per i_d point, one column per i_q point, Wb
+//! psi_q = [[...], [...], [...]]
+//! ```
+//!
+//! `catalog = "pm_syrm"` (or `saturating_ipm`) gives the reference saturating motors of
+//! `ekf_core::saturation` with their algebraic models.
+
+use std::f64::consts::{PI, TAU};
+use std::sync::Arc;
+
+use ekf_core::{FluxMap, wrap_angle};
+use glam::DVec2;
+use ekf_core::saturation::{SaturationModel, saturated_by_name};
+use serde::{Deserialize, Serialize};
+
+use super::PlantState;
+use crate::plant::frames::park;
+
+/// Grid capacity per axis of a tabulated flux map.
+pub const MAP_POINTS: usize = 32;
+
+/// RK4 sub-steps per period of the saturating plant.
+pub const SATURATION_SUBSTEPS: u32 = 8;
+
+/// Newton iterations allowed when the currents are found from the flux on a tabulated map.
+const NEWTON_ITERATIONS: u32 = 20;
+
+/// The flux-current relation of a saturating motor (module docs).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Saturation {
+    /// An algebraic model: currents from the flux in closed form.
+    Algebraic(SaturationModel),
+    /// A tabulated map as the scenario gave it, and the map built from it.
+    Map(Arc<TabulatedMap>),
+}
+
+/// A tabulated flux map (`[motor.flux_map]`): the table as written and the interpolating map.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TabulatedMap {
+    /// The table as written (what a written-out scenario lists).
+    pub table: FluxMapTable,
+    /// The interpolating map.
+    pub map: FluxMap<f64, MAP_POINTS>,
+}
+
+/// The `[motor.flux_map]` table: current axes (A, ascending) and fluxes (Wb), one row per
+/// `i_d` point and one column per `i_q` point.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FluxMapTable {
+    /// d-axis currents, A, ascending.
+    pub i_d: Vec<f64>,
+    /// q-axis currents, A, ascending.
+    pub i_q: Vec<f64>,
+    /// d-axis flux, Wb: `psi_d[row of i_d][column of i_q]`.
+    pub psi_d: Vec<Vec<f64>>,
+    /// q-axis flux, Wb, laid out as `psi_d`.
+    pub psi_q: Vec<Vec<f64>>,
+}
+
+impl FluxMapTable {
+    /// Builds the interpolating map; the error names the key (`motor.flux_map.<array>`) and
+    /// the problem.
+    pub fn build(&self) -> Result<FluxMap<f64, MAP_POINTS>, String> {
+        let (n_d, n_q) = (self.i_d.len(), self.i_q.len());
+        let flat = |name: &str, rows: &[Vec<f64>]| -> Result<Vec<f64>, String> {
+            if rows.len() != n_d {
+                return Err(format!(
+                    "motor.flux_map.{name}: {} rows, expected one per i_d point ({n_d})",
+                    rows.len()
+                ));
+            }
+            if let Some((k, r)) = rows.iter().enumerate().find(|(_, r)| r.len() != n_q) {
+                return Err(format!(
+                    "motor.flux_map.{name}: row {k} has {} values, expected one per i_q point \
+                     ({n_q})",
+                    r.len()
+                ));
+            }
+            Ok(rows.concat())
+        };
+        let psi_d = flat("psi_d", &self.psi_d)?;
+        let psi_q = flat("psi_q", &self.psi_q)?;
+        FluxMap::new(&self.i_d, &self.i_q, &psi_d, &psi_q)
+            .map_err(|e| format!("motor.flux_map: {e}"))
+    }
+}
+
+impl Saturation {
+    /// The currents `(i_d, i_q)` at the flux `psi`; `guess` is the last currents (used by a
+    /// tabulated map's Newton iteration). `None` when a tabulated map's inversion fails.
+    pub fn currents(&self, psi: (f64, f64), guess: (f64, f64)) -> Option<(f64, f64)> {
+        match self {
+            Saturation::Algebraic(m) => Some(m.currents(psi.0, psi.1)),
+            Saturation::Map(t) => t
+                .map
+                .currents(psi.0, psi.1, guess, NEWTON_ITERATIONS, 1e-12),
+        }
+    }
+
+    /// The flux `(psi_d, psi_q)` at the currents `i`, from `guess` (a nearby flux, for the
+    /// algebraic model's Newton iteration). `None` when the algebraic model's inversion fails.
+    pub fn flux(&self, i: (f64, f64), guess: (f64, f64)) -> Option<(f64, f64)> {
+        match self {
+            Saturation::Algebraic(m) => m.flux(i.0, i.1, guess),
+            Saturation::Map(t) => {
+                let p = t.map.eval(i.0, i.1);
+                Some((p.psi_d, p.psi_q))
+            }
+        }
+    }
+
+    /// The small-signal values at zero current: `(Ld, Lq, psi_f)` (central differences of
+    /// 1 mA on the flux), or an error text.
+    pub fn small_signal(&self) -> Result<(f64, f64, f64), String> {
+        let fail = || "motor.saturation: the model has no flux at zero current".to_string();
+        let (pd, pq) = self.flux((0.0, 0.0), (0.5, 0.0)).ok_or_else(fail)?;
+        let h = 1e-3;
+        let at = |i: (f64, f64)| self.flux(i, (pd, pq)).ok_or_else(fail);
+        let ld = (at((h, 0.0))?.0 - at((-h, 0.0))?.0) / (2.0 * h);
+        let lq = (at((0.0, h))?.1 - at((0.0, -h))?.1) / (2.0 * h);
+        Ok((ld, lq, pd))
+    }
+}
+
+/// The `[motor.saturation]` table as written: a named fit, or the coefficients.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SaturationSection {
+    fit: Option<String>,
+    a_d0: Option<f64>,
+    a_dd: Option<f64>,
+    s: Option<f64>,
+    a_q0: Option<f64>,
+    a_qq: Option<f64>,
+    t: Option<f64>,
+    a_dq: Option<f64>,
+    u: Option<f64>,
+    v: Option<f64>,
+    psi_n: Option<f64>,
+    a_b: Option<f64>,
+    a_bp: Option<f64>,
+    w: Option<f64>,
+    k_q: Option<f64>,
+}
+
+impl SaturationSection {
+    /// The model: the named fit, or every coefficient given (finite; the inverse
+    /// inductances and the exponents positive).
+    pub(super) fn resolve(&self) -> Result<SaturationModel, String> {
+        if let Some(name) = &self.fit {
+            let coefficients_given = self.a_d0.is_some() || self.a_q0.is_some();
+            if coefficients_given {
+                return Err("motor.saturation: give either fit or the coefficients".into());
+            }
+            return saturated_by_name(name).map(|m| m.model).ok_or_else(|| {
+                format!(
+                    "motor.saturation.fit: no saturation model named {name:?} (known: \
+                     pm_syrm, saturating_ipm)"
+                )
+            });
+        }
+        let get = |v: Option<f64>, key: &str| {
+            let v = v.ok_or_else(|| {
+                format!("motor.saturation.{key} is missing (give all 14 coefficients, or fit)")
+            })?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(format!("motor.saturation.{key}: must be finite, is {v}"))
+            }
+        };
+        let m = SaturationModel {
+            a_d0: get(self.a_d0, "a_d0")?,
+            a_dd: get(self.a_dd, "a_dd")?,
+            s: get(self.s, "s")?,
+            a_q0: get(self.a_q0, "a_q0")?,
+            a_qq: get(self.a_qq, "a_qq")?,
+            t: get(self.t, "t")?,
+            a_dq: get(self.a_dq, "a_dq")?,
+            u: get(self.u, "u")?,
+            v: get(self.v, "v")?,
+            psi_n: get(self.psi_n, "psi_n")?,
+            a_b: get(self.a_b, "a_b")?,
+            a_bp: get(self.a_bp, "a_bp")?,
+            w: get(self.w, "w")?,
+            k_q: get(self.k_q, "k_q")?,
+        };
+        for (key, v) in [("a_d0", m.a_d0), ("a_q0", m.a_q0)] {
+            if v <= 0.0 {
+                return Err(format!(
+                    "motor.saturation.{key}: an inverse inductance, must be above 0, is {v}"
+                ));
+            }
+        }
+        for (key, v) in [
+            ("a_dd", m.a_dd),
+            ("a_qq", m.a_qq),
+            ("a_dq", m.a_dq),
+            ("a_b", m.a_b),
+            ("a_bp", m.a_bp),
+            ("k_q", m.k_q),
+            ("s", m.s),
+            ("t", m.t),
+            ("u", m.u),
+            ("v", m.v),
+            ("w", m.w),
+        ] {
+            if v < 0.0 {
+                return Err(format!("motor.saturation.{key}: must be >= 0, is {v}"));
+            }
+        }
+        Ok(m)
+    }
+}
+
+/// The algebraic model as a written-out scenario lists it (its 14 coefficients).
+pub(super) fn serialize_model<S: serde::Serializer>(
+    m: &Option<SaturationModel>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Out {
+        a_d0: f64,
+        a_dd: f64,
+        s: f64,
+        a_q0: f64,
+        a_qq: f64,
+        t: f64,
+        a_dq: f64,
+        u: f64,
+        v: f64,
+        psi_n: f64,
+        a_b: f64,
+        a_bp: f64,
+        w: f64,
+        k_q: f64,
+    }
+    m.map(|m| Out {
+        a_d0: m.a_d0,
+        a_dd: m.a_dd,
+        s: m.s,
+        a_q0: m.a_q0,
+        a_qq: m.a_qq,
+        t: m.t,
+        a_dq: m.a_dq,
+        u: m.u,
+        v: m.v,
+        psi_n: m.psi_n,
+        a_b: m.a_b,
+        a_bp: m.a_bp,
+        w: m.w,
+        k_q: m.k_q,
+    })
+    .serialize(s)
+}
+
+/// The tabulated map as a written-out scenario lists it (its table).
+pub(super) fn serialize_map<S: serde::Serializer>(
+    m: &Option<Arc<TabulatedMap>>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    m.as_ref().map(|t| &t.table).serialize(s)
+}
+
+impl super::Plant {
+    /// Recomputes the stator flux of a saturating motor from the present currents (after the
+    /// currents were set from outside the integration: an opened phase, the inverter off).
+    pub(super) fn refresh_flux(&mut self) {
+        if let Some((m, flux)) = &mut self.magnetics {
+            let i = (self.state.i_d_a, self.state.i_q_a);
+            if let Some(f) = m.flux(i, *flux) {
+                *flux = f;
+            }
+        }
+    }
+
+    /// The saturating motor's step (module docs): RK4 on `(psi_d, psi_q, w_mech, th)` with
+    /// [`SATURATION_SUBSTEPS`] sub-steps, the currents from the flux at every stage.
+    pub(super) fn step_saturated(&mut self, u_ab_v: [f64; 2], t_load_nm: f64, h_s: f64) {
+        let Some((sat, flux)) = self.magnetics.clone() else {
+            return;
+        };
+        let m = &self.motor;
+        let p = m.p();
+        let locked = self.locked;
+        let n = SATURATION_SUBSTEPS;
+        let h = h_s / f64::from(n);
+        let s = self.state;
+        let mut x = [flux.0, flux.1, s.omega_mech_rad_s, s.theta_e_rad];
+        // The currents of the last stage: the guess of a tabulated map's inversion, and the
+        // fallback (one linear step from them) when an inversion fails.
+        let mut last_i = (s.i_d_a, s.i_q_a);
+        let currents = |pd: f64, pq: f64, last: &mut (f64, f64)| -> (f64, f64) {
+            let i = sat.currents((pd, pq), *last).unwrap_or_else(|| {
+                let (fd, fq) = sat.flux(*last, (pd, pq)).unwrap_or((pd, pq));
+                (last.0 + (pd - fd) / m.ld_h, last.1 + (pq - fq) / m.lq_h)
+            });
+            *last = i;
+            i
+        };
+        let deriv = |x: &[f64; 4], last: &mut (f64, f64)| -> [f64; 4] {
+            let [pd, pq, wm, th] = *x;
+            let (id, iq) = currents(pd, pq, last);
+            let (sn, cs) = th.sin_cos();
+            let DVec2 { x: ud, y: uq } = park(DVec2::from(u_ab_v), DVec2::new(cs, sn));
+            let we = p * wm;
+            let te = 1.5 * p * (pd * iq - pq * id);
+            let fr = super::coulomb_nm(m, wm);
+            let mut d = [
+                ud - m.rs_ohm * id + we * pq,
+                uq - m.rs_ohm * iq - we * pd,
+                (te - m.b_nm_s_rad * wm - fr - t_load_nm) / m.j_kg_m2,
+                we,
+            ];
+            if locked {
+                d[2] = 0.0;
+                d[3] = 0.0;
+            }
+            d
+        };
+        let add = |a: &[f64; 4], k: &[f64; 4], f: f64| -> [f64; 4] {
+            [
+                a[0] + f * k[0],
+                a[1] + f * k[1],
+                a[2] + f * k[2],
+                a[3] + f * k[3],
+            ]
+        };
+        for _ in 0..n {
+            let k1 = deriv(&x, &mut last_i);
+            let k2 = deriv(&add(&x, &k1, 0.5 * h), &mut last_i);
+            let k3 = deriv(&add(&x, &k2, 0.5 * h), &mut last_i);
+            let k4 = deriv(&add(&x, &k3, h), &mut last_i);
+            for i in 0..4 {
+                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            }
+            if x[3] >= PI {
+                x[3] -= TAU;
+            } else if x[3] < -PI {
+                x[3] += TAU;
+            }
+        }
+        let (id, iq) = currents(x[0], x[1], &mut last_i);
+        self.state = PlantState {
+            i_d_a: id,
+            i_q_a: iq,
+            omega_mech_rad_s: x[2],
+            theta_e_rad: wrap_angle(x[3]),
+        };
+        self.sc = self.state.theta_e_rad.sin_cos();
+        self.magnetics = Some((sat, (x[0], x[1])));
+    }
+}
