@@ -211,6 +211,8 @@ pub struct FluxObserver<T: Float> {
     rs: T,
     /// `Lq` (the active-flux inductance; `Ls` of a surface motor), H.
     ls: T,
+    /// The inductance of the last step's active flux (`ls`, or a flux map's chord `Lq`), H.
+    ls_now: T,
     psi2: T,
     /// `psi_f`, Wb.
     psi: T,
@@ -249,6 +251,7 @@ impl<T: Float> FluxObserver<T> {
             ts: cfg.ts_s,
             rs: m.rs_ohm,
             ls: m.lq_h,
+            ls_now: m.lq_h,
             psi2,
             psi: m.psi_f_wb,
             dl: m.ld_h - m.lq_h,
@@ -279,6 +282,27 @@ impl<T: Float> FluxObserver<T> {
     /// A non-finite input or measurement, or a non-finite result, returns the error and leaves
     /// the observer exactly as it was.
     pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<FluxEstimate<T>, EkfError> {
+        let (ls, psi, dl) = (self.ls, self.psi, self.dl);
+        self.step_with(u_prev, i, dl != T::zero(), |id, iq| {
+            (ls, psi + dl * id, dl * iq)
+        })
+    }
+
+    /// [`step`](Self::step) with the active-flux model given per step (`salient`): `active`
+    /// maps the currents `(i_d, i_q)` along the PLL's last predicted d axis to `(L, psi_a,
+    /// d psi_a / d th)`, the inductance whose current term leaves the active flux
+    /// (`eta = x - L i`), its magnitude and its dependence on the angle (module docs). The
+    /// constant-parameter motor passes `(Lq, psi_f + (Ld - Lq) i_d, (Ld - Lq) i_q)`; a flux
+    /// map its operating point ([`FluxMapObserver`](crate::saturated::FluxMapObserver)).
+    /// Without `salient` the surface motor's fixed circle is used.
+    #[inline(always)]
+    pub(crate) fn step_with(
+        &mut self,
+        u_prev: [T; 2],
+        i: [T; 2],
+        salient: bool,
+        active: impl FnOnce(T, T) -> (T, T, T),
+    ) -> Result<FluxEstimate<T>, EkfError> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
@@ -297,31 +321,37 @@ impl<T: Float> FluxObserver<T> {
                 ],
             ),
         };
-        let e0a = self.x[0] - self.ls * i_eta[0];
-        let e0b = self.x[1] - self.ls * i_eta[1];
-        let n2 = e0a * e0a + e0b * e0b;
-        let g = if self.dl == T::zero() {
-            self.gamma_half * (self.psi2 - n2)
+        let (ls, g_of) = if !salient {
+            (self.ls, None)
         } else {
-            // Active flux: the circle's radius is psi_f + (Ld - Lq) i_d, with i_d the current
-            // along the PLL's last predicted d axis; the gain limited so that the radius's
-            // dependence on the angle estimate cannot destabilise the loop (module docs).
+            // Active flux: the circle's radius is psi_a at the currents along the PLL's last
+            // predicted d axis; the gain limited so that the radius's dependence on the angle
+            // estimate cannot destabilise the loop (module docs).
             let (sd, cd) = (self.pll_dir[0], self.pll_dir[1]);
             let id = i_eta[0] * cd + i_eta[1] * sd;
             let iq = i_eta[1] * cd - i_eta[0] * sd;
-            let psi_a = self.psi + self.dl * id;
-            let coupling = to_t::<T>(8.0) * psi_a.abs() * (self.dl * iq).abs();
-            let gamma_half = if self.gamma_half * coupling > self.w_pll.abs() {
-                self.w_pll.abs() / coupling
-            } else {
-                self.gamma_half
-            };
-            gamma_half * (psi_a * psi_a - n2)
+            let (ls, psi_a, b) = active(id, iq);
+            (ls, Some((psi_a, b)))
+        };
+        let e0a = self.x[0] - ls * i_eta[0];
+        let e0b = self.x[1] - ls * i_eta[1];
+        let n2 = e0a * e0a + e0b * e0b;
+        let g = match g_of {
+            None => self.gamma_half * (self.psi2 - n2),
+            Some((psi_a, b)) => {
+                let coupling = to_t::<T>(8.0) * psi_a.abs() * b.abs();
+                let gamma_half = if self.gamma_half * coupling > self.w_pll.abs() {
+                    self.w_pll.abs() / coupling
+                } else {
+                    self.gamma_half
+                };
+                gamma_half * (psi_a * psi_a - n2)
+            }
         };
         let xa = self.x[0] + ts * (u_prev[0] - self.rs * i_r[0] + g * e0a);
         let xb = self.x[1] + ts * (u_prev[1] - self.rs * i_r[1] + g * e0b);
-        let ea = xa - self.ls * i[0];
-        let eb = xb - self.ls * i[1];
+        let ea = xa - ls * i[0];
+        let eb = xb - ls * i[1];
         let theta_flux = wrap_angle(eb.atan2(ea));
 
         let th_pred = wrap_angle(self.theta_pll + ts * self.w_pll);
@@ -335,6 +365,7 @@ impl<T: Float> FluxObserver<T> {
         }
         self.x = [xa, xb];
         self.i_prev = i;
+        self.ls_now = ls;
         self.pll_dir = [s, c];
         self.theta_flux = theta_flux;
         self.theta_pll = theta_pll;
@@ -345,8 +376,8 @@ impl<T: Float> FluxObserver<T> {
     /// The current estimate.
     pub fn estimate(&self) -> FluxEstimate<T> {
         let eta = [
-            self.x[0] - self.ls * self.i_prev[0],
-            self.x[1] - self.ls * self.i_prev[1],
+            self.x[0] - self.ls_now * self.i_prev[0],
+            self.x[1] - self.ls_now * self.i_prev[1],
         ];
         FluxEstimate {
             theta_rad: match self.output {

@@ -315,3 +315,61 @@ pub fn small_signal<T: Float, const N: usize>(
         pole_pairs,
     }
 }
+
+/// The flux-observer baseline on a flux map (the [`FluxObserver`](crate::FluxObserver) of
+/// open firmware, told the map): the active flux of the map's operating point at the PLL's
+/// angle. With `(i_d, i_q)` the currents along the PLL's last predicted d axis and the map's
+/// flux there, the chord inductance `Lq_c = psi_q / i_q` (the incremental `dPsi_q/di_q` where
+/// `|i_q|` is below 1e-3 of the characteristic current) makes `eta = x - Lq_c i` the rotor-frame
+/// vector `(psi_d - Lq_c i_d, 0)`: the active flux `psi_a = psi_d - Lq_c i_d` along the d axis,
+/// the radius the observer pulls its flux estimate to. Its dependence on the angle,
+/// `(dPsi_d/di_d - Lq_c) i_q` to first order, limits the gain as for the constant interior motor
+/// (module docs of [`flux`](crate::flux)). With a linear map this is the constant-parameter
+/// observer's active flux.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FluxMapObserver<T: Float, const N: usize> {
+    observer: crate::FluxObserver<T>,
+    map: FluxMap<T, N>,
+    /// `|i_q|` below which the chord inductance is the incremental one, A.
+    small_iq: T,
+}
+
+impl<T: Float, const N: usize> FluxMapObserver<T, N> {
+    /// Validates `cfg` (whose motor gives `Rs`, and `psi_f` to normalise the gains: the map's
+    /// small-signal parameters, [`small_signal`]) and builds the observer at rest.
+    pub fn new(
+        cfg: &crate::FluxObserverConfig<T>,
+        map: FluxMap<T, N>,
+    ) -> Result<Self, ConfigError> {
+        Ok(Self {
+            observer: crate::FluxObserver::new(cfg)?,
+            small_iq: cfg.motor.characteristic_current_a() * to_t(1e-3),
+            map,
+        })
+    }
+
+    /// One sample, as [`FluxObserver::step`](crate::FluxObserver::step), on the map's active
+    /// flux.
+    pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<crate::FluxEstimate<T>, EkfError> {
+        let (map, small_iq) = (&self.map, self.small_iq);
+        self.observer.step_with(u_prev, i, true, |id, iq| {
+            let p = map.eval(id, iq);
+            let lq = if iq.abs() > small_iq {
+                p.psi_q / iq
+            } else {
+                p.l_qq
+            };
+            (lq, p.psi_d - lq * id, (p.l_dd - lq) * iq)
+        })
+    }
+
+    /// The current estimate.
+    pub fn estimate(&self) -> crate::FluxEstimate<T> {
+        self.observer.estimate()
+    }
+
+    /// The flux map.
+    pub fn map(&self) -> &FluxMap<T, N> {
+        &self.map
+    }
+}

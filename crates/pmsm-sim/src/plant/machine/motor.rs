@@ -159,7 +159,11 @@ impl TryFrom<MotorSection> for MotorModel {
             rs_ohm: pick(s.rs_ohm, |m| m.rs_ohm, "rs_ohm")?,
             ld_h: pick(s.ld_h.or(s.ls_h).or(small.map(|v| v.0)), |m| m.ld_h, "ld_h")?,
             lq_h: pick(s.lq_h.or(s.ls_h).or(small.map(|v| v.1)), |m| m.lq_h, "lq_h")?,
-            psi_f_wb: pick(s.psi_f_wb.or(small.map(|v| v.2)), |m| m.psi_f_wb, "psi_f_wb")?,
+            psi_f_wb: pick(
+                s.psi_f_wb.or(small.map(|v| v.2)),
+                |m| m.psi_f_wb,
+                "psi_f_wb",
+            )?,
             pole_pairs: s.pole_pairs.or(base.map(|m| m.pole_pairs)).ok_or_else(|| {
                 "motor.pole_pairs is missing (give it, or motor.catalog = a reference motor)"
                     .to_string()

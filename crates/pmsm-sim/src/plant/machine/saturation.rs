@@ -39,9 +39,9 @@
 use std::f64::consts::{PI, TAU};
 use std::sync::Arc;
 
+use ekf_core::saturation::{SaturationModel, saturated_by_name};
 use ekf_core::{FluxMap, wrap_angle};
 use glam::DVec2;
-use ekf_core::saturation::{SaturationModel, saturated_by_name};
 use serde::{Deserialize, Serialize};
 
 use super::PlantState;
@@ -309,13 +309,18 @@ impl super::Plant {
     /// The saturating motor's step (module docs): RK4 on `(psi_d, psi_q, w_mech, th)` with
     /// [`SATURATION_SUBSTEPS`] sub-steps, the currents from the flux at every stage.
     pub(super) fn step_saturated(&mut self, u_ab_v: [f64; 2], t_load_nm: f64, h_s: f64) {
+        self.step_saturated_n(u_ab_v, t_load_nm, h_s, SATURATION_SUBSTEPS);
+    }
+
+    /// [`step_saturated`](Self::step_saturated) with `n` sub-steps (tests compare counts).
+    fn step_saturated_n(&mut self, u_ab_v: [f64; 2], t_load_nm: f64, h_s: f64, n: u32) {
         let Some((sat, flux)) = self.magnetics.clone() else {
             return;
         };
         let m = &self.motor;
         let p = m.p();
         let locked = self.locked;
-        let n = SATURATION_SUBSTEPS;
+        let n = n.max(1);
         let h = h_s / f64::from(n);
         let s = self.state;
         let mut x = [flux.0, flux.1, s.omega_mech_rad_s, s.theta_e_rad];
@@ -381,5 +386,134 @@ impl super::Plant {
         };
         self.sc = self.state.theta_e_rad.sin_cos();
         self.magnetics = Some((sat, (x[0], x[1])));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{MotorModel, Plant, PlantState};
+    use super::*;
+    use crate::plant::frames::inverse_park;
+    use ekf_core::saturation::{PM_SYRM, PM_SYRM_5K6};
+
+    /// Runs the PM-SyRM at 60 rad/s electrical (inertia large: constant speed) under a
+    /// proportional current loop on the true angle with flux feed-forward, through a step of
+    /// `i_q` from 0 to 15 A and of `i_d` to -10 A; returns the currents after every period.
+    fn run(motor: MotorModel, substeps: u32) -> Vec<(f64, f64)> {
+        let motor = MotorModel {
+            j_kg_m2: 1e9,
+            ..motor
+        };
+        let mut plant = Plant::new(
+            motor,
+            PlantState {
+                omega_mech_rad_s: 30.0,
+                theta_e_rad: 0.4,
+                ..PlantState::default()
+            },
+        );
+        let ts = 1e-4;
+        let mut out = Vec::new();
+        for k in 0..2000 {
+            let (id_ref, iq_ref) = if k < 500 { (0.0, 0.0) } else { (-10.0, 15.0) };
+            let s = plant.state();
+            let (pd, pq) = plant.magnetics.as_ref().unwrap().1;
+            let w = plant.omega_e_rad_s();
+            let ud = 0.63 * id_ref - w * pq + 60.0 * (id_ref - s.i_d_a);
+            let uq = 0.63 * iq_ref + w * pd + 150.0 * (iq_ref - s.i_q_a);
+            let (sn, cs) = s.theta_e_rad.sin_cos();
+            let u = inverse_park(DVec2::new(ud, uq), DVec2::new(cs, sn)).to_array();
+            plant.step_saturated_n(u, 0.0, ts, substeps);
+            let s = plant.state();
+            out.push((s.i_d_a, s.i_q_a));
+        }
+        out
+    }
+
+    fn worst(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x.0 - y.0).abs().max((x.1 - y.1).abs()))
+            .fold(0.0, f64::max)
+    }
+
+    /// Eight sub-steps are within 1 mA of 64 through the current steps; a tabulated map
+    /// sampled from the algebraic model on a 1.25 A grid is within 2 % of the rated 12.4 A.
+    #[test]
+    fn saturating_plant_converges_and_a_sampled_map_follows_the_model() {
+        let motor = MotorModel::from_saturated(&PM_SYRM);
+        let eight = run(motor.clone(), SATURATION_SUBSTEPS);
+        let fine = run(motor.clone(), 64);
+        let e = worst(&eight, &fine);
+        assert!(e < 1e-3, "8 vs 64 sub-steps: {e} A");
+        assert!((eight[1999].1 - 15.0).abs() < 0.5, "{:?}", eight[1999]);
+
+        let axis: Vec<f64> = (0..32).map(|k| -20.0 + 1.25 * k as f64).collect();
+        let map = PM_SYRM_5K6
+            .flux_map::<f64, MAP_POINTS>(&axis, &axis)
+            .unwrap();
+        let rows = |f: &dyn Fn(f64, f64) -> f64| -> Vec<Vec<f64>> {
+            axis.iter()
+                .map(|&d| axis.iter().map(|&q| f(d, q)).collect())
+                .collect()
+        };
+        let table = FluxMapTable {
+            i_d: axis.clone(),
+            i_q: axis.clone(),
+            psi_d: rows(&|d, q| map.eval(d, q).psi_d),
+            psi_q: rows(&|d, q| map.eval(d, q).psi_q),
+        };
+        let tabulated = MotorModel {
+            saturation: None,
+            flux_map: Some(Arc::new(TabulatedMap {
+                map: table.build().unwrap(),
+                table,
+            })),
+            ..motor
+        };
+        let e = worst(&run(tabulated, SATURATION_SUBSTEPS), &eight);
+        assert!(e < 0.25, "tabulated vs algebraic: {e} A");
+    }
+
+    /// The plant's torque is `1.5 p (psi_d i_q - psi_q i_d)` on the model's flux: 31.5 N m at
+    /// the rated current on the maximum-torque-per-ampere angle (44.6 deg).
+    #[test]
+    fn torque_comes_from_the_saturated_flux() {
+        let plant = Plant::new(
+            MotorModel::from_saturated(&PM_SYRM),
+            PlantState {
+                i_d_a: -8.74,
+                i_q_a: 8.86,
+                ..PlantState::default()
+            },
+        );
+        let t = plant.torque_nm();
+        assert!((t - 31.47).abs() < 0.05, "{t}");
+    }
+
+    #[test]
+    fn scenario_keys_resolve_and_name_their_errors() {
+        let parse = |body: &str| toml::from_str::<MotorModel>(body);
+        let m = parse("catalog = \"pm_syrm\"").unwrap();
+        assert_eq!(m.saturation, Some(PM_SYRM_5K6));
+        assert!((m.lq_h - 0.149_676).abs() < 1e-9);
+        let m = parse("rs_ohm = 0.63\npole_pairs = 2\nj_kg_m2 = 0.05\nb_nm_s_rad = 0.0\n[saturation]\nfit = \"pm_syrm\"")
+            .unwrap();
+        assert!((m.lq_h / 0.149_676 - 1.0).abs() < 1e-4, "{}", m.lq_h);
+        let err = parse(
+            "catalog = \"servo\"\n[flux_map]\ni_d = [0.0, 1.0]\ni_q = [0.0, 1.0]\n\
+             psi_d = [[0.1, 0.1]]\npsi_q = [[0.0, 0.1], [0.0, 0.1]]",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("motor.flux_map.psi_d: 1 rows"), "{err}");
+        let err = parse("catalog = \"servo\"\n[saturation]\nfit = \"nope\"")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("motor.saturation.fit"), "{err}");
+        let err = parse("catalog = \"pm_syrm\"\n[emf_harmonics]\nh5 = 0.01")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("motor.emf_harmonics"), "{err}");
     }
 }
