@@ -671,6 +671,14 @@ fn suite(opts: SuiteOptions, motors: &[SuiteMotor], out: &Path) -> Result<ExitCo
     let failed: Vec<String> = report
         .unexpected_failures()
         .map(|c| format!("{} ({}, {})", c.name, c.motor.name(), c.row))
+        .chain(
+            report
+                .saturated
+                .checks
+                .iter()
+                .filter(|c| !c.pass)
+                .map(|c| format!("{} ({})", c.name, c.motor)),
+        )
         .collect();
     if failed.is_empty() {
         return Ok(ExitCode::SUCCESS);

@@ -125,8 +125,10 @@ use crate::sim::{SideObserver, run_with_side_observers};
 pub use crate::output::metrics::CONVERGED_DEG;
 
 mod runs;
+mod saturated;
 mod tables;
 pub use runs::*;
+pub use saturated::*;
 
 /// The rotor's electrical angle at `t = 0`, rad (the observers start at 0: 115 deg off).
 pub const INITIAL_ANGLE_RAD: f64 = 2.0;
@@ -630,13 +632,18 @@ pub struct SuiteReport {
     pub mismatch: Vec<MismatchRow>,
     /// Real-drive rows (module docs), by motor and effect.
     pub real_drive: Vec<RealDriveRow>,
+    /// Saturated-motor rows and their goals (module `saturated`; run by [`run_suite`], not
+    /// for a selection of motors).
+    pub saturated: SaturatedReport,
     /// Goals and limits.
     pub checks: Vec<Check>,
 }
 
 /// Runs the suite (module docs): every motor ([`SuiteMotor::ALL`]), three observers.
 pub fn run_suite(opts: &SuiteOptions) -> Result<SuiteReport, SimError> {
-    run_suite_motors(opts, &SuiteMotor::ALL)
+    let mut report = run_suite_motors(opts, &SuiteMotor::ALL)?;
+    report.saturated = saturated_rows(opts)?;
+    Ok(report)
 }
 
 /// Runs the suite on the given motors only (in the order given; each keeps its own seed
@@ -763,6 +770,7 @@ pub fn run_suite_motors(
         transients,
         mismatch,
         real_drive,
+        saturated: SaturatedReport::default(),
         checks: Vec::new(),
     };
     report.checks = report.evaluate();

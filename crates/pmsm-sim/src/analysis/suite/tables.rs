@@ -369,6 +369,7 @@ impl SuiteReport {
                 );
             }
         }
+        s.push_str(&self.saturated.to_markdown());
         let _ = writeln!(
             s,
             "\n## Goals and limits (default EKF)\n\nGoals of the issue: RMS at most {GOAL_RMS_RATIO} x the baseline's in every steady-state row; |mean| at most {GOAL_MEAN_DEG} deg where w_e Ts <= {GOAL_MEAN_MAX_WTS} rad. Limits: RMS <= {LIMIT_RMS_DEG} deg, max <= {LIMIT_MAX_DEG} deg, speed RMS <= {LIMIT_SPEED_PCT} % of rated, converged from every start angle within the convergence phase, worst error through the load step <= {LIMIT_LOAD_STEP_DEG} deg. Mismatch goals at >= 50 % speed: RMS <= {GOAL_MISMATCH_RMS_DEG} deg told a wrong psi_f, Rs or temperature, <= {GOAL_MISMATCH_LS_RMS_DEG} deg told a wrong Ls; the tracked psi_f within {GOAL_MISMATCH_PSI_PCT} % told a wrong psi_f.\n"

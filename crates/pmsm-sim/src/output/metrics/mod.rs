@@ -138,6 +138,8 @@ pub(crate) struct Sums {
     pub(crate) tracking: usize,
     /// Samples with status `Tracking` while more than [`LOST_DEG`] off.
     pub(crate) tracking_lost: usize,
+    /// Samples more than [`LOST_DEG`] off.
+    pub(crate) lost: usize,
     pub(crate) sum_nis: f64,
 }
 
@@ -151,7 +153,9 @@ impl Sums {
         self.sum_w2 += ew * ew;
         self.max_w = self.max_w.max(ew.abs());
         self.tracking += usize::from(tracking);
-        self.tracking_lost += usize::from(tracking && e.abs() > LOST_DEG);
+        let lost = e.abs() > LOST_DEG;
+        self.tracking_lost += usize::from(tracking && lost);
+        self.lost += usize::from(lost);
         self.sum_nis += nis;
     }
 

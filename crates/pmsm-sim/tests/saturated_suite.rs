@@ -1,0 +1,31 @@
+//! The suite's saturated-motor rows (`pmsm_sim::analysis::suite`, module `saturated`), short
+//! form: on the saturating PM-SyRM and interior motor, the EKF told the flux map meets its
+//! goals (RMS at most half the flux baseline told the same map, no sample more than 45 deg
+//! off, never `Tracking` while more than 45 deg off), and the rows told the small-signal
+//! constants are there to compare.
+//!
+//! Run: `cargo test --release -p pmsm-sim --test saturated_suite -- --nocapture`.
+
+use pmsm_sim::analysis::suite::{SuiteOptions, Told, saturated_rows};
+
+#[test]
+fn map_ekf_meets_its_goals_on_the_saturated_motors() {
+    let report = saturated_rows(&SuiteOptions {
+        short: true,
+        ..SuiteOptions::default()
+    })
+    .unwrap();
+    print!("{}", report.to_markdown());
+    assert_eq!(report.rows.len(), 8, "two motors, four observers");
+    assert_eq!(report.checks.len(), 6);
+    for c in &report.checks {
+        assert!(
+            c.pass,
+            "{} ({}): {} > {}",
+            c.name, c.motor, c.value, c.limit
+        );
+    }
+    for r in report.rows.iter().filter(|r| r.told == Told::Map) {
+        assert!(r.samples > 10_000 && r.failures == 0, "{r:?}");
+    }
+}
