@@ -120,6 +120,25 @@ class Motor:
     ) -> Motor:
         """Motor from line-to-line R and L (halved to per phase) and Kv (rpm per volt of
         line-to-line peak back-EMF) or Kt (N m per peak phase ampere): exactly one of them."""
+    @staticmethod
+    def from_flux_map(
+        rs: float,
+        pole_pairs: int,
+        i_d: npt.ArrayLike,
+        i_q: npt.ArrayLike,
+        psi_d: npt.ArrayLike,
+        psi_q: npt.ArrayLike,
+    ) -> Motor:
+        """A saturating motor from its flux maps: i_d (n_d,) and i_q (n_q,) ascending, A;
+        psi_d, psi_q (n_d, n_q), Wb, psi[a, b] at (i_d[a], i_q[b]), magnet flux in psi_d; at
+        most 32 points per axis. ConfigError naming the problem for wrong shapes, non-finite
+        values, unordered axes, non-monotonic fluxes or a singular inductance. ld, lq, psi_f
+        read back the small-signal values at zero current. Ekf runs on the map (tracking
+        'default' means none; 'flux' is refused), FluxObserver on the map's active flux;
+        Drive and tune use the small-signal constants."""
+    @property
+    def has_flux_map(self) -> bool:
+        """Whether the motor is given by a flux map (from_flux_map)."""
 
 class RunOutput(TypedDict):
     theta: npt.NDArray[np.float64]

@@ -1,14 +1,14 @@
 //! `pyfoc._bench`: hooks for the benchmarks in `crates/pyfoc/bench` (private: not part of the
 //! API, free to change).
 
-use ekf_core::{Float, PmsmObserver};
+use ekf_core::Float;
 use numpy::PyUntypedArrayMethods;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::convert::{rows2, to_vec};
 use crate::ekf::Ekf;
-use crate::observer::Observer;
+use crate::observer::{Steps, each_observer};
 
 /// Seconds that the observer's own steps take over the rows of `u_ab`, `i_ab` (the loop of
 /// `Ekf.run` without its inputs' checks, copies and output columns), on a copy of `ekf`'s
@@ -29,7 +29,7 @@ fn time_steps(
     let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
     let mut obs = ekf.with(py, |inner| inner.observer.clone());
     Ok(py.detach(move || {
-        fn go<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: &[f64], i: &[f64]) -> f64 {
+        fn go<T: Float + Into<f64>, O: Steps<T>>(o: &mut O, u: &[f64], i: &[f64]) -> f64 {
             let c = |v: f64| T::from_subset(&v);
             let mut prev = [c(0.0); 2];
             let mut acc = 0.0;
@@ -44,10 +44,7 @@ fn time_steps(
             std::hint::black_box(acc);
             dt
         }
-        match &mut obs {
-            Observer::F64(o) => go(o, &u, &i),
-            Observer::F32(o) => go(o, &u, &i),
-        }
+        each_observer!(&mut obs, o => go(o, &u, &i))
     }))
 }
 

@@ -5,6 +5,7 @@
 use std::sync::Mutex;
 
 use ekf_core::nalgebra::{Matrix2, Matrix4, Vector4};
+use ekf_core::saturated::MapObserver;
 use ekf_core::{
     CovarianceUpdate, Discretization, EkfError, Float, ObserverConfig, PmsmObserver, RsTracking,
 };
@@ -15,8 +16,8 @@ use pyo3::types::PyDict;
 use crate::convert::{self, fixed, record_args, square, to_vec};
 use crate::engine;
 use crate::errors::{ConfigError, FilterError};
-use crate::motor::Motor;
-use crate::observer::{Columns, Filter, OUTPUTS, Observer};
+use crate::motor::{MAP_POINTS, Motor};
+use crate::observer::{Columns, Filter, OUTPUTS, Observer, Steps, each_observer};
 use crate::replay;
 
 /// Extended Kalman filter observer of a PMSM, surface or interior (active-flux model when
@@ -65,13 +66,35 @@ struct Settings {
     inverter_voltage_v: f64,
 }
 
-fn build<T: Float>(
+/// The observer of `motor` in precision `T`: on constant parameters, or on the motor's flux
+/// map (`map`, as `Observer::MapF64` / `MapF32` take it).
+fn build<T: Float, O>(
     motor: &Motor,
     ts: f64,
     s: &Settings,
-) -> Result<PmsmObserver<T>, ekf_core::ConfigError> {
+    plain: impl FnOnce(PmsmObserver<T>) -> O,
+    map: impl FnOnce(Box<MapObserver<T, MAP_POINTS>>) -> O,
+) -> PyResult<O> {
+    let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
     let conv = |v: f64| T::from_subset(&v);
-    let mut cfg = ObserverConfig::new(motor.params::<T>(), conv(ts));
+    let table = motor.map.as_ref();
+    let flux_map = table
+        .map(|t| t.map::<T>())
+        .transpose()
+        .map_err(ConfigError::new_err)?;
+    let mut cfg = match &flux_map {
+        None => ObserverConfig::new(motor.params::<T>(), conv(ts)),
+        Some(m) => {
+            if matches!(s.tracking, Tracking::Flux) {
+                return Err(ConfigError::new_err(
+                    "tracking='flux' is not available on a flux map (the map is the model): \
+                     use 'default' or 'off'",
+                ));
+            }
+            let p = motor.params::<T>();
+            MapObserver::default_config(m, p.rs_ohm, p.pole_pairs, conv(ts))
+        }
+    };
     cfg.voltage_delay_s = conv(s.voltage_delay_s);
     cfg.inverter_voltage_v = conv(s.inverter_voltage_v);
     cfg.discretization = s.disc;
@@ -97,7 +120,15 @@ fn build<T: Float>(
     if let Some(p0) = s.p0 {
         cfg.p0 = Matrix4::from_fn(|i, j| conv(p0[i][j]));
     }
-    PmsmObserver::new(&cfg)
+    match flux_map {
+        None => PmsmObserver::new(&cfg).map(plain).map_err(cfg_err),
+        Some(m) => {
+            cfg.parameter_tracking = None;
+            MapObserver::new(&cfg, m)
+                .map(|o| map(Box::new(o)))
+                .map_err(cfg_err)
+        }
+    }
 }
 
 /// Online parameter tracking of an [`Ekf`] (`tracking=` argument).
@@ -175,14 +206,13 @@ impl Ekf {
             voltage_delay_s,
             inverter_voltage_v,
         };
-        let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
         let (observer, dtype) = match dtype {
             "float64" => (
-                Observer::F64(build(motor, ts, &settings).map_err(cfg_err)?),
+                build(motor, ts, &settings, Observer::F64, Observer::MapF64)?,
                 "float64",
             ),
             "float32" => (
-                Observer::F32(build(motor, ts, &settings).map_err(cfg_err)?),
+                build(motor, ts, &settings, Observer::F32, Observer::MapF32)?,
                 "float32",
             ),
             other => {
@@ -306,8 +336,8 @@ impl Ekf {
             ekf_core::observer::check_covariance(&Matrix4::from_fn(|i, j| p[i][j]))
                 .map_err(|e| ConfigError::new_err(format!("p: {e}")))?;
         }
-        fn go<T: Float>(
-            o: &mut PmsmObserver<T>,
+        fn go<T: Float, O: Steps<T>>(
+            o: &mut O,
             x: [f64; 4],
             p: [[f64; 4]; 4],
         ) -> Result<(), EkfError> {
@@ -317,10 +347,10 @@ impl Ekf {
                 Matrix4::from_fn(|i, j| c(p[i][j])),
             )
         }
-        let res = self.with(py, |inner| match &mut inner.observer {
-            Observer::F64(o) => go(o, x, p),
-            Observer::F32(o) => go(o, x, p),
-        });
+        let res = self.with(
+            py,
+            |inner| each_observer!(&mut inner.observer, o => go(o, x, p)),
+        );
         res.map_err(|e| FilterError::new_err(e.to_string()))
     }
 

@@ -5,13 +5,16 @@
 
 use std::sync::{Mutex, PoisonError};
 
-use ekf_core::nalgebra::Matrix4;
-use ekf_core::{Estimate, Float, PmsmObserver};
+use ekf_core::nalgebra::{Matrix4, Vector4};
+use ekf_core::saturated::MapObserver;
+use ekf_core::{EkfError, Estimate, Float, PmsmObserver};
 use pyo3::prelude::*;
+
+use crate::motor::MAP_POINTS;
 
 use crate::status::RowStatus;
 
-/// The observer in the precision the user chose.
+/// The observer in the precision the user chose, on constant parameters or on a flux map.
 #[derive(Clone)]
 // One per `Ekf` object, behind its lock; boxing the larger variant would buy nothing.
 #[allow(clippy::large_enum_variant)]
@@ -20,6 +23,84 @@ pub(crate) enum Observer {
     F64(PmsmObserver<f64>),
     /// A `float32` filter.
     F32(PmsmObserver<f32>),
+    /// A `float64` filter on a flux map.
+    MapF64(Box<MapObserver<f64, MAP_POINTS>>),
+    /// A `float32` filter on a flux map.
+    MapF32(Box<MapObserver<f32, MAP_POINTS>>),
+}
+
+/// Runs `$body` with `$o` bound to the observer inside `$obs` (a `&mut Observer` or
+/// `&Observer`), whichever its kind: one generic body for the four.
+macro_rules! each_observer {
+    ($obs:expr, $o:ident => $body:expr) => {
+        match $obs {
+            $crate::observer::Observer::F64($o) => $body,
+            $crate::observer::Observer::F32($o) => $body,
+            $crate::observer::Observer::MapF64($o) => $body,
+            $crate::observer::Observer::MapF32($o) => $body,
+        }
+    };
+}
+pub(crate) use each_observer;
+
+/// What the loops need of an observer: [`PmsmObserver`] and [`MapObserver`] alike.
+pub(crate) trait Steps<T: Float> {
+    /// One sample.
+    fn step(&mut self, u: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError>;
+    /// One sample over a period of `dt`.
+    fn step_dt(&mut self, u: [T; 2], i: [T; 2], dt: T) -> Result<Estimate<T>, EkfError>;
+    /// The current estimate.
+    fn estimate(&self) -> Estimate<T>;
+    /// The state.
+    fn state(&self) -> Vector4<T>;
+    /// The covariance.
+    fn covariance(&self) -> Matrix4<T>;
+    /// Replaces state and covariance.
+    fn reset(&mut self, x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError>;
+}
+
+impl<T: Float> Steps<T> for PmsmObserver<T> {
+    #[inline(always)]
+    fn step(&mut self, u: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        PmsmObserver::step(self, u, i)
+    }
+    fn step_dt(&mut self, u: [T; 2], i: [T; 2], dt: T) -> Result<Estimate<T>, EkfError> {
+        PmsmObserver::step_dt(self, u, i, dt)
+    }
+    fn estimate(&self) -> Estimate<T> {
+        PmsmObserver::estimate(self)
+    }
+    fn state(&self) -> Vector4<T> {
+        *PmsmObserver::state(self)
+    }
+    fn covariance(&self) -> Matrix4<T> {
+        PmsmObserver::covariance(self)
+    }
+    fn reset(&mut self, x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
+        PmsmObserver::reset(self, x, p)
+    }
+}
+
+impl<T: Float, const N: usize> Steps<T> for Box<MapObserver<T, N>> {
+    #[inline(always)]
+    fn step(&mut self, u: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        MapObserver::step(self, u, i)
+    }
+    fn step_dt(&mut self, u: [T; 2], i: [T; 2], dt: T) -> Result<Estimate<T>, EkfError> {
+        MapObserver::step_dt(self, u, i, dt)
+    }
+    fn estimate(&self) -> Estimate<T> {
+        MapObserver::estimate(self)
+    }
+    fn state(&self) -> Vector4<T> {
+        *self.observer().state()
+    }
+    fn covariance(&self) -> Matrix4<T> {
+        self.observer().covariance()
+    }
+    fn reset(&mut self, x: Vector4<T>, p: Matrix4<T>) -> Result<(), EkfError> {
+        MapObserver::reset(self, x, p)
+    }
 }
 
 /// The float outputs of `run` (one `(N,)` float64 array each) and `step` (one float each),
@@ -62,10 +143,7 @@ pub(crate) struct Row {
 impl Observer {
     /// One step; a refused sample yields the unchanged estimate with the rejected status.
     pub(crate) fn step(&mut self, u: [f64; 2], i: [f64; 2]) -> Row {
-        match self {
-            Observer::F64(o) => step_row(o, u, i),
-            Observer::F32(o) => step_row(o, u, i),
-        }
+        each_observer!(self, o => step_row(o, u, i))
     }
 
     /// `run`'s loop: row `k` predicts with the voltage of row `k - 1` (`prev` for row 0) and
@@ -79,23 +157,19 @@ impl Observer {
         cols: &mut Columns,
     ) -> [f64; 2] {
         match self {
-            Observer::F64(o) => run_rows::<f64, false>(o, prev, u, i, cols),
-            Observer::F32(o) => run_rows::<f32, true>(o, prev, u, i, cols),
+            Observer::F64(o) => run_rows::<f64, _, false>(o, prev, u, i, cols),
+            Observer::F32(o) => run_rows::<f32, _, true>(o, prev, u, i, cols),
+            Observer::MapF64(o) => run_rows::<f64, _, false>(o, prev, u, i, cols),
+            Observer::MapF32(o) => run_rows::<f32, _, true>(o, prev, u, i, cols),
         }
     }
 
     pub(crate) fn state(&self) -> [f64; 4] {
-        match self {
-            Observer::F64(o) => (*o.state()).into(),
-            Observer::F32(o) => o.state().map(f64::from).into(),
-        }
+        each_observer!(self, o => Steps::state(o).map(f64::from).into())
     }
 
     pub(crate) fn covariance(&self) -> [[f64; 4]; 4] {
-        let m: Matrix4<f64> = match self {
-            Observer::F64(o) => o.covariance(),
-            Observer::F32(o) => o.covariance().map(f64::from),
-        };
+        let m: Matrix4<f64> = each_observer!(self, o => Steps::covariance(o).map(f64::from));
         core::array::from_fn(|r| core::array::from_fn(|c| m[(r, c)]))
     }
 }
@@ -103,8 +177,8 @@ impl Observer {
 /// One step of a filter in either precision: the output values in its precision and the
 /// status.
 #[inline(always)]
-fn step_values<T: Float>(
-    o: &mut PmsmObserver<T>,
+fn step_values<T: Float, O: Steps<T>>(
+    o: &mut O,
     u: [f64; 2],
     i: [f64; 2],
 ) -> ([T; OUTPUTS.len()], RowStatus) {
@@ -117,7 +191,7 @@ fn step_values<T: Float>(
 
 /// One step of a filter in either precision, as an output row.
 #[inline(always)]
-fn step_row<T: Float + Into<f64>>(o: &mut PmsmObserver<T>, u: [f64; 2], i: [f64; 2]) -> Row {
+fn step_row<T: Float + Into<f64>, O: Steps<T>>(o: &mut O, u: [f64; 2], i: [f64; 2]) -> Row {
     let (values, status) = step_values(o, u, i);
     Row {
         values: values.map(Into::into),
@@ -136,8 +210,8 @@ const BLOCK_INPUTS: usize = 2 * BLOCK_ROWS;
 /// (vectorized conversions, contiguous stores); the other rows are written one by one. The
 /// same rows either way. Buffering pays only where there is a conversion: `f32` runs about
 /// 3 % faster buffered, `f64` (nothing to convert) gains nothing and stays direct.
-fn run_rows<T: Float + Into<f64>, const BLOCKED: bool>(
-    o: &mut PmsmObserver<T>,
+fn run_rows<T: Float + Into<f64>, O: Steps<T>, const BLOCKED: bool>(
+    o: &mut O,
     mut prev: [f64; 2],
     u: &[f64],
     i: &[f64],

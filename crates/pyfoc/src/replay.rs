@@ -5,7 +5,8 @@
 
 use std::sync::{Mutex, PoisonError};
 
-use ekf_core::{Float, FluxObserverConfig, PmsmObserver};
+use ekf_core::saturated::FluxMapObserver;
+use ekf_core::{EkfError, Float, FluxEstimate, FluxObserverConfig};
 use numpy::{PyArray1, PyArrayMethods};
 use pmsm_sim::replay::{ReplayError, Scaling};
 use pyo3::create_exception;
@@ -16,8 +17,8 @@ use pyo3::types::PyDict;
 use crate::convert::{contiguous, path_of, record_args, to_vec, vector};
 use crate::engine::OutArrays;
 use crate::errors::{ConfigError, PyfocError};
-use crate::motor::Motor;
-use crate::observer::{OUTPUTS, Observer, Row};
+use crate::motor::{MAP_POINTS, Motor};
+use crate::observer::{OUTPUTS, Observer, Row, Steps, each_observer};
 use crate::status::RowStatus;
 
 create_exception!(
@@ -106,8 +107,8 @@ pub(crate) fn periods(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<f64>> {
 
 /// One step with the period that ended at this row.
 #[inline]
-fn step_row_dt<T: Float + Into<f64>>(
-    o: &mut PmsmObserver<T>,
+fn step_row_dt<T: Float + Into<f64>, O: Steps<T>>(
+    o: &mut O,
     u: [f64; 2],
     i: [f64; 2],
     dt: f64,
@@ -136,10 +137,7 @@ impl Observer {
         let mut rows = Vec::with_capacity(dt.len());
         for ((uk, ik), &d) in u.chunks_exact(2).zip(i.chunks_exact(2)).zip(dt) {
             let ik = [ik[0], ik[1]];
-            rows.push(match self {
-                Observer::F64(o) => step_row_dt(o, prev, ik, d),
-                Observer::F32(o) => step_row_dt(o, prev, ik, d),
-            });
+            rows.push(each_observer!(&mut *self, o => step_row_dt(o, prev, ik, d)));
             prev = [uk[0], uk[1]];
         }
         (rows, prev)
@@ -182,7 +180,8 @@ pub(crate) fn rows_to_dict<'py>(
 }
 
 /// The flux observer with PLL (`ekf_core::FluxObserver`, the usual tuning: observer gain and
-/// PLL bandwidth `0.1 / ts`): the baseline the EKF is compared against.
+/// PLL bandwidth `0.1 / ts`): the baseline the EKF is compared against. On a motor given by a
+/// flux map, the flux observer on the map's active flux (`ekf_core::saturated::FluxMapObserver`).
 /// `FluxObserver(motor, ts)`; `ConfigError` for invalid parameters.
 #[pyclass(frozen, module = "pyfoc")]
 pub(crate) struct FluxObserver {
@@ -193,8 +192,32 @@ pub(crate) struct FluxObserver {
 }
 
 struct FluxInner {
-    obs: ekf_core::FluxObserver<f64>,
+    obs: Flux,
     u_last: [f64; 2],
+}
+
+/// The flux observer on constant parameters or on a motor's flux map.
+// One per `FluxObserver`, behind its lock.
+#[allow(clippy::large_enum_variant)]
+enum Flux {
+    Plain(ekf_core::FluxObserver<f64>),
+    Map(Box<FluxMapObserver<f64, MAP_POINTS>>),
+}
+
+impl Flux {
+    fn step(&mut self, u: [f64; 2], i: [f64; 2]) -> Result<FluxEstimate<f64>, EkfError> {
+        match self {
+            Flux::Plain(o) => o.step(u, i),
+            Flux::Map(o) => o.step(u, i),
+        }
+    }
+
+    fn estimate(&self) -> FluxEstimate<f64> {
+        match self {
+            Flux::Plain(o) => o.estimate(),
+            Flux::Map(o) => o.estimate(),
+        }
+    }
 }
 
 #[pymethods]
@@ -202,8 +225,14 @@ impl FluxObserver {
     #[new]
     fn new(motor: &Motor, ts: f64) -> PyResult<Self> {
         let cfg = FluxObserverConfig::new(motor.params::<f64>(), ts);
-        let obs =
-            ekf_core::FluxObserver::new(&cfg).map_err(|e| ConfigError::new_err(e.to_string()))?;
+        let cfg_err = |e: ekf_core::ConfigError| ConfigError::new_err(e.to_string());
+        let obs = match &motor.map {
+            None => Flux::Plain(ekf_core::FluxObserver::new(&cfg).map_err(cfg_err)?),
+            Some(t) => {
+                let map = t.map::<f64>().map_err(ConfigError::new_err)?;
+                Flux::Map(Box::new(FluxMapObserver::new(&cfg, map).map_err(cfg_err)?))
+            }
+        };
         Ok(Self {
             inner: Mutex::new(FluxInner {
                 obs,
