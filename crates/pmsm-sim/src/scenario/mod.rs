@@ -451,6 +451,30 @@ impl Scenario {
             file: file.clone(),
             source,
         })?;
+        // A flux map in a file of its own is read into the table first.
+        if text.contains("flux_map")
+            && let Ok(mut table) = toml::from_str::<toml::Value>(&text)
+            && table
+                .get("motor")
+                .and_then(|m| m.get("flux_map"))
+                .and_then(|f| f.get("file"))
+                .is_some()
+        {
+            let dir = path.parent().unwrap_or(std::path::Path::new("."));
+            crate::plant::saturation::inline_flux_map_file(&mut table, dir).map_err(
+                |(field, problem)| SimError::Scenario {
+                    file: file.clone(),
+                    field,
+                    problem,
+                },
+            )?;
+            let text = toml::to_string(&table).map_err(|e| SimError::Scenario {
+                file: file.clone(),
+                field: "motor.flux_map".into(),
+                problem: e.to_string(),
+            })?;
+            return Self::from_toml_str(&text, &file);
+        }
         Self::from_toml_str(&text, &file)
     }
 

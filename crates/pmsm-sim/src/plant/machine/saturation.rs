@@ -33,6 +33,10 @@
 //! psi_q = [[...], [...], [...]]
 //! ```
 //!
+//! In a scenario file, `[motor.flux_map] file = "map.csv"` reads the map from a CSV table
+//! beside it instead ([`inline_flux_map_file`]: columns `i_d`, `i_q`, `psi_d`, `psi_q`, a row
+//! per grid point, the layout finite-element tools export).
+//!
 //! `catalog = "pm_syrm"` (or `saturating_ipm`) gives the reference saturating motors of
 //! `ekf_core::saturation` with their algebraic models.
 
@@ -115,6 +119,119 @@ impl FluxMapTable {
         FluxMap::new(&self.i_d, &self.i_q, &psi_d, &psi_q)
             .map_err(|e| format!("motor.flux_map: {e}"))
     }
+}
+
+/// Replaces `[motor.flux_map] file = "PATH"` in a scenario's table by the map the file holds
+/// (`PATH` relative to `dir`, the scenario file's directory). The file is a CSV table with a
+/// header naming the columns `i_d`, `i_q` (A), `psi_d`, `psi_q` (Wb), in any order, and one
+/// row per grid point: the axes are the distinct `i_d` and `i_q` values, and every pair must
+/// appear exactly once. Errors name the key and, for the file, the line and the column.
+pub fn inline_flux_map_file(
+    scenario: &mut toml::Value,
+    dir: &std::path::Path,
+) -> Result<(), (String, String)> {
+    let key = "motor.flux_map.file";
+    let Some(map) = scenario
+        .get_mut("motor")
+        .and_then(|m| m.get_mut("flux_map"))
+        .and_then(|f| f.as_table_mut())
+    else {
+        return Ok(());
+    };
+    let Some(file) = map.get("file") else {
+        return Ok(());
+    };
+    let Some(name) = file.as_str() else {
+        return Err((key.into(), "expected a file name (a string)".into()));
+    };
+    let path = dir.join(name);
+    let fail = |problem: String| (key.to_string(), format!("{}: {problem}", path.display()));
+    let text = std::fs::read_to_string(&path).map_err(|e| fail(e.to_string()))?;
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines.next().ok_or_else(|| fail("empty file".into()))?;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let col = |want: &str| {
+        names
+            .iter()
+            .position(|n| *n == want)
+            .ok_or_else(|| fail(format!("line 1: no column named {want} (header: {header})")))
+    };
+    let cols = [col("i_d")?, col("i_q")?, col("psi_d")?, col("psi_q")?];
+    let mut rows: Vec<[f64; 4]> = Vec::new();
+    for (k, line) in lines {
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        let mut row = [0.0; 4];
+        for (v, &c) in row.iter_mut().zip(&cols) {
+            let cell = cells.get(c).ok_or_else(|| {
+                fail(format!(
+                    "line {}: no column {} ({})",
+                    k + 1,
+                    c + 1,
+                    names[c]
+                ))
+            })?;
+            *v = cell
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    fail(format!(
+                        "line {}, column {} ({}): {cell:?} is not a finite number",
+                        k + 1,
+                        c + 1,
+                        names[c]
+                    ))
+                })?;
+        }
+        rows.push(row);
+    }
+    let axis = |j: usize| {
+        let mut v: Vec<f64> = rows.iter().map(|r| r[j]).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v
+    };
+    let (i_d, i_q) = (axis(0), axis(1));
+    let mut psi_d = vec![vec![f64::NAN; i_q.len()]; i_d.len()];
+    let mut psi_q = psi_d.clone();
+    for r in &rows {
+        let a = i_d.partition_point(|&x| x < r[0]);
+        let b = i_q.partition_point(|&x| x < r[1]);
+        if !psi_d[a][b].is_nan() {
+            return Err(fail(format!(
+                "the point i_d = {}, i_q = {} appears twice",
+                r[0], r[1]
+            )));
+        }
+        psi_d[a][b] = r[2];
+        psi_q[a][b] = r[3];
+    }
+    for (a, row) in psi_d.iter().enumerate() {
+        if let Some(b) = row.iter().position(|v| v.is_nan()) {
+            return Err(fail(format!(
+                "the point i_d = {}, i_q = {} is missing: every (i_d, i_q) pair of the grid \
+                 must appear once",
+                i_d[a], i_q[b]
+            )));
+        }
+    }
+    let to_value = |v: Vec<Vec<f64>>| {
+        toml::Value::Array(
+            v.into_iter()
+                .map(|r| toml::Value::Array(r.into_iter().map(toml::Value::Float).collect()))
+                .collect(),
+        )
+    };
+    let floats = |v: Vec<f64>| toml::Value::Array(v.into_iter().map(toml::Value::Float).collect());
+    map.remove("file");
+    map.insert("i_d".into(), floats(i_d));
+    map.insert("i_q".into(), floats(i_q));
+    map.insert("psi_d".into(), to_value(psi_d));
+    map.insert("psi_q".into(), to_value(psi_q));
+    Ok(())
 }
 
 impl Saturation {
