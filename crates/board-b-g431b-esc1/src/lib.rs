@@ -5,6 +5,7 @@
 
 pub mod command;
 pub mod config;
+pub mod control;
 pub mod crc;
 pub mod record;
 pub mod state;

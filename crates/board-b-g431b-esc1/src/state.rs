@@ -179,7 +179,7 @@ pub fn check_before_switching(
     current_limit_a: f32,
     over_current_a: f32,
 ) -> Result<(), BoardFault> {
-    if !(m.u_dc_v >= U_DC_MIN_V) {
+    if m.u_dc_v.is_nan() || m.u_dc_v < U_DC_MIN_V {
         return Err(BoardFault::BusLow);
     }
     if m.u_dc_v > U_DC_MAX_V {
@@ -188,7 +188,7 @@ pub fn check_before_switching(
     if !m.i_abc_a.iter().all(|i| i.abs() <= MAX_IDLE_CURRENT_A) {
         return Err(BoardFault::IdleCurrent);
     }
-    if !(m.temperature_c <= MAX_TEMPERATURE_C) {
+    if m.temperature_c.is_nan() || m.temperature_c > MAX_TEMPERATURE_C {
         return Err(BoardFault::Temperature);
     }
     if !(current_limit_a <= CURRENT_LIMIT_A && over_current_a <= OVER_CURRENT_A) {

@@ -535,7 +535,7 @@ mod tests {
                 x ^= x << 13;
                 x ^= x >> 7;
                 x ^= x << 17;
-                *b = if x % 7 == 0 { 0xA5 } else { x as u8 };
+                *b = if x.is_multiple_of(7) { 0xA5 } else { x as u8 };
             }
             let mut pos = 0;
             while let Scan::Frame(_, k) | Scan::Skip(k, _) = scan(&buf[pos..]) {
