@@ -62,8 +62,8 @@ pub const MAX_IDLE_CURRENT_A: f32 = 0.5;
 /// Power-stage temperature above which the drive does not start, degC.
 pub const MAX_TEMPERATURE_C: f32 = 80.0;
 /// Independent watchdog timeout, ms: the control interrupt and the main loop must both
-/// have run within it.
-pub const WATCHDOG_MS: u32 = 50;
+/// have run within it (a flash page erase stalls the CPU for up to 40 ms).
+pub const WATCHDOG_MS: u32 = 100;
 /// UART baud rate (the ST-LINK virtual COM port).
 pub const UART_BAUD: u32 = 921_600;
 
