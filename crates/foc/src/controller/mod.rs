@@ -285,13 +285,6 @@ fn reseed_observer(observer: &mut PmsmObserver<f32>, cfg: &FocConfig, seed: Seed
     let _ = observer.reset(x, p);
 }
 
-/// Field weakening is asked for and built in (cargo feature `field-weakening`; without it
-/// `FocConfig::validate` refuses `field_weakening.enabled`).
-#[inline(always)]
-const fn fw_on(cfg: &FocConfig) -> bool {
-    cfg!(feature = "field-weakening") && cfg.field_weakening.enabled
-}
-
 impl Foc {
     /// Validates `cfg` and builds an idle controller.
     pub fn new(cfg: &FocConfig) -> Result<Self, ConfigError> {
@@ -330,10 +323,11 @@ impl Foc {
                 cfg.startup.handover_speed_rad_s,
                 cfg.max_negative_id(),
             ),
-            shaping: cfg.motor.is_salient() || fw_on(cfg),
+            // (Without the `field-weakening` feature `FocConfig::validate` refuses it.)
+            shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled,
             salient: cfg.motor.is_salient(),
             mtpa_on: cfg.motor.is_salient() && cfg.mtpa,
-            fw_on: fw_on(cfg),
+            fw_on: cfg.field_weakening.enabled,
             max_neg_id: cfg.max_negative_id(),
             iq_last: 0.0,
             id_base: 0.0,
