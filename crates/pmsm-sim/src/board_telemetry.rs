@@ -359,7 +359,11 @@ mod tests {
         let junk: Vec<u8> = (0..20_000)
             .map(|_| {
                 x = x.wrapping_mul(1_103_515_245).wrapping_add(12345);
-                if x % 5 == 0 { 0xA5 } else { (x >> 16) as u8 }
+                if x.is_multiple_of(5) {
+                    0xA5
+                } else {
+                    (x >> 16) as u8
+                }
             })
             .collect();
         let (frames, stats) = frames(&junk);
