@@ -32,6 +32,8 @@
 //!   sample for 6.5 cycles, the dividers for 47.5.
 //! - **USART2** (PB3 TX, PB4 RX, the ST-LINK virtual COM port): [`UART_BAUD`], 8N1, FIFOs on.
 //! - **IWDG**: LSI 32 kHz / 32, reload for [`WATCHDOG_MS`].
+//! - **HardFault** (also the end of a panic): clears MOE before anything else, then waits
+//!   for the watchdog's reset.
 
 use board_b_g431b_esc1::config::{
     DEAD_TIME_NS, MAX_DUTY, PWM_ARR, SYSCLK_HZ, UART_BAUD, WATCHDOG_MS,
@@ -493,4 +495,16 @@ pub fn write_record(rec: Option<&[u8; RECORD_LEN]>) -> Result<(), FlashError> {
     }
     f.cr().write(|w| w.lock().set_bit());
     result
+}
+
+/// A panic (panic-probe ends in `udf`) or any fault lands here: the outputs off first, then
+/// wait for the watchdog's reset.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    // SAFETY: whatever ran is abandoned; clearing MOE cuts all six switches.
+    let t = unsafe { &*pac::TIM1::ptr() };
+    t.bdtr().modify(|_, w| w.moe().clear_bit());
+    loop {
+        cortex_m::asm::nop();
+    }
 }
