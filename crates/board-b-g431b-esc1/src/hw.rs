@@ -22,7 +22,10 @@
 //!   conduct): the compare values written in the interrupt load there, and the update is
 //!   TRGO, the ADC's injected trigger. The break is enabled with the outputs' idle level
 //!   low (all six switches off): MOE is off from reset and is set only by [`Pwm::enable`];
-//!   the system break (core lockup, SRAM parity, flash ECC) also cuts the outputs. OSSI/OSSR
+//!   the system break (core lockup, SRAM parity, flash ECC) cuts the outputs. The board has
+//!   no external fault line on a BKIN pin, and the internal comparators (COMP1/2/4 with DAC
+//!   thresholds into BRK2, a hardware over-current trip) are not set up: foc's software
+//!   over-current check and the supply's current limit are the over-current protection. OSSI/OSSR
 //!   keep the pins driven low while the outputs are off.
 //! - **Op-amps** 1..3: PGA gain 16 on VINP0 (PA1, PA7, PB0) with the board's bias network on
 //!   VINM0 (PA3, PA5, PB2), outputs on their pins (PA2, PA6, PB1), high-speed mode.
@@ -90,6 +93,8 @@ pub fn init(dp: pac::Peripherals) -> Reset {
     rcc.apb1enr1().modify(|_, w| w.pwren().set_bit());
     rcc.apb2enr().modify(|_, w| w.syscfgen().set_bit());
     dp.PWR.cr5().modify(|_, w| w.r1mode().clear_bit());
+    // The USB-C dead-battery pull-downs sit on PB4 (USART2 RX) and PB6 from reset: off.
+    dp.PWR.cr3().modify(|_, w| w.ucpd1_dbdis().set_bit());
     dp.FLASH.acr().modify(|_, w| unsafe {
         w.latency()
             .bits(4)
@@ -212,6 +217,8 @@ fn init_tim1(t: &pac::TIM1) {
     });
     // One update per period, at the peak: REP_CNT = 0 now, RCR = 1 from the next update
     // (RM0440 28.3.3, repetition counter in center-aligned mode).
+    // The break comes from the system sources only (no BKIN pin on this board).
+    t.af1().modify(|_, w| w.bkine().clear_bit());
     t.rcr().write(|w| w.rep().set(0));
     t.egr().write(|w| w.ug().set_bit());
     t.rcr().write(|w| w.rep().set(1));
@@ -489,11 +496,18 @@ pub fn write_record(rec: Option<&[u8; RECORD_LEN]>) -> Result<(), FlashError> {
             }
         }
         f.cr().write(|w| w.pg().clear_bit());
-        if result.is_ok() && read_record() != *bytes {
-            result = Err(FlashError::Verify);
-        }
     }
     f.cr().write(|w| w.lock().set_bit());
+    // The data cache may hold the page's old contents (read at reset): flush it.
+    f.acr().modify(|_, w| w.dcen().clear_bit());
+    f.acr().modify(|_, w| w.dcrst().set_bit());
+    f.acr()
+        .modify(|_, w| w.dcrst().clear_bit().dcen().set_bit());
+    if let (Ok(()), Some(bytes)) = (result, rec)
+        && read_record() != *bytes
+    {
+        result = Err(FlashError::Verify);
+    }
     result
 }
 
