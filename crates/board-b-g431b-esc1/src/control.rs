@@ -170,6 +170,9 @@ impl Control {
                 if self.due() {
                     frame = Some(self.drive_frame(&out, &sample, temp));
                 }
+                if out.state == State::Idle {
+                    self.sup.drive_idle();
+                }
             }
             #[cfg(feature = "identify")]
             Phase::Identifying { .. } => {
@@ -654,6 +657,22 @@ mod tests {
             "the rotor turns: {} rad/s",
             plant.w_mech
         );
+        // A controlled stop ends idle; the next start is checked again (here: a low bus).
+        assert_eq!(c.command(Command::Stop), Ok("stopping"));
+        let mut k = 0;
+        while c.supervisor().phase == Phase::Running && k < 200_000 {
+            c.period(plant.raw(12.0), &mut b);
+            plant.step(b.duties, b.on, 12.0);
+            k += 1;
+        }
+        assert_eq!(
+            c.supervisor().phase,
+            Phase::Ready,
+            "still running after {k} periods"
+        );
+        assert!(!b.on);
+        c.period(plant.raw(5.0), &mut b);
+        assert_eq!(c.command(Command::Start), Err("board_bus_low"));
         c.broke();
         c.period(plant.raw(12.0), &mut b);
         assert!(!b.on);

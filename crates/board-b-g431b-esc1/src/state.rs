@@ -414,6 +414,14 @@ impl Supervisor {
         }
     }
 
+    /// The controller went idle by itself (a controlled stop ended): `Ready`, so that the
+    /// next `start` goes through the checks again.
+    pub fn drive_idle(&mut self) {
+        if self.phase == Phase::Running {
+            self.phase = Phase::Ready;
+        }
+    }
+
     /// The break input fired: latched whatever ran.
     pub fn broke(&mut self) {
         self.phase = Phase::Faulted(BoardFault::Break);
