@@ -7,6 +7,7 @@
 //! | system clock | 170 MHz (HSI16 -> PLL x85 / 4 / 2) | RM0440 |
 //! | PWM | 20 kHz, center-aligned: ARR = 170 MHz / (2 x 20 kHz) = 4250 | [`PWM_HZ`] |
 //! | dead time | 500 ns (85 timer clocks) | [`DEAD_TIME_NS`] |
+//! | largest duty | 0.94: the low switch conducts at least 3 us around the sample point; the current loops' limit 0.88 `u_dc / sqrt(3)` | [`MAX_DUTY`], [`MAX_MODULATION`] |
 //! | shunts | 3 mOhm, op-amp PGA gain 16 with the board's bias network: -9.14 V/V | [`AMPS_PER_COUNT`] |
 //! | bus divider | 18 k / (18 k + 169 k) = 0.0963 | [`VOLTS_PER_COUNT`] |
 //! | ADC | 12 bit, 3.3 V reference | |
@@ -122,8 +123,14 @@ pub fn drive_config(motor: MotorParams<f32>, inertia_kg_m2: Option<f32>) -> FocC
     cfg.u_dc_min_v = U_DC_MIN_V;
     cfg.u_dc_max_v = U_DC_MAX_V + 1.0;
     cfg.dead_time_s = DEAD_TIME_NS as f32 * 1e-9;
+    cfg.max_modulation = cfg.max_modulation.min(MAX_MODULATION);
     cfg
 }
+
+/// The current loops' voltage limit as a fraction of `u_dc / sqrt(3)`: the centred SVPWM's
+/// largest duty is `0.5 + 0.5 m`, kept at [`MAX_DUTY`] so that the low switch conducts
+/// around the sample point (the PWM driver clamps at `MAX_DUTY` too).
+pub const MAX_MODULATION: f32 = 2.0 * MAX_DUTY - 1.0;
 
 /// The identification's settings on this board for a motor of `pole_pairs` pole pairs: the
 /// test current [`IDENTIFY_CURRENT_A`], a spin at 50 Hz electrical reached in 0.4 s, the
@@ -138,6 +145,7 @@ pub fn identify_config(pole_pairs: u8) -> foc::IdentifyConfig {
     cfg.u_dc_max_v = U_DC_MAX_V + 1.0;
     cfg.measure_inertia = true;
     cfg.pole_pairs = u32::from(pole_pairs);
+    cfg.max_modulation = cfg.max_modulation.min(MAX_MODULATION);
     cfg
 }
 
@@ -166,6 +174,19 @@ mod tests {
             foc::Foc::new(&cfg).err()
         );
         assert!(cfg.current_limit_a <= CURRENT_LIMIT_A);
+        // The largest duty of the centred SVPWM stays at the sampling limit.
+        let d = foc::svpwm(
+            foc::AlphaBeta {
+                alpha: cfg.max_modulation * U_DC_NOMINAL_V / 3f32.sqrt(),
+                beta: 0.0,
+            },
+            U_DC_NOMINAL_V,
+        );
+        assert!(
+            d.duties.iter().all(|&x| x <= MAX_DUTY + 1e-4),
+            "{:?}",
+            d.duties
+        );
         let cfg = drive_config(builtin_motor(), Some(3e-6));
         assert!(
             foc::Foc::new(&cfg).is_ok(),
