@@ -2,8 +2,8 @@
 //!
 //! A part the controller holds as an `Option` (HFI) is held, when its feature is off, as an
 //! `Option<Absent<T>>`: always `None`, and the compiler knows it, so every branch that works
-//! on the part is removed from the build (module docs of the crate, "Cargo features"). With
-//! the feature on the alias is `T` itself and nothing changes.
+//! on the part is removed from the build. With the feature on the alias is `T` itself and
+//! nothing changes (the module is not even compiled).
 
 use core::convert::Infallible;
 use core::fmt;
