@@ -24,6 +24,11 @@ cargo build -p ekf-core -p foc --no-default-features --target thumbv7em-none-eab
 step "Cortex-M4F firmware under QEMU: runs, checks, instruction counts, no f64"
 bash scripts/qemu-firmware.sh
 
+step "B-G431B-ESC1 board crate: host tests, clippy and build for thumbv7em-none-eabihf, flash <= 110 KiB, RAM <= 24 KiB"
+cargo test --locked -q -p board-b-g431b-esc1 --lib
+cargo clippy -p board-b-g431b-esc1 --target thumbv7em-none-eabihf --locked -- -D warnings
+bash crates/board-b-g431b-esc1/check-size.sh
+
 step "tests (unit, integration, doc)"
 cargo test --locked
 

@@ -8,9 +8,12 @@ pub mod controller;
 pub mod deadtime;
 pub mod fault;
 pub mod fieldweak;
+#[cfg(not(feature = "hfi"))]
+mod gate;
 pub mod hal;
 pub mod health;
 pub mod hfi;
+#[cfg(feature = "identify")]
 pub mod identify;
 pub mod io;
 pub mod mtpa;
@@ -33,6 +36,7 @@ pub use health::{HealthReport, LossReason};
 pub use hfi::{
     HFI_TRACKING_SPEED_FACTOR, HfiConfig, HfiError, HfiField, HfiPhase, HfiStatus, HfiTracker,
 };
+#[cfg(feature = "identify")]
 pub use identify::{
     Identified, Identifier, IdentifyConfig, IdentifyConfigError, IdentifyError, IdentifyFailure,
     IdentifyOutput, IdentifyStep, identify_period,

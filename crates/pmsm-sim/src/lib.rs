@@ -3,6 +3,7 @@
 #![deny(missing_docs)]
 
 pub mod analysis;
+pub mod board_telemetry;
 pub mod drive;
 mod error;
 pub mod output;

@@ -146,6 +146,18 @@ enum Command {
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
     Tune(TuneArgs),
+    /// Turn a telemetry capture of the B-G431B-ESC1 firmware (its UART bytes) into an MCAP
+    /// log of the period record.
+    Telemetry {
+        /// The capture (raw UART bytes: frames and command replies).
+        capture: PathBuf,
+        /// The MCAP log to write.
+        #[arg(long, default_value = "out/telemetry.mcap")]
+        out: PathBuf,
+        /// PWM period, s, for a capture without the board's meta frame.
+        #[arg(long)]
+        ts_s: Option<f64>,
+    },
     /// Replay a recorded drive (CSV in the documented format, or a pmsm-sim MCAP log)
     /// through the default EKF, the drive observer and the flux + PLL baseline; prints the
     /// score table and writes metrics.json, replay.mcap and plot.svg to <out>.
@@ -334,6 +346,12 @@ fn main() -> ExitCode {
             out,
             scaling,
         }) => Ok(replay_command(&log, &motor, &out, scaling)),
+        Some(Command::Telemetry { capture, out, ts_s }) => {
+            pmsm_sim::board_telemetry::convert_file(&capture, &out, ts_s).map(|s| {
+                println!("{s} -> {}", out.display());
+                ExitCode::SUCCESS
+            })
+        }
     };
     match result {
         Ok(code) => code,

@@ -56,6 +56,10 @@ impl FocConfig {
         }
         positive(self.dead_time_band(), F::DeadTimeBand)?;
         let fw = &self.field_weakening;
+        // Built without the `field-weakening` feature: refused by its first field.
+        if fw.enabled && !cfg!(feature = "field-weakening") {
+            return Err(ConfigError::OutOfRange(F::FwVoltageMargin));
+        }
         in_range(fw.voltage_margin, 0.5, 1.0, F::FwVoltageMargin)?;
         positive(fw.bandwidth_rad_s, F::FwBandwidth)?;
         if fw.bandwidth_rad_s > self.current_bw_rad_s {

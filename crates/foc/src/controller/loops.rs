@@ -25,7 +25,7 @@ impl Foc {
             self.iq_last = 0.0;
             return plan.i_ref;
         }
-        if self.fw_on && sample_ok {
+        if cfg!(feature = "field-weakening") && self.fw_on && sample_ok {
             let v = Dq {
                 d: self.pi_d.integrator() + ff.d,
                 q: self.pi_q.integrator() + ff.q,

@@ -157,7 +157,7 @@ use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
-use crate::hfi::{HfiConfig, HfiDrive, HfiError, HfiPhase, HfiStatus};
+use crate::hfi::{HfiError, HfiPhase, HfiSlot, HfiStatus};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
 use crate::startup::{Inputs, Plan, Seed, Sequencer, State, Stop};
@@ -262,7 +262,7 @@ pub struct Foc {
     /// repeat; the rate the stuck check counts at least).
     stuck_omega: [f32; 2],
     /// High-frequency injection at low speed (module docs, "Low speed by HFI"); `None`: off.
-    hfi: Option<HfiDrive>,
+    hfi: Option<HfiSlot>,
 }
 
 /// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
@@ -289,6 +289,16 @@ impl Foc {
     /// Validates `cfg` and builds an idle controller.
     pub fn new(cfg: &FocConfig) -> Result<Self, ConfigError> {
         cfg.validate()?;
+        // Built without the `tracking` feature the observer runs without online tracking of
+        // `psi_f` and `Rs`, whatever the configuration asks.
+        #[cfg(not(feature = "tracking"))]
+        let cfg = &FocConfig {
+            observer: ekf_core::ObserverConfig {
+                parameter_tracking: None,
+                ..cfg.observer
+            },
+            ..*cfg
+        };
         let observer = PmsmObserver::new(&cfg.observer).map_err(ConfigError::Observer)?;
         let ts = cfg.ts_s;
         Ok(Self {
@@ -313,6 +323,7 @@ impl Foc {
                 cfg.startup.handover_speed_rad_s,
                 cfg.max_negative_id(),
             ),
+            // (Without the `field-weakening` feature `FocConfig::validate` refuses it.)
             shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled,
             salient: cfg.motor.is_salient(),
             mtpa_on: cfg.motor.is_salient() && cfg.mtpa,
@@ -354,13 +365,19 @@ impl Foc {
     /// Turns high-frequency injection on for the low-speed range (module docs, "Low speed by
     /// HFI"), with the settings `hfi` checked against the configuration and the nominal bus
     /// voltage `u_dc_nominal_v`. Only while idle, in sensorless mode, on a salient motor.
-    pub fn enable_hfi(&mut self, hfi: &HfiConfig, u_dc_nominal_v: f32) -> Result<(), HfiError> {
+    /// (Cargo feature `hfi`.)
+    #[cfg(feature = "hfi")]
+    pub fn enable_hfi(
+        &mut self,
+        hfi: &crate::hfi::HfiConfig,
+        u_dc_nominal_v: f32,
+    ) -> Result<(), HfiError> {
         if self.seq.state() != State::Idle {
             return Err(HfiError::NotIdle);
         }
         hfi.validate(&self.cfg, u_dc_nominal_v)?;
         self.rebuild_observer(Some(hfi));
-        self.hfi = Some(HfiDrive::new(&self.cfg, hfi));
+        self.hfi = Some(crate::hfi::HfiDrive::new(&self.cfg, hfi));
         Ok(())
     }
 

@@ -222,5 +222,13 @@ pub use config::{
 };
 pub use demod::Response;
 pub(crate) use drive::HfiDrive;
+/// What the controller holds while HFI is on: the drive, or without the `hfi` feature a type
+/// with no value (every HFI branch of the tick compiled out, `crate::gate`).
+#[cfg(feature = "hfi")]
+pub(crate) type HfiSlot = HfiDrive;
+/// What the controller holds while HFI is on: the drive, or without the `hfi` feature a type
+/// with no value (every HFI branch of the tick compiled out, `crate::gate`).
+#[cfg(not(feature = "hfi"))]
+pub(crate) type HfiSlot = crate::gate::Absent<HfiDrive>;
 pub use drive::{HfiPhase, HfiStatus};
 pub use tracker::HfiTracker;
