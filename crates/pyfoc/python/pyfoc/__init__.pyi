@@ -7,7 +7,7 @@ corrected with ``i_ab[k]``. SI units; angles and speeds electrical unless named 
 import concurrent.futures
 import enum
 import os
-from typing import Any, Literal, TypedDict, final
+from typing import Any, Literal, Sequence, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,7 @@ __all__ = [
     "suite",
     "clear_buffer_pool",
     "read_log",
+    "replay_many",
     "FluxObserver",
     "DriveObserver",
     "LogError",
@@ -493,3 +494,21 @@ def sweep(
     a process pool over the cores; a Dask ``Client.get_executor()`` runs it on a cluster).
     ``chunk_size``: runs per submitted task (default: about 64 tasks in all, at most 32 runs
     each). Malformed plans raise ConfigError before anything runs."""
+
+def replay_many(
+    paths: Sequence[str | os.PathLike[str]],
+    motor: Motor | dict[str, Any],
+    executor: concurrent.futures.Executor | None = None,
+    *,
+    scaling: Literal["amplitude", "power"] = "amplitude",
+    chunk_size: int = 1,
+) -> polars.DataFrame:
+    """Replay many drive logs (read_log: the replay CSV or pmsm-sim MCAP) through the default
+    EKF of ``motor`` (a Motor or a dict of its arguments), each with its own per-row periods,
+    in parallel on ``executor`` (as ``sweep``'s). A polars DataFrame, a row per log in the
+    order of ``paths``: ``path``, ``rows``, ``duration_s``, ``ts_s`` (median period),
+    ``rejected_rows``, ``tracking_pct``, ``first_tracking_s``, ``nis_mean``, ``psi_f_end_wb``,
+    ``rs_end_ohm``, ``speed_end_rpm`` and, when the log has the reference angle and speed, the
+    angle error (``angle_error_rms_deg``, ``_mean_deg``, ``_max_deg``) and
+    ``speed_error_rms_rad_s`` over the tracking rows; ``error`` (None, or why the log could
+    not be replayed: a row, never a lost batch)."""
