@@ -146,6 +146,9 @@ enum Command {
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
     Tune(TuneArgs),
+    /// Run a sweep plan (a scenario with keys varied: grids, Monte-Carlo draws) on the local
+    /// cores; writes <out>/results.parquet, a row per run (docs/sweeps.md).
+    Sweep(pmsm_sim::analysis::sweep::cli::SweepArgs),
     /// Replay a recorded drive (CSV in the documented format, or a pmsm-sim MCAP log)
     /// through the default EKF, the drive observer and the flux + PLL baseline; prints the
     /// score table and writes metrics.json, replay.mcap and plot.svg to <out>.
@@ -328,6 +331,7 @@ fn main() -> ExitCode {
             out,
         }) => identify_command(scenario.as_deref(), json, seed, out),
         Some(Command::Tune(args)) => Ok(args.run()),
+        Some(Command::Sweep(args)) => sweep_command(&args),
         Some(Command::Replay {
             log,
             motor,
@@ -342,6 +346,28 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `pmsm-sim sweep`: the plan on the local cores; a signal keeps the finished rows and exits
+/// with 128 + its number.
+fn sweep_command(args: &pmsm_sim::analysis::sweep::cli::SweepArgs) -> Result<ExitCode, SimError> {
+    let signals = StopSignals::register();
+    let r = pmsm_sim::analysis::sweep::cli::run(args, &signals.stop)?;
+    eprintln!(
+        "{} of {} runs in {:.1} s ({} failed) -> {}",
+        r.written,
+        r.planned,
+        r.wall_s,
+        r.failed,
+        r.path.display()
+    );
+    Ok(match signals.received() {
+        Some((code, name)) if r.interrupted => {
+            eprintln!("pmsm-sim: {name}: stopped; the finished runs are written");
+            ExitCode::from(code)
+        }
+        _ => ExitCode::SUCCESS,
+    })
 }
 
 /// A scenario from a file path (anything ending in `.toml` or containing a path separator)

@@ -16,6 +16,10 @@
 //! - `error`: null, or why the run could not run (an invalid varied value, a refused
 //!   configuration): such a run is a row with its error and null metrics.
 
+#[cfg(feature = "cli")]
+pub mod cli;
+#[cfg(feature = "cli")]
+pub mod parquet_out;
 pub mod plan;
 pub mod table;
 
@@ -24,6 +28,10 @@ pub use table::{Cell, Column, ColumnKind};
 
 use crate::scenario::Scenario;
 use crate::sim::{RunOptions, run_with};
+
+/// The error of a run stopped by its `stop` flag ([`run_toml`]): not a result, left out of
+/// the table by `pmsm-sim sweep`.
+pub const INTERRUPTED: &str = "interrupted";
 
 /// Metrics left out of a sweep's table: wall-clock figures, not deterministic.
 pub const WALL_CLOCK: [&str; 2] = ["wall_time_s", "real_time_factor"];
@@ -45,7 +53,7 @@ pub struct Row {
 
 /// Runs one scenario given as TOML text (a [`RunSpec::toml`]) and returns its flattened
 /// metrics; errors (an invalid scenario, a refused configuration) as text. `stop`: the run
-/// ends early when it is set (its metrics then cover what ran).
+/// ends early when it is set, with the error [`INTERRUPTED`].
 pub fn run_toml(
     toml_text: &str,
     origin: &str,
@@ -61,6 +69,9 @@ pub fn run_toml(
         },
     )
     .map_err(|e| e.to_string())?;
+    if matches!(out.end, crate::sim::RunEnd::Interrupted { .. }) {
+        return Err(INTERRUPTED.to_string());
+    }
     let json = serde_json::to_value(&out.metrics).map_err(|e| format!("metrics: {e}"))?;
     let mut cells = Vec::new();
     flatten("", &json, &mut cells);
@@ -104,5 +115,42 @@ pub fn flatten(prefix: &str, v: &serde_json::Value, out: &mut Vec<(String, Cell)
             }
         }
         _ => out.push((prefix.to_string(), Cell::of_json(v))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_flattens_its_metrics_and_reports_errors_and_stops() {
+        let plan = Plan::new(
+            &Scenario::default_servo(),
+            &[("duration_s".into(), toml::Value::Float(0.3))],
+            1,
+            3,
+        )
+        .unwrap();
+        let spec = &plan.runs().unwrap()[0];
+        let row = run_one(spec, None);
+        assert_eq!(row.error, None);
+        let get = |k: &str| row.metrics.iter().find(|(n, _)| n == k).map(|(_, c)| c);
+        assert_eq!(get("periods"), Some(&Cell::Int(3000)));
+        assert_eq!(get("end"), Some(&Cell::Text("completed".into())));
+        assert!(matches!(
+            get("observer.angle_error_rms_deg"),
+            Some(Cell::Float(_))
+        ));
+        assert_eq!(get("drive.fault"), Some(&Cell::Null));
+        assert!(get("wall_time_s").is_none() && get("real_time_factor").is_none());
+        // The same run again: the same row (deterministic).
+        assert_eq!(run_one(spec, None), row);
+        let stop = std::sync::atomic::AtomicBool::new(true);
+        assert_eq!(
+            run_one(spec, Some(&stop)).error.as_deref(),
+            Some(INTERRUPTED)
+        );
+        let bad = run_toml("name = 1", "bad run", None).unwrap_err();
+        assert!(bad.starts_with("bad run: "), "{bad}");
     }
 }

@@ -169,7 +169,8 @@ pub fn columns(paths: &[String], rows: &[Row]) -> Vec<(String, Column)> {
         "index".to_string(),
         Column::Int(rows.iter().map(|r| Some(r.index as i64)).collect()),
     ));
-    for p in paths {
+    // A varied `seed` is the run's noise seed: the `seed` column.
+    for p in paths.iter().filter(|p| p.as_str() != "seed") {
         let cells: Vec<Cell> = rows
             .iter()
             .map(|r| {
