@@ -8,6 +8,7 @@ log readers; this package re-exports it and adds the parallel layers written in 
 from . import pyfoc as _native  # type: ignore[attr-defined]  # the native module
 from .pyfoc import *  # noqa: F403 - the native module is the package's API
 from ._fleet import replay_many
+from ._frames import to_frame
 from ._sweep import sweep
 
 __doc__ = _native.__doc__
@@ -24,6 +25,7 @@ __all__ = [
     "clear_buffer_pool",
     "read_log",
     "replay_many",
+    "to_frame",
     "FluxObserver",
     "DriveObserver",
     "LogError",

@@ -7,7 +7,7 @@ corrected with ``i_ab[k]``. SI units; angles and speeds electrical unless named 
 import concurrent.futures
 import enum
 import os
-from typing import Any, Literal, Sequence, TypedDict, final
+from typing import Any, Literal, Mapping, Sequence, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
@@ -28,6 +28,7 @@ __all__ = [
     "clear_buffer_pool",
     "read_log",
     "replay_many",
+    "to_frame",
     "FluxObserver",
     "DriveObserver",
     "LogError",
@@ -512,3 +513,10 @@ def replay_many(
     angle error (``angle_error_rms_deg``, ``_mean_deg``, ``_max_deg``) and
     ``speed_error_rms_rad_s`` over the tracking rows; ``error`` (None, or why the log could
     not be replayed: a row, never a lost batch)."""
+
+def to_frame(result: Mapping[str, Any]) -> polars.DataFrame:
+    """A result of simulate, Ekf.run, DriveObserver.run, FluxObserver.run or read_log as a
+    polars DataFrame, a row per period: 1-D arrays as columns, (N, k) arrays split into named
+    columns (i_ab -> i_alpha, i_beta; i_dq -> i_d, i_q; u_ab -> u_alpha, u_beta; duties ->
+    duty_a, duty_b, duty_c; p_diag -> p_i_alpha, p_i_beta, p_omega, p_theta); what is not per
+    row (metrics, completed, scenario, u_prev) left out."""
