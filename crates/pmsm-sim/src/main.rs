@@ -19,6 +19,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::SimError;
 use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
+use pmsm_sim::analysis::sweep::period_table::PeriodTable;
 use pmsm_sim::output::file::write_bytes;
 use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::output::plot::PlotSink;
@@ -209,6 +210,12 @@ struct RunArgs {
     /// Encoding of the per-period messages of the MCAP log (protobuf: fast; json: text).
     #[arg(long, value_enum, default_value_t = Encoding::Protobuf)]
     log_encoding: Encoding,
+    /// Also write the per-period table as <out>/periods.csv (docs/foxglove.md).
+    #[arg(long)]
+    csv: bool,
+    /// Also write the per-period table as <out>/periods.parquet.
+    #[arg(long)]
+    parquet: bool,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -546,6 +553,12 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     if let Some(p) = plot.as_mut() {
         sinks.push(p);
     }
+    let mut tables = [(args.csv, false), (args.parquet, true)]
+        .into_iter()
+        .filter(|(wanted, _)| *wanted)
+        .map(|(_, parquet)| PeriodTable::create(&dir, parquet))
+        .collect::<Result<Vec<_>, _>>()?;
+    sinks.extend(tables.iter_mut().map(|t| t as &mut dyn SampleSink));
     let out = sim::run_with(
         &scenario,
         RunOptions {
@@ -563,6 +576,9 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     let metrics = &out.metrics;
 
     let mut written = Vec::new();
+    for t in tables {
+        written.push(("per-period table", t.finish()?));
+    }
     if let Some(mut l) = log {
         if let Some(t) = out.end.stop_time_s() {
             let level = if matches!(out.end, RunEnd::Interrupted { .. }) {

@@ -18,8 +18,8 @@
 
 #[cfg(feature = "cli")]
 pub mod cli;
-#[cfg(feature = "cli")]
 pub mod parquet_out;
+pub mod period_table;
 pub mod plan;
 pub mod table;
 
