@@ -12,11 +12,13 @@
    lock (left closed loop, tripped, or stopped early).
 
 On a shared machine, other processes take cores from the sweep: the load average is printed;
-the 1-process pool against one core measures the pool's own overhead whatever the load.
+the 1-process pool against one core, and the workers' CPU time against that of the runs alone
+(one after another), measure the sweep's own overhead whatever the load.
 """
 import argparse
 import concurrent.futures as cf
 import os
+import resource
 import time
 import tomllib
 
@@ -31,18 +33,24 @@ cores = os.cpu_count() or 1
 fixed = {} if args.duration is None else {"duration_s": args.duration}
 
 _, runs = pyfoc._native._sweep_plan("default", fixed, args.single, 1)
-t = time.perf_counter()
+t, c = time.perf_counter(), time.process_time()
 for index, _, _, toml in runs:
     pyfoc._native._sweep_run(index, toml)
 single = args.single / (time.perf_counter() - t)
-print(f"one core: {single:.2f} runs/s ({1 / single:.3f} s a run)")
+single_cpu = (time.process_time() - c) / args.single
+print(f"one core: {single:.2f} runs/s ({1 / single:.3f} s a run, {single_cpu:.4f} s of CPU)")
 
 n = 200 * cores
 t = time.perf_counter()
+before = resource.getrusage(resource.RUSAGE_CHILDREN)
 df = pyfoc.sweep("default", fixed, n=n, seed=2)
 rate = n / (time.perf_counter() - t)
+after = resource.getrusage(resource.RUSAGE_CHILDREN)
+workers_cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
 print(f"sweep, default executor, {n} runs: {rate:.2f} runs/s = "
-      f"{rate / (cores * single):.2f} x ({cores} cores x one core)")
+      f"{rate / (cores * single):.2f} x ({cores} cores x one core); the workers' CPU time "
+      f"{workers_cpu:.2f} s against {n * single_cpu:.2f} s for the runs alone "
+      f"({n * single_cpu / workers_cpu:.2f})")
 
 t = time.perf_counter()
 with cf.ProcessPoolExecutor(1) as one:
