@@ -4,8 +4,10 @@
 
 mod bench;
 mod motor_command;
+mod table_commands;
 mod tune_command;
 
+use table_commands::{faults_command, low_speed_command, parse_suite_motor, suite};
 use tune_command::TuneArgs;
 
 use std::io::IsTerminal;
@@ -18,7 +20,8 @@ use std::time::{Duration, Instant};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::SimError;
-use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
+use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions};
+use pmsm_sim::analysis::sweep::period_table::PeriodTable;
 use pmsm_sim::output::file::write_bytes;
 use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::output::plot::PlotSink;
@@ -158,6 +161,9 @@ enum Command {
         #[arg(long)]
         ts_s: Option<f64>,
     },
+    /// Run a sweep plan (a scenario with keys varied: grids, Monte-Carlo draws) on the local
+    /// cores; writes <out>/results.parquet, a row per run (docs/sweeps.md).
+    Sweep(pmsm_sim::analysis::sweep::cli::SweepArgs),
     /// Replay a recorded drive (CSV in the documented format, or a pmsm-sim MCAP log)
     /// through the default EKF, the drive observer and the flux + PLL baseline; prints the
     /// score table and writes metrics.json, replay.mcap and plot.svg to <out>.
@@ -218,6 +224,12 @@ struct RunArgs {
     /// Encoding of the per-period messages of the MCAP log (protobuf: fast; json: text).
     #[arg(long, value_enum, default_value_t = Encoding::Protobuf)]
     log_encoding: Encoding,
+    /// Also write the per-period table as <out>/periods.csv (docs/foxglove.md).
+    #[arg(long)]
+    csv: bool,
+    /// Also write the per-period table as <out>/periods.parquet.
+    #[arg(long)]
+    parquet: bool,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -340,6 +352,7 @@ fn main() -> ExitCode {
             out,
         }) => identify_command(scenario.as_deref(), json, seed, out),
         Some(Command::Tune(args)) => Ok(args.run()),
+        Some(Command::Sweep(args)) => sweep_command(&args),
         Some(Command::Replay {
             log,
             motor,
@@ -360,6 +373,28 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `pmsm-sim sweep`: the plan on the local cores; a signal keeps the finished rows and exits
+/// with 128 + its number.
+fn sweep_command(args: &pmsm_sim::analysis::sweep::cli::SweepArgs) -> Result<ExitCode, SimError> {
+    let signals = StopSignals::register();
+    let r = pmsm_sim::analysis::sweep::cli::run(args, &signals.stop)?;
+    eprintln!(
+        "{} of {} runs in {:.1} s ({} failed) -> {}",
+        r.written,
+        r.planned,
+        r.wall_s,
+        r.failed,
+        r.path.display()
+    );
+    Ok(match signals.received() {
+        Some((code, name)) if r.interrupted => {
+            eprintln!("pmsm-sim: {name}: stopped; the finished runs are written");
+            ExitCode::from(code)
+        }
+        _ => ExitCode::SUCCESS,
+    })
 }
 
 /// A scenario from a file path (anything ending in `.toml` or containing a path separator)
@@ -538,6 +573,12 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     if let Some(p) = plot.as_mut() {
         sinks.push(p);
     }
+    let mut tables = [(args.csv, false), (args.parquet, true)]
+        .into_iter()
+        .filter(|(wanted, _)| *wanted)
+        .map(|(_, parquet)| PeriodTable::create(&dir, parquet))
+        .collect::<Result<Vec<_>, _>>()?;
+    sinks.extend(tables.iter_mut().map(|t| t as &mut dyn SampleSink));
     let out = sim::run_with(
         &scenario,
         RunOptions {
@@ -555,6 +596,9 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     let metrics = &out.metrics;
 
     let mut written = Vec::new();
+    for t in tables {
+        written.push(("per-period table", t.finish()?));
+    }
     if let Some(mut l) = log {
         if let Some(t) = out.end.stop_time_s() {
             let level = if matches!(out.end, RunEnd::Interrupted { .. }) {
@@ -627,128 +671,6 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
             ExitCode::from(2)
         }
     })
-}
-
-/// `pmsm-sim faults` (module `pmsm_sim::analysis::fault_suite`).
-fn faults_command(out: &Path, t_fault_s: f64, t_end_s: f64) -> Result<ExitCode, SimError> {
-    use pmsm_sim::analysis::fault_suite::{SuiteOptions, markdown, run_suite};
-    let opts = SuiteOptions { t_fault_s, t_end_s };
-    let results = run_suite(&opts)?;
-    let md = markdown(&results, &opts);
-    std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
-    let path = out.join("faults.md");
-    write_bytes(&path, md.as_bytes())?;
-    print!("{md}");
-    println!("\nwritten to {}", path.display());
-    let unexpected: Vec<&str> = results
-        .iter()
-        .filter(|r| !r.as_expected)
-        .map(|r| r.name)
-        .collect();
-    if unexpected.is_empty() {
-        return Ok(ExitCode::SUCCESS);
-    }
-    eprintln!(
-        "pmsm-sim: {} of {} fault rows not as expected: {}",
-        unexpected.len(),
-        results.len(),
-        unexpected.join("; ")
-    );
-    Ok(ExitCode::FAILURE)
-}
-
-/// The `--motor` list with repeats dropped, first occurrences kept in order.
-fn dedup(motors: &[SuiteMotor]) -> Vec<SuiteMotor> {
-    let mut out: Vec<SuiteMotor> = Vec::with_capacity(motors.len());
-    for &m in motors {
-        if !out.contains(&m) {
-            out.push(m);
-        }
-    }
-    out
-}
-
-/// A `--motor` name of `pmsm-sim suite`.
-fn parse_suite_motor(name: &str) -> Result<SuiteMotor, String> {
-    SuiteMotor::from_name(name).ok_or_else(|| {
-        let known: Vec<_> = SuiteMotor::ALL.iter().map(|m| m.name()).collect();
-        format!("unknown motor `{name}` (known: {})", known.join(", "))
-    })
-}
-
-/// `pmsm-sim suite`: runs the suite, prints the markdown tables, writes `suite.md` and
-/// `suite.json` to `out`. Exit code 1 when a goal or limit fails that is no documented known
-/// limit (`pmsm_sim::analysis::suite`, "Known limits"; the tables name those), else 0.
-fn suite(opts: SuiteOptions, motors: &[SuiteMotor], out: &Path) -> Result<ExitCode, SimError> {
-    let report = if motors.is_empty() {
-        run_suite(&opts)?
-    } else {
-        run_suite_motors(&opts, &dedup(motors))?
-    };
-    write_table(out, "suite", &report.to_markdown(), &report)?;
-    let failed: Vec<String> = report
-        .unexpected_failures()
-        .map(|c| format!("{} ({}, {})", c.name, c.motor.name(), c.row))
-        .chain(
-            report
-                .saturated
-                .checks
-                .iter()
-                .filter(|c| !c.pass)
-                .map(|c| format!("{} ({})", c.name, c.motor)),
-        )
-        .collect();
-    if failed.is_empty() {
-        return Ok(ExitCode::SUCCESS);
-    }
-    eprintln!(
-        "pmsm-sim: {} check(s) failed: {}",
-        failed.len(),
-        failed.join("; ")
-    );
-    Ok(ExitCode::FAILURE)
-}
-
-/// A table command's outputs: the Markdown `md` printed and written to `out/{stem}.md`, and
-/// `value` as pretty JSON to `out/{stem}.json`.
-fn write_table(
-    out: &Path,
-    stem: &str,
-    md: &str,
-    value: &impl serde::Serialize,
-) -> Result<ExitCode, SimError> {
-    print!("{md}");
-    std::fs::create_dir_all(out).map_err(|e| out_err(out, e))?;
-    let md_path = out.join(format!("{stem}.md"));
-    write_bytes(&md_path, md.as_bytes())?;
-    let json_path = out.join(format!("{stem}.json"));
-    let json = serde_json::to_string_pretty(value).map_err(|e| out_err(&json_path, e))?;
-    write_bytes(&json_path, format!("{json}\n").as_bytes())?;
-    println!("\noutputs: {} {}", md_path.display(), json_path.display());
-    Ok(ExitCode::SUCCESS)
-}
-
-/// `pmsm-sim low-speed` (module `pmsm_sim::analysis::low_speed`): the table, printed and written to
-/// `out`. A missed goal is a result, not an error.
-fn low_speed_command(motors: &[SuiteMotor], hold: f64, out: &Path) -> Result<ExitCode, SimError> {
-    use pmsm_sim::analysis::low_speed::{SPEEDS_PCT, run_motor, to_markdown};
-    if !(hold.is_finite() && hold > 0.0) {
-        return Err(SimError::Scenario {
-            file: "command line".into(),
-            field: "--hold".into(),
-            problem: format!("must be a positive time in s, is {hold}"),
-        });
-    }
-    let motors = if motors.is_empty() {
-        SuiteMotor::SURFACE.to_vec()
-    } else {
-        dedup(motors)
-    };
-    let mut rows = vec![];
-    for &m in &motors {
-        rows.push(run_motor(m, &SPEEDS_PCT, hold)?);
-    }
-    write_table(out, "lowspeed", &to_markdown(&rows), &rows)
 }
 
 /// `pmsm-sim replay` (module `pmsm_sim::analysis::replay`): the table printed, the outputs written.

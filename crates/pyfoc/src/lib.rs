@@ -29,6 +29,7 @@ mod replay;
 mod simulate;
 mod status;
 mod suite;
+mod sweep;
 mod tune;
 
 use errors::{ConfigError, FilterError, PyfocError, SimulationError};
@@ -44,6 +45,8 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(tune::tune_qr, m)?)?;
     m.add_function(wrap_pyfunction!(tune::tune_qr_mcap, m)?)?;
     m.add_function(wrap_pyfunction!(suite::suite, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep::sweep_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep::sweep_run, m)?)?;
     m.add_function(wrap_pyfunction!(identify::identify, m)?)?;
     m.add_function(wrap_pyfunction!(engine::clear_buffer_pool, m)?)?;
     m.add_function(wrap_pyfunction!(replay::read_log, m)?)?;

@@ -105,7 +105,7 @@ impl<T: Float, const N: usize> Steps<T> for Box<MapObserver<T, N>> {
 
 /// The float outputs of `run` (one `(N,)` float64 array each) and `step` (one float each),
 /// by name; [`outputs`] gives their values in the same order. Adding an output is one name
-/// here and one value there (and a line in `pyfoc.pyi`).
+/// here and one value there (and a line in the stub, `python/pyfoc/__init__.pyi`).
 pub(crate) const OUTPUTS: [&str; 9] = [
     "theta",
     "omega",

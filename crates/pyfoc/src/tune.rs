@@ -90,7 +90,7 @@ fn report_dict<'py>(py: Python<'py>, rep: &TuneReport) -> PyResult<Bound<'py, Py
 /// Proposes Q and R for the observer from a record by maximizing the innovation
 /// likelihood (`pmsm_sim::tune`). `u_ab`, `i_ab`: `(N, 2)` (row k of `u_ab` held over
 /// `[t_k, t_k+1)`); `theta_true` (and `omega_true`), `(N,)`, add the angle error of the
-/// default and the tuned filter. Returns a dict (see pyfoc.pyi). Releases the GIL.
+/// default and the tuned filter. Returns a dict (see the stub, python/pyfoc/__init__.pyi). Releases the GIL.
 #[pyfunction]
 #[pyo3(signature = (motor, ts, u_ab, i_ab, *, theta_true = None, omega_true = None, skip = None,
     r_shape = "full", max_evals = None, x0 = None, discretization = "lag_free",

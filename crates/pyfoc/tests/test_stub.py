@@ -1,4 +1,4 @@
-"""The stub pyfoc.pyi matches the built module: mypy's stubtest compares every name, signature,
+"""The stub python/pyfoc/__init__.pyi matches the built module: mypy's stubtest compares every name, signature,
 property and enum member of the stub with the runtime (allowlist: crates/pyfoc/stubtest-allowlist.txt)."""
 import pathlib
 import subprocess

@@ -9,6 +9,7 @@
 //! | [`identify`] | `pmsm-sim identify` | the drive's self-commissioning on a simulated motor |
 //! | [`tune`] | `pmsm-sim tune` | the observer's Q and R fitted to a logged run |
 //! | [`replay`] | `pmsm-sim replay` | the observers stepped over a recorded log of a real drive |
+//! | [`sweep`] | `pmsm-sim sweep` | many runs of a scenario with keys varied (grid, Monte-Carlo), a row each |
 
 pub mod fault_suite;
 pub mod identify;
@@ -16,4 +17,5 @@ pub mod low_speed;
 pub(crate) mod mcap_input;
 pub mod replay;
 pub mod suite;
+pub mod sweep;
 pub mod tune;

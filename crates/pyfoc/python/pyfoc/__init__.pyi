@@ -4,12 +4,14 @@ Timing: row k of ``u_ab`` is the voltage held over [t_k, t_k+1), row k of ``i_ab
 sampled at t_k; row k of the output is the estimate at t_k, predicted with ``u_ab[k-1]`` and
 corrected with ``i_ab[k]``. SI units; angles and speeds electrical unless named ``_mech``.
 """
+import concurrent.futures
 import enum
 import os
-from typing import Any, Literal, TypedDict, final
+from typing import Any, Literal, Mapping, Sequence, TypedDict, final
 
 import numpy as np
 import numpy.typing as npt
+import polars
 
 # The TypedDicts below (RunOutput, StepOutput, TuneReport, ...) describe the returned dicts for
 # type checkers only; they do not exist at runtime (crates/pyfoc/stubtest-allowlist.txt).
@@ -18,12 +20,15 @@ __all__ = [
     "Motor",
     "Ekf",
     "simulate",
+    "sweep",
     "identify",
     "tune_qr",
     "tune_qr_mcap",
     "suite",
     "clear_buffer_pool",
     "read_log",
+    "replay_many",
+    "to_frame",
     "FluxObserver",
     "DriveObserver",
     "LogError",
@@ -489,3 +494,48 @@ def clear_buffer_pool() -> int:
     memory to the next call of the same or a somewhat smaller length (already mapped: no page
     faults, no zeroing by the kernel); at most 256 MiB of outputs and 128 MiB of input copies
     stay held after the results are gone. Later calls fill the pool again."""
+
+def sweep(
+    scenario: str | os.PathLike[str] | dict[str, Any],
+    vary: dict[str, Any],
+    n: int = 1,
+    seed: int = 0,
+    executor: concurrent.futures.Executor | None = None,
+    *,
+    chunk_size: int | None = None,
+) -> polars.DataFrame:
+    """Run ``scenario`` (a preset name, a TOML path or a dict) many times with the dotted keys
+    of ``vary`` varied: a list is a grid axis, ``("uniform", lo, hi)``, ``("normal", mean,
+    sd)`` and ``("relative", sd)`` are drawn ``n`` times per grid point, a single value is a
+    fixed setting. Returns a polars DataFrame, a row per run: ``index``, each varied path,
+    ``seed`` (the run's noise seed), the run's metrics flattened with dotted names (no
+    wall-clock figures), ``error`` (None, or why the run failed: a failed run is a row).
+    Deterministic for ``seed`` whatever the executor: any concurrent.futures.Executor (default:
+    a process pool over the cores; a Dask ``Client.get_executor()`` runs it on a cluster).
+    ``chunk_size``: runs per submitted task (default: about 64 tasks in all, at most 32 runs
+    each). Malformed plans raise ConfigError before anything runs."""
+
+def replay_many(
+    paths: Sequence[str | os.PathLike[str]],
+    motor: Motor | dict[str, Any],
+    executor: concurrent.futures.Executor | None = None,
+    *,
+    scaling: Literal["amplitude", "power"] = "amplitude",
+    chunk_size: int = 1,
+) -> polars.DataFrame:
+    """Replay many drive logs (read_log: the replay CSV or pmsm-sim MCAP) through the default
+    EKF of ``motor`` (a Motor or a dict of its arguments), each with its own per-row periods,
+    in parallel on ``executor`` (as ``sweep``'s). A polars DataFrame, a row per log in the
+    order of ``paths``: ``path``, ``rows``, ``duration_s``, ``ts_s`` (median period),
+    ``rejected_rows``, ``tracking_pct``, ``first_tracking_s``, ``nis_mean``, ``psi_f_end_wb``,
+    ``rs_end_ohm``, ``speed_end_rpm`` and, when the log has the reference angle and speed, the
+    angle error (``angle_error_rms_deg``, ``_mean_deg``, ``_max_deg``) and
+    ``speed_error_rms_rad_s`` over the tracking rows; ``error`` (None, or why the log could
+    not be replayed: a row, never a lost batch)."""
+
+def to_frame(result: Mapping[str, Any]) -> polars.DataFrame:
+    """A result of simulate, Ekf.run, DriveObserver.run, FluxObserver.run or read_log as a
+    polars DataFrame, a row per period: 1-D arrays as columns, (N, k) arrays split into named
+    columns (i_ab -> i_alpha, i_beta; i_dq -> i_d, i_q; u_ab -> u_alpha, u_beta; duties ->
+    duty_a, duty_b, duty_c; p_diag -> p_i_alpha, p_i_beta, p_omega, p_theta); what is not per
+    row (metrics, completed, scenario, u_prev) left out."""
