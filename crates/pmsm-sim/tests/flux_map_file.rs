@@ -3,6 +3,7 @@
 //! naming the key, the line and the column.
 
 use std::fmt::Write;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use ekf_core::saturation::PM_SYRM_5K6;
 use pmsm_sim::scenario::Scenario;
@@ -66,7 +67,10 @@ fn load_in(dir: &std::path::Path, csv: Option<&str>) -> Result<Scenario, String>
 }
 
 fn load(csv: &str) -> Result<Scenario, String> {
-    load_in(&temp_dir(&format!("{:x}", csv.len())), Some(csv))
+    // A directory per call: the tests run in parallel.
+    static CALLS: AtomicUsize = AtomicUsize::new(0);
+    let n = CALLS.fetch_add(1, Ordering::Relaxed);
+    load_in(&temp_dir(&format!("call{n}")), Some(csv))
 }
 
 #[test]
