@@ -40,7 +40,7 @@ single = args.single / (time.perf_counter() - t)
 single_cpu = (time.process_time() - c) / args.single
 print(f"one core: {single:.2f} runs/s ({1 / single:.3f} s a run, {single_cpu:.4f} s of CPU)")
 
-n = 200 * cores
+n = 500 * cores
 t = time.perf_counter()
 before = resource.getrusage(resource.RUSAGE_CHILDREN)
 df = pyfoc.sweep("default", fixed, n=n, seed=2)
