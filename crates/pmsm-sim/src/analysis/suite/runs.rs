@@ -373,20 +373,7 @@ pub(super) fn run_scored_with(
             }
         }
     }
-    // foc sensored. Its own speed slew (half the acceleration of its current limit, for the
-    // motor's inertia) would turn the scenario's ramps into slower ones and leave the windows
-    // on a ramp; the profile's ramps are the acceleration here.
-    let mut cfg = sc.foc_config().map_err(|e| SimError::Scenario {
-        file: sc.name.clone(),
-        field: e.field,
-        problem: e.problem,
-    })?;
-    cfg.speed_slew_rad_s2 *= 100.0;
-    let mut drive = FocDrive::new(&cfg, 0.0, None).map_err(|e| SimError::Scenario {
-        file: sc.name.clone(),
-        field: "controller.foc".into(),
-        problem: e.to_string(),
-    })?;
+    let mut drive = sensored_drive(sc)?;
     let out = {
         let mut side: Vec<&mut dyn SideObserver> = scored
             .iter_mut()
@@ -406,6 +393,24 @@ pub(super) fn run_scored_with(
     }
     let end = out.end.describe();
     Ok((scored, end, out))
+}
+
+/// The suite's drive for a scenario: foc sensored with its speed slew raised a hundredfold.
+/// Its own slew (half the acceleration of its current limit, for the motor's inertia) would
+/// turn the scenario's ramps into slower ones and leave the windows on a ramp; the profile's
+/// ramps are the acceleration here.
+pub(super) fn sensored_drive(sc: &Scenario) -> Result<FocDrive, SimError> {
+    let mut cfg = sc.foc_config().map_err(|e| SimError::Scenario {
+        file: sc.name.clone(),
+        field: e.field,
+        problem: e.problem,
+    })?;
+    cfg.speed_slew_rad_s2 *= 100.0;
+    FocDrive::new(&cfg, 0.0, None).map_err(|e| SimError::Scenario {
+        file: sc.name.clone(),
+        field: "controller.foc".into(),
+        problem: e.to_string(),
+    })
 }
 
 /// Scores the controller's own observer over a window (a sink of the run).

@@ -282,11 +282,6 @@ pub fn saturated_rows(opts: &SuiteOptions) -> Result<SaturatedReport, SimError> 
         let (_, _, i_rated) = rated_mtpa(m);
         let map = told_map(m, i_rated)?;
         let small = sc.observer_params();
-        let cfg = sc.foc_config().map_err(|e| SimError::Scenario {
-            file: sc.name.clone(),
-            field: e.field,
-            problem: e.problem,
-        })?;
         // The EKFs' measurement noise from the sensing chain (module docs).
         // (Ideal sensing: the default.)
         let lsb = 2.0 * sc.sensors.adc_full_scale_a / f64::from(1u32 << sc.sensors.adc_bits);
@@ -336,13 +331,7 @@ pub fn saturated_rows(opts: &SuiteOptions) -> Result<SaturatedReport, SimError> 
                 Box::new(FluxObserver::new(&flux_cfg)?),
             ),
         ];
-        let mut cfg = cfg;
-        cfg.speed_slew_rad_s2 *= 100.0;
-        let mut drive = FocDrive::new(&cfg, 0.0, None).map_err(|e| SimError::Scenario {
-            file: sc.name.clone(),
-            field: "controller.foc".into(),
-            problem: e.to_string(),
-        })?;
+        let mut drive = sensored_drive(&sc)?;
         let out = {
             let mut side: Vec<&mut dyn SideObserver> =
                 obs.iter_mut().map(|s| s as &mut dyn SideObserver).collect();

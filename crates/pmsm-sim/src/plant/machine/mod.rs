@@ -179,16 +179,12 @@ fn cosh_sinh(disc: f64, t: f64) -> (f64, f64) {
     }
 }
 
-/// Complex product `a b`, numbers as `(re, im)`.
-#[inline]
 /// Torque of the saturated model (module docs), N m.
 fn sat_torque(m: &MotorModel, sat: &DSaturation, i_d: f64, i_q: f64) -> f64 {
     let psi_d = sat.psi_d_wb(m.ld_h, m.psi_f_wb, i_d);
     1.5 * m.p() * (psi_d * i_q - m.lq_h * i_d * i_q)
 }
 
-/// `d/dt [i_d, i_q, w_mech, th]` of the saturated model (module docs) at `[i_d, i_q, w_mech]`
-/// with the rotor-frame voltage `[u_d, u_q]`; Coulomb friction as `Tc sign(w)`.
 /// Coulomb friction torque at the mechanical speed `wm`: `coulomb_nm` against the motion,
 /// zero at rest (the stiction at a sign change is handled by the integrator).
 fn coulomb_nm(m: &MotorModel, wm: f64) -> f64 {
@@ -201,6 +197,8 @@ fn coulomb_nm(m: &MotorModel, wm: f64) -> f64 {
     }
 }
 
+/// `d/dt [i_d, i_q, w_mech, th]` of the saturated model (module docs) at `[i_d, i_q, w_mech]`
+/// with the rotor-frame voltage `[u_d, u_q]`; Coulomb friction as `Tc sign(w)`.
 fn sat_derivative(
     m: &MotorModel,
     sat: &DSaturation,
@@ -232,6 +230,35 @@ fn add_harmonics(m: &MotorModel, h: &EmfHarmonics, [id, iq, wm, th]: [f64; 4], d
     d[2] += 1.5 * m.p() * (ed * id + eq * iq) / m.j_kg_m2;
 }
 
+/// Classic RK4 on a state `[.., .., .., th]` over `n` sub-steps of `h`, the angle (last) kept
+/// in `[-pi, pi)` between sub-steps (no jump inside one).
+fn rk4(x: &mut [f64; 4], h: f64, n: u32, mut deriv: impl FnMut(&[f64; 4]) -> [f64; 4]) {
+    let add = |a: &[f64; 4], k: &[f64; 4], f: f64| -> [f64; 4] {
+        [
+            a[0] + f * k[0],
+            a[1] + f * k[1],
+            a[2] + f * k[2],
+            a[3] + f * k[3],
+        ]
+    };
+    for _ in 0..n {
+        let k1 = deriv(x);
+        let k2 = deriv(&add(x, &k1, 0.5 * h));
+        let k3 = deriv(&add(x, &k2, 0.5 * h));
+        let k4 = deriv(&add(x, &k3, h));
+        for i in 0..4 {
+            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        if x[3] >= PI {
+            x[3] -= TAU;
+        } else if x[3] < -PI {
+            x[3] += TAU;
+        }
+    }
+}
+
+/// Complex product `a b`, numbers as `(re, im)`.
+#[inline]
 fn cmul(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
     (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0)
 }
@@ -615,29 +642,7 @@ impl Plant {
             }
             d
         };
-        let add = |a: &[f64; 4], k: &[f64; 4], f: f64| -> [f64; 4] {
-            [
-                a[0] + f * k[0],
-                a[1] + f * k[1],
-                a[2] + f * k[2],
-                a[3] + f * k[3],
-            ]
-        };
-        for _ in 0..n {
-            let k1 = deriv(&x);
-            let k2 = deriv(&add(&x, &k1, 0.5 * h));
-            let k3 = deriv(&add(&x, &k2, 0.5 * h));
-            let k4 = deriv(&add(&x, &k3, h));
-            for i in 0..4 {
-                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
-            // Keep the angle bounded without a jump inside a step.
-            if x[3] >= PI {
-                x[3] -= TAU;
-            } else if x[3] < -PI {
-                x[3] += TAU;
-            }
-        }
+        rk4(&mut x, h, n, deriv);
         self.state = PlantState {
             i_d_a: x[0],
             i_q_a: x[1],

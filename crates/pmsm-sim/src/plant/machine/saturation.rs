@@ -40,7 +40,6 @@
 //! `catalog = "pm_syrm"` (or `saturating_ipm`) gives the reference saturating motors of
 //! `ekf_core::saturation` with their algebraic models.
 
-use std::f64::consts::{PI, TAU};
 use std::sync::Arc;
 
 use ekf_core::saturation::{SaturationModel, saturated_by_name};
@@ -472,28 +471,7 @@ impl super::Plant {
             }
             d
         };
-        let add = |a: &[f64; 4], k: &[f64; 4], f: f64| -> [f64; 4] {
-            [
-                a[0] + f * k[0],
-                a[1] + f * k[1],
-                a[2] + f * k[2],
-                a[3] + f * k[3],
-            ]
-        };
-        for _ in 0..n {
-            let k1 = deriv(&x, &mut last_i);
-            let k2 = deriv(&add(&x, &k1, 0.5 * h), &mut last_i);
-            let k3 = deriv(&add(&x, &k2, 0.5 * h), &mut last_i);
-            let k4 = deriv(&add(&x, &k3, h), &mut last_i);
-            for i in 0..4 {
-                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
-            if x[3] >= PI {
-                x[3] -= TAU;
-            } else if x[3] < -PI {
-                x[3] += TAU;
-            }
-        }
+        super::rk4(&mut x, h, n, |x| deriv(x, &mut last_i));
         let (id, iq) = currents(x[0], x[1], &mut last_i);
         self.state = PlantState {
             i_d_a: id,
