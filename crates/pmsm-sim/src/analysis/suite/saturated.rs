@@ -161,7 +161,13 @@ impl SideObserver for SatScored {
 /// The scenario of one saturating motor (module docs): the suite's interior-motor drive and
 /// sensing with this motor's ratings, current limit (twice the rated current), ADC range
 /// and load profile.
-fn scenario(m: &ekf_core::saturation::SaturatedMotor, opts: &SuiteOptions, k: f64) -> Scenario {
+/// `i_rated`: the rated current on the map's MTPA curve ([`rated_mtpa`]), A.
+fn scenario(
+    m: &ekf_core::saturation::SaturatedMotor,
+    opts: &SuiteOptions,
+    k: f64,
+    i_rated: f64,
+) -> Scenario {
     let r = &m.reference;
     let plan = Plan {
         conv_end_s: 0.5 * k,
@@ -173,7 +179,6 @@ fn scenario(m: &ekf_core::saturation::SaturatedMotor, opts: &SuiteOptions, k: f6
     };
     let mut sc = scenario_with(SuiteMotor::IndustrialIpm, opts, &plan, INITIAL_ANGLE_RAD);
     let motor = MotorModel::from_saturated(m);
-    let (_, _, i_rated) = rated_mtpa(m);
     let fs = (4.0 * i_rated).ceil();
     sc.name = format!("suite-{}", r.name);
     sc.description = format!(
@@ -277,9 +282,9 @@ pub fn saturated_rows(opts: &SuiteOptions) -> Result<SaturatedReport, SimError> 
     let k = if opts.short { 2.0 / 3.0 } else { 1.0 };
     let mut report = SaturatedReport::default();
     for m in &SATURATED {
-        let sc = scenario(m, opts, k);
-        let ts = sc.ts_s();
         let (_, _, i_rated) = rated_mtpa(m);
+        let sc = scenario(m, opts, k, i_rated);
+        let ts = sc.ts_s();
         let map = told_map(m, i_rated)?;
         let small = sc.observer_params();
         // The EKFs' measurement noise from the sensing chain (module docs).
