@@ -5,6 +5,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 step() { printf '\n=== %s\n' "$*"; }
+# A one-shot build: incremental caches would only take disk (the whole run needs about 3 GB).
+export CARGO_INCREMENTAL=0
 
 step "toolchain (rust-toolchain.toml) and the Cortex-M4F target"
 rustup toolchain install >/dev/null  # the pinned toolchain, with rustfmt and clippy
