@@ -482,7 +482,7 @@ impl<T: Float> DriveObserver<T> {
         // Adaptation gate (module docs), from the state before this correction.
         let tracked = pm[(3, 3)] <= sq(self.cfg.angle_sigma_limit_rad);
         let mut consistency = self.consistency;
-        consistency.watch(nis);
+        let _ = consistency.watch(nis);
         let good = if tracked && !consistency.inconsistent {
             self.good.saturating_add(1)
         } else {

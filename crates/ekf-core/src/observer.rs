@@ -171,6 +171,19 @@
 //! such a start `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the
 //! parts; the check's effect on recorded drives is in `docs/accuracy.md`.)
 //!
+//! **Speed drift** (part of the consistency check). A filter whose model is far from the motor
+//! (a saturating machine told its small-signal inductances) can settle on a wrong solution where
+//! its angle advances at the rotor's rate while its speed state is elsewhere: each correction
+//! pulls the angle back by the same amount, `K_th y` has a non-zero mean, and the innovations,
+//! which the baseline has learnt, look ordinary. In a healthy filter the angle advances by
+//! `w Ts` plus corrections that average out (an acceleration leaves a mean correction of the
+//! speed lag only). The check keeps the mean `d` of the angle correction over `drift_samples`
+//! (32) steps and reads the status `Uncertain` while `|d| > drift_ratio |w| Ts + drift_sigmas
+//! sqrt(P_ww) Ts` (0.25 and 3), trusted again after the hold with `|d|` at or below half that.
+//! (foc's health monitor makes the same comparison on its own averages.) On the saturated
+//! PM-SyRM told its small-signal constants it finds the 0.4 s after a generating step where the
+//! filter sits 145 deg off with its speed 1.8 times the rotor's (`docs/accuracy.md`).
+//!
 //! **Speed noise adaptation** ([`SpeedNoiseAdaptation`]; on in [`ObserverConfig::new`], off in
 //! foc's drive configuration and in [`ObserverConfig::seed`]). The model holds the speed constant
 //! between samples, with a random walk sized for a steady drive; a recorded ESC can go from

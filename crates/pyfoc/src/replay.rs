@@ -244,7 +244,8 @@ impl FluxObserver {
 
     /// Runs the observer over a record (same timing as `Ekf.run`); returns a dict of `(N,)`
     /// float64 arrays `theta`, `omega`, `omega_mech` and an int8 array `status`
-    /// (`Status.TRACKING` on every accepted row: the baseline has no confidence measure;
+    /// (`Status.UNCERTAIN` on every accepted row: the baseline has no confidence measure, so it
+    /// never claims `TRACKING`;
     /// `Status.REJECTED` for a non-finite row, whose outputs repeat the previous estimate).
     /// Continues from the current state; row 0 predicts with `u_prev` if given, else the
     /// last row of the previous `run` (zero for a new observer). `dt`: `(N,)` periods that
@@ -271,7 +272,7 @@ impl FluxObserver {
             let mut st = vec![0i8; n];
             for (k, (uk, ik)) in u.chunks_exact(2).zip(i.chunks_exact(2)).enumerate() {
                 let (e, s) = match g.obs.step(prev, [ik[0], ik[1]]) {
-                    Ok(e) => (e, RowStatus::Tracking),
+                    Ok(e) => (e, RowStatus::Uncertain),
                     Err(_) => (g.obs.estimate(), RowStatus::Rejected),
                 };
                 cols[0][k] = e.theta_rad;

@@ -143,8 +143,11 @@ impl<T: Float> Default for CovarianceHealth<T> {
 /// f_k  = f_k-1 + (n_k - f_k-1) / fast_samples                       fast mean (about 2-4 ms)
 /// b    = b + (mean of min(n_k, 4 b) over 8 samples - b) 8 / slow_samples
 ///        once per 8 samples, b in [2, max_baseline]                  baseline, clamped
+/// d_k  = d_k-1 + (K_th y_k - d_k-1) / drift_samples                mean angle correction
 /// inconsistent when f_k > ratio b_k or n_k > single_ratio b_k (one sample far out: the onset
-/// of a loss); trusted again after hold_samples steps in a row with f_k <= ratio b_k / 2
+/// of a loss), or |d_k| > drift_ratio |w Ts| + drift_sigmas sqrt(P_ww) Ts (speed drift);
+/// trusted again after hold_samples steps in a row with f_k <= ratio b_k / 2 and |d_k| at or
+/// below half its limit
 /// ```
 ///
 /// For a consistent filter `NIS` is chi-square with 2 degrees of freedom (mean 2); a
@@ -170,6 +173,14 @@ pub struct ConsistencyCheck<T> {
     pub hold_samples: u32,
     /// Ceiling of the baseline.
     pub max_baseline: T,
+    /// Speed drift: the angle's mean correction per step above `drift_ratio |w| Ts +
+    /// drift_sigmas sqrt(P_ww) Ts` is inconsistent (the angle moves at another speed than the
+    /// filter's speed state).
+    pub drift_ratio: T,
+    /// See [`drift_ratio`](Self::drift_ratio).
+    pub drift_sigmas: T,
+    /// Samples of the mean angle correction's time constant.
+    pub drift_samples: T,
 }
 
 impl<T: Float> ConsistencyCheck<T> {
@@ -184,11 +195,17 @@ impl<T: Float> ConsistencyCheck<T> {
         }
         positive(self.ratio, Param::ConsistencyRatio)?;
         positive(self.single_ratio, Param::ConsistencyRatio)?;
+        positive(self.drift_ratio, Param::ConsistencyRatio)?;
+        positive(self.drift_sigmas, Param::ConsistencyRatio)?;
+        if !self.drift_samples.is_finite() || self.drift_samples < T::one() {
+            return Err(ConfigError::NotPositive(Param::ConsistencyFastSamples));
+        }
         positive(self.max_baseline, Param::ConsistencyMaxBaseline)
     }
 
     /// `fast_samples = 4`, `slow_samples = 1024`, `ratio = 8`, `single_ratio = 10`,
-    /// `hold_samples = 32`, `max_baseline = 400`.
+    /// `hold_samples = 32`, `max_baseline = 400`, `drift_ratio = 0.25`, `drift_sigmas = 3`,
+    /// `drift_samples = 32`.
     ///
     /// For a consistent filter (baseline 2), one sample exceeds `single_ratio b = 20` with a
     /// probability of `e^-10 = 4.5e-5` (at 10 kHz about once in 2 s, then 32 samples
@@ -204,6 +221,9 @@ impl<T: Float> ConsistencyCheck<T> {
             single_ratio: to_t(10.0),
             hold_samples: 32,
             max_baseline: to_t(400.0),
+            drift_ratio: to_t(0.25),
+            drift_sigmas: to_t(3.0),
+            drift_samples: to_t(32.0),
         }
     }
 }
@@ -234,6 +254,17 @@ pub(crate) struct ConsistencyState<T> {
     /// Steps in a row below half the limit while inconsistent.
     pub(crate) calm: u32,
     pub(crate) inconsistent: bool,
+    /// Speed drift: the mean angle correction per step, the angle at the block's start
+    /// (known once primed), the mean's gain per block, the limit's factors.
+    pub(crate) drift: T,
+    pub(crate) block_theta: T,
+    pub(crate) drift_primed: bool,
+    pub(crate) k_drift: T,
+    pub(crate) drift_ratio: T,
+    pub(crate) drift_sigmas: T,
+    /// The mean angle correction is above its limit / at or below half of it.
+    pub(crate) drifting: bool,
+    pub(crate) drift_calm: bool,
 }
 
 /// The baseline is updated once per block of this many samples, from their clamped mean (it
@@ -261,6 +292,17 @@ impl<T: Float> ConsistencyState<T> {
             block_n: 0,
             calm: 0,
             inconsistent: true,
+            drift: T::zero(),
+            block_theta: T::zero(),
+            drift_primed: false,
+            k_drift: {
+                let k = to_t::<T>(f64::from(BASELINE_BLOCK)) / c.drift_samples;
+                if k > T::one() { T::one() } else { k }
+            },
+            drift_ratio: c.drift_ratio,
+            drift_sigmas: c.drift_sigmas,
+            drifting: false,
+            drift_calm: true,
         };
         if s.k_block > T::one() {
             s.k_block = T::one();
@@ -269,10 +311,20 @@ impl<T: Float> ConsistencyState<T> {
         s
     }
 
-    /// The limits from the baseline.
+    /// The limits from the baseline, overridden by the speed drift: drifting, the fast mean's
+    /// limit is -1 (always exceeded); not calm, its half limit is -1 (never calm). The step's
+    /// test then needs no term of its own.
     fn refresh(&mut self) {
-        self.limit = self.ratio * self.baseline;
-        self.half_limit = self.limit * to_t(0.5);
+        self.limit = if self.drifting {
+            -T::one()
+        } else {
+            self.ratio * self.baseline
+        };
+        self.half_limit = if self.drift_calm {
+            self.ratio * self.baseline * to_t(0.5)
+        } else {
+            -T::one()
+        };
         self.single = self.single_ratio * self.baseline;
         self.clamp = self.baseline * to_t(4.0);
         self.two_over_baseline = to_t::<T>(2.0) / self.baseline;
@@ -283,6 +335,42 @@ impl<T: Float> ConsistencyState<T> {
         self.fast = self.baseline;
         self.calm = 0;
         self.inconsistent = true;
+        self.drift = T::zero();
+        self.drift_primed = false;
+        self.drifting = false;
+        self.drift_calm = true;
+        self.refresh();
+    }
+
+    /// The speed drift's update at the end of a block (module docs, "Consistency"), with the
+    /// angle estimate `theta` (rad), the speed estimate times the period `w_ts` (rad) and the
+    /// speed's variance times the period squared `var_w_ts2` (rad^2). The block's mean angle
+    /// correction is the angle's advance over the block less `BASELINE_BLOCK w Ts` (the speed
+    /// changes little over eight samples), divided by `BASELINE_BLOCK`; it enters the mean
+    /// `drift` (gain `BASELINE_BLOCK / drift_samples`), compared with its limit. Out of line:
+    /// once in eight samples, when [`watch`](Self::watch) has just closed a block.
+    #[cold]
+    #[inline(never)]
+    pub(crate) fn update_drift(&mut self, theta: T, w_ts: T, var_w_ts2: T) {
+        let n: T = to_t(f64::from(BASELINE_BLOCK));
+        let start = self.block_theta;
+        self.block_theta = theta;
+        if !self.drift_primed {
+            self.drift_primed = true;
+            return;
+        }
+        let mean = (crate::wrap_angle(theta - start) - n * w_ts) / n;
+        self.drift += (mean - self.drift) * self.k_drift;
+        // |drift| - ratio |w Ts| against sigmas sqrt(var): compared in squares (no sqrt).
+        let a = self.drift.abs();
+        let r = self.drift_ratio * w_ts.abs();
+        let s2 = self.drift_sigmas * self.drift_sigmas * var_w_ts2;
+        let excess = a - r;
+        self.drifting = excess > T::zero() && excess * excess > s2;
+        // Half the limit: |drift| <= (ratio |w Ts| + sigmas sd) / 2.
+        let half = a * to_t(2.0) - r;
+        self.drift_calm = half <= T::zero() || half * half <= s2;
+        self.refresh();
     }
 
     /// The baseline's update from a full block (out of line: once in eight samples).
@@ -304,13 +392,15 @@ impl<T: Float> ConsistencyState<T> {
         self.refresh();
     }
 
-    /// One step's NIS (finite: a step with a non-finite result is refused before).
+    /// One step's NIS (finite: a step with a non-finite result is refused before). `true` when
+    /// it closed a block (the caller then updates the speed drift).
     #[inline(always)]
-    pub(crate) fn watch(&mut self, nis: T) {
+    pub(crate) fn watch(&mut self, nis: T) -> bool {
         self.fast += (nis - self.fast) * self.k_fast;
         self.block_sum += if nis < self.clamp { nis } else { self.clamp };
         self.block_n += 1;
-        if self.block_n == BASELINE_BLOCK {
+        let closed = self.block_n == BASELINE_BLOCK;
+        if closed {
             self.update_baseline();
         }
         if self.fast > self.limit || nis > self.single {
@@ -326,6 +416,7 @@ impl<T: Float> ConsistencyState<T> {
                 self.calm = 0;
             }
         }
+        closed
     }
 }
 

@@ -366,8 +366,11 @@ impl<T: Float> PmsmObserver<T> {
                     t.commit(s, t.psi);
                     self.tracker_housekeeping();
                 }
-                if let Some(w) = &mut self.consistency {
-                    w.watch(c.nis);
+                if let Some(w) = &mut self.consistency
+                    && w.watch(c.nis)
+                {
+                    let ts = self.model.ts();
+                    w.update_drift(xm[3], xm[2] * ts, pm.p22 * ts * ts);
                 }
                 self.last = c;
                 self.gate_rejected();
@@ -389,7 +392,10 @@ impl<T: Float> PmsmObserver<T> {
             self.tracker_housekeeping();
         }
         if let Some(w) = &mut self.consistency {
-            w.watch(c.nis);
+            if w.watch(c.nis) {
+                let ts = self.model.ts();
+                w.update_drift(x[3], x[2] * ts, post.p.p22 * ts * ts);
+            }
             if self.fused != 0 {
                 self.fused -= 1;
             }

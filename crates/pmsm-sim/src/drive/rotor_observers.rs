@@ -70,8 +70,8 @@ fn ekf_estimate(e: &Estimate<f64>, obs: &PmsmObserver<f64>) -> ObserverEstimate 
     }
 }
 
-/// `ekf-core`'s flux observer with PLL (no covariance: zeros, always tracking; the configured
-/// flux and resistance, no temperature).
+/// `ekf-core`'s flux observer with PLL (no covariance: zeros; no confidence measure, so it
+/// never reports `Tracking`; the configured flux and resistance, no temperature).
 impl Observer for FluxObserver<f64> {
     fn step(&mut self, u_prev: [f64; 2], i_ab_a: [f64; 2]) -> Result<ObserverEstimate, EkfError> {
         let e = FluxObserver::step(self, u_prev, i_ab_a)?;
@@ -94,7 +94,8 @@ fn flux_estimate(e: &FluxEstimate<f64>, (psi_f_wb, rs_ohm): (f64, f64)) -> Obser
         omega_e_rad_s: e.omega_e_rad_s,
         p_diag: [0.0; 4],
         nis: 0.0,
-        tracking: true,
+        // No confidence measure: it never claims to track.
+        tracking: false,
         psi_f_wb,
         psi_f_sigma_wb: 0.0,
         rs_ohm,

@@ -265,7 +265,8 @@ class FluxOutput(TypedDict):
     omega: npt.NDArray[np.float64]
     omega_mech: npt.NDArray[np.float64]
     status: npt.NDArray[np.int8]
-    """Status.TRACKING on every accepted row (no confidence measure), REJECTED otherwise."""
+    """Status.UNCERTAIN on every accepted row (no confidence measure: it never claims TRACKING),
+    REJECTED otherwise."""
 
 @final
 class FluxObserver:

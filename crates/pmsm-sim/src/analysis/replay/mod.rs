@@ -53,7 +53,8 @@
 //! than 45 deg off, the share of samples in each status, and the samples with status
 //! TRACKING while more than 45 deg off. The three observers are scored alike. The drive
 //! observer's status is TRACKING when its estimate says `tracking`, else UNCERTAIN. The flux
-//! baseline has no confidence measure: its status is TRACKING on every accepted sample.
+//! baseline has no confidence measure: its status is UNCERTAIN on every accepted sample (it
+//! never claims TRACKING).
 //!
 //! # Outputs of a replay ([`write_outputs`])
 //!
@@ -246,8 +247,9 @@ pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Rep
 }
 
 /// Runs the flux + PLL baseline (`FluxObserverConfig::new(motor, ts)`) over `log`. It has a
-/// fixed step: every period is taken as the nominal `Ts`. Status: TRACKING on every accepted
-/// sample (it has no confidence measure), REJECTED on a refused one.
+/// fixed step: every period is taken as the nominal `Ts`. Status: UNCERTAIN on every accepted
+/// sample (it has no confidence measure, so it never claims TRACKING), REJECTED on a refused
+/// one.
 pub fn run_flux(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
     log.check()?;
     let cfg = FluxObserverConfig::new(motor.params, motor.ts_s);
@@ -255,7 +257,7 @@ pub fn run_flux(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Re
     let (psi, rs) = obs.parameters();
     Ok(trace(log, |u_prev, i, _dt| {
         let (e, status) = match obs.step(u_prev, i) {
-            Ok(e) => (e, ReplayStatus::Tracking),
+            Ok(e) => (e, ReplayStatus::Uncertain),
             Err(_) => (obs.estimate(), ReplayStatus::Rejected),
         };
         let sample = ObserverSample {

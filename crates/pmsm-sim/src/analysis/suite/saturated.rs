@@ -405,7 +405,8 @@ impl SaturatedReport {
             "\n## Saturated motors (foc sensored; load steps 100/150/-100/100 % and a reversal \
              under rated load at 50 % rated speed)\n\n\
              Scored after the convergence where the speed is at least 10 % of rated; status \
-             over every sample after the convergence. The maps told are the motors' models \
+             over every sample after the convergence (the flux baseline has no confidence \
+             measure: it never reports Tracking). The maps told are the motors' models \
              sampled on a {} x {} grid.\n",
             GRID.0, GRID.1
         );

@@ -267,7 +267,11 @@ impl SuiteReport {
                 );
             }
         }
-        let _ = writeln!(s, "\n## Transients\n");
+        let _ = writeln!(
+            s,
+            "\n## Transients\n\nThe flux + PLL baseline has no confidence measure: it never \
+             reports Tracking.\n"
+        );
         let _ = writeln!(
             s,
             "| observer | motor | convergence, main run (ms) | converged starts | worst convergence over starts (ms) | worst angle error, rated load step (deg) | worst speed error, load step (rad/s) | status Tracking, whole run (%) | Tracking while > 45 deg off (samples) |"
