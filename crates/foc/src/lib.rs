@@ -16,6 +16,7 @@ pub mod hfi;
 #[cfg(feature = "identify")]
 pub mod identify;
 pub mod io;
+pub mod mapdrive;
 pub mod mtpa;
 pub mod pi;
 pub mod startup;
@@ -42,6 +43,7 @@ pub use identify::{
     IdentifyOutput, IdentifyStep, identify_period,
 };
 pub use io::{PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput};
+pub use mapdrive::{MapFieldWeakening, MapMtpa, MapPoint, MapTableError, MapTables};
 pub use mtpa::Mtpa;
 pub use pi::{Pi, PiGains};
 pub use startup::State;
