@@ -148,8 +148,10 @@
 mod checks;
 mod hfi_path;
 mod loops;
+#[cfg(feature = "flux-map")]
+mod map_path;
+mod reseed;
 
-use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{Estimate, PmsmObserver};
 
 use crate::config::{ComputationDelay, ConfigError, FocConfig, Mode};
@@ -160,10 +162,11 @@ use crate::health::HealthReport;
 use crate::hfi::{HfiError, HfiPhase, HfiSlot, HfiStatus};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
-use crate::startup::{Inputs, Plan, Seed, Sequencer, State, Stop};
+use crate::startup::{Inputs, Plan, Sequencer, State, Stop};
 use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
 use crate::transforms::{AlphaBeta, Dq};
-use crate::trig::{add_angles, max2, min2, sin_cos, sin_cos_small, sqrt, wrap};
+use crate::trig::{add_angles, max2, min2, sin_cos, sin_cos_small, sqrt};
+use reseed::reseed_observer;
 
 pub use crate::io::{PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput};
 
@@ -263,26 +266,9 @@ pub struct Foc {
     stuck_omega: [f32; 2],
     /// High-frequency injection at low speed (module docs, "Low speed by HFI"); `None`: off.
     hfi: Option<HfiSlot>,
-}
-
-/// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
-/// its angle standard deviation (rad); the currents keep their estimate. Rare (start-up,
-/// re-acquisition): out of line.
-#[cold]
-#[inline(never)]
-fn reseed_observer(observer: &mut PmsmObserver<f32>, cfg: &FocConfig, seed: Seed) {
-    let x = observer.state();
-    let si = 0.1 * cfg.motor.characteristic_current_a();
-    let sw = 0.5 * cfg.startup.handover_speed_rad_s + 0.3 * seed.omega.abs();
-    let x = Vector4::new(x[0], x[1], seed.omega, wrap(seed.theta));
-    let p = Matrix4::from_diagonal(&Vector4::new(
-        si * si,
-        si * si,
-        sw * sw,
-        seed.sigma_theta * seed.sigma_theta,
-    ));
-    // Refused only for non-finite values, which these are not; nothing changes then.
-    let _ = observer.reset(x, p);
+    /// The flux map's point of the last closed-loop reference (`FocConfig::flux_map`).
+    #[cfg(feature = "flux-map")]
+    map_point: crate::mapdrive::MapPoint,
 }
 
 impl Foc {
@@ -324,7 +310,7 @@ impl Foc {
                 cfg.max_negative_id(),
             ),
             // (Without the `field-weakening` feature `FocConfig::validate` refuses it.)
-            shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled,
+            shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled || cfg.has_flux_map(),
             salient: cfg.motor.is_salient(),
             mtpa_on: cfg.motor.is_salient() && cfg.mtpa,
             fw_on: cfg.field_weakening.enabled,
@@ -344,6 +330,8 @@ impl Foc {
             stuck_ticks: [0; 2],
             stuck_omega: [0.0; 2],
             hfi: None,
+            #[cfg(feature = "flux-map")]
+            map_point: crate::mapdrive::MapPoint::ZERO,
         })
     }
 
@@ -769,6 +757,8 @@ impl Foc {
         self.fw.reset();
         self.iq_last = 0.0;
         self.id_base = 0.0;
+        #[cfg(feature = "flux-map")]
+        self.reset_map();
         self.u_hist = [AlphaBeta::default(); 2];
         self.u_dq_last = Dq::default();
         self.stuck_angle = [0.0; 2];

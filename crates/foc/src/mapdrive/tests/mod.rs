@@ -8,7 +8,6 @@ use ekf_core::saturation::{PM_SYRM, SATURATED_IPM, SaturatedMotor};
 
 use super::*;
 use crate::mtpa::Mtpa;
-use crate::pi::{Pi, PiGains};
 
 /// Grid capacity of the test maps.
 const N: usize = 16;
@@ -65,6 +64,7 @@ fn map_of(m: &SaturatedMotor, i_r: f64) -> FluxMap<f64, N> {
 }
 
 struct Case {
+    m: SaturatedMotor,
     map: FluxMap<f64, N>,
     i_r: f64,
     k_t: f32,
@@ -76,6 +76,7 @@ fn case(m: SaturatedMotor) -> Case {
     let map = map_of(&m, i_r);
     let r = &m.reference;
     Case {
+        m,
         map,
         i_r,
         k_t: (1.5 * f64::from(r.pole_pairs) * r.psi_f_wb) as f32,
@@ -111,6 +112,10 @@ impl Case {
         best.1
     }
 }
+
+mod steps;
+#[cfg(feature = "flux-map")]
+mod wired;
 
 #[test]
 fn mtpa_table_has_the_maps_torque_per_ampere() {
