@@ -77,6 +77,8 @@ impl Pi {
     }
 
     /// Replaces the proportional gain (gain scheduling; the integrator is kept), V/A.
+    /// (Cargo feature `flux-map`.)
+    #[cfg(feature = "flux-map")]
     #[inline]
     pub fn set_kp(&mut self, kp: f32) {
         self.kp = kp;

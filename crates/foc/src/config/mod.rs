@@ -545,6 +545,13 @@ impl FocConfig {
         ))
     }
 
+    /// Whether the closed-loop current references are shaped (MTPA, torque conversion,
+    /// field weakening, current circle): a salient motor, field weakening on or a flux map.
+    /// Otherwise the speed loop's output is the q reference as it is.
+    pub fn shapes_references(&self) -> bool {
+        self.motor.is_salient() || self.field_weakening.enabled || self.has_flux_map()
+    }
+
     /// Whether the drive is told a flux map (`flux_map` is `Some`; always `false` without
     /// the cargo feature `flux-map`).
     pub fn has_flux_map(&self) -> bool {

@@ -7,6 +7,10 @@ use crate::startup::{Frame, Plan};
 use crate::transforms::{AlphaBeta, Dq};
 use crate::trig::{at_most, sin_cos, sqrt, wrap};
 
+#[cfg(feature = "flux-map")]
+#[path = "map_path.rs"]
+mod map_path;
+
 impl Foc {
     /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the
     /// torque command as a surface-equivalent current, `r.d` a hand-over's fading d

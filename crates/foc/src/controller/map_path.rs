@@ -1,7 +1,7 @@
 //! The closed-loop references, gains and decoupling of a drive told a flux map
 //! ([`FocConfig::flux_map`](crate::FocConfig::flux_map), module [`crate::mapdrive`]).
 
-use super::Foc;
+use super::super::Foc;
 use crate::mapdrive::MapPoint;
 use crate::startup::{Frame, Plan};
 use crate::transforms::Dq;
@@ -10,7 +10,7 @@ use crate::trig::{at_most, sqrt};
 impl Foc {
     /// Back to the zero-torque point of the map and the configured gains (loops reset, out
     /// of closed loop).
-    pub(super) fn reset_map(&mut self) {
+    pub(in crate::controller) fn reset_map(&mut self) {
         self.map_point = match &self.cfg.flux_map {
             Some(m) => m.mtpa.lookup(0.0),
             None => MapPoint::ZERO,
@@ -27,7 +27,7 @@ impl Foc {
     /// incremental inductances (unless `current_gains` is set); `d` is limited to
     /// `[-max_negative_id, current_limit_a]`, then the current circle cuts `q` first.
     #[inline(never)]
-    pub(super) fn map_refs(&mut self, plan: Plan, u_max: f32) -> Option<Dq> {
+    pub(in crate::controller) fn map_refs(&mut self, plan: Plan, u_max: f32) -> Option<Dq> {
         let m = self.cfg.flux_map.as_ref()?;
         let r = plan.i_ref;
         let p = if cfg!(feature = "field-weakening") && self.fw_on {
@@ -68,7 +68,7 @@ impl Foc {
     /// the measured currents `i` by the expansion at the last reference's point,
     /// `psi(i) = psi_r + L_r (i - i_r)`; `u_d = -w psi_q(i)`, `u_q = w psi_d(i)`.
     #[inline]
-    pub(super) fn map_feed_forward(&self, i: Dq, frame: Frame) -> Option<Dq> {
+    pub(in crate::controller) fn map_feed_forward(&self, i: Dq, frame: Frame) -> Option<Dq> {
         if !frame.emf || self.cfg.flux_map.is_none() {
             return None;
         }

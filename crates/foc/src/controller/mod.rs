@@ -103,6 +103,12 @@
 //! tick's feed-forward). Under align and I/f the plan's references are used and `i_fw` is
 //! reset. The surface path without field weakening costs one flag test.
 //!
+//! Told a saturating motor's flux map (`FocConfig::flux_map`, cargo feature `flux-map`),
+//! the closed-loop references come from its MTPA table (or, with field weakening on, its
+//! field-weakening table at the flux limit `(k u_max - Rs |i|) / |w|`), the current PIs'
+//! `Kp` from its incremental inductances and the decoupling and back-EMF feed-forward from
+//! its fluxes (module `mapdrive`). Built without the feature, the tick is the one above.
+//!
 //! `w` is the speed of the control frame: the observer's (or sensor's) speed in closed
 //! loop, the ramp speed under I/f, where the back-EMF feed-forward is off (the rotor angle
 //! is not the frame angle). PI gains: [`FocConfig::current_pi_gains`]; anti-windup:
@@ -148,10 +154,8 @@
 mod checks;
 mod hfi_path;
 mod loops;
-#[cfg(feature = "flux-map")]
-mod map_path;
-mod reseed;
 
+use ekf_core::nalgebra::{Matrix4, Vector4};
 use ekf_core::{Estimate, PmsmObserver};
 
 use crate::config::{ComputationDelay, ConfigError, FocConfig, Mode};
@@ -159,14 +163,13 @@ use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
-use crate::hfi::{HfiError, HfiPhase, HfiSlot, HfiStatus};
+use crate::hfi::{HfiPhase, HfiSlot};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
-use crate::startup::{Inputs, Plan, Sequencer, State, Stop};
+use crate::startup::{Inputs, Plan, Seed, Sequencer, State, Stop};
 use crate::svpwm::{SAFE_DUTIES, duties_to_alpha_beta, linear_limit_v, modulate, modulate_duties};
 use crate::transforms::{AlphaBeta, Dq};
-use crate::trig::{add_angles, max2, min2, sin_cos, sin_cos_small, sqrt};
-use reseed::reseed_observer;
+use crate::trig::{add_angles, max2, min2, sin_cos, sin_cos_small, sqrt, wrap};
 
 pub use crate::io::{PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput};
 
@@ -225,8 +228,7 @@ pub struct Foc {
     mtpa: Mtpa,
     /// Field-weakening loop.
     fw: FieldWeakening,
-    /// The closed-loop current references are shaped (salient motor or field weakening on):
-    /// otherwise the speed loop's output is the q reference as it is.
+    /// The closed-loop current references are shaped ([`FocConfig::shapes_references`]).
     shaping: bool,
     /// `Ld != Lq`: torque conversion with reluctance torque.
     salient: bool,
@@ -271,6 +273,26 @@ pub struct Foc {
     map_point: crate::mapdrive::MapPoint,
 }
 
+/// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
+/// its angle standard deviation (rad); the currents keep their estimate. Rare (start-up,
+/// re-acquisition): out of line.
+#[cold]
+#[inline(never)]
+fn reseed_observer(observer: &mut PmsmObserver<f32>, cfg: &FocConfig, seed: Seed) {
+    let x = observer.state();
+    let si = 0.1 * cfg.motor.characteristic_current_a();
+    let sw = 0.5 * cfg.startup.handover_speed_rad_s + 0.3 * seed.omega.abs();
+    let x = Vector4::new(x[0], x[1], seed.omega, wrap(seed.theta));
+    let p = Matrix4::from_diagonal(&Vector4::new(
+        si * si,
+        si * si,
+        sw * sw,
+        seed.sigma_theta * seed.sigma_theta,
+    ));
+    // Refused only for non-finite values, which these are not; nothing changes then.
+    let _ = observer.reset(x, p);
+}
+
 impl Foc {
     /// Validates `cfg` and builds an idle controller.
     pub fn new(cfg: &FocConfig) -> Result<Self, ConfigError> {
@@ -310,7 +332,7 @@ impl Foc {
                 cfg.max_negative_id(),
             ),
             // (Without the `field-weakening` feature `FocConfig::validate` refuses it.)
-            shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled || cfg.has_flux_map(),
+            shaping: cfg.shapes_references(),
             salient: cfg.motor.is_salient(),
             mtpa_on: cfg.motor.is_salient() && cfg.mtpa,
             fw_on: cfg.field_weakening.enabled,
@@ -348,41 +370,6 @@ impl Foc {
             }
             _ => self.seq.state(),
         }
-    }
-
-    /// Turns high-frequency injection on for the low-speed range (module docs, "Low speed by
-    /// HFI"), with the settings `hfi` checked against the configuration and the nominal bus
-    /// voltage `u_dc_nominal_v`. Only while idle, in sensorless mode, on a salient motor.
-    /// (Cargo feature `hfi`.)
-    #[cfg(feature = "hfi")]
-    pub fn enable_hfi(
-        &mut self,
-        hfi: &crate::hfi::HfiConfig,
-        u_dc_nominal_v: f32,
-    ) -> Result<(), HfiError> {
-        if self.seq.state() != State::Idle {
-            return Err(HfiError::NotIdle);
-        }
-        hfi.validate(&self.cfg, u_dc_nominal_v)?;
-        self.rebuild_observer(Some(hfi));
-        self.hfi = Some(crate::hfi::HfiDrive::new(&self.cfg, hfi));
-        Ok(())
-    }
-
-    /// Turns high-frequency injection off (the controller as built by [`Foc::new`]). Only
-    /// while idle.
-    pub fn disable_hfi(&mut self) -> Result<(), HfiError> {
-        if self.seq.state() != State::Idle {
-            return Err(HfiError::NotIdle);
-        }
-        self.rebuild_observer(None);
-        self.hfi = None;
-        Ok(())
-    }
-
-    /// What HFI is doing (`None`: off).
-    pub fn hfi_status(&self) -> Option<HfiStatus> {
-        self.hfi.map(|h| h.status())
     }
 
     /// The latched fault, if any.

@@ -114,7 +114,6 @@ impl Case {
 }
 
 mod steps;
-#[cfg(feature = "flux-map")]
 mod wired;
 
 #[test]
