@@ -22,7 +22,7 @@
 //! | `over_current_a` | `2 current_limit_a` | above transient overshoot |
 //! | `u_dc_min_v`, `u_dc_max_v` | `0.6 U`, `1.25 U` | |
 //! | `max_speed_rad_s` | `0.95 U / (sqrt(3) psi_f)` | back-EMF below the linear voltage limit (no field weakening; [`FocConfig::with_field_weakening`] raises it) |
-//! | `flux_map` | `None` | the constant-parameter laws; a saturating motor's map as tables ([`MapTables`](crate::MapTables), module [`mapdrive`](crate::mapdrive)) schedules MTPA, field weakening, the current-loop gains and the decoupling on it |
+//! | `flux_map` | `None` | the constant-parameter laws; a saturating motor's map as tables (`MapTables`, module `mapdrive`, feature `flux-map`) schedules MTPA, field weakening, the current-loop gains and the decoupling on it |
 //! | `mtpa` | `true` | salient motors run on the MTPA curve (module [`mtpa`](crate::mtpa)); no effect on a surface motor |
 //! | `field_weakening.enabled` | `false` | off unless asked for: above base speed a trip leaves the back-EMF, which then exceeds the bus, to the bridge's diodes (an uncontrolled generator): a decision for the drive's designer |
 //! | `field_weakening.voltage_margin` | 0.95 | the loop holds `|u| = 0.95 u_max`: headroom for the current loops (module [`fieldweak`](crate::fieldweak)) |

@@ -197,6 +197,19 @@ fn mtpa_table_has_the_maps_torque_per_ampere() {
 }
 
 #[test]
+fn table_sizes_are_as_documented() {
+    assert_eq!(core::mem::size_of::<MapPoint>(), 32);
+    assert_eq!(
+        core::mem::size_of::<MapMtpa<MTPA_POINTS>>(),
+        MTPA_POINTS * 32 + 16
+    );
+    assert_eq!(
+        core::mem::size_of::<MapFieldWeakening<FW_ROWS, FW_COLUMNS>>(),
+        FW_ROWS * (FW_COLUMNS * 32 + 4) + 16
+    );
+}
+
+#[test]
 fn tables_refuse_bad_input() {
     let c = case(SATURATED_IPM);
     assert_eq!(
