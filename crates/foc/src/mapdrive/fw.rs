@@ -12,7 +12,7 @@ use crate::trig::{max2, min2};
 const BISECT_T: usize = 32;
 
 /// The voltage-limited current vectors of a flux map: `J` flux limits by `K` torque
-/// fractions (module docs of [`mapdrive`](super)). `J (K * 32 + 4) + 16` bytes.
+/// fractions (module docs of [`mapdrive`](super)). `J (K * 32 + 4) + 12` bytes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MapFieldWeakening<const J: usize, const K: usize> {
     /// `rows[j][k]`: the point at the flux limit `psi_j` and the torque `k / (K - 1)` of

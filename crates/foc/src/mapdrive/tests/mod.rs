@@ -205,7 +205,7 @@ fn table_sizes_are_as_documented() {
     );
     assert_eq!(
         core::mem::size_of::<MapFieldWeakening<FW_ROWS, FW_COLUMNS>>(),
-        FW_ROWS * (FW_COLUMNS * 32 + 4) + 16
+        FW_ROWS * (FW_COLUMNS * 32 + 4) + 12
     );
 }
 
