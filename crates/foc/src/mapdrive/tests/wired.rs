@@ -89,3 +89,84 @@ fn a_drive_told_the_map_weakens_within_the_voltage_limit() {
         assert!(d.hypot(q) <= f64::from(cfg.current_limit_a) * 1.001);
     }
 }
+
+/// The controller's tick on the map plant (flux as state, rotor held at `w` el.), sensored,
+/// current limit `I_r` and the speed loop asking for more torque than that: the current
+/// references rise to the limit. Returns the largest `i_q` beyond its reference while it
+/// rises (A), the last tick's `i_dq` and reference, and the plant's torque at the end (N m).
+fn run_on_map_plant(c: &Case, map: bool) -> (f64, Dq, Dq, f64) {
+    let r = &c.m.reference;
+    let mut cfg =
+        FocConfig::new(r.params::<f32>(), r.ts_s as f32, r.u_dc_v as f32).with_mode(Mode::Sensored);
+    cfg.current_limit_a = c.i_r as f32;
+    cfg.over_current_a = 3.0 * cfg.current_limit_a;
+    cfg.samples.max_step_a = Some(f32::INFINITY);
+    if map {
+        cfg.flux_map = Some(
+            MapTables::from_map(
+                &c.map,
+                r.pole_pairs,
+                cfg.torque_constant_nm_a(),
+                cfg.current_limit_a,
+                4.0,
+            )
+            .unwrap(),
+        );
+    }
+    let w = 0.2 * r.rated_omega_e_rad_s();
+    let mut foc = Foc::new(&cfg).unwrap();
+    foc.set_speed_ref_mech_rad_s((3.0 * w / f64::from(r.pole_pairs)) as f32)
+        .unwrap();
+    foc.start().unwrap();
+    let e0 = c.map.eval(0.0, 0.0);
+    let (mut pd, mut pq, mut id, mut iq) = (e0.psi_d, e0.psi_q, 0.0f64, 0.0f64);
+    let mut u_prev = [0.0f64; 2];
+    let mut over = 0.0f64;
+    let (mut i_last, mut ref_last) = (Dq::default(), Dq::default());
+    let ts = r.ts_s;
+    for k in 0..3000 {
+        let th = w * ts * k as f64;
+        let (s, co) = th.sin_cos();
+        let (ia, ib) = (co * id - s * iq, s * id + co * iq);
+        let out = foc.tick(
+            &TickInput::alpha_beta(ia as f32, ib as f32, r.u_dc_v as f32)
+                .with_sensor(crate::trig::wrap(th as f32), w as f32),
+        );
+        assert!(out.fault.is_none(), "{:?}", out.fault);
+        let t = out.telemetry;
+        over = over.max(f64::from(t.i_dq.q - t.i_dq_ref.q));
+        (i_last, ref_last) = (t.i_dq, t.i_dq_ref);
+        let h = ts / 20.0;
+        for m in 0..20 {
+            let (s, co) = (th + w * h * m as f64).sin_cos();
+            let (ud, uq) = (
+                co * u_prev[0] + s * u_prev[1],
+                co * u_prev[1] - s * u_prev[0],
+            );
+            pd += h * (ud - r.rs_ohm * id + w * pq);
+            pq += h * (uq - r.rs_ohm * iq - w * pd);
+            (id, iq) = c.map.currents(pd, pq, (id, iq), 30, 1e-12).unwrap();
+        }
+        u_prev = [f64::from(t.u_ab.alpha), f64::from(t.u_ab.beta)];
+    }
+    (over, i_last, ref_last, c.torque(id, iq))
+}
+
+#[test]
+fn the_tick_told_the_map_tracks_its_references_on_the_map_plant() {
+    for m in [PM_SYRM, SATURATED_IPM] {
+        let c = case(m);
+        let (over, i, r, t) = run_on_map_plant(&c, true);
+        let (over0, i0, r0, t0) = run_on_map_plant(&c, false);
+        let best = c.best_torque(c.i_r);
+        println!(
+            "{}: told the map: i {i:?} ref {r:?}, torque {t:.2} N m (map's best at I_r \
+             {best:.2}), largest i_q above its reference {over:.3} A; constant parameters: i \
+             {i0:?} ref {r0:?}, torque {t0:.2} N m, largest i_q above its reference {over0:.3} A",
+            m.reference.name
+        );
+        assert!((i.d - r.d).abs() < 0.01 * c.i_r as f32 && (i.q - r.q).abs() < 0.01 * c.i_r as f32);
+        assert!((t / best - 1.0).abs() < 0.01, "{t} vs {best}");
+        assert!(over < 0.1 * c.i_r, "{over}");
+    }
+}
