@@ -92,6 +92,14 @@ impl<const J: usize, const K: usize> MapFieldWeakening<J, K> {
                 let (d, q) =
                     solve(torque, psi).ok_or(MapTableError::NoTorque(mtpa.current_limit_a()))?;
                 *p = s.point(d, q);
+                let finite = [
+                    p.i.d, p.i.q, p.psi.d, p.psi.q, p.l_dd, p.l_dq, p.l_qd, p.l_qq,
+                ]
+                .iter()
+                .all(|x| x.is_finite());
+                if !finite {
+                    return Err(MapTableError::NoTorque(mtpa.current_limit_a()));
+                }
             }
         }
         Ok(Self {

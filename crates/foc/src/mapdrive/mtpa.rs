@@ -61,6 +61,12 @@ impl<const K: usize> MapMtpa<K> {
                 s.mtpa_at_torque(torque, i_max)
             };
             *p = s.point(d, q);
+            let finite = [p.psi.d, p.psi.q, p.l_dd, p.l_dq, p.l_qd, p.l_qq]
+                .iter()
+                .all(|x| x.is_finite());
+            if !finite {
+                return Err(MapTableError::NoTorque(current_limit_a));
+            }
             let mag = f((d * d + q * q).sqrt());
             if !(mag.is_finite() && mag >= last) {
                 return Err(MapTableError::NoTorque(mag));
