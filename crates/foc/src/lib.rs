@@ -16,6 +16,8 @@ pub mod hfi;
 #[cfg(feature = "identify")]
 pub mod identify;
 pub mod io;
+#[cfg(feature = "flux-map")]
+pub mod mapdrive;
 pub mod mtpa;
 pub mod pi;
 pub mod startup;
@@ -42,6 +44,8 @@ pub use identify::{
     IdentifyOutput, IdentifyStep, identify_period,
 };
 pub use io::{PhaseCurrents, RotorSensor, Telemetry, TickInput, TickOutput};
+#[cfg(feature = "flux-map")]
+pub use mapdrive::{MapFieldWeakening, MapMtpa, MapPoint, MapTableError, MapTables};
 pub use mtpa::Mtpa;
 pub use pi::{Pi, PiGains};
 pub use startup::State;

@@ -76,6 +76,14 @@ impl Pi {
         limit(p + i + ff, lo, hi)
     }
 
+    /// Replaces the proportional gain (gain scheduling; the integrator is kept), V/A.
+    /// (Cargo feature `flux-map`.)
+    #[cfg(feature = "flux-map")]
+    #[inline]
+    pub fn set_kp(&mut self, kp: f32) {
+        self.kp = kp;
+    }
+
     /// The integrator, in output units.
     pub fn integrator(&self) -> f32 {
         self.integ

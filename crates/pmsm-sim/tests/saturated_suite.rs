@@ -3,11 +3,14 @@
 //! goals (RMS at most half the flux baseline told the same map, no sample more than 45 deg
 //! off, never `Tracking` while more than 45 deg off), the rows told the small-signal
 //! constants are there to compare, and no EKF row reports `Tracking` while more than 45 deg
-//! off.
+//! off. Opt-in: foc told the map too, at the default 500 Hz current bandwidth (the
+//! small-signal drive runs at 150 Hz), meets the same goals.
 //!
 //! Run: `cargo test --release -p pmsm-sim --test saturated_suite -- --nocapture`.
 
-use pmsm_sim::analysis::suite::{SuiteOptions, Told, saturated_rows};
+use pmsm_sim::analysis::suite::{
+    SatDrive, SuiteOptions, Told, saturated_rows, saturated_rows_with,
+};
 
 #[test]
 fn map_ekf_meets_its_goals_on_the_saturated_motors() {
@@ -34,5 +37,31 @@ fn map_ekf_meets_its_goals_on_the_saturated_motors() {
     // of the consistency check reports it).
     for r in report.rows.iter().filter(|r| r.observer == "EKF") {
         assert_eq!(r.tracking_while_lost, 0, "{r:?}");
+    }
+}
+
+#[test]
+fn foc_told_the_map_drives_the_saturated_motors_at_500_hz() {
+    let report = saturated_rows_with(
+        &SuiteOptions {
+            short: true,
+            ..SuiteOptions::default()
+        },
+        SatDrive::Map {
+            current_bandwidth_hz: 500.0,
+        },
+    )
+    .unwrap();
+    print!("{}", report.to_markdown());
+    assert_eq!(report.rows.len(), 8);
+    for c in &report.checks {
+        assert!(
+            c.pass,
+            "{} ({}): {} > {}",
+            c.name, c.motor, c.value, c.limit
+        );
+    }
+    for r in report.rows.iter().filter(|r| r.told == Told::Map) {
+        assert!(r.samples > 10_000 && r.failures == 0, "{r:?}");
     }
 }

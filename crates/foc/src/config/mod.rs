@@ -22,6 +22,7 @@
 //! | `over_current_a` | `2 current_limit_a` | above transient overshoot |
 //! | `u_dc_min_v`, `u_dc_max_v` | `0.6 U`, `1.25 U` | |
 //! | `max_speed_rad_s` | `0.95 U / (sqrt(3) psi_f)` | back-EMF below the linear voltage limit (no field weakening; [`FocConfig::with_field_weakening`] raises it) |
+//! | `flux_map` | `None` | the constant-parameter laws; a saturating motor's map as tables (`MapTables`, module `mapdrive`, feature `flux-map`) schedules MTPA, field weakening, the current-loop gains and the decoupling on it |
 //! | `mtpa` | `true` | salient motors run on the MTPA curve (module [`mtpa`](crate::mtpa)); no effect on a surface motor |
 //! | `field_weakening.enabled` | `false` | off unless asked for: above base speed a trip leaves the back-EMF, which then exceeds the bus, to the bridge's diodes (an uncontrolled generator): a decision for the drive's designer |
 //! | `field_weakening.voltage_margin` | 0.95 | the loop holds `|u| = 0.95 u_max`: headroom for the current loops (module [`fieldweak`](crate::fieldweak)) |
@@ -398,6 +399,14 @@ pub struct FocConfig {
     pub samples: SampleCheckConfig,
     /// The observer (motor and `ts_s` must equal the fields above).
     pub observer: ObserverConfig<f32>,
+    /// The motor's flux map as tables (module [`mapdrive`](crate::mapdrive)): `Some` makes
+    /// the closed-loop references, the current loops' proportional gains and their
+    /// decoupling come from the map (MTPA table; the field-weakening table when
+    /// `field_weakening.enabled`). `None` (the default): the constant-parameter laws.
+    /// The tables' torque constant must be [`torque_constant_nm_a`](Self::torque_constant_nm_a)
+    /// (the speed loop's command unit). (Cargo feature `flux-map`.)
+    #[cfg(feature = "flux-map")]
+    pub flux_map: Option<crate::mapdrive::MapTables>,
 }
 
 /// `x` rounded to the nearest integer, as `u16` (saturating; NaN gives 0).
@@ -467,6 +476,8 @@ impl FocConfig {
                 speed_noise_adaptation: None,
                 ..ObserverConfig::new(motor, ts_s)
             },
+            #[cfg(feature = "flux-map")]
+            flux_map: None,
         }
         .with_inertia(kt / 1000.0)
     }
@@ -534,10 +545,31 @@ impl FocConfig {
         ))
     }
 
+    /// Whether the closed-loop current references are shaped (MTPA, torque conversion,
+    /// field weakening, current circle): a salient motor, field weakening on or a flux map.
+    /// Otherwise the speed loop's output is the q reference as it is.
+    pub fn shapes_references(&self) -> bool {
+        self.motor.is_salient() || self.field_weakening.enabled || self.has_flux_map()
+    }
+
+    /// Whether the drive is told a flux map (`flux_map` is `Some`; always `false` without
+    /// the cargo feature `flux-map`).
+    pub fn has_flux_map(&self) -> bool {
+        #[cfg(feature = "flux-map")]
+        return self.flux_map.is_some();
+        #[cfg(not(feature = "flux-map"))]
+        false
+    }
+
     /// The speed loop's output limit: the torque command (surface-equivalent current `T /
     /// k_t`, module [`mtpa`](crate::mtpa)) that `current_limit_a` makes on the MTPA curve (or
     /// with `i_d = 0` when `mtpa` is off), A. `current_limit_a` itself for a surface motor.
+    /// With a flux map: the MTPA table's largest command.
     pub fn torque_current_limit_a(&self) -> f32 {
+        #[cfg(feature = "flux-map")]
+        if let Some(m) = &self.flux_map {
+            return m.mtpa.torque_current_max();
+        }
         if !self.motor.is_salient() {
             return self.current_limit_a;
         }

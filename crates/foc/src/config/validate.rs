@@ -69,6 +69,13 @@ impl FocConfig {
         if self.max_negative_id() > self.current_limit_a {
             return Err(ConfigError::OutOfRange(F::FwMaxNegativeId));
         }
+        #[cfg(feature = "flux-map")]
+        if let Some(m) = &self.flux_map {
+            let k = m.mtpa.torque_constant_nm_a() / self.torque_constant_nm_a();
+            if !(k - 1.0).abs().le(&1e-4) {
+                return Err(ConfigError::OutOfRange(F::FluxMap));
+            }
+        }
         let s = &self.startup;
         positive(s.align_current_a, F::AlignCurrent)?;
         if s.align_current_a > self.current_limit_a {
@@ -203,6 +210,8 @@ pub enum Field {
     MissingTripTicks,
     OverCurrentTripTicks,
     StuckAngle,
+    /// `flux_map`: its torque constant is not the motor's (`1.5 p psi_f`) within 1e-4.
+    FluxMap,
     /// `field_weakening.voltage_margin`.
     FwVoltageMargin,
     /// `field_weakening.bandwidth_rad_s`.

@@ -1,16 +1,51 @@
-//! The plan of a tick with HFI on (module docs of [`controller`](super), "Low speed by
-//! HFI").
+//! HFI in the controller (module docs of [`controller`](super), "Low speed by HFI"): turning
+//! it on and off, and the plan of a tick with HFI on.
 
 use ekf_core::{Estimate, PmsmObserver};
 
 use super::{Foc, reseed_observer};
 use crate::config::Mode;
-use crate::hfi::{HFI_TRACKING_SPEED_FACTOR, HfiConfig};
-use crate::startup::{Frame, Inputs, Plan, Seed, Stop};
+use crate::hfi::{HFI_TRACKING_SPEED_FACTOR, HfiConfig, HfiError, HfiStatus};
+use crate::startup::{Frame, Inputs, Plan, Seed, State, Stop};
 use crate::transforms::{AlphaBeta, Dq};
 use crate::trig::max2;
 
 impl Foc {
+    /// Turns high-frequency injection on for the low-speed range (module docs, "Low speed by
+    /// HFI"), with the settings `hfi` checked against the configuration and the nominal bus
+    /// voltage `u_dc_nominal_v`. Only while idle, in sensorless mode, on a salient motor.
+    /// (Cargo feature `hfi`.)
+    #[cfg(feature = "hfi")]
+    pub fn enable_hfi(
+        &mut self,
+        hfi: &crate::hfi::HfiConfig,
+        u_dc_nominal_v: f32,
+    ) -> Result<(), HfiError> {
+        if self.seq.state() != State::Idle {
+            return Err(HfiError::NotIdle);
+        }
+        hfi.validate(&self.cfg, u_dc_nominal_v)?;
+        self.rebuild_observer(Some(hfi));
+        self.hfi = Some(crate::hfi::HfiDrive::new(&self.cfg, hfi));
+        Ok(())
+    }
+
+    /// Turns high-frequency injection off (the controller as built by [`Foc::new`]). Only
+    /// while idle.
+    pub fn disable_hfi(&mut self) -> Result<(), HfiError> {
+        if self.seq.state() != State::Idle {
+            return Err(HfiError::NotIdle);
+        }
+        self.rebuild_observer(None);
+        self.hfi = None;
+        Ok(())
+    }
+
+    /// What HFI is doing (`None`: off).
+    pub fn hfi_status(&self) -> Option<HfiStatus> {
+        self.hfi.map(|h| h.status())
+    }
+
     /// The plan of a tick with HFI on (module docs, "Low speed by HFI"): the standstill test's
     /// d current in the tracked frame, or the sequencer's sensored path on the blended angle;
     /// with the carrier to add and the current the loops take.

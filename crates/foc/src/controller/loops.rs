@@ -7,6 +7,10 @@ use crate::startup::{Frame, Plan};
 use crate::transforms::{AlphaBeta, Dq};
 use crate::trig::{at_most, sin_cos, sqrt, wrap};
 
+#[cfg(feature = "flux-map")]
+#[path = "map_path.rs"]
+mod map_path;
+
 impl Foc {
     /// Closed-loop current references from the plan's (module [`crate::mtpa`]: `r.q` is the
     /// torque command as a surface-equivalent current, `r.d` a hand-over's fading d
@@ -23,7 +27,15 @@ impl Foc {
         if !plan.frame.emf {
             self.fw.reset();
             self.iq_last = 0.0;
+            #[cfg(feature = "flux-map")]
+            if self.cfg.flux_map.is_some() {
+                self.reset_map();
+            }
             return plan.i_ref;
+        }
+        #[cfg(feature = "flux-map")]
+        if let Some(r) = self.map_refs(plan, u_max) {
+            return r;
         }
         if cfg!(feature = "field-weakening") && self.fw_on && sample_ok {
             let v = Dq {
@@ -94,6 +106,10 @@ impl Foc {
     /// swing under I/f (a restart then failed to hand over in `tests/state_machine.rs`).
     #[inline]
     pub(super) fn feed_forward(&self, i: Dq, frame: Frame) -> Dq {
+        #[cfg(feature = "flux-map")]
+        if let Some(ff) = self.map_feed_forward(i, frame) {
+            return ff;
+        }
         let wlq = frame.omega * self.cfg.motor.lq_h;
         let wld = frame.omega * self.cfg.motor.ld_h;
         let emf = if frame.emf {

@@ -103,6 +103,12 @@
 //! tick's feed-forward). Under align and I/f the plan's references are used and `i_fw` is
 //! reset. The surface path without field weakening costs one flag test.
 //!
+//! Told a saturating motor's flux map (`FocConfig::flux_map`, cargo feature `flux-map`),
+//! the closed-loop references come from its MTPA table (or, with field weakening on, its
+//! field-weakening table at the flux limit `(k u_max - Rs |i|) / |w|`), the current PIs'
+//! `Kp` from its incremental inductances and the decoupling and back-EMF feed-forward from
+//! its fluxes (module `mapdrive`). Built without the feature, the tick is the one above.
+//!
 //! `w` is the speed of the control frame: the observer's (or sensor's) speed in closed
 //! loop, the ramp speed under I/f, where the back-EMF feed-forward is off (the rotor angle
 //! is not the frame angle). PI gains: [`FocConfig::current_pi_gains`]; anti-windup:
@@ -157,7 +163,7 @@ use crate::deadtime::DeadTimeCompensation;
 use crate::fault::{Fault, FaultInfo};
 use crate::fieldweak::FieldWeakening;
 use crate::health::HealthReport;
-use crate::hfi::{HfiError, HfiPhase, HfiSlot, HfiStatus};
+use crate::hfi::{HfiPhase, HfiSlot};
 use crate::mtpa::Mtpa;
 use crate::pi::Pi;
 use crate::startup::{Inputs, Plan, Seed, Sequencer, State, Stop};
@@ -222,8 +228,7 @@ pub struct Foc {
     mtpa: Mtpa,
     /// Field-weakening loop.
     fw: FieldWeakening,
-    /// The closed-loop current references are shaped (salient motor or field weakening on):
-    /// otherwise the speed loop's output is the q reference as it is.
+    /// The closed-loop current references are shaped ([`FocConfig::shapes_references`]).
     shaping: bool,
     /// `Ld != Lq`: torque conversion with reluctance torque.
     salient: bool,
@@ -263,6 +268,9 @@ pub struct Foc {
     stuck_omega: [f32; 2],
     /// High-frequency injection at low speed (module docs, "Low speed by HFI"); `None`: off.
     hfi: Option<HfiSlot>,
+    /// The flux map's point of the last closed-loop reference (`FocConfig::flux_map`).
+    #[cfg(feature = "flux-map")]
+    map_point: crate::mapdrive::MapPoint,
 }
 
 /// Replaces the observer's estimate by the seed's angle (rad el.) and speed (rad/s el.) with
@@ -324,7 +332,7 @@ impl Foc {
                 cfg.max_negative_id(),
             ),
             // (Without the `field-weakening` feature `FocConfig::validate` refuses it.)
-            shaping: cfg.motor.is_salient() || cfg.field_weakening.enabled,
+            shaping: cfg.shapes_references(),
             salient: cfg.motor.is_salient(),
             mtpa_on: cfg.motor.is_salient() && cfg.mtpa,
             fw_on: cfg.field_weakening.enabled,
@@ -344,6 +352,8 @@ impl Foc {
             stuck_ticks: [0; 2],
             stuck_omega: [0.0; 2],
             hfi: None,
+            #[cfg(feature = "flux-map")]
+            map_point: crate::mapdrive::MapPoint::ZERO,
         })
     }
 
@@ -360,41 +370,6 @@ impl Foc {
             }
             _ => self.seq.state(),
         }
-    }
-
-    /// Turns high-frequency injection on for the low-speed range (module docs, "Low speed by
-    /// HFI"), with the settings `hfi` checked against the configuration and the nominal bus
-    /// voltage `u_dc_nominal_v`. Only while idle, in sensorless mode, on a salient motor.
-    /// (Cargo feature `hfi`.)
-    #[cfg(feature = "hfi")]
-    pub fn enable_hfi(
-        &mut self,
-        hfi: &crate::hfi::HfiConfig,
-        u_dc_nominal_v: f32,
-    ) -> Result<(), HfiError> {
-        if self.seq.state() != State::Idle {
-            return Err(HfiError::NotIdle);
-        }
-        hfi.validate(&self.cfg, u_dc_nominal_v)?;
-        self.rebuild_observer(Some(hfi));
-        self.hfi = Some(crate::hfi::HfiDrive::new(&self.cfg, hfi));
-        Ok(())
-    }
-
-    /// Turns high-frequency injection off (the controller as built by [`Foc::new`]). Only
-    /// while idle.
-    pub fn disable_hfi(&mut self) -> Result<(), HfiError> {
-        if self.seq.state() != State::Idle {
-            return Err(HfiError::NotIdle);
-        }
-        self.rebuild_observer(None);
-        self.hfi = None;
-        Ok(())
-    }
-
-    /// What HFI is doing (`None`: off).
-    pub fn hfi_status(&self) -> Option<HfiStatus> {
-        self.hfi.map(|h| h.status())
     }
 
     /// The latched fault, if any.
@@ -769,6 +744,8 @@ impl Foc {
         self.fw.reset();
         self.iq_last = 0.0;
         self.id_base = 0.0;
+        #[cfg(feature = "flux-map")]
+        self.reset_map();
         self.u_hist = [AlphaBeta::default(); 2];
         self.u_dq_last = Dq::default();
         self.stuck_angle = [0.0; 2];

@@ -21,6 +21,10 @@
 //! 2.6 - 3.0 s   -50 %
 //! ```
 //!
+//! Opt-in ([`saturated_rows_with`], [`SatDrive::Map`]; not in the suite's report): foc told
+//! the same map as the observers, its MTPA, current-loop gains and decoupling from the map
+//! (module `foc::mapdrive`), at a current bandwidth of the caller's choice.
+//!
 //! (`short`: the same at two thirds of the times.) Scored from the end of the convergence on:
 //! RMS, max and share above 45 deg of the angle error over the samples where the speed is at
 //! least 10 % of rated (the angle is unobservable from the EMF at standstill); status over
@@ -277,15 +281,77 @@ fn told_map(
         })
 }
 
+/// How foc drives the saturated motors.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum SatDrive {
+    /// The suite's rows: MTPA and current-loop gains from the small-signal constants, current
+    /// bandwidth [`SAT_CURRENT_BANDWIDTH_HZ`].
+    #[default]
+    SmallSignal,
+    /// Opt-in: foc told the map the observers are told (`FocConfig::flux_map`: MTPA,
+    /// current-loop gains and decoupling from the map, module `foc::mapdrive`), at this
+    /// current bandwidth, Hz.
+    Map {
+        /// Current-loop bandwidth, Hz.
+        current_bandwidth_hz: f64,
+    },
+}
+
+/// The suite's sensored drive told `map` ([`SatDrive::Map`]): tables for the scenario's
+/// current limit, field weakening down to a quarter of the MTPA flux.
+fn map_drive(
+    sc: &Scenario,
+    m: &ekf_core::saturation::SaturatedMotor,
+    map: &FluxMap<f64, 16>,
+) -> Result<FocDrive, SimError> {
+    let err = |field: String, problem: String| SimError::Scenario {
+        file: sc.name.clone(),
+        field,
+        problem,
+    };
+    let mut cfg = sc.foc_config().map_err(|e| err(e.field, e.problem))?;
+    // As the suite's sensored drive (`sensored_drive`).
+    cfg.speed_slew_rad_s2 *= 100.0;
+    let tables = foc::MapTables::from_map(
+        map,
+        m.reference.pole_pairs,
+        cfg.torque_constant_nm_a(),
+        cfg.current_limit_a,
+        4.0,
+    )
+    .map_err(|e| err("flux map".into(), e.to_string()))?;
+    cfg.flux_map = Some(tables);
+    FocDrive::new(&cfg, 0.0, None).map_err(|e| err("controller.foc".into(), e.to_string()))
+}
+
 /// The saturated rows (module docs).
 pub fn saturated_rows(opts: &SuiteOptions) -> Result<SaturatedReport, SimError> {
+    saturated_rows_with(opts, SatDrive::SmallSignal)
+}
+
+/// The saturated rows with foc driving as `how` says ([`saturated_rows`]: the small-signal
+/// drive).
+pub fn saturated_rows_with(
+    opts: &SuiteOptions,
+    how: SatDrive,
+) -> Result<SaturatedReport, SimError> {
     let k = if opts.short { 2.0 / 3.0 } else { 1.0 };
     let mut report = SaturatedReport::default();
     for m in &SATURATED {
         let (_, _, i_rated) = rated_mtpa(m);
-        let sc = scenario(m, opts, k, i_rated);
+        let mut sc = scenario(m, opts, k, i_rated);
+        if let SatDrive::Map {
+            current_bandwidth_hz,
+        } = how
+        {
+            sc.controller.current_bandwidth_hz = current_bandwidth_hz;
+        }
         let ts = sc.ts_s();
         let map = told_map(m, i_rated)?;
+        let mut drive = match how {
+            SatDrive::SmallSignal => sensored_drive(&sc)?,
+            SatDrive::Map { .. } => map_drive(&sc, m, &map)?,
+        };
         let small = sc.observer_params();
         // The EKFs' measurement noise from the sensing chain (module docs).
         // (Ideal sensing: the default.)
@@ -336,7 +402,6 @@ pub fn saturated_rows(opts: &SuiteOptions) -> Result<SaturatedReport, SimError> 
                 Box::new(FluxObserver::new(&flux_cfg)?),
             ),
         ];
-        let mut drive = sensored_drive(&sc)?;
         let out = {
             let mut side: Vec<&mut dyn SideObserver> =
                 obs.iter_mut().map(|s| s as &mut dyn SideObserver).collect();
