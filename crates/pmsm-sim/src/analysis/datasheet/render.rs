@@ -618,8 +618,10 @@ fn m4f_section(d: &Datasheet) -> Section {
         Block::Para(format!(
             "Method: the firmware example (crates/foc-firmware, release, thumbv7em-none-eabihf) run under \
              QEMU's {} with `-icount shift=10`; the firmware counts the instructions of each routine with \
-             the SysTick (instructions, not cycles: wait states and pipeline stalls are not counted). Read \
-             from `{looked}` ({}).",
+             the SysTick (instructions, not cycles: wait states and pipeline stalls are not counted). The \
+             firmware runs its own built-in motor: the counts depend on the code path (`foc_tick` surface \
+             motor in closed loop, `foc_tick_ipm` interior, `foc_tick_hfi` with HFI), not on the motor's \
+             values. Read from `{looked}` ({}).",
             c.machine, c.qemu
         )),
         Block::Table(
