@@ -105,7 +105,7 @@ fn quick_datasheet_of_the_default_motor() {
             &j,
             &["angle", "cells", &k.to_string(), "angle_error_rms_deg"],
         );
-        assert!(e >= 0.0 && e < 180.0, "{c}");
+        assert!((0.0..180.0).contains(&e), "{c}");
     }
     let runs = j["low_speed"]["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 3);
