@@ -107,10 +107,12 @@ fn angle(d: &Datasheet) -> Section {
         .map(|(k, &l)| Series {
             name: format!("{l} % rated torque"),
             color: PALETTE[k % PALETTE.len()],
+            // x: the speed's place in the list (the low speeds would crowd a linear axis).
             points: g
                 .at_load(l)
-                .filter(|c| c.held)
-                .map(|c| (c.speed_pct, c.angle_error_rms_deg))
+                .enumerate()
+                .filter(|(_, c)| c.held)
+                .map(|(k, c)| (k as f64, c.angle_error_rms_deg))
                 .collect(),
             line: true,
         })
@@ -118,10 +120,10 @@ fn angle(d: &Datasheet) -> Section {
     blocks.push(Block::Figure(Figure {
         file: "fig1-angle-error.svg".into(),
         title: format!("{}: angle error of foc's observer", d.motor.name()),
-        x_label: "speed, % of rated".into(),
+        x_label: "speed, % of rated (the speeds tested, evenly spaced)".into(),
         y_label: "RMS angle error, deg el.".into(),
         series,
-        x_categories: vec![],
+        x_categories: g.speeds_pct.iter().map(|s| s.to_string()).collect(),
         h_lines: vec![],
     }));
     let mut header = vec!["load \\ speed (% rated)".to_string()];
@@ -424,27 +426,20 @@ fn identify(d: &Datasheet) -> Section {
         d.seed + s.runs.len() as u64
     ))];
     let names: Vec<String> = IDENTIFIED.iter().map(|(n, _)| n.to_string()).collect();
-    let series = s
-        .runs
-        .iter()
-        .enumerate()
-        .map(|(k, r)| Series {
-            name: if k < 6 {
-                format!("seed {}", r.seed)
-            } else {
-                String::new()
-            },
-            color: PALETTE[k % PALETTE.len()],
-            points: IDENTIFIED
-                .iter()
-                .enumerate()
-                .filter_map(|(i, (_, get))| {
+    let series = vec![Series {
+        name: format!("one point per seed ({})", s.runs.len()),
+        color: PALETTE[0],
+        points: s
+            .runs
+            .iter()
+            .flat_map(|r| {
+                IDENTIFIED.iter().enumerate().filter_map(|(i, (_, get))| {
                     r.errors_pct.as_ref().and_then(get).map(|e| (i as f64, e))
                 })
-                .collect(),
-            line: false,
-        })
-        .collect();
+            })
+            .collect(),
+        line: false,
+    }];
     blocks.push(Block::Figure(Figure {
         file: "fig5-identification.svg".into(),
         title: format!("{}: identification error per parameter", d.motor.name()),
