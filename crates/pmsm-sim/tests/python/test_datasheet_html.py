@@ -7,7 +7,8 @@ hold every section title and one inline <svg> per figure.
 
 Chromium: `chromium` (Debian) on PATH. Without it the test is skipped, unless
 PMSM_REQUIRE_CHROMIUM=1 (scripts/test-all.sh sets it after installing Chromium), which makes a
-missing or failing browser an error. Run as test_mcap.py (PMSM_SIM_BIN, or a cargo build)."""
+missing or failing browser (or a missing Pillow) an error. Run as test_mcap.py (PMSM_SIM_BIN, or
+a cargo build); needs Pillow (tests/data/requirements.txt)."""
 import os
 import shutil
 import subprocess
@@ -30,19 +31,27 @@ WIDTH, HEIGHT = 1200, 7000
 FIGURE_COLOURS = [(0, 114, 178), (230, 159, 0), (0, 158, 115)]
 
 
+def missing(what: str):
+    """Fails when the test is required (scripts/test-all.sh), else skips."""
+    if os.environ.get("PMSM_REQUIRE_CHROMIUM") == "1":
+        pytest.fail(what)
+    pytest.skip(what)
+
+
 def chromium() -> str:
     for name in ("chromium", "chromium-browser"):
         path = shutil.which(name)
         if path:
             return path
-    if os.environ.get("PMSM_REQUIRE_CHROMIUM") == "1":
-        pytest.fail("chromium is not on PATH (apt-get install -y chromium)")
-    pytest.skip("chromium is not installed (apt-get install -y chromium)")
+    missing("chromium is not on PATH (apt-get install -y chromium)")
 
 
 def test_datasheet_html_renders_in_chromium(sim_bin, tmp_path):  # noqa: F811
     browser = chromium()
-    image = pytest.importorskip("PIL.Image")
+    try:
+        from PIL import Image as image
+    except ImportError:
+        missing("Pillow is not installed (pip install -r tests/data/requirements.txt)")
     out = tmp_path / "ds"
     done = subprocess.run([sim_bin, "datasheet", "--quick", "--out", str(out)],
                           capture_output=True, text=True, timeout=300)
