@@ -147,11 +147,19 @@ fn angle(d: &Datasheet) -> Section {
     let result = match g.worst_held() {
         Some(w) => format!(
             "Result: RMS angle error (deg el.) per cell above; the largest where the loop held is {} deg \
-             at {} % speed and {} % torque; {} of {} cells lost the loop. (The simulator's f64 EKF, riding \
-             along on the same samples, is in `datasheet.json`, `ekf_angle_error_rms_deg`.)",
+             at {} % speed and {} % torque, from 10 % of rated speed up at most {} deg; {} of {} cells \
+             lost the loop. (The simulator's f64 EKF, riding along on the same samples, is in \
+             `datasheet.json`, `ekf_angle_error_rms_deg`.)",
             f(w.angle_error_rms_deg, 2),
             w.speed_pct,
             w.load_pct,
+            f(
+                g.cells
+                    .iter()
+                    .filter(|c| c.held && c.speed_pct >= 10.0)
+                    .fold(f64::NAN, |m, c| m.max(c.angle_error_rms_deg)),
+                2
+            ),
             g.cells.iter().filter(|c| !c.held).count(),
             g.cells.len()
         ),
@@ -630,12 +638,17 @@ fn m4f_section(d: &Datasheet) -> Section {
         .iter()
         .filter_map(|(n, b)| b.map(|b| format!("{n} {b} bytes")))
         .collect();
+    let ticks: Vec<String> = ["foc_tick", "foc_tick_ipm", "foc_tick_hfi"]
+        .iter()
+        .filter_map(|k| {
+            c.instructions_per_call
+                .get(*k)
+                .map(|n| format!("`{k}` **{n} instructions per call**"))
+        })
+        .collect();
     blocks.push(Block::Para(format!(
-        "Result: `foc_tick` **{} instructions per call**{}.",
-        c.instructions_per_call
-            .get("foc_tick")
-            .copied()
-            .unwrap_or(0),
+        "Result: {}{}.",
+        ticks.join(", "),
         if mem.is_empty() {
             String::new()
         } else {
