@@ -24,6 +24,7 @@ pub mod cli;
 
 pub mod angle;
 pub mod m4f;
+pub mod page;
 pub mod plots;
 pub mod render;
 pub mod sections;
