@@ -11,6 +11,9 @@
 //! | 6. lock loss under parameter error | [`sections`] | a Monte-Carlo [`crate::analysis::sweep::Plan`] |
 //! | 7. M4F instructions per tick | [`m4f`] | read from the QEMU run's JSON (`scripts/qemu-firmware.sh`) |
 //!
+//! [`render`] turns the results into sections (method, figure, table, result, command) and
+//! [`page`] writes them as markdown and HTML; [`plots`] draws the figures.
+//!
 //! Every random draw comes from Xoshiro256++ streams seeded with [`DatasheetOptions::seed`]
 //! (plus a constant per section): the datasheet is the same, byte for byte, for a seed,
 //! whatever the number of threads. The runs of a section go to [`par_map`], a pool of Rust
