@@ -1,7 +1,7 @@
 //! Sections 2, 5 and 6: the low-speed limit, self-commissioning and lock loss under
 //! parameter error, each through the analysis module that owns the method.
 //!
-//! - **Low speed** ([`low_speed`]): [`crate::analysis::low_speed`]'s run at each test speed
+//! - **Low speed** ([`low_speed()`]): [`crate::analysis::low_speed`]'s run at each test speed
 //!   (rated active load, held, no fall-back), the speeds on the threads; the lowest speed down
 //!   to which every speed passes, by that module's rule.
 //! - **Identification** ([`identify`]): [`crate::analysis::identify::identify`] on the motor's
