@@ -9,7 +9,9 @@
 #   instruction advances virtual time by 1024 ns and the firmware counts instructions with the
 #   SysTick (crates/foc-firmware/src/meter.rs). The firmware checks that the observer converged
 #   to the known speed and angle and exits non-zero otherwise.
-# - Prints the lines `cortex-m4 <name>: <N> instructions/call`, and flash and RAM use.
+# - Prints the lines `cortex-m4 <name>: <N> instructions/call`, and flash and RAM use; when every
+#   check passed, also writes them as JSON to <target dir>/m4f-counts.json (CARGO_TARGET_DIR or
+#   target/), the counts `pmsm-sim datasheet` reads.
 # - Fails when the ELF holds double-precision soft-float routines (__aeabi_d*, __aeabi_*2d): the
 #   Cortex-M4F has a single-precision FPU only, so any f64 on the MCU path is emulated in
 #   software. It names the functions that call them. --allow-f64 makes this a warning.
@@ -101,14 +103,15 @@ grep -q '^foc-firmware: all checks passed$' "$log" || fail=1
 step "flash and RAM use"
 # Flash: what is loaded at 0x0 (vectors, code, constants, .data's initial values).
 # RAM: static data (.data, .bss, .uninit); the stack (top of RAM, growing down) is not included.
-"$llvm_bin/llvm-size" -A "$elf" | awk '
+mem=$("$llvm_bin/llvm-size" -A "$elf" | awk '
     $1 == ".vector_table" || $1 == ".text" || $1 == ".rodata" { flash += $2; f = f sprintf(" %s %d", $1, $2) }
     $1 == ".data" { flash += $2; ram += $2; f = f sprintf(" .data %d", $2); r = r sprintf(" .data %d", $2) }
     $1 == ".bss" || $1 == ".uninit" { ram += $2; r = r sprintf(" %s %d", $1, $2) }
     END {
         printf "cortex-m4 flash: %d bytes (%s )\n", flash, f
         printf "cortex-m4 ram: %d bytes static (%s ; stack not included)\n", ram, r
-    }'
+    }')
+echo "$mem"
 
 step "no f64 arithmetic on the MCU (no double-precision soft-float routines)"
 # AEABI names (__aeabi_dadd, __aeabi_d2f, __aeabi_f2d, ...) and the libgcc names of
@@ -138,4 +141,15 @@ if [ "$fail" != 0 ]; then
     step "FAILED"
     exit 1
 fi
+# The counts as JSON for `pmsm-sim datasheet` (only from a run whose checks all passed).
+counts="${CARGO_TARGET_DIR:-target}/m4f-counts.json"
+flash=$(echo "$mem" | sed -n -E 's/^cortex-m4 flash: ([0-9]+) bytes.*/\1/p')
+ram=$(echo "$mem" | sed -n -E 's/^cortex-m4 ram: ([0-9]+) bytes.*/\1/p')
+{
+    printf '{\n  "machine": "mps2-an386",\n  "qemu": "%s",\n  "instructions_per_call": {' \
+        "$(qemu-system-arm --version | sed -n 1p | sed 's/["\\]//g')"
+    sed -n -E 's/^cortex-m4 ([a-z_0-9]+): ([0-9]+) instructions\/call$/"\1": \2/p' "$log" | paste -sd, - | sed 's/,/, /g'
+    printf '},\n  "flash_bytes": %s,\n  "ram_bytes": %s\n}\n' "${flash:-null}" "${ram:-null}"
+} >"$counts"
+echo "counts written to $counts"
 step "firmware checks passed"

@@ -60,8 +60,15 @@ cargo clippy -p pyfoc --all-targets --locked -- -D warnings
 (cd crates/pyfoc && VIRTUAL_ENV="$PWD/../../$venv" PATH="$PWD/../../$venv/bin:$PATH" maturin develop --locked --quiet)
 "$venv/bin/python" -m pytest crates/pyfoc/tests -q
 
-step "pmsm-sim: MCAP log read back by the Python mcap package"
+step "pmsm-sim: MCAP log read back by the Python mcap package; the datasheet's HTML in headless Chromium"
+# Debian's chromium for the datasheet's rendering test (about 40 s with apt-get update).
+if ! command -v chromium >/dev/null 2>&1; then
+    sudo=""
+    [ "$(id -u)" = 0 ] || sudo="sudo"
+    $sudo env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+fi
 cargo build -p pmsm-sim --locked --quiet
-PMSM_SIM_BIN="$(pwd)/target/debug/pmsm-sim" "$venv/bin/python" -m pytest crates/pmsm-sim/tests/python -q
+PMSM_REQUIRE_CHROMIUM=1 PMSM_SIM_BIN="$(pwd)/target/debug/pmsm-sim" "$venv/bin/python" -m pytest crates/pmsm-sim/tests/python -q
 
 step "all checks passed"

@@ -164,6 +164,10 @@ enum Command {
     /// Run a sweep plan (a scenario with keys varied: grids, Monte-Carlo draws) on the local
     /// cores; writes <out>/results.parquet, a row per run (docs/sweeps.md).
     Sweep(pmsm_sim::analysis::sweep::cli::SweepArgs),
+    /// One motor's datasheet: angle error, low-speed limit, start-up, HFI polarity,
+    /// identification, lock loss under parameter error, M4F instructions; every figure from a
+    /// sweep run here (<out>/datasheet.html, datasheet.md; docs/datasheet.md).
+    Datasheet(pmsm_sim::analysis::datasheet::cli::DatasheetArgs),
     /// Replay a recorded drive (CSV in the documented format, or a pmsm-sim MCAP log)
     /// through the default EKF, the drive observer and the flux + PLL baseline; prints the
     /// score table and writes metrics.json, replay.mcap and plot.svg to <out>.
@@ -353,6 +357,14 @@ fn main() -> ExitCode {
         }) => identify_command(scenario.as_deref(), json, seed, out),
         Some(Command::Tune(args)) => Ok(args.run()),
         Some(Command::Sweep(args)) => sweep_command(&args),
+        Some(Command::Datasheet(args)) => {
+            pmsm_sim::analysis::datasheet::cli::run(&args, &mut |s| eprintln!("datasheet: {s}"))
+                .map(|w| {
+                    w.files.iter().for_each(|f| println!("{}", f.display()));
+                    eprintln!("datasheet: written in {:.1} s", w.wall_s);
+                    ExitCode::SUCCESS
+                })
+        }
         Some(Command::Replay {
             log,
             motor,

@@ -10,7 +10,9 @@
 //! | [`tune`] | `pmsm-sim tune` | the observer's Q and R fitted to a logged run |
 //! | [`replay`] | `pmsm-sim replay` | the observers stepped over a recorded log of a real drive |
 //! | [`sweep`] | `pmsm-sim sweep` | many runs of a scenario with keys varied (grid, Monte-Carlo), a row each |
+//! | [`datasheet`] | `pmsm-sim datasheet` | one motor's datasheet (HTML and markdown), every figure from a sweep |
 
+pub mod datasheet;
 pub mod fault_suite;
 pub mod identify;
 pub mod low_speed;
