@@ -88,7 +88,8 @@ fn default_run_writes_its_outputs_and_prints_the_paths() {
     let svg = std::fs::read_to_string(dir.join("out/default/plot.svg")).unwrap_or_default();
     assert!(svg.starts_with("<svg") && svg.contains("angle error"));
     // The drive-state band (0.05 s: alignment only).
-    assert!(svg.contains("drive state: align #ff8c00"), "no state band");
+    assert!(svg.contains(">\ndrive state:\n</text>"), "no state band");
+    assert!(svg.contains(">\nalign\n</text>"), "no state key");
     let metrics: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.join("out/default/metrics.json")).unwrap_or_default(),
     )
