@@ -146,8 +146,8 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Time stamps of the MCAP log: wall (the run's wall-clock start time plus the
-        /// simulated time) or zero (the simulated time alone, from 1970-01-01: identical
-        /// files for identical runs).
+        /// simulated time) or zero (the simulated time alone, from 1970-01-01: the same time
+        /// stamps for identical runs).
         #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
         log_time: LogTimeArg,
     },
@@ -166,8 +166,8 @@ enum Command {
         #[arg(long)]
         ts_s: Option<f64>,
         /// Time stamps of the MCAP log: wall (the run's wall-clock start time plus the
-        /// simulated time) or zero (the simulated time alone, from 1970-01-01: identical
-        /// files for identical runs).
+        /// simulated time) or zero (the simulated time alone, from 1970-01-01: the same time
+        /// stamps for identical runs).
         #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
         log_time: LogTimeArg,
     },
@@ -244,7 +244,7 @@ struct RunArgs {
     #[arg(long, value_enum, default_value_t = Encoding::Protobuf)]
     log_encoding: Encoding,
     /// Time stamps of the MCAP log: wall (the run's wall-clock start time plus the simulated
-    /// time) or zero (the simulated time alone, from 1970-01-01: identical files for
+    /// time) or zero (the simulated time alone, from 1970-01-01: the same time stamps for
     /// identical runs).
     #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
     log_time: LogTimeArg,

@@ -24,7 +24,7 @@
 //! [`wall_clock_unix_ns`]) so that Foxglove shows the date and time the run was made, or
 //! leaves at 0 (`--log-time zero`: the simulated time alone, the log starting at the epoch,
 //! 1970-01-01; what the behaviour gate `scripts/same-outputs.sh` uses, so that two runs give
-//! identical files). A reader takes the time of a message relative to the first message's
+//! the same time stamps). A reader takes the time of a message relative to the first message's
 //! (the scenario message, written at the start), or to the metadata's `start_time_unix_ns`.
 //! A metadata record `pmsm_sim` holds the simulator version, the scenario's TOML and, when it
 //! is not 0, `start_time_unix_ns` (decimal). Chunks of at most 1 MiB
@@ -152,7 +152,7 @@ pub enum LogTime {
     /// The wall-clock time at the start of the run plus the simulated time (the default).
     #[default]
     Wall,
-    /// The simulated time alone (the log starts at the Unix epoch): identical files for
+    /// The simulated time alone (the log starts at the Unix epoch): the same time stamps for
     /// identical runs.
     Zero,
 }
