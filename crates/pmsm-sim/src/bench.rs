@@ -63,6 +63,7 @@ pub(crate) fn bench(what: Option<&str>, runs: usize, out: &Path) -> Result<ExitC
         Some(LogOptions {
             compression,
             encoding,
+            ..LogOptions::default()
         })
     };
     let (pb, json) = (LogEncoding::Protobuf, LogEncoding::Json);

@@ -62,20 +62,24 @@ pub fn convert_file(
     capture: &Path,
     out: &Path,
     ts_s: Option<f64>,
+    log_options: LogOptions,
 ) -> Result<TelemetryStats, SimError> {
     let bytes = std::fs::read(capture).map_err(|e| SimError::Output {
         path: capture.display().to_string(),
         message: format!("cannot read the capture: {e}"),
     })?;
-    telemetry_to_mcap(&bytes, out, ts_s)
+    telemetry_to_mcap(&bytes, out, ts_s, log_options)
 }
 
 /// Converts a capture into an MCAP log at `out`. `ts_s`: the PWM period when the capture
-/// has no meta frame (refused without either; a meta frame wins).
+/// has no meta frame (refused without either; a meta frame wins). `log_options`: how the
+/// log is written (its time stamps' origin; the capture has no clock of its own, so the CLI
+/// stamps the time of the conversion, or 0).
 pub fn telemetry_to_mcap(
     capture: &[u8],
     out: &Path,
     ts_s: Option<f64>,
+    log_options: LogOptions,
 ) -> Result<TelemetryStats, SimError> {
     let err = |message: String| SimError::Output {
         path: out.display().to_string(),
@@ -101,7 +105,7 @@ pub fn telemetry_to_mcap(
     scenario.name = "b-g431b-esc1".into();
     scenario.description = "telemetry of the B-G431B-ESC1 firmware (not a simulation)".into();
     scenario.inverter.ts_s = ts;
-    let mut log = McapLog::create(out, &scenario, LogOptions::default())?;
+    let mut log = McapLog::create(out, &scenario, log_options)?;
     let mut last_k = None;
     for f in &frames.0 {
         if let Frame::Period(p) = f {
@@ -309,7 +313,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("board-telemetry-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let out = dir.join("run.mcap");
-        let stats = telemetry_to_mcap(&capture(), &out, None).unwrap();
+        let stats = telemetry_to_mcap(&capture(), &out, None, LogOptions::default()).unwrap();
         assert_eq!(stats.periods, 49);
         assert_eq!(stats.crc_errors, 1);
         assert_eq!(stats.meta_frames, 1);
@@ -345,10 +349,10 @@ mod tests {
         let out = std::env::temp_dir().join("board-telemetry-refused.mcap");
         let mut buf = [0u8; MAX_FRAME];
         let n = period(1).encode(&mut buf);
-        let e = telemetry_to_mcap(&buf[..n], &out, None).unwrap_err();
+        let e = telemetry_to_mcap(&buf[..n], &out, None, LogOptions::default()).unwrap_err();
         assert!(e.to_string().contains("--ts-s"), "{e}");
-        assert!(telemetry_to_mcap(&buf[..n], &out, Some(-1.0)).is_err());
-        let stats = telemetry_to_mcap(&buf[..n], &out, Some(1e-4)).unwrap();
+        assert!(telemetry_to_mcap(&buf[..n], &out, Some(-1.0), LogOptions::default()).is_err());
+        let stats = telemetry_to_mcap(&buf[..n], &out, Some(1e-4), LogOptions::default()).unwrap();
         assert_eq!(stats.periods, 1);
         std::fs::remove_file(&out).ok();
     }

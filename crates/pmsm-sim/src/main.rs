@@ -23,7 +23,7 @@ use pmsm_sim::SimError;
 use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions};
 use pmsm_sim::analysis::sweep::period_table::PeriodTable;
 use pmsm_sim::output::file::write_bytes;
-use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, McapLog};
+use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, LogTime, McapLog};
 use pmsm_sim::output::plot::PlotSink;
 use pmsm_sim::output::report;
 use pmsm_sim::scenario::{PRESETS, Scenario};
@@ -145,6 +145,11 @@ enum Command {
         /// Output directory.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Time stamps of the MCAP log: wall (the run's wall-clock start time plus the
+        /// simulated time) or zero (the simulated time alone, from 1970-01-01: the same time
+        /// stamps for identical runs).
+        #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
+        log_time: LogTimeArg,
     },
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
@@ -160,6 +165,11 @@ enum Command {
         /// PWM period, s, for a capture without the board's meta frame.
         #[arg(long)]
         ts_s: Option<f64>,
+        /// Time stamps of the MCAP log: wall (the run's wall-clock start time plus the
+        /// simulated time) or zero (the simulated time alone, from 1970-01-01: the same time
+        /// stamps for identical runs).
+        #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
+        log_time: LogTimeArg,
     },
     /// Run a sweep plan (a scenario with keys varied: grids, Monte-Carlo draws) on the local
     /// cores; writes <out>/results.parquet, a row per run (docs/sweeps.md).
@@ -184,6 +194,10 @@ enum Command {
         /// Clarke scaling of the CSV log's voltages and currents.
         #[arg(long, value_enum, default_value_t = ScalingArg::Amplitude)]
         scaling: ScalingArg,
+        /// Time stamps of replay.mcap: wall (the replay's wall-clock start time plus the
+        /// log's time) or zero (the log's time alone, from 1970-01-01).
+        #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
+        log_time: LogTimeArg,
     },
 }
 
@@ -200,8 +214,9 @@ struct RunArgs {
     /// Output directory (default: out/<scenario name>/, relative to the current directory).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Do not write the MCAP log (refused together with --log-compression or --log-encoding).
-    #[arg(long, conflicts_with_all = ["log_compression", "log_encoding"])]
+    /// Do not write the MCAP log (refused together with --log-compression, --log-encoding
+    /// or --log-time).
+    #[arg(long, conflicts_with_all = ["log_compression", "log_encoding", "log_time"])]
     no_log: bool,
     /// Do not draw the plot.
     #[arg(long)]
@@ -228,6 +243,11 @@ struct RunArgs {
     /// Encoding of the per-period messages of the MCAP log (protobuf: fast; json: text).
     #[arg(long, value_enum, default_value_t = Encoding::Protobuf)]
     log_encoding: Encoding,
+    /// Time stamps of the MCAP log: wall (the run's wall-clock start time plus the simulated
+    /// time) or zero (the simulated time alone, from 1970-01-01: the same time stamps for
+    /// identical runs).
+    #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
+    log_time: LogTimeArg,
     /// Also write the per-period table as <out>/periods.csv (docs/foxglove.md).
     #[arg(long)]
     csv: bool,
@@ -247,6 +267,29 @@ enum Compress {
 enum Encoding {
     Protobuf,
     Json,
+}
+
+/// `--log-time`: the origin of the MCAP log's time stamps ([`LogTime`]).
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum LogTimeArg {
+    /// The wall-clock time at the start of the run plus the simulated time.
+    Wall,
+    /// The simulated time alone (from 1970-01-01).
+    Zero,
+}
+
+impl LogTimeArg {
+    /// The log options with this time origin, read from the clock now.
+    fn options(self) -> LogOptions {
+        let t = match self {
+            LogTimeArg::Wall => LogTime::Wall,
+            LogTimeArg::Zero => LogTime::Zero,
+        };
+        LogOptions {
+            start_time_unix_ns: t.start_time_unix_ns(),
+            ..LogOptions::default()
+        }
+    }
 }
 
 impl From<Encoding> for LogEncoding {
@@ -354,7 +397,8 @@ fn main() -> ExitCode {
             json,
             seed,
             out,
-        }) => identify_command(scenario.as_deref(), json, seed, out),
+            log_time,
+        }) => identify_command(scenario.as_deref(), json, seed, out, log_time.options()),
         Some(Command::Tune(args)) => Ok(args.run()),
         Some(Command::Sweep(args)) => sweep_command(&args),
         Some(Command::Datasheet(args)) => {
@@ -370,13 +414,24 @@ fn main() -> ExitCode {
             motor,
             out,
             scaling,
-        }) => Ok(replay_command(&log, &motor, &out, scaling)),
-        Some(Command::Telemetry { capture, out, ts_s }) => {
-            pmsm_sim::board_telemetry::convert_file(&capture, &out, ts_s).map(|s| {
+            log_time,
+        }) => Ok(replay_command(
+            &log,
+            &motor,
+            &out,
+            scaling,
+            log_time.options(),
+        )),
+        Some(Command::Telemetry {
+            capture,
+            out,
+            ts_s,
+            log_time,
+        }) => pmsm_sim::board_telemetry::convert_file(&capture, &out, ts_s, log_time.options())
+            .map(|s| {
                 println!("{s} -> {}", out.display());
                 ExitCode::SUCCESS
-            })
-        }
+            }),
     };
     match result {
         Ok(code) => code,
@@ -477,6 +532,7 @@ fn identify_command(
     json: bool,
     seed: Option<u64>,
     out: Option<PathBuf>,
+    log: LogOptions,
 ) -> Result<ExitCode, SimError> {
     use pmsm_sim::analysis::identify::{IdentifyOptions, identify, output_paths, table};
     let scenario = load(what.unwrap_or("default"))?;
@@ -487,6 +543,7 @@ fn identify_command(
         mcap: Some(mcap),
         svg: Some(svg),
         seed,
+        log,
     };
     let r = identify(&scenario, &opts)?;
     if json {
@@ -546,6 +603,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
             LogOptions {
                 compression: args.log_compression.into(),
                 encoding: args.log_encoding.into(),
+                ..args.log_time.options()
             },
         )?)
     };
@@ -686,7 +744,13 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
 }
 
 /// `pmsm-sim replay` (module `pmsm_sim::analysis::replay`): the table printed, the outputs written.
-fn replay_command(log: &Path, motor: &Path, out: &Path, scaling: ScalingArg) -> ExitCode {
+fn replay_command(
+    log: &Path,
+    motor: &Path,
+    out: &Path,
+    scaling: ScalingArg,
+    log_options: LogOptions,
+) -> ExitCode {
     use pmsm_sim::analysis::replay::{
         Scaling, markdown, read_log, read_motor, replay, write_outputs,
     };
@@ -698,7 +762,7 @@ fn replay_command(log: &Path, motor: &Path, out: &Path, scaling: ScalingArg) -> 
         let m = read_motor(motor)?;
         let l = read_log(log, scaling)?;
         let r = replay(&l, &m, &log.display().to_string())?;
-        let written = write_outputs(out, &l, &m, &r)?;
+        let written = write_outputs(out, &l, &m, &r, log_options)?;
         print!("{}", markdown(&r.report));
         println!("\noutputs in {}:", out.display());
         for p in written {

@@ -88,7 +88,8 @@ fn default_run_writes_its_outputs_and_prints_the_paths() {
     let svg = std::fs::read_to_string(dir.join("out/default/plot.svg")).unwrap_or_default();
     assert!(svg.starts_with("<svg") && svg.contains("angle error"));
     // The drive-state band (0.05 s: alignment only).
-    assert!(svg.contains("drive state: align #ff8c00"), "no state band");
+    assert!(svg.contains(">\ndrive state:\n</text>"), "no state band");
+    assert!(svg.contains(">\nalign\n</text>"), "no state key");
     let metrics: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.join("out/default/metrics.json")).unwrap_or_default(),
     )
@@ -434,7 +435,11 @@ fn list_prints_aligned_columns() {
 #[test]
 fn no_log_with_a_log_option_is_refused() {
     let dir = temp_dir("nolog");
-    for (opt, val) in [("--log-compression", "zstd"), ("--log-encoding", "json")] {
+    for (opt, val) in [
+        ("--log-compression", "zstd"),
+        ("--log-encoding", "json"),
+        ("--log-time", "zero"),
+    ] {
         for prefix in [&[][..], &["run"][..]] {
             let mut args = prefix.to_vec();
             args.extend(["--no-log", opt, val, "--duration", "0.01", "--out", "o"]);
@@ -444,6 +449,18 @@ fn no_log_with_a_log_option_is_refused() {
             assert!(err.contains("--no-log") && err.contains(opt), "{err}");
         }
     }
+    assert!(!dir.join("o").exists());
+    // A --log-time that is neither wall nor zero: refused, naming the option and the choices.
+    let o = run(
+        &["--log-time", "now", "--duration", "0.01", "--out", "o"],
+        &dir,
+    );
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--log-time") && err.contains("wall") && err.contains("zero"),
+        "{err}"
+    );
     assert!(!dir.join("o").exists());
     // Without the log options --no-log runs.
     let o = run(&["--no-log", "--duration", "0.01", "--out", "o"], &dir);

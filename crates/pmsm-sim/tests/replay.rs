@@ -181,9 +181,14 @@ fn replay_of_simulated_logs() {
     let sd = rd.report.ekf.unwrap_or_else(|| panic!("scored"));
     assert!(sd.rms_deg > s0.rms_deg, "{sd:?} {s0:?}");
 
-    // Outputs: the MCAP log the replay writes is itself a log read_log reads.
+    // Outputs: the MCAP log the replay writes is itself a log read_log reads (stamped with
+    // the wall-clock time, as the CLI's default writes it).
     let out = tmp("out");
-    let files = pmsm_sim::analysis::replay::write_outputs(&out, &a, &motor, &ra)
+    let wall = pmsm_sim::output::mcap::LogOptions {
+        start_time_unix_ns: pmsm_sim::output::mcap::wall_clock_unix_ns(),
+        ..Default::default()
+    };
+    let files = pmsm_sim::analysis::replay::write_outputs(&out, &a, &motor, &ra, wall)
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(files.len(), 3);
     let back = read_log(&files[0], Scaling::Amplitude).unwrap_or_else(|e| panic!("{e}"));

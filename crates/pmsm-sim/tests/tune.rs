@@ -205,6 +205,9 @@ fn mcap_log_gives_the_same_result_as_the_arrays() {
             &sc,
             LogOptions {
                 encoding,
+                // Stamped with the wall clock, as the CLI writes it: the reader takes the
+                // periods' own k and t_s, so the result is that of the arrays all the same.
+                start_time_unix_ns: pmsm_sim::output::mcap::wall_clock_unix_ns(),
                 ..LogOptions::default()
             },
         )

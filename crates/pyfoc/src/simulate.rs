@@ -108,18 +108,30 @@ fn trace_dict<'py>(
 /// measured `i_ab_meas`, applied `u_ab`, `duties`, the observer's `theta_est`/`omega_est`/
 /// `angle_error_deg`/`nis`/`p_diag`, ...) plus `metrics` (dict, as `pmsm-sim --json`) and
 /// `completed` (False when the run stopped early; the arrays then hold what was simulated).
-/// With `mcap`, the run is also logged to that file (as `pmsm-sim run` does).
+/// With `mcap`, the run is also logged to that file (as `pmsm-sim run` does), its time
+/// stamps from `log_time`: `"wall"` (the wall-clock time at the start plus the simulated
+/// time, the default) or `"zero"` (the simulated time alone); anything else: ConfigError.
 /// MemoryError, before anything runs, when the trace would not fit in memory. The GIL is
 /// released while it runs.
 #[pyfunction]
-#[pyo3(signature = (scenario = None, *, duration = None, seed = None, mcap = None))]
+#[pyo3(signature = (scenario = None, *, duration = None, seed = None, mcap = None, log_time = "wall"))]
 pub(crate) fn simulate<'py>(
     py: Python<'py>,
     scenario: Option<&Bound<'py, PyAny>>,
     duration: Option<f64>,
     seed: Option<&Bound<'py, PyAny>>,
     mcap: Option<&Bound<'py, PyAny>>,
+    log_time: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let log_time = match log_time {
+        "wall" => pmsm_sim::mcap_log::LogTime::Wall,
+        "zero" => pmsm_sim::mcap_log::LogTime::Zero,
+        other => {
+            return Err(ConfigError::new_err(format!(
+                "log_time must be \"wall\" or \"zero\", got {other:?}"
+            )));
+        }
+    };
     let mut sc = match scenario {
         Some(obj) => scenario_of(obj)?,
         None => pmsm_sim::scenario::Scenario::preset("default")
@@ -147,8 +159,15 @@ pub(crate) fn simulate<'py>(
     )?;
     let mut log = match &mcap_path {
         Some(p) => Some(
-            pmsm_sim::mcap_log::McapLog::create(p, &sc, pmsm_sim::mcap_log::LogOptions::default())
-                .map_err(|e| SimulationError::new_err(e.to_string()))?,
+            pmsm_sim::mcap_log::McapLog::create(
+                p,
+                &sc,
+                pmsm_sim::mcap_log::LogOptions {
+                    start_time_unix_ns: log_time.start_time_unix_ns(),
+                    ..pmsm_sim::mcap_log::LogOptions::default()
+                },
+            )
+            .map_err(|e| SimulationError::new_err(e.to_string()))?,
         ),
         None => None,
     };

@@ -1,5 +1,6 @@
 """pyfoc.simulate: presets, TOML paths and dicts in; aligned arrays and metrics out."""
 import threading
+import time
 import tomllib
 
 import numpy as np
@@ -92,3 +93,35 @@ def test_simulations_in_threads():
     for t in threads:
         t.join()
     assert len(results) == 3 and len(set(results)) == 1
+
+
+def _log_times(path):
+    """(first message's log time, last period's log time, the pmsm_sim metadata) of a log."""
+    from mcap.reader import make_reader
+
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        first = next(iter(reader.iter_messages(log_time_order=False)))[2].log_time
+        last = [m.log_time for _, _, m in reader.iter_messages(topics=["/pmsm_sim/period"])][-1]
+        meta = next(m.metadata for m in reader.iter_metadata() if m.name == "pmsm_sim")
+    return first, last, meta
+
+
+def test_mcap_time_stamps_wall_or_zero(tmp_path):
+    """simulate(mcap=...) stamps the log as `pmsm-sim run` does: the wall-clock start plus the
+    simulated time by default (recorded as start_time_unix_ns), the simulated time alone with
+    log_time="zero"; read_log reads both to the same arrays; another value is refused."""
+    before = time.time_ns()
+    pyfoc.simulate("default", duration=0.02, mcap=tmp_path / "wall.mcap")
+    after = time.time_ns()
+    pyfoc.simulate("default", duration=0.02, mcap=tmp_path / "zero.mcap", log_time="zero")
+    start, last, meta = _log_times(tmp_path / "wall.mcap")
+    assert before <= start <= after and meta["start_time_unix_ns"] == str(start)
+    assert last == start + 199 * 100_000
+    start, last, meta = _log_times(tmp_path / "zero.mcap")
+    assert start == 0 and last == 199 * 100_000 and "start_time_unix_ns" not in meta
+    a, b = pyfoc.read_log(tmp_path / "wall.mcap"), pyfoc.read_log(tmp_path / "zero.mcap")
+    np.testing.assert_array_equal(a["i_ab"], b["i_ab"])
+    np.testing.assert_array_equal(a["t"], b["t"])
+    with pytest.raises(pyfoc.ConfigError, match="log_time"):
+        pyfoc.simulate("default", duration=0.01, mcap=tmp_path / "x.mcap", log_time="now")

@@ -79,6 +79,31 @@ def test_same_table_with_threads_and_dask(local):
     assert other["motor.rs_ohm"].to_list() != local["motor.rs_ohm"].to_list()
 
 
+class _RayExecutor(cf.Executor):
+    """Ray tasks behind the concurrent.futures interface pyfoc.sweep takes: ``submit`` runs
+    ``fn`` as a Ray task and returns its ObjectRef's ``future()`` (Ray has no
+    concurrent.futures Executor of its own)."""
+
+    def __init__(self, ray):
+        self._ray = ray
+
+    def submit(self, fn, /, *args, **kwargs):
+        return self._ray.remote(fn).remote(*args, **kwargs).future()
+
+
+def test_same_table_with_ray(local):
+    """Ray on this machine (a local cluster of 2 CPUs) gives the same table as the default
+    process pool. Optional: runs only where ``ray`` is importable (it is not in
+    tests/data/requirements.txt: about 240 MB installed)."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        df = pyfoc.sweep("default", VARY, n=3, seed=5, executor=_RayExecutor(ray))
+    finally:
+        ray.shutdown()
+    assert_frame_equal(df, local)
+
+
 def test_a_failing_run_is_a_row():
     df = pyfoc.sweep("default", {"duration_s": 0.1, "controller.current_limit_a": [4.5, -1.0]},
                      executor=cf.ThreadPoolExecutor(2))

@@ -44,6 +44,8 @@ pub struct IdentifyOptions {
     pub svg: Option<PathBuf>,
     /// Override the scenario's seed (sensor noise).
     pub seed: Option<u64>,
+    /// How the MCAP log is written (its time stamps' origin: `start_time_unix_ns`).
+    pub log: LogOptions,
 }
 
 /// The motor parameters, true or identified (SI).
@@ -236,7 +238,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
     let mut sensor = CurrentSensor::new(sc.sensors, sc.seed);
     let mut faults = FaultInjector::new(&sc.faults, &sc.fault_context());
     let mut log = match &opts.mcap {
-        Some(p) => Some(McapLog::create(p, &sc, LogOptions::default())?),
+        Some(p) => Some(McapLog::create(p, &sc, opts.log)?),
         None => None,
     };
     let mut plot = opts

@@ -18,8 +18,16 @@
 //! from the one description of the record in [`crate::output::record`] (how to add a field: there).
 //! The other channels are JSON (`jsonschema`): one message each.
 //!
-//! Log and publish times are the simulated time `k Ts` in nanoseconds. A metadata record
-//! `pmsm_sim` holds the simulator version and the scenario's TOML. Chunks of at most 1 MiB
+//! Log and publish times are the run's start time plus the simulated time `k Ts`, in
+//! nanoseconds since the Unix epoch: [`LogOptions::start_time_unix_ns`], which the CLI sets to
+//! the wall-clock time at the start of the run (`--log-time wall`, its default; read with
+//! [`wall_clock_unix_ns`]) so that Foxglove shows the date and time the run was made, or
+//! leaves at 0 (`--log-time zero`: the simulated time alone, the log starting at the epoch,
+//! 1970-01-01; what the behaviour gate `scripts/same-outputs.sh` uses, so that two runs give
+//! the same time stamps). A reader takes the time of a message relative to the first message's
+//! (the scenario message, written at the start), or to the metadata's `start_time_unix_ns`.
+//! A metadata record `pmsm_sim` holds the simulator version, the scenario's TOML and, when it
+//! is not 0, `start_time_unix_ns` (decimal). Chunks of at most 1 MiB
 //! (finished every 1024 periods: "Write errors" below), not compressed by default
 //! ([`LogCompression`]: this data compresses only 1.5-1.8x, and
 //! compressing a 700-byte message with lz4 or zstd, 1.3-1.8 us, costs several times what
@@ -131,6 +139,40 @@ pub struct LogOptions {
     pub compression: LogCompression,
     /// Encoding of `/pmsm_sim/period`.
     pub encoding: LogEncoding,
+    /// Time stamp of the run's start (simulated time 0), ns since the Unix epoch: every
+    /// message is stamped with it plus its simulated time (log and publish time). 0 (the
+    /// default): the simulated time alone. Non-zero: also recorded in the `pmsm_sim`
+    /// metadata as `start_time_unix_ns`.
+    pub start_time_unix_ns: u64,
+}
+
+/// Origin of the time stamps the CLI's commands give their MCAP logs (`--log-time`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LogTime {
+    /// The wall-clock time at the start of the run plus the simulated time (the default).
+    #[default]
+    Wall,
+    /// The simulated time alone (the log starts at the Unix epoch): the same time stamps for
+    /// identical runs.
+    Zero,
+}
+
+impl LogTime {
+    /// [`LogOptions::start_time_unix_ns`] for this choice: [`wall_clock_unix_ns`] now, or 0.
+    pub fn start_time_unix_ns(self) -> u64 {
+        match self {
+            LogTime::Wall => wall_clock_unix_ns(),
+            LogTime::Zero => 0,
+        }
+    }
+}
+
+/// The system's wall-clock time, ns since the Unix epoch (0 for a clock set before 1970;
+/// saturates in the year 2554).
+pub fn wall_clock_unix_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
 
 /// Periods handed to the writer thread at a time (a batch of copied [`Sample`]s, about
@@ -183,6 +225,8 @@ struct Inner {
     event: u16,
     seq: u32,
     ts_ns: u64,
+    /// Added to every message's simulated time ([`LogOptions::start_time_unix_ns`]).
+    origin_ns: u64,
     buf: Vec<u8>,
     proto: proto::PeriodEncoder,
 }
@@ -277,13 +321,20 @@ impl McapLog {
         let metrics = add_json("pmsm_sim.Metrics", METRICS_SCHEMA, TOPIC_METRICS)?;
         let event = add_json("pmsm_sim.Event", EVENT_SCHEMA, TOPIC_EVENT)?;
         let toml = scenario.to_toml()?;
+        let mut metadata = BTreeMap::from([
+            ("version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+            ("scenario_toml".to_string(), toml.clone()),
+        ]);
+        if options.start_time_unix_ns != 0 {
+            metadata.insert(
+                "start_time_unix_ns".to_string(),
+                options.start_time_unix_ns.to_string(),
+            );
+        }
         writer
             .write_metadata(&Metadata {
                 name: "pmsm_sim".into(),
-                metadata: BTreeMap::from([
-                    ("version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-                    ("scenario_toml".to_string(), toml.clone()),
-                ]),
+                metadata,
             })
             .map_err(|e| out_err(path, io_text(e)))?;
         let ts_ns = (scenario.ts_s() * 1e9).round() as u64;
@@ -298,6 +349,7 @@ impl McapLog {
             event,
             seq: 0,
             ts_ns,
+            origin_ns: options.start_time_unix_ns,
             buf: Vec::with_capacity(4096),
             proto: proto::PeriodEncoder::new(),
         };
@@ -548,15 +600,17 @@ impl Inner {
         }
     }
 
-    /// The header of the next message (sequence numbers count every message of the file).
+    /// The header of the next message at simulated time `t_ns` (sequence numbers count every
+    /// message of the file; the time stamps are the origin plus `t_ns`).
     #[inline]
     fn header(&mut self, channel: u16, t_ns: u64) -> MessageHeader {
         self.seq = self.seq.wrapping_add(1);
+        let t = self.origin_ns.saturating_add(t_ns);
         MessageHeader {
             channel_id: channel,
             sequence: self.seq,
-            log_time: t_ns,
-            publish_time: t_ns,
+            log_time: t,
+            publish_time: t,
         }
     }
 

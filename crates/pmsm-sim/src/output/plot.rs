@@ -7,7 +7,8 @@
 //!
 //! 0. the **drive state** along the time axis: one coloured bar per stretch of a state
 //!    ([`STATE_COLORS`]: align, I/f, hand-over, closed loop, HFI, fault, ...), named inside
-//!    when it is wide enough, the key in the band's caption;
+//!    when it is wide enough; above it the key: a swatch and the state's name in words for
+//!    each state the run went through;
 //! 1. mechanical speed: true, estimated (the simulator's EKF and the controller's own, when
 //!    it has one), the scenario's reference and the controller's own (slewed; `foc`: the I/f
 //!    ramp speed in open loop), rpm;
@@ -17,6 +18,12 @@
 //! 4. the motor's `psi_f` and `Rs`: the plant's (they drift with temperature, module
 //!    [`faults`](crate::plant::fault_injection)) and the observers' tracked ones, % of the plant's values at
 //!    the start.
+//!
+//! Each panel's legend lists the curves drawn on it and only those, in words ("speed
+//! reference", "EKF angle error (simulator, f64)", "d-axis current", ...): a curve with no
+//! finite point (no seed filter, no controller's observer) gets no line and no entry, and a
+//! panel without curves no legend box. No text of the plot is a colour code or an
+//! identifier.
 //!
 //! SVG only: plotters' SVG backend writes text as `<text>` elements and needs no font files,
 //! so the plot works on a headless machine without system fonts.
@@ -32,9 +39,10 @@ use crate::output::record::Sample;
 /// Largest number of points kept per curve.
 pub const MAX_POINTS: usize = 4000;
 
-/// Colour and label of each drive state in the band (by the telemetry's state name; any
-/// other name is drawn grey with its own name).
-pub const STATE_COLORS: [(&str, &str, RGBColor); 8] = [
+/// Colour and label of each drive state in the band (by the telemetry's state name), and of
+/// each step of the identification sequence (`pmsm-sim identify`, foc's `IdentifyStep`
+/// names); any other name is drawn grey, named in words (underscores as spaces).
+pub const STATE_COLORS: [(&str, &str, RGBColor); 16] = [
     ("idle", "idle", RGBColor(190, 190, 190)),
     ("align", "align", RGBColor(255, 140, 0)),
     ("open_loop", "I/f", RGBColor(255, 215, 0)),
@@ -43,16 +51,26 @@ pub const STATE_COLORS: [(&str, &str, RGBColor); 8] = [
     ("hfi", "HFI", RGBColor(148, 0, 211)),
     ("fault", "fault", RGBColor(220, 20, 60)),
     ("sensored", "sensored", RGBColor(0, 128, 128)),
+    ("offsets", "current offsets", RGBColor(160, 160, 160)),
+    ("probe", "probe", RGBColor(210, 180, 140)),
+    ("resistance", "resistance", RGBColor(30, 144, 255)),
+    ("inductance_d", "d-axis inductance", RGBColor(0, 0, 205)),
+    ("inductance_q", "q-axis inductance", RGBColor(138, 43, 226)),
+    ("spin", "spin", RGBColor(46, 139, 87)),
+    ("inertia", "inertia", RGBColor(107, 142, 35)),
+    ("done", "done", RGBColor(112, 128, 144)),
 ];
 
-/// Colour and label of the state named `name` in the band.
-pub fn state_style(name: &str) -> (&str, RGBColor) {
+/// Label (in words) and colour of the state named `name` in the band: from
+/// [`STATE_COLORS`], else grey with the name's underscores written as spaces.
+pub fn state_style(name: &str) -> (String, RGBColor) {
     STATE_COLORS
         .iter()
         .find(|(n, _, _)| *n == name)
-        .map_or((name, RGBColor(120, 120, 120)), |(_, label, c)| {
-            (*label, *c)
-        })
+        .map_or_else(
+            || (name.replace('_', " "), RGBColor(120, 120, 120)),
+            |(_, label, c)| ((*label).to_string(), *c),
+        )
 }
 
 /// One kept sample.
@@ -135,47 +153,50 @@ impl PlotSink {
             _ => (0.0, 1e-3),
         };
 
+        // Legend entries drawn since the last legend (none: no legend box).
+        let mut drawn = 0usize;
+
         // Band: the drive state.
         self.draw_states(&band, t0..t1)?;
 
         // Panel 1: speed.
         let (lo, hi) = range(pts.iter().flat_map(|p| [p.speed_rpm, p.est_rpm, p.ref_rpm]));
         let mut c = chart(&panels[0], "speed", t0..t1, lo..hi, "rpm (mech.)")?;
-        line(
+        drawn += line(
             &mut c,
             pts.iter().map(|p| (p.t, p.ref_rpm)),
             &BLACK.mix(0.5),
-            "reference",
+            "speed reference",
         )?;
         if pts.iter().any(|p| p.ctl_ref_rpm.is_some()) {
-            line(
+            drawn += line(
                 &mut c,
                 pts.iter().filter_map(|p| p.ctl_ref_rpm.map(|w| (p.t, w))),
                 &MAGENTA.mix(0.6),
-                "controller's own reference",
+                "controller's speed reference (slewed)",
             )?;
         }
-        line(
+        drawn += line(
             &mut c,
             pts.iter().map(|p| (p.t, p.speed_rpm)),
             &BLUE,
-            "true",
+            "true speed",
         )?;
-        line(
+        drawn += line(
             &mut c,
             pts.iter().map(|p| (p.t, p.est_rpm)),
             &RED,
-            "EKF f64 (sim) estimate",
+            "EKF speed estimate (simulator, f64)",
         )?;
         if pts.iter().any(|p| p.ctl_est_rpm.is_some()) {
-            line(
+            drawn += line(
                 &mut c,
                 pts.iter().filter_map(|p| p.ctl_est_rpm.map(|w| (p.t, w))),
                 &CYAN.mix(0.9),
-                "controller's EKF (f32) estimate",
+                "controller's EKF speed estimate (f32)",
             )?;
         }
-        legend(&mut c)?;
+        legend(&mut c, &mut drawn)?;
 
         // Panel 2: angle error, zoomed on the converged part.
         let conv = |e: f64| e.abs() < 5.0;
@@ -188,36 +209,36 @@ impl PlotSink {
         let lim = (zoom * 1.15).clamp(0.2, 5.0);
         let mut c = chart(
             &panels[1],
-            "angle error wrap(th_hat - th) (start-up excursion clipped)",
+            "angle error: estimated minus true angle, wrapped (start-up excursion clipped)",
             t0..t1,
             -lim..lim,
             "deg el.",
         )?;
         if pts.iter().any(|p| p.seed_err_deg.is_some()) {
-            line(
+            drawn += line(
                 &mut c,
                 pts.iter()
                     .filter_map(|p| p.seed_err_deg.map(|e| (p.t, e.clamp(-lim, lim)))),
                 &GREEN.mix(0.8),
-                "seed filter",
+                "seed EKF angle error",
             )?;
         }
-        line(
+        drawn += line(
             &mut c,
             pts.iter().map(|p| (p.t, p.err_deg.clamp(-lim, lim))),
             &RED,
-            "EKF f64 (sim)",
+            "EKF angle error (simulator, f64)",
         )?;
         if pts.iter().any(|p| p.ctl_err_deg.is_some()) {
-            line(
+            drawn += line(
                 &mut c,
                 pts.iter()
                     .filter_map(|p| p.ctl_err_deg.map(|e| (p.t, e.clamp(-lim, lim)))),
                 &CYAN.mix(0.9),
-                "controller's EKF (f32)",
+                "controller's EKF angle error (f32)",
             )?;
         }
-        legend(&mut c)?;
+        legend(&mut c, &mut drawn)?;
 
         // Panel 3: dq currents.
         let (lo, hi) = range(
@@ -231,20 +252,25 @@ impl PlotSink {
             lo..hi,
             "A",
         )?;
-        line(
+        drawn += line(
             &mut c,
             pts.iter().map(|p| (p.t, p.i_dq_ref[1])),
             &BLACK.mix(0.5),
-            "i_q ref",
+            "q-axis current reference",
         )?;
-        line(&mut c, pts.iter().map(|p| (p.t, p.i_dq[1])), &BLUE, "i_q")?;
-        line(
+        drawn += line(
+            &mut c,
+            pts.iter().map(|p| (p.t, p.i_dq[1])),
+            &BLUE,
+            "q-axis current",
+        )?;
+        drawn += line(
             &mut c,
             pts.iter().map(|p| (p.t, p.i_dq[0])),
             &MAGENTA,
-            "i_d",
+            "d-axis current",
         )?;
-        legend(&mut c)?;
+        legend(&mut c, &mut drawn)?;
 
         // Panel 4: the motor's parameters, % of the plant's at the start.
         let (psi0, rs0) = pts.first().map_or((1.0, 1.0), |p| (p.psi[0], p.rs[0]));
@@ -268,15 +294,20 @@ impl PlotSink {
             "%",
         )?;
         let series: [(usize, bool, RGBColor, &str); 6] = [
-            (0, true, BLACK, "psi_f plant"),
-            (1, true, BLUE, "psi_f sim EKF"),
-            (2, true, GREEN, "psi_f controller"),
-            (0, false, RGBColor(128, 0, 0), "Rs plant"),
-            (1, false, RED, "Rs sim EKF"),
-            (2, false, MAGENTA, "Rs controller"),
+            (0, true, BLACK, "magnet flux, plant"),
+            (1, true, BLUE, "magnet flux, EKF estimate"),
+            (2, true, GREEN, "magnet flux, controller's estimate"),
+            (0, false, RGBColor(128, 0, 0), "stator resistance, plant"),
+            (1, false, RED, "stator resistance, EKF estimate"),
+            (
+                2,
+                false,
+                MAGENTA,
+                "stator resistance, controller's estimate",
+            ),
         ];
         for (i, is_psi, color, label) in series {
-            line(
+            drawn += line(
                 &mut c,
                 pts.iter().map(|p| {
                     let v = if is_psi {
@@ -290,7 +321,7 @@ impl PlotSink {
                 label,
             )?;
         }
-        legend(&mut c)?;
+        legend(&mut c, &mut drawn)?;
         root.present()?;
         Ok(())
     }
@@ -320,17 +351,20 @@ impl PlotSink {
                 seen.push(name);
             }
         }
-        let key: Vec<String> = seen
-            .iter()
-            .map(|n| {
-                let (label, RGBColor(r, g, b)) = state_style(n);
-                format!("{label} #{r:02x}{g:02x}{b:02x}")
-            })
-            .collect();
-        let caption = format!("drive state: {}", key.join(", "));
+        // The key, in words: "drive state:", then a swatch and the name of each state seen.
+        let (key, area) = area.split_vertically(26);
+        let font: TextStyle = ("sans-serif", 15).into();
+        let mut px = 68;
+        key.draw(&Text::new("drive state:", (px, 6), font.clone()))?;
+        px += key.estimate_text_size("drive state:", &font)?.0 as i32 + 14;
+        for n in &seen {
+            let (label, color) = state_style(n);
+            key.draw(&Rectangle::new([(px, 6), (px + 14, 20)], color.filled()))?;
+            key.draw(&Text::new(label.clone(), (px + 19, 6), font.clone()))?;
+            px += key.estimate_text_size(&label, &font)?.0 as i32 + 36;
+        }
         let span = x.end - x.start;
-        let mut c = ChartBuilder::on(area)
-            .caption(caption, ("sans-serif", 16))
+        let mut c = ChartBuilder::on(&area)
             .margin(8)
             .x_label_area_size(0)
             .y_label_area_size(60)
@@ -352,7 +386,7 @@ impl PlotSink {
                 .map(|&(a, _, name)| {
                     let (label, _) = state_style(name);
                     Text::new(
-                        label.to_string(),
+                        label,
                         (a.max(x.start) + 0.005 * span, 0.7),
                         ("sans-serif", 13),
                     )
@@ -408,15 +442,27 @@ fn line<S: Into<ShapeStyle> + Copy + 'static>(
     points: impl Iterator<Item = (f64, f64)>,
     style: &S,
     label: &str,
-) -> Result<(), Box<dyn std::error::Error>> {
+) -> Result<usize, Box<dyn std::error::Error>> {
     let st: ShapeStyle = (*style).into();
-    c.draw_series(LineSeries::new(points.filter(|p| p.1.is_finite()), st))?
+    let finite: Vec<(f64, f64)> = points.filter(|p| p.1.is_finite()).collect();
+    if finite.is_empty() {
+        // Nothing to draw: no line, no legend entry.
+        return Ok(0);
+    }
+    c.draw_series(LineSeries::new(finite, st))?
         .label(label)
         .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], st));
-    Ok(())
+    Ok(1)
 }
 
-fn legend<'a, 'b: 'a>(c: &mut Chart<'a, 'b>) -> Result<(), Box<dyn std::error::Error>> {
+/// The legend of the curves drawn since the last one (`drawn` of them; none: no box).
+fn legend<'a, 'b: 'a>(
+    c: &mut Chart<'a, 'b>,
+    drawn: &mut usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    if std::mem::take(drawn) == 0 {
+        return Ok(());
+    }
     c.configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE.mix(0.85))
@@ -511,33 +557,177 @@ mod tests {
             .unwrap_or_else(|e| panic!("{e}"));
         let svg = std::fs::read_to_string(&path).unwrap_or_default();
         let _ = std::fs::remove_file(&path);
-        assert!(svg.contains(
-            "drive state: align #ff8c00, I/f #ffd700, hand-over #6495ed, closed loop #2e8b57, fault #dc143c"
-        ));
-        // The band's rectangles, in time order, are the first ones after the background.
-        let fills: Vec<&str> = svg
-            .lines()
-            .filter(|l| l.starts_with("<rect"))
-            .filter_map(|l| l.split("fill=\"").nth(1)?.split('"').next())
+        // The key in words: a swatch and a name per state, in order of appearance.
+        let texts = visible_texts(&svg);
+        let key: Vec<&str> = texts
+            .iter()
+            .skip_while(|t| *t != "drive state:")
             .skip(1)
             .take(5)
+            .map(String::as_str)
             .collect();
-        assert_eq!(
-            fills,
-            ["#FF8C00", "#FFD700", "#6495ED", "#2E8B57", "#DC143C"]
-        );
-        let xs: Vec<f64> = svg
-            .lines()
-            .filter(|l| l.starts_with("<rect"))
-            .skip(1)
-            .take(5)
-            .filter_map(|l| l.split("x=\"").nth(1)?.split('"').next()?.parse().ok())
-            .collect();
+        assert_eq!(key, ["align", "I/f", "hand-over", "closed loop", "fault"]);
+        let colours = ["#FF8C00", "#FFD700", "#6495ED", "#2E8B57", "#DC143C"];
+        // After the background: the key's five swatches, then the band's rectangles in time
+        // order, in the same colours.
+        let rects: Vec<&str> = svg.lines().filter(|l| l.starts_with("<rect")).collect();
+        let fill = |l: &&str| {
+            l.split("fill=\"")
+                .nth(1)?
+                .split('"')
+                .next()
+                .map(str::to_string)
+        };
+        let x =
+            |l: &&str| -> Option<f64> { l.split("x=\"").nth(1)?.split('"').next()?.parse().ok() };
+        let swatches: Vec<String> = rects.iter().skip(1).take(5).filter_map(fill).collect();
+        assert_eq!(swatches, colours);
+        let fills: Vec<String> = rects.iter().skip(6).take(5).filter_map(fill).collect();
+        assert_eq!(fills, colours);
+        let xs: Vec<f64> = rects.iter().skip(6).take(5).filter_map(x).collect();
         assert!(xs.windows(2).all(|w| w[0] < w[1]), "{xs:?}");
         // Names inside the stretches of at least 5 % of the run (all but the 20 ms hand-over).
         for name in ["align", "I/f", "closed loop", "fault"] {
             assert!(svg.contains(&format!(">\n{name}\n</text>")), "{name}");
         }
-        assert!(!svg.contains(">\nhand-over\n</text>"));
+        // The hand-over's name is in the key only.
+        assert_eq!(texts.iter().filter(|t| *t == "hand-over").count(), 1);
+        assert!(no_hex_colour(&texts), "{texts:?}");
+    }
+
+    /// The contents of the SVG's `<text>` elements (what a reader sees), unescaped.
+    fn visible_texts(svg: &str) -> Vec<String> {
+        svg.split("<text")
+            .skip(1)
+            .filter_map(|t| {
+                let body = t.split_once('>')?.1.split("</text>").next()?;
+                Some(
+                    body.trim()
+                        .replace("&apos;", "'")
+                        .replace("&quot;", "\"")
+                        .replace("&lt;", "<")
+                        .replace("&gt;", ">")
+                        .replace("&amp;", "&"),
+                )
+            })
+            .collect()
+    }
+
+    /// No text looks like a hex colour code (`#` and six hex digits).
+    fn no_hex_colour(texts: &[String]) -> bool {
+        texts.iter().all(|t| {
+            !t.as_bytes()
+                .windows(7)
+                .any(|w| w[0] == b'#' && w[1..].iter().all(u8::is_ascii_hexdigit))
+        })
+    }
+
+    /// Every label a curve can have, with whether a run with the seed filter and a controller
+    /// observer (`all`) and one without them draws it.
+    const LABELS: [(&str, bool); 17] = [
+        ("speed reference", true),
+        ("controller's speed reference (slewed)", false),
+        ("true speed", true),
+        ("EKF speed estimate (simulator, f64)", true),
+        ("controller's EKF speed estimate (f32)", false),
+        ("seed EKF angle error", false),
+        ("EKF angle error (simulator, f64)", true),
+        ("controller's EKF angle error (f32)", false),
+        ("q-axis current reference", true),
+        ("q-axis current", true),
+        ("d-axis current", true),
+        ("magnet flux, plant", true),
+        ("magnet flux, EKF estimate", true),
+        ("magnet flux, controller's estimate", false),
+        ("stator resistance, plant", true),
+        ("stator resistance, EKF estimate", true),
+        ("stator resistance, controller's estimate", false),
+    ];
+
+    fn drawn(all: bool, state: &'static str) -> String {
+        let mut sink = PlotSink::new(200, 4);
+        for k in 0..200 {
+            let mut s = Sample {
+                k,
+                t_s: k as f64 * 1e-3,
+                ..Sample::default()
+            };
+            s.control.telemetry.state = state;
+            s.truth.psi_f_wb = 0.175;
+            s.truth.rs_ohm = 2.875;
+            s.observer.psi_f_wb = 0.17;
+            s.observer.rs_ohm = 2.9;
+            s.observer.angle_error_deg = 0.1 * (k as f64 * 0.1).sin();
+            if all {
+                let mut o = s.observer;
+                o.angle_error_deg *= 2.0;
+                s.seed_filter = Some(o);
+                s.controller_observer = Some(o);
+                s.control.telemetry.speed_ref_rpm = Some(100.0);
+            }
+            sink.record(&s).unwrap_or_else(|e| panic!("{e}"));
+        }
+        let path =
+            std::env::temp_dir().join(format!("pmsm-sim-legend-{all}-{}.svg", std::process::id()));
+        sink.write_svg(&path, "legend")
+            .unwrap_or_else(|e| panic!("{e}"));
+        let svg = std::fs::read_to_string(&path).unwrap_or_default();
+        let _ = std::fs::remove_file(&path);
+        svg
+    }
+
+    /// The legends list the curves drawn and only those, in words: a run without the seed
+    /// filter and the controller's observer has no entries for them (nor an empty curve);
+    /// every entry is one drawn curve (one polyline for the curve, one for its legend
+    /// sample); no text is a colour code; a state without a label of its own is named in
+    /// words.
+    #[test]
+    fn legend_lists_the_drawn_curves_in_words() {
+        for all in [false, true] {
+            let svg = drawn(all, if all { "closed_loop" } else { "over_current" });
+            let texts = visible_texts(&svg);
+            let mut entries = 0;
+            for (label, always) in LABELS {
+                let n = texts.iter().filter(|t| *t == label).count();
+                let expected = usize::from(all || always);
+                assert_eq!(n, expected, "{label} (all: {all})");
+                entries += n;
+            }
+            assert_eq!(entries, if all { 17 } else { 11 });
+            // Polylines: (stroke and opacity, points). A legend sample is a 20 px horizontal
+            // stroke; each has a curve of its style with more points.
+            let lines: Vec<(String, Vec<(f64, f64)>)> = svg
+                .lines()
+                .filter(|l| l.starts_with("<polyline"))
+                .filter_map(|l| {
+                    let attr = |k: &str| l.split(&format!("{k}=\"")).nth(1)?.split('"').next();
+                    let style = format!("{} {}", attr("stroke")?, attr("opacity")?);
+                    let pts = attr("points")?
+                        .split_whitespace()
+                        .filter_map(|p| {
+                            let (x, y) = p.split_once(',')?;
+                            Some((x.parse().ok()?, y.parse().ok()?))
+                        })
+                        .collect();
+                    Some((style, pts))
+                })
+                .collect();
+            let samples: Vec<&String> = lines
+                .iter()
+                .filter(|(_, p)| p.len() == 2 && p[0].1 == p[1].1 && p[1].0 - p[0].0 == 20.0)
+                .map(|(st, _)| st)
+                .collect();
+            assert_eq!(samples.len(), entries, "all: {all}");
+            for st in samples {
+                assert!(
+                    lines.iter().any(|(s, p)| s == st && p.len() > 2),
+                    "no curve drawn for the legend entry styled {st}"
+                );
+            }
+            assert!(no_hex_colour(&texts), "{texts:?}");
+            assert!(!texts.iter().any(|t| t.contains('_')), "{texts:?}");
+            let state = if all { "closed loop" } else { "over current" };
+            assert!(texts.iter().any(|t| t == state), "{texts:?}");
+        }
     }
 }

@@ -99,8 +99,19 @@ def read(path: Path):
     return summary, messages, channels
 
 
+def time_origin(path: Path):
+    """(first message's log time, the `pmsm_sim` metadata) of a log: the origin a reader takes
+    the messages' times from."""
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        first = next(iter(reader.iter_messages(log_time_order=False)))[2]
+        meta = next(m.metadata for m in reader.iter_metadata() if m.name == "pmsm_sim")
+    return first.log_time, meta
+
+
 def test_default_run_reads_back(sim_bin, tmp_path):
     out = tmp_path / "o"
+    before_ns = time.time_ns()
     done = subprocess.run(
         [sim_bin, "run", "default", "--duration", "0.4", "--out", str(out), "--no-plot"],
         capture_output=True,
@@ -133,8 +144,12 @@ def test_default_run_reads_back(sim_bin, tmp_path):
         assert -math.pi <= p["truth"]["theta_e_rad"] < math.pi
         assert len(p["observer"]["p_diag"]) == 4 and min(p["observer"]["p_diag"]) >= 0.0
         assert all(0.0 <= d <= 1.0 for d in p["inverter"]["duties"])
-    # Log time is the simulated time in ns.
-    assert channels["/pmsm_sim/period"][2] == 3999 * 100_000
+    # Log time: the run's wall-clock start (the first message's time, recorded as the
+    # metadata's start_time_unix_ns) plus the simulated time in ns.
+    start, meta = time_origin(out / "run.mcap")
+    assert before_ns <= start <= time.time_ns()
+    assert meta["start_time_unix_ns"] == str(start)
+    assert channels["/pmsm_sim/period"][2] == start + 3999 * 100_000
     last = periods[-1]
     # The default runs foc sensorless: 0.1 s of alignment, I/f, hand-over at 0.335 s.
     states = [p["control"]["telemetry"]["state"] for p in periods]
@@ -170,19 +185,23 @@ def test_default_run_reads_back(sim_bin, tmp_path):
 
 def test_protobuf_and_json_encodings_agree(sim_bin, tmp_path):
     """The same run logged with --log-encoding json (JSON schema) and compressed: every period
-    message has the same fields and the same numbers as the protobuf one."""
+    message has the same fields and the same numbers as the protobuf one. With --log-time
+    zero the time stamps are the simulated time alone (no start time recorded)."""
     logs = {}
     for enc, comp in [("protobuf", "none"), ("json", "zstd"), ("protobuf", "lz4")]:
         out = tmp_path / f"{enc}-{comp}"
         done = subprocess.run(
             [sim_bin, "run", "default", "--duration", "0.05", "--out", str(out), "--no-plot",
-             "--log-encoding", enc, "--log-compression", comp],
+             "--log-encoding", enc, "--log-compression", comp, "--log-time", "zero"],
             capture_output=True,
             text=True,
         )
         assert done.returncode == 0, done.stderr
         _, messages, channels = read(out / "run.mcap")
         assert channels["/pmsm_sim/period"][1].message_encoding == enc
+        assert channels["/pmsm_sim/period"][2] == 499 * 100_000
+        start, meta = time_origin(out / "run.mcap")
+        assert start == 0 and "start_time_unix_ns" not in meta
         logs[(enc, comp)] = messages["/pmsm_sim/period"]
     pb = logs[("protobuf", "none")]
     assert len(pb) == 500

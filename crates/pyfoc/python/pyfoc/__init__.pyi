@@ -355,6 +355,7 @@ def simulate(
     duration: float | None = None,
     seed: int | None = None,
     mcap: str | os.PathLike[str] | None = None,
+    log_time: Literal["wall", "zero"] = "wall",
 ) -> dict[str, Any]:
     """Run the drive simulator (pmsm-sim) on a preset name, a TOML path or a dict with the TOML
     layout (None: the "default" preset). Returns arrays aligned on the PWM period: ``t``,
@@ -366,7 +367,8 @@ def simulate(
     as ``pmsm-sim --json`` but NaN kept where JSON writes null), ``completed`` and
     ``scenario``. With ``mcap``, the run is also
     logged to that MCAP file (as ``pmsm-sim run`` writes it; SimulationError if it cannot be
-    created). Malformed scenarios raise ConfigError; a run whose trace would not fit in
+    created), its time stamps the wall-clock start plus the simulated time (``log_time=
+    "wall"``) or the simulated time alone (``"zero"``). Malformed scenarios raise ConfigError; a run whose trace would not fit in
     memory raises MemoryError before it starts. Releases the GIL."""
 
 class AngleError(TypedDict):

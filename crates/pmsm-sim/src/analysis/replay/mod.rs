@@ -616,6 +616,7 @@ pub fn write_outputs(
     log: &DriveLog,
     motor: &ReplayMotor,
     rep: &Replay,
+    log_options: crate::output::mcap::LogOptions,
 ) -> Result<Vec<PathBuf>, ReplayError> {
     let out_err = |p: &Path, m: String| ReplayError::Output {
         path: p.display().to_string(),
@@ -638,7 +639,7 @@ pub fn write_outputs(
     sc.duration_s = log.len() as f64 * motor.ts_s;
     let sim_err = |e: crate::SimError| out_err(&mcap, e.to_string());
     let mut mlog =
-        crate::output::mcap::McapLog::create(&mcap, &sc, Default::default()).map_err(sim_err)?;
+        crate::output::mcap::McapLog::create(&mcap, &sc, log_options).map_err(sim_err)?;
     let mut plot = crate::output::plot::PlotSink::new(log.len(), motor.params.pole_pairs);
     for k in 0..log.len() {
         let s = sample(log, motor, rep, k);
