@@ -329,6 +329,7 @@ fn main() -> ExitCode {
         Some(Command::Show { preset }) => show(preset.as_deref().unwrap_or("default")),
         Some(Command::Check { scenario }) => load(&scenario).map(|s| {
             println!("{}: ok ({} periods)", s.name, s.periods());
+            warn_infeasible(&s);
             ExitCode::SUCCESS
         }),
         Some(Command::Bench {
@@ -417,6 +418,13 @@ fn load(what: &str) -> Result<Scenario, SimError> {
         Scenario::from_file(path)
     } else {
         Scenario::preset(what)
+    }
+}
+
+/// Prints the scenario's feasibility warnings (module `scenario::feasibility`) on stderr.
+fn warn_infeasible(sc: &Scenario) {
+    for w in pmsm_sim::scenario::feasibility::check(sc).warnings {
+        eprintln!("pmsm-sim: warning: {}: {}", sc.name, w.message);
     }
 }
 
@@ -523,6 +531,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         field: e.field,
         problem: e.problem,
     })?;
+    warn_infeasible(&scenario);
 
     let dir = args
         .out

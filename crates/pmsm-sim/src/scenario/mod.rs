@@ -25,6 +25,7 @@ pub use bounds::{
     TORQUE_FACTOR,
 };
 mod configs;
+pub mod feasibility;
 mod messages;
 mod noise;
 pub use noise::ObserverNoise;
