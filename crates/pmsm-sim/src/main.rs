@@ -26,6 +26,7 @@ use pmsm_sim::output::file::write_bytes;
 use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, McapLog};
 use pmsm_sim::output::plot::PlotSink;
 use pmsm_sim::output::report;
+use pmsm_sim::output::startup_log::StartupLog;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
 
@@ -587,7 +588,9 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
 
     // The observers' thread only where each busy thread has a core (`sim::pipeline_pays`).
     let inline_observers = !sim::pipeline_pays(log.is_some());
-    let mut sinks: Vec<&mut dyn SampleSink> = Vec::new();
+    // The state changes in words, printed on stderr after the run.
+    let mut startup_log = StartupLog::new(&scenario);
+    let mut sinks: Vec<&mut dyn SampleSink> = vec![&mut startup_log];
     if let Some(l) = log.as_mut() {
         sinks.push(l);
     }
@@ -614,6 +617,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    eprint!("{}", startup_log.summary());
     let metrics = &out.metrics;
 
     let mut written = Vec::new();
