@@ -143,17 +143,18 @@ impl Scenario {
     /// `(align_time_s, accel_rad_s2 el., shortest ramp s)`. With `tau_e = max(Ld, Lq) / Rs`
     /// and the swing period `T(I) = 2 pi / sqrt(1.5 p^2 psi_f I / J)` of the rotor under a
     /// current vector `I` (the pendulum of the alignment and of the I/f load angle):
-    /// alignment `5 tau_e + 4 T(align_a)`; acceleration `0.25 p k_t if_a / J` el. (a
+    /// alignment `5 tau_e + 2 T(align_a)`; acceleration `0.25 p k_t if_a / J` el. (a
     /// quarter of the I/f torque, the rest for the load and the load angle's swing);
-    /// shortest ramp `4 T(if_a)` (the damped swing settles before the hand-over).
+    /// shortest ramp `2 T(if_a)` (the damped swing settles before the hand-over). Measured
+    /// against foc's fixed times: docs/startup.md, "Start-up times from the motor".
     pub fn motor_startup_timing(&self, align_a: f64, if_a: f64, j: f64) -> (f64, f64, f64) {
         let m = &self.motor;
         let p = m.p();
         let tau_e = m.ld_h.max(m.lq_h) / m.rs_ohm;
         let swing = |i: f64| 2.0 * PI / (1.5 * p * p * m.psi_f_wb * i / j).sqrt();
-        let align = 5.0 * tau_e + 4.0 * swing(align_a);
+        let align = 5.0 * tau_e + 2.0 * swing(align_a);
         let accel = 0.25 * p * m.torque_constant_nm_a() * if_a / j;
-        (align, accel, 4.0 * swing(if_a))
+        (align, accel, 2.0 * swing(if_a))
     }
 
     /// One line on the controller, for reports.

@@ -78,10 +78,10 @@ pub enum StartupTiming {
     #[default]
     Fixed,
     /// From the motor (module `configs`, `Scenario::motor_startup_timing`): the alignment
-    /// `5 L/R + 4` periods of the rotor's swing under the alignment current
+    /// `5 L/R + 2` periods of the rotor's swing under the alignment current
     /// (`w_n^2 = 1.5 p^2 psi_f I_align / J`), the ramp's acceleration a quarter of what the
     /// I/f current's torque gives the inertia (`0.25 p k_t I_f / J` el.), but the ramp at
-    /// least 4 swing periods under the I/f current long.
+    /// least 2 swing periods under the I/f current long.
     Motor,
 }
 
@@ -800,20 +800,24 @@ mod tests {
         assert_eq!(fixed.startup.align_time_s, 0.2);
         // By hand (small_fast, I_align = I_f = 7.5 A, J = 2e-5): tau_e = 0.15 mH / 0.12 ohm
         // = 1.25 ms; w_n^2 = 1.5 49 0.006 7.5 / 2e-5 = 165375, T = 2 pi / 406.66 = 15.451 ms;
-        // alignment 5 tau_e + 4 T = 68.05 ms; acceleration 0.25 7 0.063 7.5 / 2e-5 = 41344
+        // alignment 5 tau_e + 2 T = 37.15 ms; acceleration 0.25 7 0.063 7.5 / 2e-5 = 41344
         // rad/s^2 el., but the ramp to the hand-over speed (2 Rs I_f / psi_f = 300 rad/s el.)
-        // at least 4 T = 61.80 ms: 4854 rad/s^2 el.
+        // at least 2 T = 30.90 ms: 9708 rad/s^2 el.
         let (align, accel, ramp) = drone.motor_startup_timing(7.5, 7.5, 2e-5);
-        assert!((align - 0.068_05).abs() < 1e-5, "{align}");
+        assert!((align - 0.037_15).abs() < 1e-5, "{align}");
         assert!((accel - 41_343.75).abs() < 1e-2, "{accel}");
-        assert!((ramp - 0.061_80).abs() < 1e-5, "{ramp}");
+        assert!((ramp - 0.030_90).abs() < 1e-5, "{ramp}");
         let mut sc = drone.clone();
         let mut foc = sc.controller.foc.unwrap_or_default();
         foc.startup_timing = StartupTiming::Motor;
         sc.controller.foc = Some(foc);
         let c = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
-        assert!((c.startup.align_time_s - 0.068_05).abs() < 1e-5);
-        assert!((c.startup.accel_rad_s2 - 300.0 / 0.061_80).abs() < 0.5);
+        assert!((c.startup.align_time_s - 0.037_15).abs() < 1e-5);
+        assert!(
+            (c.startup.accel_rad_s2 - 9708.0).abs() < 2.0,
+            "{}",
+            c.startup.accel_rad_s2
+        );
         // Explicit times win; the option is written to TOML only when set.
         foc.align_time_s = Some(0.15);
         sc.controller.foc = Some(foc);
