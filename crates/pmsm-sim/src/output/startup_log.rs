@@ -190,7 +190,9 @@ impl StartupLog {
                 "closed loop (speed reference {:.0} rpm)",
                 s.control.speed_ref_rpm
             ),
-            (_, "sensored") => "closed loop on the sensor".into(),
+            (_, "sensored") | ("idle", "closed_loop") => {
+                "closed loop on the sensor (sensored: no alignment, no I/f)".into()
+            }
             ("closed_loop" | "handover", "open_loop") => {
                 // foc leaves closed loop on its slewed reference (the last period's).
                 let r = self.prev_ref_rpm.unwrap_or(s.control.speed_ref_rpm).abs();
@@ -321,6 +323,18 @@ mod tests {
         }
         let text = log.summary();
         assert!(text.contains("never in closed loop"), "{text}");
+        // foc sensored goes from idle straight to closed loop.
+        let mut log = StartupLog::new(&sc);
+        assert_eq!(
+            log.record(&sample(1e-4, "closed_loop", 0.0, Some(0.0))),
+            Ok(())
+        );
+        assert!(
+            log.summary()
+                .contains("0.0001 s  closed loop on the sensor (sensored: no alignment, no I/f)"),
+            "{}",
+            log.summary()
+        );
         assert!(text.contains("... and 5 more state changes"), "{text}");
     }
 }
