@@ -26,6 +26,7 @@ use pmsm_sim::output::file::write_bytes;
 use pmsm_sim::output::mcap::{LogCompression, LogEncoding, LogOptions, LogTime, McapLog};
 use pmsm_sim::output::plot::PlotSink;
 use pmsm_sim::output::report;
+use pmsm_sim::output::startup_log::StartupLog;
 use pmsm_sim::scenario::{PRESETS, Scenario};
 use pmsm_sim::sim::{self, RunEnd, RunOptions, SampleSink};
 
@@ -372,6 +373,7 @@ fn main() -> ExitCode {
         Some(Command::Show { preset }) => show(preset.as_deref().unwrap_or("default")),
         Some(Command::Check { scenario }) => load(&scenario).map(|s| {
             println!("{}: ok ({} periods)", s.name, s.periods());
+            warn_infeasible(&s);
             ExitCode::SUCCESS
         }),
         Some(Command::Bench {
@@ -472,6 +474,13 @@ fn load(what: &str) -> Result<Scenario, SimError> {
         Scenario::from_file(path)
     } else {
         Scenario::preset(what)
+    }
+}
+
+/// Prints the scenario's feasibility warnings (module `scenario::feasibility`) on stderr.
+fn warn_infeasible(sc: &Scenario) {
+    for w in pmsm_sim::scenario::feasibility::check(sc).warnings {
+        eprintln!("pmsm-sim: warning: {}: {}", sc.name, w.message);
     }
 }
 
@@ -580,6 +589,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         field: e.field,
         problem: e.problem,
     })?;
+    warn_infeasible(&scenario);
 
     let dir = args
         .out
@@ -636,7 +646,9 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
 
     // The observers' thread only where each busy thread has a core (`sim::pipeline_pays`).
     let inline_observers = !sim::pipeline_pays(log.is_some());
-    let mut sinks: Vec<&mut dyn SampleSink> = Vec::new();
+    // The state changes in words, printed on stderr after the run.
+    let mut startup_log = StartupLog::new(&scenario);
+    let mut sinks: Vec<&mut dyn SampleSink> = vec![&mut startup_log];
     if let Some(l) = log.as_mut() {
         sinks.push(l);
     }
@@ -663,6 +675,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
+    eprint!("{}", startup_log.summary());
     let metrics = &out.metrics;
 
     let mut written = Vec::new();

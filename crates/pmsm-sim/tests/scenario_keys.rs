@@ -20,7 +20,7 @@ use pmsm_sim::plant::fault_injection::{Channel, Channels, FaultSpec, Phase};
 use pmsm_sim::plant::load::{Interpolation, LoadTerm};
 use pmsm_sim::scenario::{
     FieldWeakeningSettings, FocSettings, ObserverLoss, ObserverNoise, ObserverSettings,
-    RPM_PER_RAD_S, ReversalMode, Scenario, SkippedCycles,
+    RPM_PER_RAD_S, ReversalMode, Scenario, SkippedCycles, StartupTiming,
 };
 
 const BIN: &str = env!("CARGO_BIN_EXE_pmsm-sim");
@@ -67,6 +67,7 @@ fn full_scenario() -> Scenario {
         startup_kick_speed_ratio: Some(f64::from(cfg.startup.kick_speed_ratio)),
         observer_loss: ObserverLoss::FallBack,
         reversal: ReversalMode::ClosedLoop,
+        startup_timing: StartupTiming::Motor,
         exit_speed_ratio: Some(0.7),
         dead_time_s: Some(sc.inverter.dead_time_s),
         dead_time_band_a: Some(0.02 * limit),

@@ -25,6 +25,7 @@ pub use bounds::{
     TORQUE_FACTOR,
 };
 mod configs;
+pub mod feasibility;
 mod messages;
 mod noise;
 pub use noise::ObserverNoise;
@@ -66,6 +67,29 @@ pub enum ObserverLoss {
     FallBack,
     /// Trip the `observer_lost` fault.
     Trip,
+}
+
+/// How the unset start-up times of `foc` are chosen (`[controller.foc] startup_timing`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StartupTiming {
+    /// foc's fixed defaults: `align_time_s` 0.2 s, the I/f ramp reaching the hand-over
+    /// speed in 0.5 s, whatever the motor.
+    #[default]
+    Fixed,
+    /// From the motor (module `configs`, `Scenario::motor_startup_timing`): the alignment
+    /// `5 L/R + 2` periods of the rotor's swing under the alignment current
+    /// (`w_n^2 = 1.5 p^2 psi_f I_align / J`), the ramp's acceleration a quarter of what the
+    /// I/f current's torque gives the inertia (`0.25 p k_t I_f / J` el.), but the ramp at
+    /// least 2 swing periods under the I/f current long.
+    Motor,
+}
+
+impl StartupTiming {
+    /// The default (not written to TOML).
+    pub fn is_fixed(&self) -> bool {
+        *self == Self::Fixed
+    }
 }
 
 /// How `foc` passes through zero speed in a reversal (`FocConfig::startup.reversal`).
@@ -124,6 +148,12 @@ pub struct FocSettings {
     /// How a reversal passes through zero speed: `closed_loop` (default, foc's) or
     /// `open_loop` (I/f below the exit speed).
     pub reversal: ReversalMode,
+    /// How the start-up's times are chosen where `align_time_s` and
+    /// `startup_accel_rpm_per_s` are not given: `fixed` (default: foc's 0.2 s alignment and
+    /// the hand-over speed in 0.5 s) or `motor` (from the motor's electrical and mechanical
+    /// time constants, [`StartupTiming::Motor`]).
+    #[serde(skip_serializing_if = "StartupTiming::is_fixed")]
+    pub startup_timing: StartupTiming,
     /// Closed loop returns to I/f below this fraction of the hand-over speed (for a stop or
     /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default foc's,
     /// 0.7.
@@ -761,6 +791,46 @@ mod tests {
         let mut s = sc.clone();
         s.controller.kind = ControllerKind::FocSensored;
         assert_eq!(s.foc_config().map(|c| c.mode), Ok(Mode::Sensored));
+    }
+
+    #[test]
+    fn startup_timing_from_the_motor_is_opt_in() {
+        let drone = Scenario::preset("drone").unwrap_or_else(|e| panic!("{e}"));
+        let fixed = drone.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(fixed.startup.align_time_s, 0.2);
+        // By hand (small_fast, I_align = I_f = 7.5 A, J = 2e-5): tau_e = 0.15 mH / 0.12 ohm
+        // = 1.25 ms; w_n^2 = 1.5 49 0.006 7.5 / 2e-5 = 165375, T = 2 pi / 406.66 = 15.451 ms;
+        // alignment 5 tau_e + 2 T = 37.15 ms; acceleration 0.25 7 0.063 7.5 / 2e-5 = 41344
+        // rad/s^2 el., but the ramp to the hand-over speed (2 Rs I_f / psi_f = 300 rad/s el.)
+        // at least 2 T = 30.90 ms: 9708 rad/s^2 el.
+        let (align, accel, ramp) = drone.motor_startup_timing(7.5, 7.5, 2e-5);
+        assert!((align - 0.037_15).abs() < 1e-5, "{align}");
+        assert!((accel - 41_343.75).abs() < 1e-2, "{accel}");
+        assert!((ramp - 0.030_90).abs() < 1e-5, "{ramp}");
+        let mut sc = drone.clone();
+        let mut foc = sc.controller.foc.unwrap_or_default();
+        foc.startup_timing = StartupTiming::Motor;
+        sc.controller.foc = Some(foc);
+        let c = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
+        assert!((c.startup.align_time_s - 0.037_15).abs() < 1e-5);
+        assert!(
+            (c.startup.accel_rad_s2 - 9708.0).abs() < 2.0,
+            "{}",
+            c.startup.accel_rad_s2
+        );
+        // Explicit times win; the option is written to TOML only when set.
+        foc.align_time_s = Some(0.15);
+        sc.controller.foc = Some(foc);
+        let c = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
+        assert_eq!(c.startup.align_time_s, 0.15);
+        let text = sc.to_toml().unwrap_or_default();
+        assert!(text.contains("startup_timing = \"motor\""), "{text}");
+        assert!(
+            !drone
+                .to_toml()
+                .unwrap_or_default()
+                .contains("startup_timing")
+        );
     }
 
     #[test]
