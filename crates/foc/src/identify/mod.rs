@@ -147,6 +147,7 @@ mod offsets;
 mod outcome;
 mod probe;
 mod resistance;
+pub mod saturation;
 mod spin;
 
 pub use config::{IdentifyConfig, IdentifyConfigError};
@@ -154,6 +155,10 @@ pub use numeric::ln;
 pub use outcome::{
     Identified, IdentifyError, IdentifyFailure, IdentifyOutput, IdentifyStep, Quantity,
     SURFACE_TOLERANCE,
+};
+pub use saturation::{
+    FluxSamples, SaturationConfig, SaturationError, SaturationOutput, SaturationPhase,
+    SaturationProbe,
 };
 
 use align::Align;
