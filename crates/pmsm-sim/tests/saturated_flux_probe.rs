@@ -52,7 +52,26 @@ fn rated_current(m: &SaturatedMotor) -> f64 {
     hi
 }
 
-fn probe(m: &SaturatedMotor, i_max: f64, theta0: f64) -> Outcome {
+/// What the probe is told, as factors on the true values, and the sensor noise.
+#[derive(Clone, Copy)]
+struct Told {
+    rs: f64,
+    l: f64,
+    psi_f: f64,
+    j: f64,
+    /// Uniform current noise, +- A.
+    noise_a: f64,
+}
+
+const EXACT: Told = Told {
+    rs: 1.0,
+    l: 1.0,
+    psi_f: 1.0,
+    j: 1.0,
+    noise_a: 0.0,
+};
+
+fn probe(m: &SaturatedMotor, i_max: f64, theta0: f64, told: Told) -> Outcome {
     let r = &m.reference;
     let motor = MotorModel::from_saturated(m);
     let mut plant = Plant::new(
@@ -65,24 +84,32 @@ fn probe(m: &SaturatedMotor, i_max: f64, theta0: f64) -> Outcome {
     let ts = r.ts_s;
     let mut cfg = SaturationConfig::new(
         ts as f32,
-        r.rs_ohm as f32,
+        (r.rs_ohm * told.rs) as f32,
         theta0 as f32,
-        r.psi_f_wb as f32,
-        (r.ld_h as f32, r.lq_h as f32),
+        (r.psi_f_wb * told.psi_f) as f32,
+        ((r.ld_h * told.l) as f32, (r.lq_h * told.l) as f32),
         i_max as f32,
     );
     cfg.delay = ComputationDelay::OnePeriod;
-    cfg.inertia_kg_m2 = r.j_kg_m2 as f32;
+    cfg.inertia_kg_m2 = (r.j_kg_m2 * told.j) as f32;
     cfg.pole_pairs = r.pole_pairs;
     let mut p = SaturationProbe::new(&cfg).unwrap();
     let mut u_prev = [0.0f64; 2];
     let mut max_move = 0.0f64;
     let mut peak = 0.0f64;
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
     let pp = f64::from(r.pole_pairs);
     let max_ticks = (5.0 / ts) as u64;
     for _ in 0..max_ticks {
-        let i = plant.i_ab_a();
+        let mut i = plant.i_ab_a();
         peak = peak.max(i[0].hypot(i[1]));
+        for x in &mut i {
+            // xorshift: uniform noise in +- noise_a.
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            *x += told.noise_a * ((seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0);
+        }
         let out = p.tick(&TickInput::alpha_beta(
             i[0] as f32,
             i[1] as f32,
@@ -130,10 +157,16 @@ fn max_errors(
 }
 
 fn check(m: &SaturatedMotor, theta0: f64) {
+    check_told(m, theta0, EXACT, 2.0, 1.0);
+}
+
+/// Runs the probe told `told` and checks the nodes within `node_pct`, the map within
+/// `map_pct` of the true model on the same grid, the rotor's motion, time and peak current.
+fn check_told(m: &SaturatedMotor, theta0: f64, told: Told, node_pct: f64, map_pct: f64) {
     let name = m.reference.name;
     let i_r = rated_current(m);
     let i_max = 1.5 * i_r;
-    let o = probe(m, i_max, theta0);
+    let o = probe(m, i_max, theta0, told);
     let s = &o.samples;
     // Nodes inside the rated circle: the measurement itself.
     let mut nodes = Vec::new();
@@ -205,9 +238,12 @@ fn check(m: &SaturatedMotor, theta0: f64) {
          {:.3} s; rotor moved {:.2e} mech rad; peak {:.2} A; q closure {:.2e} Wb",
         s.n_d, s.n_q, o.duration_s, o.max_move_mech_rad, o.peak_a, s.q_closure_wb
     );
-    assert!(nd < 2.0 && nq < 2.0, "{name}: node errors {nd} {nq} %");
     assert!(
-        md < gd + 1.0 && mq < gq + 1.0,
+        nd < node_pct && nq < node_pct,
+        "{name}: node errors {nd} {nq} %"
+    );
+    assert!(
+        md < gd + map_pct && mq < gq + map_pct,
         "{name}: map errors {md} {mq} % (the true model on the grid: {gd} {gq} %)"
     );
     // The rotor drifts slowly between the pulses (followed by the probe): bounded here.
@@ -224,4 +260,20 @@ fn pm_syrm_flux_map_at_standstill() {
 #[test]
 fn saturating_ipm_flux_map_at_standstill() {
     check(&SATURATED_IPM, -2.1);
+}
+
+/// Told what the identification measures, with its typical errors (`Rs` +2 %, `Ld`, `Lq`
+/// +3 %, `psi_f` +1 %, `J` +5 %) and 50 mA of current noise: the nodes within 3 %, the map
+/// within 2 % of the true model on the grid.
+#[test]
+fn the_identifications_errors_and_noise_cost_little() {
+    let told = Told {
+        rs: 1.02,
+        l: 1.03,
+        psi_f: 1.01,
+        j: 1.05,
+        noise_a: 0.05,
+    };
+    check_told(&PM_SYRM, 0.7, told, 3.0, 2.0);
+    check_told(&SATURATED_IPM, -2.1, told, 3.0, 2.0);
 }
