@@ -248,6 +248,14 @@ fn check_told(m: &SaturatedMotor, theta0: f64, told: Told, node_pct: f64, map_pc
     );
     // The rotor drifts slowly between the pulses (followed by the probe): bounded here.
     assert!(o.max_move_mech_rad < 0.2, "{name}: rotor moved");
+    // The probe's own estimate of the motion agrees with the plant's (electrical rad).
+    let est = f64::from(s.rotor_angle_max_rad) / f64::from(m.reference.pole_pairs);
+    println!("{name}: the probe's estimate of the rotor's largest angle: {est:.2e} mech rad");
+    assert!(
+        (est - o.max_move_mech_rad).abs() < 0.1 * o.max_move_mech_rad + 1e-4,
+        "{name}: estimated {est}, true {}",
+        o.max_move_mech_rad
+    );
     assert!(o.duration_s < 5.0, "{name}: {} s", o.duration_s);
     assert!(o.peak_a < 2.0 * i_max, "{name}: peak {} A", o.peak_a);
 }

@@ -175,6 +175,7 @@ impl SaturationProbe {
             psi_d: [[0.0; SAT_MAX_Q]; SAT_MAX_D],
             psi_q: [[0.0; SAT_MAX_Q]; SAT_MAX_D],
             q_closure_wb: 0.0,
+            rotor_angle_max_rad: 0.0,
             ticks: 0,
         };
         for k in 0..cfg.n_d {
@@ -396,6 +397,7 @@ impl SaturationProbe {
             self.rotor_speed += ts * p * t / self.cfg.inertia_kg_m2;
             self.rotor_angle += ts * self.rotor_speed;
             self.rsc = sin_cos(self.rotor_angle);
+            self.out.rotor_angle_max_rad = self.out.rotor_angle_max_rad.max(self.rotor_angle.abs());
         }
         let [i_d, i_q] = self.to_rotor([i_fd, i_fq]);
         let psi_before = self.psi_prev;

@@ -225,6 +225,9 @@ pub struct FluxSamples {
     /// Largest `|psi_q|` where a q pulse's falling branch crossed zero current (drift and
     /// hysteresis; ideally 0), Wb.
     pub q_closure_wb: f32,
+    /// Largest `|angle|` of the rotor the probe followed (from the torque and `J`, zero
+    /// when `J` is not given), electrical rad from the alignment.
+    pub rotor_angle_max_rad: f32,
     /// Ticks the measurement took.
     pub ticks: u32,
 }
