@@ -125,7 +125,9 @@
 //! [`Identifier`] holds the shared context (settings, frame, results so far) and the state of
 //! the step in progress, an enum whose variants carry their own state: one file per step
 //! (`offsets`, `probe`, `align`, `resistance`, `inductance`, `spin`, `inertia`; the I/f drive
-//! of the last two in `if_drive`). Each step's `step` returns the voltage and whether the step
+//! of the last two in `if_drive`). The standstill flux-map measurement of saturating motors,
+//! [`SaturationProbe`] (module [`saturation`]), is a separate state machine run after this
+//! sequence, not part of it. Each step's `step` returns the voltage and whether the step
 //! is over, its `next` the state that follows; [`Identifier::tick`] checks the inputs, picks
 //! the step and modulates.
 
@@ -147,6 +149,7 @@ mod offsets;
 mod outcome;
 mod probe;
 mod resistance;
+pub mod saturation;
 mod spin;
 
 pub use config::{IdentifyConfig, IdentifyConfigError};
@@ -154,6 +157,10 @@ pub use numeric::ln;
 pub use outcome::{
     Identified, IdentifyError, IdentifyFailure, IdentifyOutput, IdentifyStep, Quantity,
     SURFACE_TOLERANCE,
+};
+pub use saturation::{
+    FluxSamples, SaturationConfig, SaturationError, SaturationOutput, SaturationPhase,
+    SaturationProbe,
 };
 
 use align::Align;
