@@ -20,8 +20,8 @@ fn map_ekf_meets_its_goals_on_the_saturated_motors() {
     })
     .unwrap();
     print!("{}", report.to_markdown());
-    assert_eq!(report.rows.len(), 8, "two motors, four observers");
-    assert_eq!(report.checks.len(), 6);
+    assert_eq!(report.rows.len(), 10, "two motors, five observers");
+    assert_eq!(report.checks.len(), 10);
     for c in &report.checks {
         assert!(
             c.pass,
@@ -38,6 +38,17 @@ fn map_ekf_meets_its_goals_on_the_saturated_motors() {
     for r in report.rows.iter().filter(|r| r.observer == "EKF") {
         assert_eq!(r.tracking_while_lost, 0, "{r:?}");
     }
+    // The identified maps: measured at standstill within 5 s, the rotor held within a tenth
+    // of a turn; the RMS ratio to the true map's row is reported against its goal (1.5).
+    assert_eq!(report.identification.len(), 2);
+    for i in &report.identification {
+        assert!(i.duration_s <= 5.0, "{i:?}");
+        assert!(
+            i.rotor_moved_mech_rad < 0.1 * std::f64::consts::TAU,
+            "{i:?}"
+        );
+        assert!(i.rms_ratio.is_finite(), "{i:?}");
+    }
 }
 
 #[test]
@@ -53,7 +64,7 @@ fn foc_told_the_map_drives_the_saturated_motors_at_500_hz() {
     )
     .unwrap();
     print!("{}", report.to_markdown());
-    assert_eq!(report.rows.len(), 8);
+    assert_eq!(report.rows.len(), 10);
     for c in &report.checks {
         assert!(
             c.pass,

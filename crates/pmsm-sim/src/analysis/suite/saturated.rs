@@ -37,12 +37,16 @@
 //!   (`I_r` the rated current on the MTPA curve of the map);
 //! - flux baseline told the map: [`FluxMapObserver`] (`FluxObserverConfig::new`);
 //! - EKF told the small-signal constants: `PmsmObserver` (`ObserverConfig::new`);
+//! - EKF told the identified map: [`MapObserver`] on the map foc's standstill flux-map
+//!   measurement gives on the plant before the run (module `identified`);
 //! - flux baseline told them: `FluxObserver`.
 //!
 //! # Goals ([`SATURATED_CHECKS`])
 //!
 //! EKF told the map: RMS at most half the flux baseline told the map; no sample more than
-//! 45 deg off; never `Tracking` while more than 45 deg off. The rows told the constants have
+//! 45 deg off; never `Tracking` while more than 45 deg off. EKF told the identified map: no
+//! sample more than 45 deg off, never `Tracking` while lost; its RMS against the row told the
+//! map is reported with its goal ([`GOAL_IDENTIFIED_RATIO`]). The rows told the constants have
 //! no goal here (the report shows what saturation costs a constant model).
 
 use ekf_core::saturated::{FluxMapObserver, MapObserver};
@@ -61,10 +65,12 @@ pub const SAT_CURRENT_BANDWIDTH_HZ: f64 = 150.0;
 const GRID: (usize, usize) = (12, 16);
 
 /// The checks of the saturated rows (module docs).
-pub const SATURATED_CHECKS: [&str; 3] = [
+pub const SATURATED_CHECKS: [&str; 5] = [
     "goal: map EKF RMS / map flux baseline RMS",
     "goal: map EKF share above 45 deg (%)",
     "goal: map EKF Tracking while above 45 deg off",
+    "goal: identified-map EKF share above 45 deg (%)",
+    "goal: identified-map EKF Tracking while above 45 deg off",
 ];
 
 /// What an observer of the saturated rows was told.
@@ -75,6 +81,8 @@ pub enum Told {
     Map,
     /// Its small-signal constants (what a low-current commissioning measures).
     SmallSignal,
+    /// The map foc's standstill flux-map measurement gives (module `identified`).
+    IdentifiedMap,
 }
 
 /// One observer on one saturating motor (module docs).
@@ -117,6 +125,24 @@ pub struct SaturatedCheck {
     pub pass: bool,
 }
 
+/// foc's standstill flux-map measurement of one motor (module `identified`) and how the EKF
+/// told its result compares with the EKF told the motor's map.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SaturatedIdentification {
+    /// Motor.
+    pub motor: &'static str,
+    /// Duration of the measurement, s.
+    pub duration_s: f64,
+    /// Largest rotor movement during it, mechanical rad.
+    pub rotor_moved_mech_rad: f64,
+    /// Largest probe current, A.
+    pub probe_current_a: f64,
+    /// RMS of the EKF told the identified map over that of the EKF told the map.
+    pub rms_ratio: f64,
+    /// The goal on that ratio.
+    pub goal: f64,
+}
+
 /// The saturated rows and their checks.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SaturatedReport {
@@ -124,7 +150,12 @@ pub struct SaturatedReport {
     pub rows: Vec<SaturatedRow>,
     /// Goals (module docs).
     pub checks: Vec<SaturatedCheck>,
+    /// The identified maps.
+    pub identification: Vec<SaturatedIdentification>,
 }
+
+/// Goal: the EKF told the identified map within this factor of the one told the map (RMS).
+pub const GOAL_IDENTIFIED_RATIO: f64 = 1.5;
 
 /// An observer of the saturated rows, scoring itself.
 struct SatScored {
@@ -348,6 +379,7 @@ pub fn saturated_rows_with(
         }
         let ts = sc.ts_s();
         let map = told_map(m, i_rated)?;
+        let ident = super::identified::identified_map(m, i_rated)?;
         let mut drive = match how {
             SatDrive::SmallSignal => sensored_drive(&sc)?,
             SatDrive::Map { .. } => map_drive(&sc, m, &map)?,
@@ -364,6 +396,10 @@ pub fn saturated_rows_with(
         let map_cfg = ObserverConfig {
             noise,
             ..MapObserver::default_config(&map, small.rs_ohm, small.pole_pairs, ts)
+        };
+        let ident_cfg = ObserverConfig {
+            noise,
+            ..MapObserver::default_config(&ident.map, small.rs_ohm, small.pole_pairs, ts)
         };
         let ekf_cfg = ObserverConfig {
             noise,
@@ -395,6 +431,11 @@ pub fn saturated_rows_with(
                 "EKF",
                 Told::SmallSignal,
                 Box::new(PmsmObserver::new(&ekf_cfg)?),
+            ),
+            scored(
+                "EKF",
+                Told::IdentifiedMap,
+                Box::new(MapObserver::new(&ident_cfg, ident.map.clone())?),
             ),
             scored(
                 "flux baseline",
@@ -434,11 +475,25 @@ pub fn saturated_rows_with(
                 .iter()
                 .find(|r| r.motor == name && r.observer == observer && r.told == told)
         };
-        if let (Some(ekf), Some(flux)) = (row("EKF", Told::Map), row("flux baseline", Told::Map)) {
+        if let (Some(ekf), Some(flux), Some(id)) = (
+            row("EKF", Told::Map),
+            row("flux baseline", Told::Map),
+            row("EKF", Told::IdentifiedMap),
+        ) {
+            report.identification.push(SaturatedIdentification {
+                motor: name,
+                duration_s: ident.duration_s,
+                rotor_moved_mech_rad: ident.rotor_moved_mech_rad,
+                probe_current_a: super::identified::PROBE_CURRENT * i_rated,
+                rms_ratio: id.angle_rms_deg / ekf.angle_rms_deg,
+                goal: GOAL_IDENTIFIED_RATIO,
+            });
             let values = [
                 (ekf.angle_rms_deg / flux.angle_rms_deg, GOAL_RMS_RATIO),
                 (ekf.lost_pct, 0.0),
                 (ekf.tracking_while_lost as f64, 0.0),
+                (id.lost_pct, 0.0),
+                (id.tracking_while_lost as f64, 0.0),
             ];
             let checks: Vec<SaturatedCheck> = SATURATED_CHECKS
                 .iter()
@@ -489,6 +544,7 @@ impl SaturatedReport {
                 match r.told {
                     Told::Map => "flux map",
                     Told::SmallSignal => "small-signal constants",
+                    Told::IdentifiedMap => "identified map",
                 },
                 r.angle_rms_deg,
                 r.angle_max_deg,
@@ -512,6 +568,32 @@ impl SaturatedReport {
                 c.limit,
                 if c.pass { "pass" } else { "FAIL" }
             );
+        }
+        if !self.identification.is_empty() {
+            let _ = writeln!(
+                s,
+                "\nThe identified maps: foc's standstill flux-map measurement on the plant \
+                 (`foc::identify::saturation`), told the small-signal constants.\n\n\
+                 | motor | duration (s) | rotor moved (mech rad) | largest current (A) | \
+                 identified-map EKF RMS / map EKF RMS | goal |\n|---|---|---|---|---|---|"
+            );
+            for i in &self.identification {
+                let _ = writeln!(
+                    s,
+                    "| {} | {:.3} | {:.3} | {:.1} | {:.2} | <= {} ({}) |",
+                    i.motor,
+                    i.duration_s,
+                    i.rotor_moved_mech_rad,
+                    i.probe_current_a,
+                    i.rms_ratio,
+                    i.goal,
+                    if i.rms_ratio <= i.goal {
+                        "met"
+                    } else {
+                        "missed"
+                    }
+                );
+            }
         }
         s
     }
