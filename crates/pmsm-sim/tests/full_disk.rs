@@ -3,7 +3,7 @@
 //!
 //! Two ways: a log whose file stands for a disk of N bytes (`McapLog::create_limited`, the
 //! output layer's injected write error), for many N; and, where the test may mount one
-//! (root), the CLI on a 1 MiB tmpfs. Without the permission to mount, the tmpfs test prints a
+//! (root), the CLI on a 2 MiB tmpfs. Without the permission to mount, the tmpfs test prints a
 //! note and passes.
 
 use std::path::{Path, PathBuf};
@@ -104,11 +104,12 @@ fn a_log_on_a_full_disk_names_the_cause_and_stays_readable() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Runs `args` with the output on a 1 MiB tmpfs mounted at `dir`; `None` when mounting is
+/// Runs `args` with the output on a 2 MiB tmpfs (room for one complete chunk:
+/// 1024 periods of about 1 KB, just over 1 MiB) mounted at `dir`; `None` when mounting is
 /// not permitted.
 fn on_tmpfs(dir: &Path, fill: u64, args: &[&str]) -> Option<std::process::Output> {
     let mount = Command::new("mount")
-        .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs"])
+        .args(["-t", "tmpfs", "-o", "size=2m", "tmpfs"])
         .arg(dir)
         .output();
     match mount {
@@ -169,11 +170,11 @@ fn the_cli_on_a_full_tmpfs_keeps_a_readable_log_and_no_cut_files() {
     assert_eq!(files, ["run.mcap"], "{stderr}");
     let n = n.unwrap_or_else(|_| panic!("the log is not readable"));
     assert!(n >= 1024, "{n} periods");
-    println!("1 MiB tmpfs: {n} periods readable; {}", stderr.trim());
+    println!("2 MiB tmpfs: {n} periods readable; {}", stderr.trim());
 
     // No log; the plot does not fit (about 600 kB for the default run).
     let dir = temp_dir("tmpfs-plot");
-    let Some(out) = on_tmpfs(&dir, 700_000, &["run", "--no-log"]) else {
+    let Some(out) = on_tmpfs(&dir, 1_700_000, &["run", "--no-log"]) else {
         let _ = std::fs::remove_dir_all(&dir);
         return;
     };

@@ -12,7 +12,7 @@
 //!
 //! The per-period channel is protobuf by default: message encoding `protobuf`, schema encoding
 //! `protobuf` with a `FileDescriptorSet` ([`proto::file_descriptor_set`]; the `.proto` text is
-//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 60 ns and 940 bytes
+//! `src/schemas/period.proto`), encoded by [`proto::PeriodEncoder`] (about 70 ns and 1000 bytes
 //! per message). With [`LogEncoding::Json`] it is JSON with the JSON schema
 //! [`proto::json_schema`] (same field names, about 40 times slower to write). All three come
 //! from the one description of the record in [`crate::output::record`] (how to add a field: there).
@@ -124,7 +124,7 @@ impl LogCompression {
 /// Encoding of the per-period messages.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum LogEncoding {
-    /// Protobuf ([`proto`]): the default, about 60 ns per message.
+    /// Protobuf ([`proto`]): the default, about 70 ns per message.
     #[default]
     Protobuf,
     /// JSON with the JSON schema [`proto::json_schema`] (the same fields; about 2.6 us per

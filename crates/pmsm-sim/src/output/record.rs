@@ -40,6 +40,10 @@
 //!    `PMSM_SIM_BLESS=1 cargo test -p pmsm-sim --lib schema` (then review the diff of
 //!    `src/schemas/`).
 //!
+//! A vector's components can be written as named scalars too, for plots: `named { i_d_a = 12
+//! => i_dq_a[0], ... }` ends the message. Computed from the array when encoded, they are in the
+//! JSON encoding, the schema and the decoded logs, never out of step with the array.
+//!
 //! Nothing else: the encoder, the descriptor, the JSON schema and the decoder follow. A new
 //! message is one more `record!` block (and its name in the [`MESSAGES`] list).
 //!
@@ -50,7 +54,7 @@
 //! depend on it.
 
 use ekf_core::wrap_angle;
-use serde::Serialize;
+use serde::{Serialize, ser::SerializeStruct};
 
 // ---------------------------------------------------------------------------------------------
 // The schema table.
@@ -508,15 +512,25 @@ macro_rules! record {
                 $(#[doc = $fdoc:literal])*
                 pub $field:ident : $ty:ty = $number:literal,
             )*
+            $(named { $($named:ident = $nnumber:literal => $src:ident[$idx:literal],)* })?
         }
     ) => {
         $(#[doc = $doc])*
-        #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq)]
         pub struct $name {
             $(
                 $(#[doc = $fdoc])*
                 pub $field: $ty,
             )*
+        }
+
+        impl Serialize for $name {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut m = s.serialize_struct($proto, Self::DEF.fields.len())?;
+                $(m.serialize_field(stringify!($field), &self.$field)?;)*
+                $($(m.serialize_field(stringify!($named), &self.$src[$idx])?;)*)?
+                m.end()
+            }
         }
 
         impl Message for $name {
@@ -530,12 +544,21 @@ macro_rules! record {
                     card: <$ty as Field>::CARD,
                     nullable: <$ty as Field>::NULLABLE,
                     doc: &[$($fdoc),*],
-                }),*],
+                }),* $($(, FieldDef {
+                    name: stringify!($named),
+                    number: $nnumber,
+                    ty: Ty::Double,
+                    card: Card::Single,
+                    nullable: false,
+                    doc: &[concat!("`", stringify!($src), "[", $idx, "]` again, named (for plots).")],
+                })*)?],
             };
-            const MAX_BODY: usize = 0 $(+ key_len($number) + <$ty as Field>::MAX_LEN)*;
+            const MAX_BODY: usize = 0 $(+ key_len($number) + <$ty as Field>::MAX_LEN)*
+                $($(+ key_len($nnumber) + 8)*)?;
             #[inline(always)]
             fn encode_body(&self, e: &mut Enc<'_>) {
                 $(Field::encode(&self.$field, e, $number);)*
+                $($(e.double($nnumber, self.$src[$idx]);)*)?
             }
             #[inline(always)]
             fn text_len(&self) -> usize {
@@ -596,6 +619,10 @@ record! {
         pub psi_f_wb: f64 = 8,
         /// The plant's stator resistance now, ohm.
         pub rs_ohm: f64 = 9,
+        named {
+            i_alpha_a = 10 => i_ab_a[0], i_beta_a = 11 => i_ab_a[1],
+            i_d_a = 12 => i_dq_a[0], i_q_a = 13 => i_dq_a[1],
+        }
     }
 }
 
@@ -687,6 +714,11 @@ record! {
         /// The estimate of the controller's own observer (for foc: its f32 EKF), if any. The
         /// simulator scores it against the truth like its own observers.
         pub estimate: Option<ControllerEstimate> = 12,
+        named {
+            i_d_a = 13 => i_dq_a[0], i_q_a = 14 => i_dq_a[1],
+            i_d_ref_a = 15 => i_dq_ref_a[0], i_q_ref_a = 16 => i_dq_ref_a[1],
+            u_d_ref_v = 17 => u_dq_ref_v[0], u_q_ref_v = 18 => u_dq_ref_v[1],
+        }
     }
 }
 
@@ -732,6 +764,7 @@ record! {
         pub u_ab_commanded_v: [f64; 2] = 4,
         /// Bus voltage over the period, V.
         pub u_dc_v: f64 = 5,
+        named { u_alpha_v = 6 => u_ab_v[0], u_beta_v = 7 => u_ab_v[1], }
     }
 }
 

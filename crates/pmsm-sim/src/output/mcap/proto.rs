@@ -1,7 +1,7 @@
 //! The per-period message (`pmsm_sim.Period`) on the wire: its protobuf encoding, and the
 //! schema files made from the one description of the record in [`crate::output::record`].
 //!
-//! - [`PeriodEncoder`]: the protobuf encoding of a [`Sample`] (about 60 ns and 900 bytes per
+//! - [`PeriodEncoder`]: the protobuf encoding of a [`Sample`] (about 70 ns and 1000 bytes per
 //!   message: straight-line code the `record!` macro generates, no allocation).
 //! - [`file_descriptor_set`]: the `FileDescriptorSet` the log carries as the schema of
 //!   encoding `protobuf` (what Foxglove and the `mcap` Python package with
@@ -489,14 +489,14 @@ mod tests {
         assert_eq!(buf.len(), 4 + 20_000);
     }
 
-    /// The default's message is about 900 bytes (what the log size per period is made of),
+    /// The default's message is about 1 KB (what the log size per period is made of),
     /// well within the buffer reserved for it.
     #[test]
     fn message_size() {
         let mut s = full_sample();
         let mut enc = PeriodEncoder::new();
         let n = enc.encode(&s).len();
-        assert!((800..1000).contains(&n), "{n}");
+        assert!((900..1100).contains(&n), "{n}");
         s.control.telemetry.state = "";
         s.control.telemetry.fault = None;
         s.k = u64::MAX;
@@ -548,9 +548,79 @@ mod tests {
         let bare = bare(full);
         for (s, old) in [(full, old_full), (bare, old_bare)] {
             let decoded = decode_to_json("Period", old).unwrap_or_else(|e| panic!("{e}"));
-            let json = serde_json::to_value(legacy(s)).unwrap_or_else(|e| panic!("{e}"));
+            let mut json = serde_json::to_value(legacy(s)).unwrap_or_else(|e| panic!("{e}"));
+            // The named components came later too: absent, they read as 0.
+            for (path, _, _) in NAMED {
+                if let Some(v) = json.pointer_mut(path) {
+                    *v = 0.0.into();
+                }
+            }
             assert_eq!(decoded, json);
         }
+    }
+
+    /// The named components of the vectors (JSON pointer, the array's pointer, index).
+    const NAMED: [(&str, &str, usize); 12] = [
+        ("/truth/i_alpha_a", "/truth/i_ab_a", 0),
+        ("/truth/i_beta_a", "/truth/i_ab_a", 1),
+        ("/truth/i_d_a", "/truth/i_dq_a", 0),
+        ("/truth/i_q_a", "/truth/i_dq_a", 1),
+        ("/control/telemetry/i_d_a", "/control/telemetry/i_dq_a", 0),
+        ("/control/telemetry/i_q_a", "/control/telemetry/i_dq_a", 1),
+        (
+            "/control/telemetry/i_d_ref_a",
+            "/control/telemetry/i_dq_ref_a",
+            0,
+        ),
+        (
+            "/control/telemetry/i_q_ref_a",
+            "/control/telemetry/i_dq_ref_a",
+            1,
+        ),
+        (
+            "/control/telemetry/u_d_ref_v",
+            "/control/telemetry/u_dq_ref_v",
+            0,
+        ),
+        (
+            "/control/telemetry/u_q_ref_v",
+            "/control/telemetry/u_dq_ref_v",
+            1,
+        ),
+        ("/inverter/u_alpha_v", "/inverter/u_ab_v", 0),
+        ("/inverter/u_beta_v", "/inverter/u_ab_v", 1),
+    ];
+
+    /// Every named component decodes to its array's component, in the protobuf message and
+    /// the JSON encoding alike (distinct values everywhere, so a swapped index fails).
+    #[test]
+    fn named_components_equal_the_arrays() {
+        let s = full_sample();
+        let mut enc = PeriodEncoder::new();
+        let decoded = decode_to_json("Period", enc.encode(&s)).unwrap_or_else(|e| panic!("{e}"));
+        let json = serde_json::to_value(s).unwrap_or_else(|e| panic!("{e}"));
+        for doc in [&decoded, &json] {
+            for (named, array, i) in NAMED {
+                let v = doc.pointer(named).and_then(serde_json::Value::as_f64);
+                let a = doc.pointer(array).and_then(|a| a[i].as_f64());
+                assert!(
+                    v.is_some() && v == a,
+                    "{named}: {v:?} vs {array}[{i}]: {a:?}"
+                );
+            }
+        }
+        let t = &decoded["control"]["telemetry"];
+        assert_eq!(
+            t["u_q_ref_v"].as_f64(),
+            Some(s.control.telemetry.u_dq_ref_v[1])
+        );
+        assert_eq!(decoded["truth"]["i_q_a"].as_f64(), Some(s.truth.i_dq_a[1]));
+        // The table holds all of them (plus the arrays), once each.
+        let named = MESSAGES
+            .iter()
+            .flat_map(|m| m.fields)
+            .filter(|f| f.doc[0].contains("]` again"));
+        assert_eq!(named.count(), NAMED.len());
     }
 
     /// Compares a checked-in schema file with what the table generates; with
