@@ -14,17 +14,7 @@
 
 use ekf_core::FluxMap;
 use ekf_core::saturation::{PM_SYRM, SATURATED_IPM, SaturatedMotor};
-use foc::identify::saturation::{FluxSamples, SaturationConfig, SaturationProbe};
-use foc::{ComputationDelay, TickInput};
-use pmsm_sim::plant::{MotorModel, Plant, PlantState};
-
-/// What one probe run measured.
-struct Outcome {
-    samples: FluxSamples,
-    duration_s: f64,
-    max_move_mech_rad: f64,
-    peak_a: f64,
-}
+use pmsm_sim::analysis::suite::identified::{ProbeRun, ProbeTold as Told, probe_plant};
 
 /// Peak rated current: the smallest current magnitude whose best angle (MTPA, searched in
 /// 0.5 deg steps) gives the rated torque.
@@ -52,91 +42,10 @@ fn rated_current(m: &SaturatedMotor) -> f64 {
     hi
 }
 
-/// What the probe is told, as factors on the true values, and the sensor noise.
-#[derive(Clone, Copy)]
-struct Told {
-    rs: f64,
-    l: f64,
-    psi_f: f64,
-    j: f64,
-    /// Uniform current noise, +- A.
-    noise_a: f64,
-}
-
-const EXACT: Told = Told {
-    rs: 1.0,
-    l: 1.0,
-    psi_f: 1.0,
-    j: 1.0,
-    noise_a: 0.0,
-};
-
-fn probe(m: &SaturatedMotor, i_max: f64, theta0: f64, told: Told) -> Outcome {
-    let r = &m.reference;
-    let motor = MotorModel::from_saturated(m);
-    let mut plant = Plant::new(
-        motor,
-        PlantState {
-            theta_e_rad: theta0,
-            ..PlantState::default()
-        },
-    );
-    let ts = r.ts_s;
-    let mut cfg = SaturationConfig::new(
-        ts as f32,
-        (r.rs_ohm * told.rs) as f32,
-        theta0 as f32,
-        (r.psi_f_wb * told.psi_f) as f32,
-        ((r.ld_h * told.l) as f32, (r.lq_h * told.l) as f32),
-        i_max as f32,
-    );
-    cfg.delay = ComputationDelay::OnePeriod;
-    cfg.inertia_kg_m2 = (r.j_kg_m2 * told.j) as f32;
-    cfg.pole_pairs = r.pole_pairs;
-    let mut p = SaturationProbe::new(&cfg).unwrap();
-    let mut u_prev = [0.0f64; 2];
-    let mut max_move = 0.0f64;
-    let mut peak = 0.0f64;
-    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-    let pp = f64::from(r.pole_pairs);
-    let max_ticks = (5.0 / ts) as u64;
-    for _ in 0..max_ticks {
-        let mut i = plant.i_ab_a();
-        peak = peak.max(i[0].hypot(i[1]));
-        for x in &mut i {
-            // xorshift: uniform noise in +- noise_a.
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            *x += told.noise_a * ((seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0);
-        }
-        let out = p.tick(&TickInput::alpha_beta(
-            i[0] as f32,
-            i[1] as f32,
-            r.u_dc_v as f32,
-        ));
-        if p.is_done() {
-            break;
-        }
-        // One period of computation delay: this period applies last tick's voltage.
-        plant.step(u_prev, 0.0, ts);
-        u_prev = [f64::from(out.u_ab.alpha), f64::from(out.u_ab.beta)];
-        let moved = (plant.state().theta_e_rad - theta0).abs() / pp;
-        max_move = max_move.max(moved);
-    }
-    let samples = match p.result() {
-        Some(Ok(s)) => *s,
-        other => panic!(
-            "{}: probe did not finish: {other:?} moved {max_move}",
-            r.name
-        ),
-    };
-    Outcome {
-        duration_s: f64::from(p.ticks()) * ts,
-        samples,
-        max_move_mech_rad: max_move,
-        peak_a: peak,
-    }
+/// Runs the probe (`pmsm_sim::analysis::suite::identified::probe_plant`).
+fn probe(m: &SaturatedMotor, i_max: f64, theta0: f64, told: Told) -> ProbeRun {
+    probe_plant(m, i_max, theta0, &told)
+        .unwrap_or_else(|e| panic!("{}: probe did not finish: {e}", m.reference.name))
 }
 
 /// Largest error of `(psi_d, psi_q)` over `|psi|` at the points `f` gives, `%`.
@@ -157,7 +66,7 @@ fn max_errors(
 }
 
 fn check(m: &SaturatedMotor, theta0: f64) {
-    check_told(m, theta0, EXACT, 2.0, 1.0);
+    check_told(m, theta0, Told::EXACT, 2.0, 1.0);
 }
 
 /// Runs the probe told `told` and checks the nodes within `node_pct`, the map within
@@ -236,7 +145,7 @@ fn check_told(m: &SaturatedMotor, theta0: f64, told: Told, node_pct: f64, map_pc
         "{name}: rated {i_r:.2} A, grid {}x{} to {i_max:.2} A; nodes |i|<=rated: psi_d {nd:.3} %, \
          psi_q {nq:.3} %; map over |i|<=rated: psi_d {md:.3} %, psi_q {mq:.3} %; duration \
          {:.3} s; rotor moved {:.2e} mech rad; peak {:.2} A; q closure {:.2e} Wb",
-        s.n_d, s.n_q, o.duration_s, o.max_move_mech_rad, o.peak_a, s.q_closure_wb
+        s.n_d, s.n_q, o.duration_s, o.rotor_moved_mech_rad, o.peak_a, s.q_closure_wb
     );
     assert!(
         nd < node_pct && nq < node_pct,
@@ -247,14 +156,14 @@ fn check_told(m: &SaturatedMotor, theta0: f64, told: Told, node_pct: f64, map_pc
         "{name}: map errors {md} {mq} % (the true model on the grid: {gd} {gq} %)"
     );
     // The rotor drifts slowly between the pulses (followed by the probe): bounded here.
-    assert!(o.max_move_mech_rad < 0.2, "{name}: rotor moved");
+    assert!(o.rotor_moved_mech_rad < 0.2, "{name}: rotor moved");
     // The probe's own estimate of the motion agrees with the plant's (electrical rad).
     let est = f64::from(s.rotor_angle_max_rad) / f64::from(m.reference.pole_pairs);
     println!("{name}: the probe's estimate of the rotor's largest angle: {est:.2e} mech rad");
     assert!(
-        (est - o.max_move_mech_rad).abs() < 0.1 * o.max_move_mech_rad + 1e-4,
+        (est - o.rotor_moved_mech_rad).abs() < 0.1 * o.rotor_moved_mech_rad + 1e-4,
         "{name}: estimated {est}, true {}",
-        o.max_move_mech_rad
+        o.rotor_moved_mech_rad
     );
     assert!(o.duration_s < 5.0, "{name}: {} s", o.duration_s);
     assert!(o.peak_a < 2.0 * i_max, "{name}: peak {} A", o.peak_a);

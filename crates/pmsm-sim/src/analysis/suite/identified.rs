@@ -1,78 +1,113 @@
-//! The map an observer of the saturated rows is told when it is told the **identified** map:
-//! foc's standstill flux-map measurement (`foc::identify::saturation::SaturationProbe`) run on
-//! the motor's saturating plant before the row's run.
+//! foc's standstill flux-map measurement (`foc::identify::saturation::SaturationProbe`) on a
+//! saturating motor's plant: [`probe_plant`] runs it, [`identified_map`] gives the map an
+//! observer of the saturated rows is told when it is told the **identified** map.
 //!
-//! The probe sits at rest on a fresh plant (the rotor free with the motor's inertia, aligned
-//! at 0), told what a self-commissioning of the motor gives: `Rs`, `psi_f` and the
-//! small-signal inductances (the plant's own at zero current), the inertia and the pole pairs;
-//! the voltage is applied one period after it is computed, the switches are ideal and the
-//! currents exact. Its grid spans `+-`[`PROBE_CURRENT`] times the rated current (7 x 9
-//! levels); beyond it the map continues linearly (`ekf_core::FluxMap`).
+//! The probe sits at rest on a fresh plant (the rotor free with the motor's inertia, at the
+//! given angle), told what a self-commissioning of the motor gives ([`ProbeTold`]: `Rs`,
+//! `psi_f`, the small-signal inductances, the inertia, as factors on the motor's values) and
+//! the pole pairs; the voltage is applied one period after it is computed, the switches are
+//! ideal, the currents exact or with uniform noise. For the suite's rows its grid spans
+//! `+-`[`PROBE_CURRENT`] times the rated current (7 x 9 levels); beyond it the map continues
+//! linearly (`ekf_core::FluxMap`).
 
 use ekf_core::FluxMap;
 use ekf_core::saturation::SaturatedMotor;
-use foc::identify::saturation::{SaturationConfig, SaturationProbe};
+use foc::identify::saturation::{FluxSamples, SAT_MAX_Q, SaturationConfig, SaturationProbe};
 use foc::{ComputationDelay, TickInput};
 
 use crate::SimError;
 use crate::plant::{MotorModel, Plant, PlantState};
 
-/// Largest probe current, times the rated current.
+/// Largest probe current of the suite's rows, times the rated current.
 pub const PROBE_CURRENT: f64 = 1.7;
 
-/// The identified map and what its measurement took.
-pub struct Identified {
-    /// The map, built from the probe's samples.
-    pub map: FluxMap<f64, 16>,
+/// What the probe is told, as factors on the motor's values, and the current sensors' noise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbeTold {
+    /// Factor on `Rs`.
+    pub rs: f64,
+    /// Factor on the small-signal `Ld` and `Lq`.
+    pub l: f64,
+    /// Factor on `psi_f`.
+    pub psi_f: f64,
+    /// Factor on the inertia.
+    pub j: f64,
+    /// Uniform current noise, +- A.
+    pub noise_a: f64,
+}
+
+impl ProbeTold {
+    /// The motor's own values, no noise.
+    pub const EXACT: Self = Self {
+        rs: 1.0,
+        l: 1.0,
+        psi_f: 1.0,
+        j: 1.0,
+        noise_a: 0.0,
+    };
+}
+
+/// What one probe run measured.
+#[derive(Clone, Copy, Debug)]
+pub struct ProbeRun {
+    /// The samples.
+    pub samples: FluxSamples,
     /// Duration of the measurement, s.
     pub duration_s: f64,
     /// Largest rotor movement during it, mechanical rad.
     pub rotor_moved_mech_rad: f64,
+    /// Largest current magnitude, A.
+    pub peak_a: f64,
 }
 
-/// Runs the probe on `m`'s plant (module docs); `i_rated`: the rated current, A.
-pub fn identified_map(m: &SaturatedMotor, i_rated: f64) -> Result<Identified, SimError> {
+/// Runs the probe (module docs) on `m`'s plant with the rotor at `theta0_rad` (electrical),
+/// up to `i_max_a`.
+pub fn probe_plant(
+    m: &SaturatedMotor,
+    i_max_a: f64,
+    theta0_rad: f64,
+    told: &ProbeTold,
+) -> Result<ProbeRun, SimError> {
     let r = &m.reference;
     let fail = |problem: String| SimError::Scenario {
-        file: format!("suite-{}", r.name),
+        file: format!("flux-map probe {}", r.name),
         field: "identified flux map".into(),
         problem,
     };
-    // Small-signal inductances at zero current (what a low-current measurement gives).
-    let (pd0, _) = m
-        .model
-        .flux(0.0, 0.0, (r.psi_f_wb, 0.0))
-        .ok_or_else(|| fail("no flux at zero current".into()))?;
-    let h = 1e-3;
-    let ld0 = m
-        .model
-        .flux(h, 0.0, (pd0, 0.0))
-        .map(|(d, _)| (d - pd0) / h)
-        .ok_or_else(|| fail("no d flux".into()))?;
-    let lq0 = m
-        .model
-        .flux(0.0, h, (pd0, 0.0))
-        .map(|(_, q)| q / h)
-        .ok_or_else(|| fail("no q flux".into()))?;
-    let mut plant = Plant::new(MotorModel::from_saturated(m), PlantState::default());
+    let mut plant = Plant::new(
+        MotorModel::from_saturated(m),
+        PlantState {
+            theta_e_rad: theta0_rad,
+            ..PlantState::default()
+        },
+    );
     let ts = r.ts_s;
     let mut cfg = SaturationConfig::new(
         ts as f32,
-        r.rs_ohm as f32,
-        0.0,
-        pd0 as f32,
-        (ld0 as f32, lq0 as f32),
-        (PROBE_CURRENT * i_rated) as f32,
+        (r.rs_ohm * told.rs) as f32,
+        theta0_rad as f32,
+        (r.psi_f_wb * told.psi_f) as f32,
+        ((r.ld_h * told.l) as f32, (r.lq_h * told.l) as f32),
+        i_max_a as f32,
     );
     cfg.delay = ComputationDelay::OnePeriod;
-    cfg.inertia_kg_m2 = r.j_kg_m2 as f32;
+    cfg.inertia_kg_m2 = (r.j_kg_m2 * told.j) as f32;
     cfg.pole_pairs = r.pole_pairs;
     let mut p = SaturationProbe::new(&cfg).map_err(|e| fail(e.to_string()))?;
     let mut u_prev = [0.0f64; 2];
-    let mut moved = 0.0f64;
+    let (mut moved, mut peak) = (0.0f64, 0.0f64);
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
     let pp = f64::from(r.pole_pairs);
     for _ in 0..(5.0 / ts) as u64 {
-        let i = plant.i_ab_a();
+        let mut i = plant.i_ab_a();
+        peak = peak.max(i[0].hypot(i[1]));
+        for x in &mut i {
+            // xorshift: uniform noise in +- noise_a.
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            *x += told.noise_a * ((seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0);
+        }
         let out = p.tick(&TickInput::alpha_beta(
             i[0] as f32,
             i[1] as f32,
@@ -81,28 +116,51 @@ pub fn identified_map(m: &SaturatedMotor, i_rated: f64) -> Result<Identified, Si
         if p.is_done() {
             break;
         }
+        // One period of computation delay: this period applies last tick's voltage.
         plant.step(u_prev, 0.0, ts);
         u_prev = [f64::from(out.u_ab.alpha), f64::from(out.u_ab.beta)];
-        moved = moved.max(plant.state().theta_e_rad.abs() / pp);
+        moved = moved.max((plant.state().theta_e_rad - theta0_rad).abs() / pp);
     }
-    let s = match p.result() {
+    let samples = match p.result() {
         Some(Ok(s)) => *s,
         Some(Err(e)) => return Err(fail(e.to_string())),
         None => return Err(fail("the probe did not end within 5 s".into())),
     };
+    Ok(ProbeRun {
+        samples,
+        duration_s: f64::from(p.ticks()) * ts,
+        rotor_moved_mech_rad: moved,
+        peak_a: peak,
+    })
+}
+
+/// The identified map and what its measurement took.
+pub struct Identified {
+    /// The map, built from the probe's samples.
+    pub map: FluxMap<f64, 16>,
+    /// The probe's run.
+    pub run: ProbeRun,
+}
+
+/// The map of the suite's row "EKF told the identified map" (module docs): the probe told
+/// the motor's own values, the rotor at 0, up to [`PROBE_CURRENT`] times `i_rated` (A).
+pub fn identified_map(m: &SaturatedMotor, i_rated: f64) -> Result<Identified, SimError> {
+    let run = probe_plant(m, PROBE_CURRENT * i_rated, 0.0, &ProbeTold::EXACT)?;
+    let s = &run.samples;
     let i_d: Vec<f64> = s.i_d[..s.n_d].iter().map(|&x| f64::from(x)).collect();
     let i_q: Vec<f64> = s.i_q[..s.n_q].iter().map(|&x| f64::from(x)).collect();
-    let grid = |psi: &[[f32; foc::identify::saturation::SAT_MAX_Q]]| -> Vec<f64> {
+    let grid = |psi: &[[f32; SAT_MAX_Q]]| -> Vec<f64> {
         psi[..s.n_d]
             .iter()
             .flat_map(|row| row[..s.n_q].iter().map(|&x| f64::from(x)))
             .collect()
     };
-    let (pdv, pqv) = (grid(&s.psi_d), grid(&s.psi_q));
-    let map = FluxMap::new(&i_d, &i_q, &pdv, &pqv).map_err(|e| fail(e.to_string()))?;
-    Ok(Identified {
-        map,
-        duration_s: f64::from(p.ticks()) * ts,
-        rotor_moved_mech_rad: moved,
-    })
+    let map = FluxMap::new(&i_d, &i_q, &grid(&s.psi_d), &grid(&s.psi_q)).map_err(|e| {
+        SimError::Scenario {
+            file: format!("flux-map probe {}", m.reference.name),
+            field: "identified flux map".into(),
+            problem: e.to_string(),
+        }
+    })?;
+    Ok(Identified { map, run })
 }

@@ -124,7 +124,7 @@ use crate::sim::{SideObserver, run_with_side_observers};
 
 pub use crate::output::metrics::CONVERGED_DEG;
 
-mod identified;
+pub mod identified;
 mod runs;
 mod saturated;
 mod tables;

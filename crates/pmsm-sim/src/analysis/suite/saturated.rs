@@ -482,8 +482,8 @@ pub fn saturated_rows_with(
         ) {
             report.identification.push(SaturatedIdentification {
                 motor: name,
-                duration_s: ident.duration_s,
-                rotor_moved_mech_rad: ident.rotor_moved_mech_rad,
+                duration_s: ident.run.duration_s,
+                rotor_moved_mech_rad: ident.run.rotor_moved_mech_rad,
                 probe_current_a: super::identified::PROBE_CURRENT * i_rated,
                 rms_ratio: id.angle_rms_deg / ekf.angle_rms_deg,
                 goal: GOAL_IDENTIFIED_RATIO,
