@@ -63,6 +63,14 @@ pub enum Param {
     AdaptationReference,
     /// Largest factor of the speed noise adaptation, `SpeedNoiseAdaptation::max_factor`.
     AdaptationMaxFactor,
+    /// Block of the acceleration feedforward's learning, `AccelerationFeedforward::block_samples`.
+    FeedforwardBlock,
+    /// Memory of the acceleration feedforward's learning, `AccelerationFeedforward::memory_blocks`.
+    FeedforwardMemory,
+    /// Largest gain of the acceleration feedforward, `AccelerationFeedforward::max_gain`.
+    FeedforwardMaxGain,
+    /// Conditioning of the acceleration feedforward's learning, `AccelerationFeedforward::min_conditioning`.
+    FeedforwardConditioning,
     /// A noise level of the drive observer (`DriveConfig::sigma_*`).
     DriveNoise,
     /// A prior of the drive observer's input errors (`DriveConfig::sigma_tau_s`,
@@ -179,6 +187,10 @@ impl fmt::Display for Param {
             Param::AdaptationSamples => "speed_noise_adaptation.samples",
             Param::AdaptationReference => "speed_noise_adaptation.nis_reference",
             Param::AdaptationMaxFactor => "speed_noise_adaptation.max_factor",
+            Param::FeedforwardBlock => "acceleration_feedforward.block_samples",
+            Param::FeedforwardMemory => "acceleration_feedforward.memory_blocks",
+            Param::FeedforwardMaxGain => "acceleration_feedforward.max_gain",
+            Param::FeedforwardConditioning => "acceleration_feedforward.min_conditioning",
             Param::DriveNoise => "drive.sigma (noise level)",
             Param::DrivePrior => "drive.sigma (input error prior)",
             Param::DriveTime => "drive.settle_s / restart_s",

@@ -34,9 +34,9 @@ pub use motor::{
 };
 pub use noise::NoiseCovariances;
 pub use observer::{
-    BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization, Estimate, InnovationGate,
-    ObserverConfig, ObserverCounters, ParameterTracking, PmsmModel, PmsmObserver, RsTracking,
-    Status, default_p0,
+    AccelerationFeedforward, BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization,
+    Estimate, InnovationGate, ObserverConfig, ObserverCounters, ParameterTracking, PmsmModel,
+    PmsmObserver, RsTracking, Status, default_p0,
 };
 
 /// Re-export of the `nalgebra` this crate is built on, for its matrix types.

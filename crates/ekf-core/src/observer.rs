@@ -205,6 +205,39 @@
 //! acceleration: foc's drive turns it off (a closed speed loop amplifies the speed noise; the
 //! drive knows its own torque command).
 //!
+//! **Acceleration feedforward** ([`AccelerationFeedforward`]; on in [`ObserverConfig::new`], off
+//! in foc's drive configuration and in [`ObserverConfig::seed`]). Torque is `3/2 p psi_f i_q`, so
+//! the rotor's electrical acceleration is `k i_q - a_load(w)` with `k = 3/2 p^2 psi_f / J`
+//! unknown (the inertia is the drive's, propeller or load included). The feedforward models it as
+//! `a = k i_q + c0 + c1 w` (a constant and a viscous load; with forgetting, the linear term
+//! follows a fan's `w^2` locally) and adds `Ts a` to the predicted speed and `Ts^2 a / 2` to the
+//! angle, `i_q` and `w` from the posterior the prediction starts from (in its frame: the step's
+//! own sine and cosine). Within a dead band of `k` times three standard deviations of the
+//! measurement noise it adds nothing: a steady current's noise moves no speed.
+//!
+//! The three coefficients are learnt by least squares with forgetting (100 blocks): each block
+//! of 32 samples whose angle stayed tracked gives the filter's own speed change `dw` against the
+//! block's sums of `i_q`, `1` and `w`, normalized by `I_c = psi_f / L_q` and `Ts`
+//! (`dw Ts = t0 sum(i_q / I_c) + t1 n + t2 sum(w Ts)`), solved by Cramer's rule once the
+//! information matrix's determinant is at least `10^-3` of its diagonal's product. Until then
+//! the speed is today's random walk exactly. `k` is bounded to `[0, 0.1 / (Ts^2 I_c)]` (a rate
+//! at which `I_c` turns `w Ts` by 0.1 rad per period); a fit with `k <= 0` switches the model
+//! off.
+//!
+//! Observability: all three are ratios of what the filter measures while it tracks, the speed's
+//! change against the q current and the speed. `k` is told from the load only when the current
+//! moves independently of the speed (current or duty steps: the conditioning test); a drive that
+//! never changes its torque never uses the model. A speed estimate that lags an acceleration
+//! biases `k` low (simulated: 12 % low), toward the random walk.
+//!
+//! Why: at low speed the back-EMF is small beside the resistive and inverter voltage errors, and
+//! a current step there (a duty or torque step) is when a filter whose speed is a random walk
+//! reads the voltage error as a speed and slips; the model keeps the speed on the trajectory the
+//! current sets until the EMF is large enough to correct it. Its input is not covariance-weighted
+//! (the current and speed enter as inputs, their Jacobian left out). The model is kept through
+//! resets; a branch flip turns the sign of its constant term. Measured in `docs/accuracy.md`
+//! ("Recorded drives", "Transients").
+//!
 //! **Voltage timing** ([`ObserverConfig::voltage_delay_s`], default 0). The model takes `u_prev`
 //! as the voltage held over the period. A drive's log may not hold that: firmware that updates
 //! the PWM part-way through the next period and turns its command ahead by the speed times the
@@ -239,6 +272,7 @@
 //! | `observer/fusion.rs` | [`PmsmObserver::correct_angle`]: an external angle fused |
 //! | `observer/safeguards.rs` | the safeguards' configuration and running state |
 //! | `observer/adaptation.rs` | [`SpeedNoiseAdaptation`]: `Q_ww` raised through transients |
+//! | `observer/feedforward.rs` | [`AccelerationFeedforward`]: the speed prediction follows the q current |
 //! | `observer/recovery.rs` | what the safeguards do: rejection, flip, self-reset |
 //! | `observer/estimate.rs` | [`Estimate`], [`Status`], [`ObserverCounters`]: what is reported |
 //! | `observer/tracking.rs` | [`ParameterTracking`]: online `psi_f` and `Rs` |
@@ -247,6 +281,7 @@
 mod adaptation;
 mod config;
 mod estimate;
+mod feedforward;
 mod fusion;
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 mod host;
@@ -267,6 +302,7 @@ pub use config::{
     MAX_COVARIANCE_ENTRY, MAX_TS_S, MIN_TS_S, ObserverConfig, check_covariance, default_p0,
 };
 pub use estimate::{Estimate, ObserverCounters, Status};
+pub use feedforward::AccelerationFeedforward;
 pub use model::{Discretization, PmsmModel};
 pub use pmsm::PmsmObserver;
 pub(crate) use safeguards::ConsistencyState;

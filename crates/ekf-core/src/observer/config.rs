@@ -3,8 +3,8 @@
 use nalgebra::{Cholesky, Matrix4, SMatrix, Vector4};
 
 use super::{
-    BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization, InnovationGate,
-    ParameterTracking, SpeedNoiseAdaptation,
+    AccelerationFeedforward, BranchCheck, ConsistencyCheck, CovarianceHealth, Discretization,
+    InnovationGate, ParameterTracking, SpeedNoiseAdaptation,
 };
 use crate::ekf::{CovarianceUpdate, all_finite};
 use crate::motor::positive;
@@ -62,6 +62,9 @@ pub struct ObserverConfig<T: Float> {
     /// Speed noise adaptation: `Q_ww` raised while the innovations are larger than a
     /// consistent filter's (module docs, "Speed noise adaptation"); `None` keeps `Q` fixed.
     pub speed_noise_adaptation: Option<SpeedNoiseAdaptation<T>>,
+    /// Acceleration feedforward: the speed prediction follows the q current with a gain learnt
+    /// online (module docs, "Acceleration feedforward"); `None`: the speed is a random walk.
+    pub acceleration_feedforward: Option<AccelerationFeedforward<T>>,
 }
 
 impl<T: Float> ObserverConfig<T> {
@@ -88,6 +91,7 @@ impl<T: Float> ObserverConfig<T> {
             speed_noise_adaptation: Some(SpeedNoiseAdaptation::default()),
             voltage_delay_s: T::zero(),
             inverter_voltage_v: T::zero(),
+            acceleration_feedforward: Some(AccelerationFeedforward::default_for(&motor, ts_s)),
         }
     }
 
@@ -106,6 +110,7 @@ impl<T: Float> ObserverConfig<T> {
             consistency: None,
             parameter_tracking: None,
             speed_noise_adaptation: None,
+            acceleration_feedforward: None,
             ..Self::new(motor, ts_s)
         }
     }
@@ -148,6 +153,9 @@ impl<T: Float> ObserverConfig<T> {
         }
         if let Some(c) = &self.consistency {
             c.validate()?;
+        }
+        if let Some(f) = &self.acceleration_feedforward {
+            f.validate()?;
         }
         if let Some(a) = &self.speed_noise_adaptation {
             a.validate()?;

@@ -1,5 +1,6 @@
 //! The observer type [`PmsmObserver`]: its state, its construction and its accessors.
 
+use super::feedforward::FeedforwardState;
 use super::{AdaptationState, ObserverConfig, ObserverCounters, PmsmModel};
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
 
@@ -35,6 +36,8 @@ pub struct PmsmObserver<T: Float> {
     pub(super) health: Option<HealthState<T>>,
     pub(super) consistency: Option<ConsistencyState<T>>,
     pub(super) adaptation: Option<AdaptationState<T>>,
+    /// The acceleration feedforward's state (`None` when off).
+    pub(super) feedforward: Option<FeedforwardState<T>>,
     /// `ObserverConfig::voltage_delay_s`.
     pub(super) voltage_delay: T,
     /// `ObserverConfig::inverter_voltage_v` and the linear band of its signs, A.
@@ -130,6 +133,10 @@ impl<T: Float> PmsmObserver<T> {
                 .speed_noise_adaptation
                 .as_ref()
                 .map(AdaptationState::new),
+            feedforward: cfg.acceleration_feedforward.as_ref().map(|c| {
+                let r = cfg.noise.r;
+                FeedforwardState::new(c, &cfg.motor, cfg.ts_s, r[(0, 0)].max(r[(1, 1)]))
+            }),
             voltage_delay: cfg.voltage_delay_s,
             inverter: (
                 cfg.inverter_voltage_v,
@@ -137,7 +144,8 @@ impl<T: Float> PmsmObserver<T> {
             ),
             extras: cfg.voltage_delay_s != T::zero()
                 || cfg.inverter_voltage_v != T::zero()
-                || cfg.speed_noise_adaptation.is_some(),
+                || cfg.speed_noise_adaptation.is_some()
+                || cfg.acceleration_feedforward.is_some(),
             fused: 0,
             tracker,
             slow,
@@ -200,6 +208,13 @@ impl<T: Float> PmsmObserver<T> {
         self.tracker
             .as_ref()
             .map(|t| (Vector4::from(t.s.x), t.s.c_pp))
+    }
+
+    /// The acceleration feedforward's learnt gain `k`, rad/s^2 of electrical speed per ampere
+    /// of `i_q` (module docs, "Acceleration feedforward"); 0 while it has not seen enough
+    /// current steps, or when it is off.
+    pub fn acceleration_gain(&self) -> T {
+        self.feedforward.as_ref().map_or(T::zero(), |f| f.k)
     }
 
     /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.

@@ -73,6 +73,9 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(t) = &mut self.tracker {
             t.flip_speed();
         }
+        if let Some(f) = &mut self.feedforward {
+            f.flip();
+        }
         self.counters.branch_flips = self.counters.branch_flips.saturating_add(1);
         self.events.flipped = true;
     }
@@ -153,8 +156,8 @@ impl<T: Float> PmsmObserver<T> {
         self.counters.covariance_resets = self.counters.covariance_resets.saturating_add(1);
     }
 
-    /// Clears the gate's, the branch check's, the consistency check's and the speed noise
-    /// adaptation's running state.
+    /// Clears the gate's, the branch check's, the consistency check's, the speed noise
+    /// adaptation's and the acceleration feedforward's running state (its learnt gain kept).
     pub(super) fn restart_safeguards(&mut self) {
         self.locked = false;
         if let Some(w) = &mut self.consistency {
@@ -162,6 +165,9 @@ impl<T: Float> PmsmObserver<T> {
         }
         if let Some(a) = &mut self.adaptation {
             a.restart();
+        }
+        if let Some(f) = &mut self.feedforward {
+            f.restart();
         }
         if let Some(g) = &mut self.gate {
             g.inconsistent = 0;

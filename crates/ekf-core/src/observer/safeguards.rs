@@ -359,7 +359,9 @@ impl<T: Float> ConsistencyState<T> {
             self.drift_primed = true;
             return;
         }
-        let mean = (crate::wrap_angle(theta - start) - n * w_ts) / n;
+        // The deviation from the advance the speed predicts is wrapped, not the advance: over a
+        // block the angle advances by up to `8 |w Ts|`, beyond pi when `|w Ts| > pi / 8`.
+        let mean = crate::wrap_angle(theta - start - n * w_ts) / n;
         self.drift += (mean - self.drift) * self.k_drift;
         // |drift| - ratio |w Ts| against sigmas sqrt(var): compared in squares (no sqrt).
         let a = self.drift.abs();

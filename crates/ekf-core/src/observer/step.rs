@@ -6,6 +6,7 @@ use super::host;
 use super::{Estimate, PmsmObserver};
 use nalgebra::{Matrix4, Vector4};
 
+use super::model::TransitionTerms;
 use super::safeguards::{Events, Verdict, gate_accepted_high, gate_verdict};
 use super::structured::{self, Outcome, Sym4};
 use super::tracking::TrackerStep;
@@ -14,6 +15,9 @@ use crate::{Float, to_t};
 
 /// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
 pub const MAX_PERIOD_FACTOR: f64 = 64.0;
+
+/// A prediction: `(x-, P-)`, the tracker's prior, the acceleration feedforward's sample.
+pub(super) type Prior<T> = (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>, Option<(T, T)>);
 
 impl<T: Float> PmsmObserver<T> {
     /// One sample: predict with `u_prev = [u_a, u_b]` (V, held over the previous period), then
@@ -89,31 +93,30 @@ impl<T: Float> PmsmObserver<T> {
         // surface ones none of the salient model's.
         match (self.tracker.is_some(), self.model.discrete().salient) {
             (true, false) => {
-                let (xm, pm, tm) = self.prior::<true, false>(u_prev);
-                self.correct_prior::<true, false>(xm, pm, tm, i)
+                let (xm, pm, tm, ff) = self.prior::<true, false>(u_prev);
+                self.correct_prior::<true, false>(xm, pm, tm, ff, i)
             }
             (false, false) => {
-                let (xm, pm, _) = self.prior::<false, false>(u_prev);
-                self.correct_prior::<false, false>(xm, pm, None, i)
+                let (xm, pm, _, ff) = self.prior::<false, false>(u_prev);
+                self.correct_prior::<false, false>(xm, pm, None, ff, i)
             }
             (true, true) => {
-                let (xm, pm, tm) = self.prior::<true, true>(u_prev);
-                self.correct_prior::<true, true>(xm, pm, tm, i)
+                let (xm, pm, tm, ff) = self.prior::<true, true>(u_prev);
+                self.correct_prior::<true, true>(xm, pm, tm, ff, i)
             }
             (false, true) => {
-                let (xm, pm, _) = self.prior::<false, true>(u_prev);
-                self.correct_prior::<false, true>(xm, pm, None, i)
+                let (xm, pm, _, ff) = self.prior::<false, true>(u_prev);
+                self.correct_prior::<false, true>(xm, pm, None, ff, i)
             }
         }
     }
 
     /// The prediction `(x-, P-)` and, with tracking (`TRACK`, the tracker present), the prior
-    /// of the tracked parameters (nothing is stored here). `S`: the motor is salient.
+    /// of the tracked parameters; with the acceleration feedforward, the q current and the
+    /// speed of the posterior it started from (its learning's sample). Nothing is stored here.
+    /// `S`: the motor is salient.
     #[inline(always)]
-    pub(super) fn prior<const TRACK: bool, const S: bool>(
-        &self,
-        u_prev: [T; 2],
-    ) -> (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>) {
+    pub(super) fn prior<const TRACK: bool, const S: bool>(&self, u_prev: [T; 2]) -> Prior<T> {
         // One test on the common path for the voltage timing and the speed noise adaptation
         // (both off in foc's drive); their work is out of line.
         let q_adapted;
@@ -144,11 +147,13 @@ impl<T: Float> PmsmObserver<T> {
                 let (xm, mut pm, t) =
                     structured::predict::<T, S>(&disc, q, &self.x, &self.p, u_prev, trusted);
                 let tm = tr.predict::<S>(k, &disc, &t, &self.x, &mut pm, active);
-                (xm, pm, Some(tm))
+                let mut xm = xm;
+                let ff = self.feedforward(&mut xm, &t);
+                (xm, pm, Some(tm), ff)
             }
             _ => {
                 let trusted = self.locked;
-                let (xm, pm, _) = structured::predict::<T, S>(
+                let (mut xm, pm, t) = structured::predict::<T, S>(
                     self.model.discrete(),
                     q,
                     &self.x,
@@ -156,7 +161,8 @@ impl<T: Float> PmsmObserver<T> {
                     u_prev,
                     trusted,
                 );
-                (xm, pm, None)
+                let ff = self.feedforward(&mut xm, &t);
+                (xm, pm, None, ff)
             }
         }
     }
@@ -211,6 +217,27 @@ impl<T: Float> PmsmObserver<T> {
         q
     }
 
+    /// The acceleration feedforward's share of the prior `xm` (module docs, "Acceleration
+    /// feedforward"), from the posterior's q current (in its frame: the step's `sin`, `cos`
+    /// of the angle in `t`) and speed, which it returns (the learning's sample).
+    #[inline(always)]
+    fn feedforward(&self, xm: &mut Vector4<T>, t: &TransitionTerms<T>) -> Option<(T, T)> {
+        let f = self.feedforward.as_ref()?;
+        let (x, w) = (&self.x, self.x[2]);
+        let iq = x[1] * t.cos_th - x[0] * t.sin_th;
+        f.feedforward(xm, iq, w, self.model.ts());
+        Some((iq, w))
+    }
+
+    /// The acceleration feedforward's learning sample `ff` of a committed step (`trusted`: the
+    /// step's angle was tracked and corrected).
+    #[inline(always)]
+    fn feedforward_watch(&mut self, ff: Option<(T, T)>, trusted: bool) {
+        if let (Some(f), Some((iq, w))) = (&mut self.feedforward, ff) {
+            f.watch(iq, w, trusted);
+        }
+    }
+
     /// The speed noise adaptation's bookkeeping after an accepted correction.
     #[inline(always)]
     fn extras_watch(&mut self, nis: T, tracking: bool) {
@@ -246,13 +273,13 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p, tm) = match (self.tracker.is_some(), self.model.discrete().salient) {
+        let (x, p, tm, ff) = match (self.tracker.is_some(), self.model.discrete().salient) {
             (true, false) => self.prior::<true, false>(u_prev),
             (false, false) => self.prior::<false, false>(u_prev),
             (true, true) => self.prior::<true, true>(u_prev),
             (false, true) => self.prior::<false, true>(u_prev),
         };
-        self.commit_prediction(x, p, tm)
+        self.commit_prediction(x, p, tm, ff)
     }
 
     /// Stores a prediction `(x, p)` (and the tracker's prior `tm`) as the new estimate, with
@@ -265,6 +292,7 @@ impl<T: Float> PmsmObserver<T> {
         x: Vector4<T>,
         p: Sym4<T>,
         tm: Option<TrackerStep<T>>,
+        ff: Option<(T, T)>,
     ) -> Result<(), EkfError> {
         let tracker_finite = match (&tm, &self.tracker) {
             (Some(s), Some(t)) => t.finite_with(s, t.psi),
@@ -287,6 +315,7 @@ impl<T: Float> PmsmObserver<T> {
             t.commit(s, t.psi);
             self.tracker_housekeeping();
         }
+        self.feedforward_watch(ff, false);
         self.events = Events::default();
         if self.unhealthy(&self.x, &self.p) {
             self.self_reset(None);
@@ -303,14 +332,14 @@ impl<T: Float> PmsmObserver<T> {
         match (self.tracker.is_some(), self.model.discrete().salient) {
             (true, false) => {
                 let tm = self.tracker.map(|t| t.as_step());
-                self.correct_prior::<true, false>(self.x, self.p, tm, i)
+                self.correct_prior::<true, false>(self.x, self.p, tm, None, i)
             }
-            (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, i),
+            (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, None, i),
             (true, true) => {
                 let tm = self.tracker.map(|t| t.as_step());
-                self.correct_prior::<true, true>(self.x, self.p, tm, i)
+                self.correct_prior::<true, true>(self.x, self.p, tm, None, i)
             }
-            (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, i),
+            (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, None, i),
         }
     }
 
@@ -322,6 +351,7 @@ impl<T: Float> PmsmObserver<T> {
         xm: Vector4<T>,
         pm: Sym4<T>,
         tm: Option<TrackerStep<T>>,
+        ff: Option<(T, T)>,
         i: [T; 2],
     ) -> Result<Estimate<T>, EkfError> {
         // Common path first: every test below is one comparison on good data; the rare
@@ -362,6 +392,7 @@ impl<T: Float> PmsmObserver<T> {
                 // Rejected by the gate: the step is the prediction only.
                 self.x = xm;
                 self.p = pm;
+                self.feedforward_watch(ff, false);
                 if TRACK && let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
                     t.commit(s, t.psi);
                     self.tracker_housekeeping();
@@ -400,6 +431,7 @@ impl<T: Float> PmsmObserver<T> {
                 self.fused -= 1;
             }
         }
+        self.feedforward_watch(ff, tracking);
         if self.extras {
             self.extras_watch(c.nis, tracking);
         }

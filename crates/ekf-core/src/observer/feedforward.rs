@@ -1,0 +1,253 @@
+//! Acceleration feedforward: the speed prediction follows the q current through a mechanical
+//! model learnt online ([`AccelerationFeedforward`]; the method is in the module docs of
+//! [`observer`](crate::observer), "Acceleration feedforward").
+
+use nalgebra::Vector4;
+
+use crate::error::Param;
+use crate::motor::{MotorParams, positive};
+use crate::{ConfigError, Float, to_t};
+
+/// Configuration of the acceleration feedforward (module docs of [`observer`](crate::observer),
+/// "Acceleration feedforward"): the speed prediction adds `Ts (k i_q + c0 + c1 w)`, a mechanical
+/// model whose three coefficients are learnt online by least squares from the filter's own speed
+/// changes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AccelerationFeedforward<T> {
+    /// Samples per block of the learning (at least 4).
+    pub block_samples: u32,
+    /// Blocks of the learning's memory (forgetting factor `1 - 1 / memory_blocks`; at least 1).
+    pub memory_blocks: T,
+    /// Largest `k`, rad/s^2 per A (above zero).
+    pub max_gain: T,
+    /// Smallest normalized determinant of the learning's information matrix at which the model
+    /// is taken into use (in `(0, 1)`): how far the q current's excursions must be from a
+    /// function of the speed for `k` to be told from the load.
+    pub min_conditioning: T,
+}
+
+impl<T: Float> AccelerationFeedforward<T> {
+    /// The defaults for `motor` sampled every `ts_s`: blocks of 32 samples, a memory of 100
+    /// blocks, `max_gain` the gain at which the characteristic current `I_c = psi_f / L_q`
+    /// changes `w Ts` by 0.1 rad per period (`0.1 / (Ts^2 I_c)`), conditioning `10^-3`.
+    pub fn default_for(motor: &MotorParams<T>, ts_s: T) -> Self {
+        Self {
+            block_samples: 32,
+            memory_blocks: to_t(100.0),
+            max_gain: to_t::<T>(0.1) / (ts_s * ts_s * motor.characteristic_current_a()),
+            min_conditioning: to_t(1e-3),
+        }
+    }
+
+    /// Checks every field: at least 4 samples per block and 1 block of memory, the gain bound
+    /// finite and above zero, the conditioning in `(0, 1)`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.block_samples < 4 {
+            return Err(ConfigError::OutOfRange(Param::FeedforwardBlock));
+        }
+        if !self.memory_blocks.is_finite() || self.memory_blocks < T::one() {
+            return Err(ConfigError::OutOfRange(Param::FeedforwardMemory));
+        }
+        positive(self.max_gain, Param::FeedforwardMaxGain)?;
+        let c = self.min_conditioning;
+        if !(c > T::zero() && c < T::one()) {
+            return Err(ConfigError::OutOfRange(Param::FeedforwardConditioning));
+        }
+        Ok(())
+    }
+}
+
+/// The feedforward's running state: the model in use, the learning's block and sums.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct FeedforwardState<T> {
+    /// Model in use: acceleration `k i_q + c0 + c1 w` (rad/s^2; all 0 until learnt).
+    pub(crate) k: T,
+    c0: T,
+    c1: T,
+    /// Dead band of the modelled acceleration: `k` times three standard deviations of the
+    /// measurement noise (a steady current's noise moves no speed).
+    band: T,
+    /// Three standard deviations of the measurement noise, A.
+    noise3: T,
+    /// Normalization: `1 / I_c` (A^-1), the nominal period (s).
+    inv_ic: T,
+    ts: T,
+    block_samples: u32,
+    forget: T,
+    max_gain: T,
+    min_conditioning: T,
+    /// The block: samples, sums of `i_q / I_c` and `w Ts`, `w Ts` at its start, all trusted.
+    n: u32,
+    s_iq: T,
+    s_w: T,
+    w0: T,
+    trusted: bool,
+    /// Information matrix (upper triangle) and vector of the normalized regression
+    /// `dw Ts = t0 sum(i_q / I_c) + t1 n + t2 sum(w Ts)`.
+    a: [T; 6],
+    b: [T; 3],
+}
+
+impl<T: Float> FeedforwardState<T> {
+    /// The state for `c` for `motor` at the period `ts_s`, with the measurement noise variance
+    /// `r_a2` (A^2, the larger diagonal entry of `R`).
+    pub(crate) fn new(
+        c: &AccelerationFeedforward<T>,
+        motor: &MotorParams<T>,
+        ts_s: T,
+        r_a2: T,
+    ) -> Self {
+        Self {
+            k: T::zero(),
+            c0: T::zero(),
+            c1: T::zero(),
+            band: T::zero(),
+            noise3: to_t::<T>(3.0) * r_a2.sqrt(),
+            inv_ic: T::one() / motor.characteristic_current_a(),
+            ts: ts_s,
+            block_samples: c.block_samples,
+            forget: T::one() - T::one() / c.memory_blocks,
+            max_gain: c.max_gain,
+            min_conditioning: c.min_conditioning,
+            n: 0,
+            s_iq: T::zero(),
+            s_w: T::zero(),
+            w0: T::zero(),
+            trusted: false,
+            a: [T::zero(); 6],
+            b: [T::zero(); 3],
+        }
+    }
+
+    /// Adds the modelled acceleration over a period of `ts` to the prior `xm`, from the q
+    /// current `iq` and the speed of the posterior the prediction started from: the speed by
+    /// `ts a`, the angle by half of that times `ts` (the mean speed over the period). Within
+    /// the dead band, nothing.
+    #[inline(always)]
+    pub(crate) fn feedforward(&self, xm: &mut Vector4<T>, iq: T, w: T, ts: T) {
+        let a = self.k * iq + self.c0 + self.c1 * w;
+        let a = if a > self.band {
+            a - self.band
+        } else if a < -self.band {
+            a + self.band
+        } else {
+            return;
+        };
+        let dw = ts * a;
+        xm[2] += dw;
+        xm[3] += dw * ts * to_t(0.5);
+    }
+
+    /// One sample of the learning: the q current `iq` and the speed `w` of the posterior the
+    /// step's prediction started from (`trusted`: its angle was tracked). A full block is
+    /// closed first, by this speed.
+    #[inline(always)]
+    pub(crate) fn watch(&mut self, iq: T, w: T, trusted: bool) {
+        let wts = w * self.ts;
+        if self.n >= self.block_samples {
+            self.learn(wts);
+        }
+        if self.n == 0 {
+            self.w0 = wts;
+            self.trusted = true;
+        }
+        self.s_iq += iq * self.inv_ic;
+        self.s_w += wts;
+        self.n += 1;
+        self.trusted &= trusted;
+    }
+
+    /// The end of a block closed by the speed `wts` (`w Ts`): the regression's update and, when
+    /// well conditioned, the model from its solution. The block's `n` currents drove the speed
+    /// from its first sample to `wts`.
+    #[cold]
+    #[inline(never)]
+    fn learn(&mut self, wts: T) {
+        let x = [self.s_iq, to_t::<T>(f64::from(self.n)), self.s_w];
+        let y = wts - self.w0;
+        let trusted = self.trusted;
+        self.n = 0;
+        self.s_iq = T::zero();
+        self.s_w = T::zero();
+        if !trusted {
+            return;
+        }
+        let l = self.forget;
+        let a = [
+            l * self.a[0] + x[0] * x[0],
+            l * self.a[1] + x[0] * x[1],
+            l * self.a[2] + x[0] * x[2],
+            l * self.a[3] + x[1] * x[1],
+            l * self.a[4] + x[1] * x[2],
+            l * self.a[5] + x[2] * x[2],
+        ];
+        let b = [
+            l * self.b[0] + x[0] * y,
+            l * self.b[1] + x[1] * y,
+            l * self.b[2] + x[2] * y,
+        ];
+        if !(a.iter().chain(b.iter()).fold(T::zero(), |s, &v| s + v)).is_finite() {
+            return;
+        }
+        self.a = a;
+        self.b = b;
+        // Solve by Cramer's rule; the determinant normalized by the diagonal's product measures
+        // how independent the regressors have been.
+        let [a00, a01, a02, a11, a12, a22] = a;
+        let c00 = a11 * a22 - a12 * a12;
+        let c01 = a02 * a12 - a01 * a22;
+        let c02 = a01 * a12 - a02 * a11;
+        let det = a00 * c00 + a01 * c01 + a02 * c02;
+        let scale = a00 * a11 * a22;
+        if !(scale > T::zero() && det > self.min_conditioning * scale) {
+            return;
+        }
+        let c11 = a00 * a22 - a02 * a02;
+        let c12 = a01 * a02 - a00 * a12;
+        let c22 = a00 * a11 - a01 * a01;
+        let inv = T::one() / det;
+        let t0 = (c00 * b[0] + c01 * b[1] + c02 * b[2]) * inv;
+        let t1 = (c01 * b[0] + c11 * b[1] + c12 * b[2]) * inv;
+        let t2 = (c02 * b[0] + c12 * b[1] + c22 * b[2]) * inv;
+        // Back to physical units: dw Ts per step = t0 i_q / I_c + t1 + t2 w Ts.
+        let inv_ts2 = T::one() / (self.ts * self.ts);
+        let k = t0 * self.inv_ic * inv_ts2;
+        if !k.is_finite() || k <= T::zero() {
+            // A model in which current does not accelerate the rotor is no model: off.
+            self.k = T::zero();
+            self.c0 = T::zero();
+            self.c1 = T::zero();
+            self.band = T::zero();
+            return;
+        }
+        let (k, t1, t2) = if k > self.max_gain {
+            // Bounded gain: the load terms scaled with it.
+            let f = self.max_gain / k;
+            (self.max_gain, t1 * f, t2 * f)
+        } else {
+            (k, t1, t2)
+        };
+        self.k = k;
+        self.c0 = t1 * inv_ts2;
+        self.c1 = t2 / self.ts;
+        self.band = k * self.noise3;
+    }
+
+    /// After a reset: the block restarts; the model is kept (a property of the drive).
+    pub(crate) fn restart(&mut self) {
+        self.n = 0;
+        self.s_iq = T::zero();
+        self.s_w = T::zero();
+    }
+
+    /// After a branch flip (`theta += pi`, `w = -w`): in the flipped frame `i_q`, `w` and the
+    /// acceleration change sign, so the model's constant term does, and the learning's sums
+    /// that pair the constant regressor with an odd one; the block restarts.
+    pub(crate) fn flip(&mut self) {
+        self.c0 = -self.c0;
+        self.a[1] = -self.a[1];
+        self.a[4] = -self.a[4];
+        self.b[1] = -self.b[1];
+        self.restart();
+    }
+}
