@@ -232,6 +232,7 @@ impl<T: Float, const N: usize> MapObserver<T, N> {
         ObserverConfig {
             parameter_tracking: None,
             speed_noise_adaptation: None,
+            acceleration_feedforward: None,
             ..ObserverConfig::new(small_signal(map, rs_ohm, pole_pairs), ts_s)
         }
     }

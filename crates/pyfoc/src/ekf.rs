@@ -64,6 +64,7 @@ struct Settings {
     tracking: Tracking,
     voltage_delay_s: f64,
     inverter_voltage_v: f64,
+    feedforward: bool,
 }
 
 /// The observer of `motor` in precision `T`: on constant parameters, or on the motor's flux
@@ -97,6 +98,9 @@ fn build<T: Float, O>(
     };
     cfg.voltage_delay_s = conv(s.voltage_delay_s);
     cfg.inverter_voltage_v = conv(s.inverter_voltage_v);
+    if !s.feedforward {
+        cfg.acceleration_feedforward = None;
+    }
     cfg.discretization = s.disc;
     cfg.covariance_update = s.update;
     match s.tracking {
@@ -147,7 +151,8 @@ impl Ekf {
     #[new]
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
-        tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0))]
+        tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0,
+        acceleration_feedforward = true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -162,6 +167,7 @@ impl Ekf {
         tracking: &str,
         voltage_delay_s: f64,
         inverter_voltage_v: f64,
+        acceleration_feedforward: bool,
     ) -> PyResult<Self> {
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
@@ -205,6 +211,7 @@ impl Ekf {
             tracking,
             voltage_delay_s,
             inverter_voltage_v,
+            feedforward: acceleration_feedforward,
         };
         let (observer, dtype) = match dtype {
             "float64" => (

@@ -60,10 +60,17 @@ impl<T: Float> AccelerationFeedforward<T> {
 /// The feedforward's running state: the model in use, the learning's block and sums.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct FeedforwardState<T> {
-    /// Model in use: acceleration `k i_q + c0 + c1 w` (rad/s^2; all 0 until learnt).
+    /// Learnt gain in use, rad/s^2 per A (0 until learnt).
     pub(crate) k: T,
-    c0: T,
-    c1: T,
+    /// The load's acceleration, estimated from the filter's speed changes: a low-pass of
+    /// `k i_q - dw / Ts` (rad/s^2).
+    load: T,
+    /// Its gain per sample.
+    k_load: T,
+    /// The previous sample's `i_q` and `w` (the step between them is the load's measurement).
+    iq_prev: T,
+    w_prev: T,
+    primed: bool,
     /// Dead band of the modelled acceleration: `k` times three standard deviations of the
     /// measurement noise (a steady current's noise moves no speed).
     band: T,
@@ -72,6 +79,7 @@ pub(crate) struct FeedforwardState<T> {
     /// Normalization: `1 / I_c` (A^-1), the nominal period (s).
     inv_ic: T,
     ts: T,
+    inv_ts: T,
     block_samples: u32,
     forget: T,
     max_gain: T,
@@ -99,12 +107,16 @@ impl<T: Float> FeedforwardState<T> {
     ) -> Self {
         Self {
             k: T::zero(),
-            c0: T::zero(),
-            c1: T::zero(),
+            load: T::zero(),
+            k_load: to_t(0.125),
+            iq_prev: T::zero(),
+            w_prev: T::zero(),
+            primed: false,
             band: T::zero(),
             noise3: to_t::<T>(3.0) * r_a2.sqrt(),
             inv_ic: T::one() / motor.characteristic_current_a(),
             ts: ts_s,
+            inv_ts: T::one() / ts_s,
             block_samples: c.block_samples,
             forget: T::one() - T::one() / c.memory_blocks,
             max_gain: c.max_gain,
@@ -124,8 +136,8 @@ impl<T: Float> FeedforwardState<T> {
     /// `ts a`, the angle by half of that times `ts` (the mean speed over the period). Within
     /// the dead band, nothing.
     #[inline(always)]
-    pub(crate) fn feedforward(&self, xm: &mut Vector4<T>, iq: T, w: T, ts: T) {
-        let a = self.k * iq + self.c0 + self.c1 * w;
+    pub(crate) fn feedforward(&self, xm: &mut Vector4<T>, iq: T, ts: T) {
+        let a = self.k * iq - self.load;
         let a = if a > self.band {
             a - self.band
         } else if a < -self.band {
@@ -143,6 +155,15 @@ impl<T: Float> FeedforwardState<T> {
     /// closed first, by this speed.
     #[inline(always)]
     pub(crate) fn watch(&mut self, iq: T, w: T, trusted: bool) {
+        // The load: what the current's acceleration leaves of the filter's speed change over
+        // the last step (it has no meaning before the first sample or across a restart).
+        if self.primed {
+            let a = self.k * self.iq_prev - (w - self.w_prev) * self.inv_ts;
+            self.load += (a - self.load) * self.k_load;
+        }
+        self.iq_prev = iq;
+        self.w_prev = w;
+        self.primed = true;
         let wts = w * self.ts;
         if self.n >= self.block_samples {
             self.learn(wts);
@@ -202,39 +223,28 @@ impl<T: Float> FeedforwardState<T> {
         if !(scale > T::zero() && det > self.min_conditioning * scale) {
             return;
         }
-        let c11 = a00 * a22 - a02 * a02;
-        let c12 = a01 * a02 - a00 * a12;
-        let c22 = a00 * a11 - a01 * a01;
-        let inv = T::one() / det;
-        let t0 = (c00 * b[0] + c01 * b[1] + c02 * b[2]) * inv;
-        let t1 = (c01 * b[0] + c11 * b[1] + c12 * b[2]) * inv;
-        let t2 = (c02 * b[0] + c12 * b[1] + c22 * b[2]) * inv;
-        // Back to physical units: dw Ts per step = t0 i_q / I_c + t1 + t2 w Ts.
-        let inv_ts2 = T::one() / (self.ts * self.ts);
-        let k = t0 * self.inv_ic * inv_ts2;
-        if !k.is_finite() || k <= T::zero() {
-            // A model in which current does not accelerate the rotor is no model: off.
-            self.k = T::zero();
-            self.c0 = T::zero();
-            self.c1 = T::zero();
-            self.band = T::zero();
-            return;
-        }
-        let (k, t1, t2) = if k > self.max_gain {
-            // Bounded gain: the load terms scaled with it.
-            let f = self.max_gain / k;
-            (self.max_gain, t1 * f, t2 * f)
+        // Only the current's coefficient is used: the load's terms in the regression keep it
+        // unbiased by a load that moves with the speed, while the feedforward takes the load
+        // from its own estimate (neutral in a steady state).
+        let t0 = (c00 * b[0] + c01 * b[1] + c02 * b[2]) / det;
+        let k = t0 * self.inv_ic / (self.ts * self.ts);
+        let k = if !k.is_finite() || k <= T::zero() {
+            // Current that does not accelerate the rotor is no model: off.
+            T::zero()
+        } else if k > self.max_gain {
+            self.max_gain
         } else {
-            (k, t1, t2)
+            k
         };
+        // The load estimate moves to the new gain's balance at once.
+        self.load += (k - self.k) * self.iq_prev;
         self.k = k;
-        self.c0 = t1 * inv_ts2;
-        self.c1 = t2 / self.ts;
         self.band = k * self.noise3;
     }
 
     /// After a reset: the block restarts; the model is kept (a property of the drive).
     pub(crate) fn restart(&mut self) {
+        self.primed = false;
         self.n = 0;
         self.s_iq = T::zero();
         self.s_w = T::zero();
@@ -244,7 +254,7 @@ impl<T: Float> FeedforwardState<T> {
     /// acceleration change sign, so the model's constant term does, and the learning's sums
     /// that pair the constant regressor with an odd one; the block restarts.
     pub(crate) fn flip(&mut self) {
-        self.c0 = -self.c0;
+        self.load = -self.load;
         self.a[1] = -self.a[1];
         self.a[4] = -self.a[4];
         self.b[1] = -self.b[1];

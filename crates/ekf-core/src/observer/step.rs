@@ -225,7 +225,7 @@ impl<T: Float> PmsmObserver<T> {
         let f = self.feedforward.as_ref()?;
         let (x, w) = (&self.x, self.x[2]);
         let iq = x[1] * t.cos_th - x[0] * t.sin_th;
-        f.feedforward(xm, iq, w, self.model.ts());
+        f.feedforward(xm, iq, self.model.ts());
         Some((iq, w))
     }
 
