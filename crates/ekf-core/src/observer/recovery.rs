@@ -2,6 +2,7 @@
 //! "Safeguards"): a rejected sample, a branch flip, the health check and its self-reset, the
 //! divergence count, a refused step.
 
+use super::pmsm::Tracking;
 use super::{Estimate, PmsmObserver};
 use nalgebra::Vector4;
 
@@ -70,8 +71,8 @@ impl<T: Float> PmsmObserver<T> {
         self.x[3] = wrap_angle(self.x[3] + T::pi());
         self.p = self.p.flip_speed();
         self.p.p33 += b.flip_var;
-        if let Some(t) = &mut self.tracker {
-            t.flip_speed();
+        if let Some(k) = &mut self.tracking {
+            k.t.flip_speed();
         }
         self.counters.branch_flips = self.counters.branch_flips.saturating_add(1);
         self.events.flipped = true;
@@ -144,7 +145,7 @@ impl<T: Float> PmsmObserver<T> {
         };
         self.x = Vector4::new(ia, ib, w, th);
         self.p = h.p0;
-        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) {
+        if let Some(Tracking { t, slow }) = &mut self.tracking {
             t.restart(slow, true);
         }
         self.restart_safeguards();

@@ -3,6 +3,7 @@
 
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 use super::host;
+use super::pmsm::Tracking;
 use super::{Estimate, PmsmObserver};
 use nalgebra::{Matrix4, Vector4};
 
@@ -87,7 +88,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         // Four monomorphic paths: the one without tracking carries none of its code, the
         // surface ones none of the salient model's.
-        match (self.tracker.is_some(), self.model.discrete().salient) {
+        match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
                 let (xm, pm, tm) = self.prior::<true, false>(u_prev);
                 self.correct_prior::<true, false>(xm, pm, tm, i)
@@ -120,7 +121,7 @@ impl<T: Float> PmsmObserver<T> {
         let mut q = self.model.q_sym();
         let mut u_prev = u_prev;
         if self.extras {
-            if self.voltage_delay != T::zero() || self.inverter.0 != T::zero() {
+            if self.timing {
                 u_prev = self.applied(u_prev);
             }
             if let Some(a) = &self.adaptation
@@ -130,8 +131,8 @@ impl<T: Float> PmsmObserver<T> {
                 q = &q_adapted;
             }
         }
-        match (&self.tracker, &self.slow) {
-            (Some(tr), Some(slow)) if TRACK => {
+        match &self.tracking {
+            Some(Tracking { t: tr, slow }) if TRACK => {
                 let k = &slow.k;
                 let tracked = self.p.p33 <= self.angle_var_limit;
                 let trusted = self.locked;
@@ -246,7 +247,7 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p, tm) = match (self.tracker.is_some(), self.model.discrete().salient) {
+        let (x, p, tm) = match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => self.prior::<true, false>(u_prev),
             (false, false) => self.prior::<false, false>(u_prev),
             (true, true) => self.prior::<true, true>(u_prev),
@@ -266,8 +267,8 @@ impl<T: Float> PmsmObserver<T> {
         p: Sym4<T>,
         tm: Option<TrackerStep<T>>,
     ) -> Result<(), EkfError> {
-        let tracker_finite = match (&tm, &self.tracker) {
-            (Some(s), Some(t)) => t.finite_with(s, t.psi),
+        let tracker_finite = match (&tm, &self.tracking) {
+            (Some(s), Some(Tracking { t, .. })) => t.finite_with(s, t.psi),
             _ => true,
         };
         if !(finite(x.as_slice()) && p.all_finite() && tracker_finite) {
@@ -283,7 +284,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = p;
-        if let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+        if let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
             t.commit(s, t.psi);
             self.tracker_housekeeping();
         }
@@ -300,14 +301,14 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        match (self.tracker.is_some(), self.model.discrete().salient) {
+        match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
-                let tm = self.tracker.map(|t| t.as_step());
+                let tm = self.tracking.map(|k| k.t.as_step());
                 self.correct_prior::<true, false>(self.x, self.p, tm, i)
             }
             (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, i),
             (true, true) => {
-                let tm = self.tracker.map(|t| t.as_step());
+                let tm = self.tracking.map(|k| k.t.as_step());
                 self.correct_prior::<true, true>(self.x, self.p, tm, i)
             }
             (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, i),
@@ -339,8 +340,8 @@ impl<T: Float> PmsmObserver<T> {
             _ => false,
         });
         let (post, tn) = match outcome {
-            Ok(Outcome::Updated(post)) => match (&tm, &self.tracker, &self.slow) {
-                (Some(s), Some(t), Some(slow)) if TRACK => {
+            Ok(Outcome::Updated(post)) => match (&tm, &self.tracking) {
+                (Some(s), Some(Tracking { t, slow })) if TRACK => {
                     let (step, psi, sum) = t.correct(&slow.k, s, &post);
                     // Both sums finite in one test (`v - v` is 0 for a finite `v`, NaN
                     // otherwise): the state's results and the tracker's.
@@ -362,7 +363,7 @@ impl<T: Float> PmsmObserver<T> {
                 // Rejected by the gate: the step is the prediction only.
                 self.x = xm;
                 self.p = pm;
-                if TRACK && let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+                if TRACK && let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
                     t.commit(s, t.psi);
                     self.tracker_housekeeping();
                 }
@@ -387,7 +388,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.x = x;
         self.p = post.p;
-        if TRACK && let (Some((s, psi)), Some(t)) = (&tn, &mut self.tracker) {
+        if TRACK && let (Some((s, psi)), Some(Tracking { t, .. })) = (&tn, &mut self.tracking) {
             t.commit(s, *psi);
             self.tracker_housekeeping();
         }
@@ -446,7 +447,7 @@ impl<T: Float> PmsmObserver<T> {
     /// filter, the reported deviations).
     #[inline(always)]
     pub(super) fn tracker_housekeeping(&mut self) {
-        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow)
+        if let Some(Tracking { t, slow }) = &mut self.tracking
             && t.housekeeping_due(&slow.k)
         {
             t.housekeeping(slow);
@@ -460,7 +461,7 @@ impl<T: Float> PmsmObserver<T> {
     #[cold]
     #[inline(never)]
     pub(super) fn refresh_rs_constants(&mut self) {
-        if let Some(t) = &self.tracker
+        if let Some(Tracking { t, .. }) = &self.tracking
             && t.rs != self.rs_constants.0
         {
             // At the configured flux, so that the cache is a function of `Rs` alone (its `c`
