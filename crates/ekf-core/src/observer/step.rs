@@ -401,9 +401,7 @@ impl<T: Float> PmsmObserver<T> {
                 self.fused -= 1;
             }
         }
-        if self.extras {
-            self.extras_watch(c.nis, tracking);
-        }
+        self.extras_watch(c.nis, tracking);
         self.last = c;
         self.events = Events::default();
         if let Some(g) = &mut self.gate {
