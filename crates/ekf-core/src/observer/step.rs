@@ -115,21 +115,19 @@ impl<T: Float> PmsmObserver<T> {
         &self,
         u_prev: [T; 2],
     ) -> (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>) {
-        // One test on the common path for the voltage timing and the speed noise adaptation
-        // (both off in foc's drive); their work is out of line.
+        // One test on the common path each for the voltage timing and the speed noise
+        // adaptation's raised `Q` (both off in foc's drive); their work is out of line.
         let q_adapted;
         let mut q = self.model.q_sym();
         let mut u_prev = u_prev;
-        if self.extras {
-            if self.timing {
-                u_prev = self.applied(u_prev);
-            }
-            if let Some(a) = &self.adaptation
-                && a.factor > T::one()
-            {
-                q_adapted = self.adapted_q(a.factor);
-                q = &q_adapted;
-            }
+        if self.timing {
+            u_prev = self.applied(u_prev);
+        }
+        if let Some(a) = &self.adaptation
+            && a.factor > T::one()
+        {
+            q_adapted = self.adapted_q(a.factor);
+            q = &q_adapted;
         }
         match &self.tracking {
             Some(Tracking { t: tr, slow }) if TRACK => {
@@ -212,9 +210,9 @@ impl<T: Float> PmsmObserver<T> {
         q
     }
 
-    /// The speed noise adaptation's bookkeeping after an accepted correction.
+    /// The speed noise adaptation's bookkeeping after an accepted correction (when it is on).
     #[inline(always)]
-    fn extras_watch(&mut self, nis: T, tracking: bool) {
+    fn adaptation_watch(&mut self, nis: T, tracking: bool) {
         if let Some(a) = &mut self.adaptation {
             a.watch(
                 nis,
@@ -401,7 +399,7 @@ impl<T: Float> PmsmObserver<T> {
                 self.fused -= 1;
             }
         }
-        self.extras_watch(c.nis, tracking);
+        self.adaptation_watch(c.nis, tracking);
         self.last = c;
         self.events = Events::default();
         if let Some(g) = &mut self.gate {
