@@ -113,7 +113,7 @@ impl<T: Float> PmsmObserver<T> {
             l * rs,
         ];
         let cpp = t.s.c_pp - kp * l;
-        let floor = T::default_epsilon() * kx.var0_psi;
+        let floor = kx.var_floor_psi;
         let psi = t.psi + kp * y;
         let psi = if psi < kx.psi_min {
             kx.psi_min

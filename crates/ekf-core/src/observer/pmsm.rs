@@ -48,6 +48,9 @@ pub struct PmsmObserver<T: Float> {
     /// Steps left in which a fused angle ([`Self::correct_angle`]) makes the angle observable
     /// at any speed.
     pub(super) fused: u32,
+    /// Steps refused in a row for a singular `S` or a non-finite result (counted with the
+    /// covariance health check on; a plain field: reset by every step without a test).
+    pub(super) refusals: u32,
     /// Online parameter tracking (`None` when off).
     pub(super) tracking: Option<Tracking<T>>,
     /// The step's constants at a tracked `Rs` (`model.discrete_at(_, rs)`) and that `Rs`:
@@ -124,7 +127,6 @@ impl<T: Float> PmsmObserver<T> {
                 inconsistent: 0,
             }),
             health: cfg.covariance_health.map(|h| HealthState {
-                refusals: 0,
                 trace_bound: h.trace_factor * p0.trace(),
                 current_bound: h.current_factor * cfg.motor.characteristic_current_a(),
                 speed_bound: h.max_w_ts_rad / cfg.ts_s,
@@ -147,6 +149,7 @@ impl<T: Float> PmsmObserver<T> {
                 || cfg.speed_noise_adaptation.is_some(),
             timing: cfg.voltage_delay_s != T::zero() || cfg.inverter_voltage_v != T::zero(),
             fused: 0,
+            refusals: 0,
             tracking,
             events: Events::default(),
             counters: ObserverCounters::default(),

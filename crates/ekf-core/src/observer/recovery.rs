@@ -106,11 +106,11 @@ impl<T: Float> PmsmObserver<T> {
     #[inline(never)]
     pub(super) fn refused_resets(&mut self) -> bool {
         let unhealthy = self.unhealthy(&self.x, &self.p);
-        match &mut self.health {
-            Some(h) => {
-                h.refusals += 1;
-                if unhealthy || h.refusals >= MAX_REFUSALS {
-                    h.refusals = 0;
+        match &self.health {
+            Some(_) => {
+                self.refusals += 1;
+                if unhealthy || self.refusals >= MAX_REFUSALS {
+                    self.refusals = 0;
                     true
                 } else {
                     false

@@ -277,9 +277,7 @@ impl<T: Float> PmsmObserver<T> {
             }
             return Err(EkfError::NonFiniteResult);
         }
-        if let Some(h) = &mut self.health {
-            h.refusals = 0;
-        }
+        self.refusals = 0;
         self.x = x;
         self.p = p;
         if let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
@@ -341,10 +339,12 @@ impl<T: Float> PmsmObserver<T> {
             Ok(Outcome::Updated(post)) => match (&tm, &self.tracking) {
                 (Some(s), Some(Tracking { t, slow })) if TRACK => {
                     let (step, psi, sum) = t.correct(&slow.k, s, &post);
-                    // Both sums finite in one test (`v - v` is 0 for a finite `v`, NaN
-                    // otherwise): the state's results and the tracker's.
+                    // Both sums finite in one test on their sum (`v - v` is 0 for a finite
+                    // `v`, NaN otherwise): the state's results and the tracker's (a sum of
+                    // check sums, conservative like them).
+                    let total = post.sum + sum;
                     #[allow(clippy::eq_op)]
-                    let finite = (post.sum - post.sum) + (sum - sum) == T::zero();
+                    let finite = total - total == T::zero();
                     if !finite {
                         return self.refused(EkfError::NonFiniteResult, i);
                     }
@@ -381,9 +381,7 @@ impl<T: Float> PmsmObserver<T> {
             Err(e) => return self.refused(e, i),
         };
         let (x, c, dth) = (post.x, post.correction, post.dth);
-        if let Some(h) = &mut self.health {
-            h.refusals = 0;
-        }
+        self.refusals = 0;
         self.x = x;
         self.p = post.p;
         if TRACK && let (Some((s, psi)), Some(Tracking { t, .. })) = (&tn, &mut self.tracking) {

@@ -170,6 +170,9 @@ pub(super) struct TrackerConstants<T> {
     pub q_psi: T,
     /// Initial variance of `psi_f`, also its ceiling.
     pub var0_psi: T,
+    /// Floor of the variance of `psi_f` after a correction, `eps var0_psi` (rounding must not
+    /// leave it non-positive).
+    pub var_floor_psi: T,
     /// Initial variance of `Rs` (split filter).
     pub var0_rs: T,
     pub min_speed2: T,
@@ -195,6 +198,7 @@ impl<T: Float> Tracker<T> {
         let mut k = TrackerConstants {
             q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * ts_s,
             var0_psi: sq(cfg.psi_f_sigma0 * psi0),
+            var_floor_psi: T::default_epsilon() * sq(cfg.psi_f_sigma0 * psi0),
             var0_rs: sq(cfg.rs_sigma0 * rs0),
             min_speed2: sq(cfg.min_speed_rad_s),
             settle_samples: cfg.settle_samples,
@@ -413,7 +417,7 @@ impl<T: Float> Tracker<T> {
         let psi = clamp(self.psi + kp0 * y[0] + kp1 * y[1], k.psi_min, k.psi_max);
         let c = prior.c_pp - (kp0 * l0 + kp1 * l1);
         // Rounding must not leave the variance non-positive.
-        let floor = T::default_epsilon() * k.var0_psi;
+        let floor = k.var_floor_psi;
         let next = TrackerStep {
             x,
             c_pp: if c > floor { c } else { floor },
