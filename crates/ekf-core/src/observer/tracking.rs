@@ -448,10 +448,12 @@ impl<T: Float> Tracker<T> {
 
     /// The sum of this tracker's values with the step `s` and flux `psi` committed: finite
     /// when they all are (NaN and infinities propagate; conservatively, an overflow too).
+    /// `Rs` is left out: a step does not change it, and it is finite whenever it is set (the
+    /// split filter takes only a finite result, the other setters clamp or check it).
     #[inline(always)]
     fn check_sum(&self, s: &TrackerStep<T>, psi: T) -> T {
         let x = &s.x;
-        psi + self.rs + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
+        psi + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
     }
 
     /// Whether the slow work is due (a full window, or the deviations to refresh).
