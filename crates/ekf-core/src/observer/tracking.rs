@@ -195,10 +195,11 @@ impl<T: Float> Tracker<T> {
     /// A tracker at the configured parameters with the initial covariance, and its slow part.
     pub fn new(cfg: &ParameterTracking<T>, psi0: T, rs0: T, ts_s: T) -> (Self, TrackerSlow<T>) {
         let sq = |v: T| v * v;
+        let var0_psi = sq(cfg.psi_f_sigma0 * psi0);
         let mut k = TrackerConstants {
             q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * ts_s,
-            var0_psi: sq(cfg.psi_f_sigma0 * psi0),
-            var_floor_psi: T::default_epsilon() * sq(cfg.psi_f_sigma0 * psi0),
+            var0_psi,
+            var_floor_psi: T::default_epsilon() * var0_psi,
             var0_rs: sq(cfg.rs_sigma0 * rs0),
             min_speed2: sq(cfg.min_speed_rad_s),
             settle_samples: cfg.settle_samples,
