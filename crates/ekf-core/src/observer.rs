@@ -205,8 +205,8 @@
 //! acceleration: foc's drive turns it off (a closed speed loop amplifies the speed noise; the
 //! drive knows its own torque command).
 //!
-//! **Acceleration feedforward** ([`AccelerationFeedforward`]; on in [`ObserverConfig::new`], off
-//! in foc's drive configuration and in [`ObserverConfig::seed`]). Torque is `3/2 p psi_f i_q`, so
+//! **Acceleration feedforward** ([`AccelerationFeedforward`]; opt-in: off in
+//! [`ObserverConfig::new`], [`ObserverConfig::seed`] and foc's drive). Torque is `3/2 p psi_f i_q`, so
 //! the rotor's electrical acceleration is `k i_q - a_load(w)` with `k = 3/2 p^2 psi_f / J`
 //! unknown (the inertia is the drive's, propeller or load included). The feedforward models it as
 //! `a = k i_q + c0 + c1 w` (a constant and a viscous load; with forgetting, the linear term

@@ -38,8 +38,8 @@
 //! scalar step equals it to rounding, tested).
 //!
 //! Cost on the Cortex-M4F (`f32`, 9 x 11 map; `bash scripts/qemu-firmware.sh`): the
-//! [`MapObserver`] step is 1363 instructions (median; max 1538), the constant-parameter salient
-//! step 1254 (`ekf_step_salient`, with tracking); the map's evaluation is 505 of them
+//! [`MapObserver`] step is 1339 instructions (median; max 1515), the constant-parameter salient
+//! step 1196 (`ekf_step_salient`, with tracking); the map's evaluation is 505 of them
 //! (`fluxmap_eval`).
 //!
 //! The noise covariances are those of the constant-parameter observer
@@ -232,7 +232,6 @@ impl<T: Float, const N: usize> MapObserver<T, N> {
         ObserverConfig {
             parameter_tracking: None,
             speed_noise_adaptation: None,
-            acceleration_feedforward: None,
             ..ObserverConfig::new(small_signal(map, rs_ohm, pole_pairs), ts_s)
         }
     }

@@ -16,7 +16,9 @@
 //! 2.88-2.98 deg. At `w Ts = 0.6` the status reads `Tracking` 100 % of the time (0 % when the
 //! speed drift check wrapped the block's advance instead of its deviation).
 use ekf_core::testing::Rng;
-use ekf_core::{MotorParams, ObserverConfig, PmsmObserver, Status, wrap_angle};
+use ekf_core::{
+    AccelerationFeedforward, MotorParams, ObserverConfig, PmsmObserver, Status, wrap_angle,
+};
 
 /// Electrical acceleration per ampere of `i_q`, rad/s^2 per A.
 const K: f64 = 420_000.0;
@@ -150,10 +152,10 @@ fn feedforward_learns_the_gain_and_holds_the_angle_through_current_steps() {
     let ts = 1e-4;
     let n = 8000;
     let from = n - 8 * 400;
-    let on = ObserverConfig::new(motor, ts);
-    let off = ObserverConfig {
-        acceleration_feedforward: None,
-        ..on
+    let off = ObserverConfig::new(motor, ts);
+    let on = ObserverConfig {
+        acceleration_feedforward: Some(AccelerationFeedforward::default_for(&motor, ts)),
+        ..off
     };
     let hot = |cfg: &ObserverConfig<f64>| {
         let mut c = *cfg;
@@ -204,16 +206,13 @@ fn steady_current_leaves_the_random_walk_alone() {
     let motor = MotorParams::servo();
     let ts = 1e-4;
     let rec = record(&motor, ts, 6000, 0.1 / ts, |_| 0.1 / ts * B / K, true, 3);
-    let on = ObserverConfig::new(motor, ts);
+    let off = ObserverConfig::new(motor, ts);
+    let on = ObserverConfig {
+        acceleration_feedforward: Some(AccelerationFeedforward::default_for(&motor, ts)),
+        ..off
+    };
     let a = run(&rec, &on, 3000);
-    let b = run(
-        &rec,
-        &ObserverConfig {
-            acceleration_feedforward: None,
-            ..on
-        },
-        3000,
-    );
+    let b = run(&rec, &off, 3000);
     println!(
         "steady: gain {:.0}, max error {:.3} / {:.3} deg",
         a.gain, a.max_deg, b.max_deg

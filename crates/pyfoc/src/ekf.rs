@@ -7,7 +7,8 @@ use std::sync::Mutex;
 use ekf_core::nalgebra::{Matrix2, Matrix4, Vector4};
 use ekf_core::saturated::MapObserver;
 use ekf_core::{
-    CovarianceUpdate, Discretization, EkfError, Float, ObserverConfig, PmsmObserver, RsTracking,
+    AccelerationFeedforward, CovarianceUpdate, Discretization, EkfError, Float, ObserverConfig,
+    PmsmObserver, RsTracking,
 };
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
@@ -98,8 +99,14 @@ fn build<T: Float, O>(
     };
     cfg.voltage_delay_s = conv(s.voltage_delay_s);
     cfg.inverter_voltage_v = conv(s.inverter_voltage_v);
-    if !s.feedforward {
-        cfg.acceleration_feedforward = None;
+    if s.feedforward {
+        if flux_map.is_some() {
+            return Err(ConfigError::new_err(
+                "acceleration_feedforward is not available on a flux map: leave it False",
+            ));
+        }
+        cfg.acceleration_feedforward =
+            Some(AccelerationFeedforward::default_for(&cfg.motor, cfg.ts_s));
     }
     cfg.discretization = s.disc;
     cfg.covariance_update = s.update;
@@ -152,7 +159,7 @@ impl Ekf {
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
         tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0,
-        acceleration_feedforward = true))]
+        acceleration_feedforward = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,

@@ -63,7 +63,8 @@ pub struct ObserverConfig<T: Float> {
     /// consistent filter's (module docs, "Speed noise adaptation"); `None` keeps `Q` fixed.
     pub speed_noise_adaptation: Option<SpeedNoiseAdaptation<T>>,
     /// Acceleration feedforward: the speed prediction follows the q current with a gain learnt
-    /// online (module docs, "Acceleration feedforward"); `None`: the speed is a random walk.
+    /// online (module docs, "Acceleration feedforward"); `None` (the default): the speed is a
+    /// random walk. Opt in with [`AccelerationFeedforward::default_for`].
     pub acceleration_feedforward: Option<AccelerationFeedforward<T>>,
 }
 
@@ -91,7 +92,7 @@ impl<T: Float> ObserverConfig<T> {
             speed_noise_adaptation: Some(SpeedNoiseAdaptation::default()),
             voltage_delay_s: T::zero(),
             inverter_voltage_v: T::zero(),
-            acceleration_feedforward: Some(AccelerationFeedforward::default_for(&motor, ts_s)),
+            acceleration_feedforward: None,
         }
     }
 

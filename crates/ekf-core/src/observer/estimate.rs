@@ -1,6 +1,7 @@
 //! What the observer reports: [`Estimate`] (one sample), [`Status`] and [`ObserverCounters`].
 
 use super::PmsmObserver;
+use super::pmsm::Tracking;
 use crate::{Float, to_t};
 
 /// Whether the angle estimate can be trusted.
@@ -100,8 +101,8 @@ impl<T: Float> PmsmObserver<T> {
             Status::Tracking
         };
         let (psi_f_wb, psi_f_sigma_wb, rs_ohm, rs_sigma_ohm, winding_temperature_c, tracking) =
-            match (&self.tracker, &self.slow) {
-                (Some(t), Some(slow)) => (
+            match &self.tracking {
+                Some(Tracking { t, slow }) => (
                     t.psi,
                     t.psi_sigma,
                     t.rs,

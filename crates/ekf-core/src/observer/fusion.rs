@@ -2,6 +2,7 @@
 //! [`PmsmObserver::correct_angle`].
 
 use super::PmsmObserver;
+use super::pmsm::Tracking;
 use nalgebra::Vector4;
 
 use super::structured::{self, Sym4};
@@ -77,7 +78,7 @@ impl<T: Float> PmsmObserver<T> {
             return Err(EkfError::NonFiniteResult);
         }
         // The flux (tracking active): its cross-covariance `X` with the angle takes its share.
-        let active = self.tracker.as_ref().is_some_and(|t| t.s.active);
+        let active = self.tracking.as_ref().is_some_and(|k| k.t.s.active);
         if active && !self.correct_angle_flux(y, k, inv_s, rs) {
             return Err(EkfError::NonFiniteResult);
         }
@@ -99,7 +100,7 @@ impl<T: Float> PmsmObserver<T> {
     #[cold]
     #[inline(never)]
     pub(super) fn correct_angle_flux(&mut self, y: T, k: [T; 4], inv_s: T, rs: T) -> bool {
-        let (Some(t), Some(slow)) = (&mut self.tracker, &self.slow) else {
+        let Some(Tracking { t, slow }) = &mut self.tracking else {
             return false;
         };
         let kx = &slow.k;
@@ -112,7 +113,7 @@ impl<T: Float> PmsmObserver<T> {
             l * rs,
         ];
         let cpp = t.s.c_pp - kp * l;
-        let floor = T::default_epsilon() * kx.var0_psi;
+        let floor = kx.var_floor_psi;
         let psi = t.psi + kp * y;
         let psi = if psi < kx.psi_min {
             kx.psi_min

@@ -121,7 +121,7 @@ impl<T: Float> PmsmObserver<T> {
         let mut q = self.model.q_sym();
         let mut u = u_prev;
         if self.extras {
-            if self.voltage_delay != T::zero() || self.inverter.0 != T::zero() {
+            if self.timing {
                 u = self.applied(u);
             }
             if let Some(a) = &self.adaptation

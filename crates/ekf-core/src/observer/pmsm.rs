@@ -45,18 +45,31 @@ pub struct PmsmObserver<T: Float> {
     /// A voltage delay, an inverter voltage or the speed noise adaptation is configured (their code runs out of
     /// line, behind this one test).
     pub(super) extras: bool,
+    /// A voltage delay or an inverter voltage is configured (the voltage applied differs from
+    /// the logged one): one test of a flag where the speed noise adaptation alone is on.
+    pub(super) timing: bool,
     /// Steps left in which a fused angle ([`Self::correct_angle`]) makes the angle observable
     /// at any speed.
     pub(super) fused: u32,
-    pub(super) tracker: Option<Tracker<T>>,
-    /// The tracking's constants and split filter (present with `tracker`).
-    pub(super) slow: Option<TrackerSlow<T>>,
+    /// Steps refused in a row for a singular `S` or a non-finite result (counted with the
+    /// covariance health check on; a plain field: reset by every step without a test).
+    pub(super) refusals: u32,
+    /// Online parameter tracking (`None` when off).
+    pub(super) tracking: Option<Tracking<T>>,
     /// The step's constants at a tracked `Rs` (`model.discrete_at(_, rs)`) and that `Rs`:
     /// `Rs` changes only once per window of the split filter, so a step whose `Rs` is this one
     /// recomputes only the flux's term (refreshed by [`Self::refresh_rs_constants`]).
     pub(super) rs_constants: (T, Discrete<T>),
     pub(super) events: Events,
     pub(super) counters: ObserverCounters,
+}
+
+/// The online parameter tracking: the per-step part and the slow part (its constants and
+/// split filter), present together (one test of one `Option` on the step's path).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Tracking<T> {
+    pub(super) t: Tracker<T>,
+    pub(super) slow: TrackerSlow<T>,
 }
 
 pub(super) fn zero_correction<T: Float>() -> Correction<T, 2> {
@@ -75,13 +88,10 @@ impl<T: Float> PmsmObserver<T> {
         x0[3] = wrap_angle(x0[3]);
         let ts = cfg.ts_s;
         let p0 = Sym4::from_matrix(&cfg.p0);
-        let (tracker, slow) = match cfg.parameter_tracking {
-            Some(t) => {
-                let (tracker, slow) = Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts);
-                (Some(tracker), Some(slow))
-            }
-            None => (None, None),
-        };
+        let tracking = cfg.parameter_tracking.map(|t| {
+            let (t, slow) = Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts);
+            Tracking { t, slow }
+        });
         let model = PmsmModel::new(cfg);
         let rs_constants = (
             cfg.motor.rs_ohm,
@@ -120,7 +130,6 @@ impl<T: Float> PmsmObserver<T> {
                 inconsistent: 0,
             }),
             health: cfg.covariance_health.map(|h| HealthState {
-                refusals: 0,
                 trace_bound: h.trace_factor * p0.trace(),
                 current_bound: h.current_factor * cfg.motor.characteristic_current_a(),
                 speed_bound: h.max_w_ts_rad / cfg.ts_s,
@@ -144,11 +153,11 @@ impl<T: Float> PmsmObserver<T> {
             ),
             extras: cfg.voltage_delay_s != T::zero()
                 || cfg.inverter_voltage_v != T::zero()
-                || cfg.speed_noise_adaptation.is_some()
-                || cfg.acceleration_feedforward.is_some(),
+                || cfg.speed_noise_adaptation.is_some(),
+            timing: cfg.voltage_delay_s != T::zero() || cfg.inverter_voltage_v != T::zero(),
             fused: 0,
-            tracker,
-            slow,
+            refusals: 0,
+            tracking,
             events: Events::default(),
             counters: ObserverCounters::default(),
         })
@@ -193,7 +202,7 @@ impl<T: Float> PmsmObserver<T> {
         self.p = Sym4::from_matrix(&p);
         self.last = zero_correction();
         self.events = Events::default();
-        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) {
+        if let Some(Tracking { t, slow }) = &mut self.tracking {
             t.restart(slow, false);
         }
         self.restart_safeguards();
@@ -205,9 +214,9 @@ impl<T: Float> PmsmObserver<T> {
     /// `[i_a, i_b, w_e, theta]` and its variance (`None` when tracking is off). The cross-
     /// covariance is zero while the tracking is frozen.
     pub fn flux_covariance(&self) -> Option<(Vector4<T>, T)> {
-        self.tracker
+        self.tracking
             .as_ref()
-            .map(|t| (Vector4::from(t.s.x), t.s.c_pp))
+            .map(|k| (Vector4::from(k.t.s.x), k.t.s.c_pp))
     }
 
     /// The acceleration feedforward's learnt gain `k`, rad/s^2 of electrical speed per ampere
@@ -219,8 +228,8 @@ impl<T: Float> PmsmObserver<T> {
 
     /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.
     pub fn parameters(&self) -> (T, T) {
-        match &self.tracker {
-            Some(t) => (t.psi, t.rs),
+        match &self.tracking {
+            Some(k) => (k.t.psi, k.t.rs),
             None => (self.nominal.0, self.nominal.1),
         }
     }
@@ -231,7 +240,7 @@ impl<T: Float> PmsmObserver<T> {
     /// nothing changed, when tracking is off, a value is not finite or outside the
     /// configured range.
     pub fn set_parameters(&mut self, psi_f_wb: T, rs_ohm: T) -> Result<(), EkfError> {
-        let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) else {
+        let Some(Tracking { t, slow }) = &mut self.tracking else {
             return Err(EkfError::NonFiniteInput);
         };
         let k = slow.k;

@@ -2,6 +2,7 @@
 //! "Safeguards"): a rejected sample, a branch flip, the health check and its self-reset, the
 //! divergence count, a refused step.
 
+use super::pmsm::Tracking;
 use super::{Estimate, PmsmObserver};
 use nalgebra::Vector4;
 
@@ -70,8 +71,8 @@ impl<T: Float> PmsmObserver<T> {
         self.x[3] = wrap_angle(self.x[3] + T::pi());
         self.p = self.p.flip_speed();
         self.p.p33 += b.flip_var;
-        if let Some(t) = &mut self.tracker {
-            t.flip_speed();
+        if let Some(k) = &mut self.tracking {
+            k.t.flip_speed();
         }
         if let Some(f) = &mut self.feedforward {
             f.flip();
@@ -108,11 +109,11 @@ impl<T: Float> PmsmObserver<T> {
     #[inline(never)]
     pub(super) fn refused_resets(&mut self) -> bool {
         let unhealthy = self.unhealthy(&self.x, &self.p);
-        match &mut self.health {
-            Some(h) => {
-                h.refusals += 1;
-                if unhealthy || h.refusals >= MAX_REFUSALS {
-                    h.refusals = 0;
+        match &self.health {
+            Some(_) => {
+                self.refusals += 1;
+                if unhealthy || self.refusals >= MAX_REFUSALS {
+                    self.refusals = 0;
                     true
                 } else {
                     false
@@ -147,7 +148,7 @@ impl<T: Float> PmsmObserver<T> {
         };
         self.x = Vector4::new(ia, ib, w, th);
         self.p = h.p0;
-        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow) {
+        if let Some(Tracking { t, slow }) = &mut self.tracking {
             t.restart(slow, true);
         }
         self.restart_safeguards();

@@ -469,8 +469,6 @@ pub const MAX_REFUSALS: u32 = 3;
 /// Covariance health constants.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct HealthState<T> {
-    /// Steps refused in a row for a singular `S` or a non-finite result.
-    pub(super) refusals: u32,
     pub(super) trace_bound: T,
     /// Bound on `|i_a| + |i_b|`, A.
     pub(super) current_bound: T,

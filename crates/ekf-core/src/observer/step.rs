@@ -3,6 +3,7 @@
 
 #[cfg(all(feature = "std", target_arch = "x86_64"))]
 use super::host;
+use super::pmsm::Tracking;
 use super::{Estimate, PmsmObserver};
 use nalgebra::{Matrix4, Vector4};
 
@@ -91,7 +92,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         // Four monomorphic paths: the one without tracking carries none of its code, the
         // surface ones none of the salient model's.
-        match (self.tracker.is_some(), self.model.discrete().salient) {
+        match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
                 let (xm, pm, tm, ff) = self.prior::<true, false>(u_prev);
                 self.correct_prior::<true, false>(xm, pm, tm, ff, i)
@@ -117,24 +118,23 @@ impl<T: Float> PmsmObserver<T> {
     /// `S`: the motor is salient.
     #[inline(always)]
     pub(super) fn prior<const TRACK: bool, const S: bool>(&self, u_prev: [T; 2]) -> Prior<T> {
-        // One test on the common path for the voltage timing and the speed noise adaptation
-        // (both off in foc's drive); their work is out of line.
+        // One test on the common path each for the voltage timing, the speed noise
+        // adaptation's raised `Q` and the acceleration feedforward (all off in foc's drive);
+        // their work is out of line.
         let q_adapted;
         let mut q = self.model.q_sym();
         let mut u_prev = u_prev;
-        if self.extras {
-            if self.voltage_delay != T::zero() || self.inverter.0 != T::zero() {
-                u_prev = self.applied(u_prev);
-            }
-            if let Some(a) = &self.adaptation
-                && a.factor > T::one()
-            {
-                q_adapted = self.adapted_q(a.factor);
-                q = &q_adapted;
-            }
+        if self.timing {
+            u_prev = self.applied(u_prev);
         }
-        match (&self.tracker, &self.slow) {
-            (Some(tr), Some(slow)) if TRACK => {
+        if let Some(a) = &self.adaptation
+            && a.factor > T::one()
+        {
+            q_adapted = self.adapted_q(a.factor);
+            q = &q_adapted;
+        }
+        match &self.tracking {
+            Some(Tracking { t: tr, slow }) if TRACK => {
                 let k = &slow.k;
                 let tracked = self.p.p33 <= self.angle_var_limit;
                 let trusted = self.locked;
@@ -238,9 +238,9 @@ impl<T: Float> PmsmObserver<T> {
         }
     }
 
-    /// The speed noise adaptation's bookkeeping after an accepted correction.
+    /// The speed noise adaptation's bookkeeping after an accepted correction (when it is on).
     #[inline(always)]
-    fn extras_watch(&mut self, nis: T, tracking: bool) {
+    fn adaptation_watch(&mut self, nis: T, tracking: bool) {
         if let Some(a) = &mut self.adaptation {
             a.watch(
                 nis,
@@ -273,7 +273,7 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p, tm, ff) = match (self.tracker.is_some(), self.model.discrete().salient) {
+        let (x, p, tm, ff) = match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => self.prior::<true, false>(u_prev),
             (false, false) => self.prior::<false, false>(u_prev),
             (true, true) => self.prior::<true, true>(u_prev),
@@ -294,8 +294,8 @@ impl<T: Float> PmsmObserver<T> {
         tm: Option<TrackerStep<T>>,
         ff: Option<(T, T)>,
     ) -> Result<(), EkfError> {
-        let tracker_finite = match (&tm, &self.tracker) {
-            (Some(s), Some(t)) => t.finite_with(s, t.psi),
+        let tracker_finite = match (&tm, &self.tracking) {
+            (Some(s), Some(Tracking { t, .. })) => t.finite_with(s, t.psi),
             _ => true,
         };
         if !(finite(x.as_slice()) && p.all_finite() && tracker_finite) {
@@ -306,12 +306,10 @@ impl<T: Float> PmsmObserver<T> {
             }
             return Err(EkfError::NonFiniteResult);
         }
-        if let Some(h) = &mut self.health {
-            h.refusals = 0;
-        }
+        self.refusals = 0;
         self.x = x;
         self.p = p;
-        if let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+        if let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
             t.commit(s, t.psi);
             self.tracker_housekeeping();
         }
@@ -329,14 +327,14 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        match (self.tracker.is_some(), self.model.discrete().salient) {
+        match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
-                let tm = self.tracker.map(|t| t.as_step());
+                let tm = self.tracking.map(|k| k.t.as_step());
                 self.correct_prior::<true, false>(self.x, self.p, tm, None, i)
             }
             (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, None, i),
             (true, true) => {
-                let tm = self.tracker.map(|t| t.as_step());
+                let tm = self.tracking.map(|k| k.t.as_step());
                 self.correct_prior::<true, true>(self.x, self.p, tm, None, i)
             }
             (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, None, i),
@@ -369,13 +367,15 @@ impl<T: Float> PmsmObserver<T> {
             _ => false,
         });
         let (post, tn) = match outcome {
-            Ok(Outcome::Updated(post)) => match (&tm, &self.tracker, &self.slow) {
-                (Some(s), Some(t), Some(slow)) if TRACK => {
+            Ok(Outcome::Updated(post)) => match (&tm, &self.tracking) {
+                (Some(s), Some(Tracking { t, slow })) if TRACK => {
                     let (step, psi, sum) = t.correct(&slow.k, s, &post);
-                    // Both sums finite in one test (`v - v` is 0 for a finite `v`, NaN
-                    // otherwise): the state's results and the tracker's.
+                    // Both sums finite in one test on their sum (`v - v` is 0 for a finite
+                    // `v`, NaN otherwise): the state's results and the tracker's (a sum of
+                    // check sums, conservative like them).
+                    let total = post.sum + sum;
                     #[allow(clippy::eq_op)]
-                    let finite = (post.sum - post.sum) + (sum - sum) == T::zero();
+                    let finite = total - total == T::zero();
                     if !finite {
                         return self.refused(EkfError::NonFiniteResult, i);
                     }
@@ -393,7 +393,7 @@ impl<T: Float> PmsmObserver<T> {
                 self.x = xm;
                 self.p = pm;
                 self.feedforward_watch(ff, false);
-                if TRACK && let (Some(s), Some(t)) = (&tm, &mut self.tracker) {
+                if TRACK && let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
                     t.commit(s, t.psi);
                     self.tracker_housekeeping();
                 }
@@ -413,12 +413,10 @@ impl<T: Float> PmsmObserver<T> {
             Err(e) => return self.refused(e, i),
         };
         let (x, c, dth) = (post.x, post.correction, post.dth);
-        if let Some(h) = &mut self.health {
-            h.refusals = 0;
-        }
+        self.refusals = 0;
         self.x = x;
         self.p = post.p;
-        if TRACK && let (Some((s, psi)), Some(t)) = (&tn, &mut self.tracker) {
+        if TRACK && let (Some((s, psi)), Some(Tracking { t, .. })) = (&tn, &mut self.tracking) {
             t.commit(s, *psi);
             self.tracker_housekeeping();
         }
@@ -432,9 +430,7 @@ impl<T: Float> PmsmObserver<T> {
             }
         }
         self.feedforward_watch(ff, tracking);
-        if self.extras {
-            self.extras_watch(c.nis, tracking);
-        }
+        self.adaptation_watch(c.nis, tracking);
         self.last = c;
         self.events = Events::default();
         if let Some(g) = &mut self.gate {
@@ -478,7 +474,7 @@ impl<T: Float> PmsmObserver<T> {
     /// filter, the reported deviations).
     #[inline(always)]
     pub(super) fn tracker_housekeeping(&mut self) {
-        if let (Some(t), Some(slow)) = (&mut self.tracker, &mut self.slow)
+        if let Some(Tracking { t, slow }) = &mut self.tracking
             && t.housekeeping_due(&slow.k)
         {
             t.housekeeping(slow);
@@ -492,7 +488,7 @@ impl<T: Float> PmsmObserver<T> {
     #[cold]
     #[inline(never)]
     pub(super) fn refresh_rs_constants(&mut self) {
-        if let Some(t) = &self.tracker
+        if let Some(Tracking { t, .. }) = &self.tracking
             && t.rs != self.rs_constants.0
         {
             // At the configured flux, so that the cache is a function of `Rs` alone (its `c`

@@ -233,11 +233,13 @@ pub(crate) fn predict_cov_salient<T: Float>(
 /// The sum of the values, finite only when they all are: NaN and infinities propagate
 /// through a sum (and, conservatively, finite values so large that their sum overflows make
 /// it infinite). One test instead of one per value; four partial sums keep the dependency
-/// chain short.
+/// chain short. The partial sums start from the first values, not from zero (`0 + x` is not
+/// folded: `-0 + 0` is `+0`), so `N - 1` additions in all (`N >= 4`).
 #[inline(always)]
 pub(crate) fn check_sum<T: Float, const N: usize>(v: &[T; N]) -> T {
-    let mut acc = [T::zero(); 4];
-    for (i, x) in v.iter().enumerate() {
+    const { assert!(N >= 4, "check_sum takes at least 4 values") };
+    let mut acc = [v[0], v[1], v[2], v[3]];
+    for (i, x) in v.iter().enumerate().skip(4) {
         acc[i % 4] += *x;
     }
     (acc[0] + acc[1]) + (acc[2] + acc[3])

@@ -170,6 +170,9 @@ pub(super) struct TrackerConstants<T> {
     pub q_psi: T,
     /// Initial variance of `psi_f`, also its ceiling.
     pub var0_psi: T,
+    /// Floor of the variance of `psi_f` after a correction, `eps var0_psi` (rounding must not
+    /// leave it non-positive).
+    pub var_floor_psi: T,
     /// Initial variance of `Rs` (split filter).
     pub var0_rs: T,
     pub min_speed2: T,
@@ -192,9 +195,11 @@ impl<T: Float> Tracker<T> {
     /// A tracker at the configured parameters with the initial covariance, and its slow part.
     pub fn new(cfg: &ParameterTracking<T>, psi0: T, rs0: T, ts_s: T) -> (Self, TrackerSlow<T>) {
         let sq = |v: T| v * v;
+        let var0_psi = sq(cfg.psi_f_sigma0 * psi0);
         let mut k = TrackerConstants {
             q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * ts_s,
-            var0_psi: sq(cfg.psi_f_sigma0 * psi0),
+            var0_psi,
+            var_floor_psi: T::default_epsilon() * var0_psi,
             var0_rs: sq(cfg.rs_sigma0 * rs0),
             min_speed2: sq(cfg.min_speed_rad_s),
             settle_samples: cfg.settle_samples,
@@ -413,7 +418,7 @@ impl<T: Float> Tracker<T> {
         let psi = clamp(self.psi + kp0 * y[0] + kp1 * y[1], k.psi_min, k.psi_max);
         let c = prior.c_pp - (kp0 * l0 + kp1 * l1);
         // Rounding must not leave the variance non-positive.
-        let floor = T::default_epsilon() * k.var0_psi;
+        let floor = k.var_floor_psi;
         let next = TrackerStep {
             x,
             c_pp: if c > floor { c } else { floor },
@@ -444,10 +449,12 @@ impl<T: Float> Tracker<T> {
 
     /// The sum of this tracker's values with the step `s` and flux `psi` committed: finite
     /// when they all are (NaN and infinities propagate; conservatively, an overflow too).
+    /// `Rs` is left out: a step does not change it, and it is finite whenever it is set (the
+    /// split filter takes only a finite result, the other setters clamp or check it).
     #[inline(always)]
     fn check_sum(&self, s: &TrackerStep<T>, psi: T) -> T {
         let x = &s.x;
-        psi + self.rs + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
+        psi + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
     }
 
     /// Whether the slow work is due (a full window, or the deviations to refresh).

@@ -41,7 +41,7 @@
 //! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
 //! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended; [`StartupConfig::kick_speed_ratio_for`] puts the kick at 0.6 % of a known rated speed) | as `damping_ratio` |
-//! | `observer` | [`ObserverConfig::new`] for the motor and `Ts`, without the speed noise adaptation and the acceleration feedforward | its status includes the innovation consistency check (the health monitor's `Uncertain` loss reason); the salient kick detection reads the covariance's part (`Estimate::angle_tracked`). The adaptation (raising the speed's process noise while the innovations exceed the level learnt) cannot tell a burst of current-sensor noise from an acceleration: in closed loop it turns the burst into speed noise that the speed loop amplifies (pmsm-sim's fault row "noise burst (0.3 A, 50 ms)" trips on over-current with it, falls back without it); the drive knows its own torque command instead. The feedforward (the speed prediction following the q current) changes the default run's observer by under 1 % RMS (0.0728 -> 0.0723 deg) at the cost of a sine and cosine per step on the M4F: left off in the drive |
+//! | `observer` | [`ObserverConfig::new`] for the motor and `Ts`, without the speed noise adaptation | its status includes the innovation consistency check (the health monitor's `Uncertain` loss reason); the salient kick detection reads the covariance's part (`Estimate::angle_tracked`). The adaptation (raising the speed's process noise while the innovations exceed the level learnt) cannot tell a burst of current-sensor noise from an acceleration: in closed loop it turns the burst into speed noise that the speed loop amplifies (pmsm-sim's fault row "noise burst (0.3 A, 50 ms)" trips on over-current with it, falls back without it); the drive knows its own torque command instead |
 //! | `samples.max_step_a` | `None`: `(u_dc_max_v + Rs over_current_a) Ts / Ls + 0.1 over_current_a` | the most the current vector can change in one period (applied voltage up to `2/3 u_dc`, back-EMF up to `u_dc / sqrt(3)` at the maximum speed: `1.24 u_dc < u_dc_max_v`), plus a margin for noise and an `Ls` a little lower than configured |
 //! | `samples.missing_trip_ticks` | 5 | a missing or implausible current sample is ridden through (observer predicts only, PI state held, the last voltage reused); five in a row trip |
 //! | `samples.stuck_angle_rad` | `pi / 4` | a phase reading repeated bit for bit while the current vector turns an eighth of a period: [`Fault::CurrentSensor`](crate::Fault::CurrentSensor) |
@@ -474,7 +474,6 @@ impl FocConfig {
             samples: SampleCheckConfig::default(),
             observer: ObserverConfig {
                 speed_noise_adaptation: None,
-                acceleration_feedforward: None,
                 ..ObserverConfig::new(motor, ts_s)
             },
             #[cfg(feature = "flux-map")]

@@ -194,9 +194,10 @@ class Ekf:
     inverter_voltage_v: the inverter's voltage error (dead time), V, as foc's self-commissioning
     reports it (the voltage lost along a current aligned with a phase axis); subtracted along
     the signs of the estimated phase currents. Within [0, 100] (ConfigError otherwise); 0: none.
-    acceleration_feedforward: the speed prediction follows the q current through the rotor's
-    acceleration per ampere, learnt online from the filter's own speed changes (ekf-core's
-    AccelerationFeedforward; on by default, False: the speed is a random walk).
+    acceleration_feedforward: True: the speed prediction follows the q current through the
+    rotor's acceleration per ampere, learnt online from the filter's own speed changes
+    (ekf-core's AccelerationFeedforward with its defaults; not on a flux map); False (the
+    default): the speed is a random walk.
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -243,7 +244,7 @@ class Ekf:
         tracking: Literal["default", "flux", "off"] = "default",
         voltage_delay_s: float = 0.0,
         inverter_voltage_v: float = 0.0,
-        acceleration_feedforward: bool = True,
+        acceleration_feedforward: bool = False,
     ) -> Ekf: ...
     def run(
         self,
