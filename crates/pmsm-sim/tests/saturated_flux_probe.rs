@@ -4,8 +4,9 @@
 //! inductances (what the identification measures), the voltages applied one period late
 //! (ideal switches), the currents sampled exactly.
 //!
-//! Goals: the identified flux within 2 % of the true flux (error over the stator flux
-//! magnitude `|psi|`) at the grid's nodes with `|i| <= rated`; the `FluxMap` built from them
+//! The grid spans `+-1.5` times the rated current on both axes (the suite's identified-map
+//! rows: `+-PROBE_CURRENT`, 1.7, checked against the flux goal too). Goals: the identified flux within 2 % of the true flux (error
+//! over the stator flux magnitude `|psi|`) at the grid's nodes with `|i| <= rated`; the `FluxMap` built from them
 //! within 1 % (points) of the true model sampled on the same grid, over `|i| <= rated` (the
 //! grid's own interpolation error is the motor's, not the probe's); the rotor moves less than
 //! 0.2 mechanical rad (it is followed from the torque and `J`); the probe ends within 5 s.
@@ -14,7 +15,9 @@
 
 use ekf_core::FluxMap;
 use ekf_core::saturation::{PM_SYRM, SATURATED_IPM, SaturatedMotor};
-use pmsm_sim::analysis::suite::identified::{ProbeRun, ProbeTold as Told, probe_plant};
+use pmsm_sim::analysis::suite::identified::{
+    PROBE_CURRENT, ProbeRun, ProbeTold as Told, probe_plant, probe_realistic,
+};
 
 /// Peak rated current: the smallest current magnitude whose best angle (MTPA, searched in
 /// 0.5 deg steps) gives the rated torque.
@@ -66,15 +69,24 @@ fn max_errors(
 }
 
 fn check(m: &SaturatedMotor, theta0: f64) {
-    check_told(m, theta0, Told::EXACT, 2.0, 1.0);
+    check_told(m, theta0, Told::EXACT, 2.0, 1.0, 1.5);
 }
 
-/// Runs the probe told `told` and checks the nodes within `node_pct`, the map within
-/// `map_pct` of the true model on the same grid, the rotor's motion, time and peak current.
-fn check_told(m: &SaturatedMotor, theta0: f64, told: Told, node_pct: f64, map_pct: f64) {
+/// Runs the probe told `told` on a grid to `k_max` times the rated current and checks the
+/// nodes within `node_pct`, the map within `map_pct` of the true model on the same grid, the
+/// rotor's motion (0.2 mech rad on the 1.5 grid, a tenth of a turn on a wider one), time and
+/// peak current.
+fn check_told(
+    m: &SaturatedMotor,
+    theta0: f64,
+    told: Told,
+    node_pct: f64,
+    map_pct: f64,
+    k_max: f64,
+) {
     let name = m.reference.name;
     let i_r = rated_current(m);
-    let i_max = 1.5 * i_r;
+    let i_max = k_max * i_r;
     let o = probe(m, i_max, theta0, told);
     let s = &o.samples;
     // Nodes inside the rated circle: the measurement itself.
@@ -156,7 +168,12 @@ fn check_told(m: &SaturatedMotor, theta0: f64, told: Told, node_pct: f64, map_pc
         "{name}: map errors {md} {mq} % (the true model on the grid: {gd} {gq} %)"
     );
     // The rotor drifts slowly between the pulses (followed by the probe): bounded here.
-    assert!(o.rotor_moved_mech_rad < 0.2, "{name}: rotor moved");
+    let moved_max = if k_max <= 1.5 {
+        0.2
+    } else {
+        0.1 * std::f64::consts::TAU
+    };
+    assert!(o.rotor_moved_mech_rad < moved_max, "{name}: rotor moved");
     // The probe's own estimate of the motion agrees with the plant's (electrical rad).
     let est = f64::from(s.rotor_angle_max_rad) / f64::from(m.reference.pole_pairs);
     println!("{name}: the probe's estimate of the rotor's largest angle: {est:.2e} mech rad");
@@ -191,6 +208,59 @@ fn the_identifications_errors_and_noise_cost_little() {
         j: 1.05,
         noise_a: 0.05,
     };
-    check_told(&PM_SYRM, 0.7, told, 3.0, 2.0);
-    check_told(&SATURATED_IPM, -2.1, told, 3.0, 2.0);
+    check_told(&PM_SYRM, 0.7, told, 3.0, 2.0, 1.5);
+    check_told(&SATURATED_IPM, -2.1, told, 3.0, 2.0, 1.5);
+}
+
+/// The grid of the suite's identified-map rows (`+-PROBE_CURRENT` times rated), the probe
+/// told the motor's own values: the identified flux within 2 % over the rated current range
+/// on both motors (the nodes inside the rated circle), the map within 1 % of the true model
+/// on the same grid.
+#[test]
+fn the_suites_grid_meets_the_flux_goal() {
+    check_told(&PM_SYRM, 0.7, Told::EXACT, 2.0, 1.0, PROBE_CURRENT);
+    check_told(&SATURATED_IPM, -2.1, Told::EXACT, 2.0, 1.0, PROBE_CURRENT);
+}
+
+/// The probe on the suite's realistic drive (`probe_realistic`: dead time, one period of
+/// delay, 12-bit ADC over four times rated, noise, gain and offset errors; the offsets and
+/// the dead-time voltage as the identification measures them), on the suite's grid, told
+/// the motor's own values: prints the flux errors and asserts the 2 % goal on the nodes
+/// inside the rated circle.
+#[test]
+fn realistic_sensing_meets_the_flux_goal() {
+    for (m, theta0) in [(&PM_SYRM, 0.7), (&SATURATED_IPM, -2.1)] {
+        let name = m.reference.name;
+        let i_r = rated_current(m);
+        let o = probe_realistic(m, i_r, PROBE_CURRENT * i_r, theta0, &Told::EXACT, 1)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        let s = &o.samples;
+        let mut pts = Vec::new();
+        let mut got = Vec::new();
+        for d in 0..s.n_d {
+            for q in 0..s.n_q {
+                let (id, iq) = (f64::from(s.i_d[d]), f64::from(s.i_q[q]));
+                if id.hypot(iq) <= i_r * 1.0001 {
+                    pts.push((id, iq));
+                    got.push((f64::from(s.psi_d[d][q]), f64::from(s.psi_q[d][q])));
+                }
+            }
+        }
+        let (nd, nq) = max_errors(m, &pts, |id, iq| {
+            let k = pts.iter().position(|p| *p == (id, iq)).unwrap();
+            got[k]
+        });
+        println!(
+            "{name} realistic sensing, grid to {:.2} A: nodes |i|<=rated psi_d {nd:.3} %, \
+             psi_q {nq:.3} %; duration {:.3} s; rotor moved {:.3} mech rad; peak {:.2} A; \
+             q closure {:.2e} Wb",
+            PROBE_CURRENT * i_r,
+            o.duration_s,
+            o.rotor_moved_mech_rad,
+            o.peak_a,
+            s.q_closure_wb
+        );
+        assert!(nd < 2.0 && nq < 2.0, "{name}: {nd} {nq} %");
+        assert!(o.duration_s < 5.0);
+    }
 }

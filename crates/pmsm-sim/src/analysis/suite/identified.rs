@@ -164,3 +164,104 @@ pub fn identified_map(m: &SaturatedMotor, i_rated: f64) -> Result<Identified, Si
     })?;
     Ok(Identified { map, run })
 }
+
+/// The probe on the saturated rows' realistic drive: [`probe_plant`]'s setting with the
+/// suite's inverter (dead time, one period of delay) and current sensing (12-bit ADC over
+/// four times the rated current, noise, gain and offset errors; seed `seed`) instead of
+/// ideal switches and exact currents. The probe is told the offsets as the identification's
+/// offsets step measures them (the mean of 256 samples, PWM off, no current), the inverter's
+/// voltage error along the phase-a axis (`4/3 t_dead / Ts u_dc`, what the resistance step
+/// measures), and the motor's values scaled by `told` (`told.noise_a` unused: the sensors'
+/// own noise). `i_rated` sets the ADC range, as in the suite's rows.
+pub fn probe_realistic(
+    m: &SaturatedMotor,
+    i_rated: f64,
+    i_max_a: f64,
+    theta0_rad: f64,
+    told: &ProbeTold,
+    seed: u64,
+) -> Result<ProbeRun, SimError> {
+    use crate::plant::inverter::Inverter;
+    use crate::plant::sensors::CurrentSensor;
+
+    let r = &m.reference;
+    let fail = |problem: String| SimError::Scenario {
+        file: format!("flux-map probe {}", r.name),
+        field: "identified flux map (realistic sensing)".into(),
+        problem,
+    };
+    let opts = super::SuiteOptions {
+        seed,
+        ..super::SuiteOptions::default()
+    };
+    let sc = super::saturated::scenario(m, &opts, 1.0, i_rated);
+    let ts = sc.ts_s();
+    let mut plant = Plant::new(
+        MotorModel::from_saturated(m),
+        PlantState {
+            theta_e_rad: theta0_rad,
+            ..PlantState::default()
+        },
+    );
+    let mut inverter = Inverter::new(sc.inverter);
+    let mut sensor = CurrentSensor::new(sc.sensors, sc.seed);
+    // The offsets step: PWM off, no current.
+    let n_off = 256;
+    let mut off = [0.0f64; 2];
+    for _ in 0..n_off {
+        let s = sensor.measure([0.0; 3]);
+        off[0] += s.i_abc_a[0] / f64::from(n_off);
+        off[1] += s.i_abc_a[1] / f64::from(n_off);
+    }
+    let mut cfg = SaturationConfig::new(
+        ts as f32,
+        (r.rs_ohm * told.rs) as f32,
+        theta0_rad as f32,
+        (r.psi_f_wb * told.psi_f) as f32,
+        ((r.ld_h * told.l) as f32, (r.lq_h * told.l) as f32),
+        i_max_a as f32,
+    );
+    cfg.delay = if sc.inverter.delay {
+        ComputationDelay::OnePeriod
+    } else {
+        ComputationDelay::None
+    };
+    cfg.inertia_kg_m2 = (r.j_kg_m2 * told.j) as f32;
+    cfg.pole_pairs = r.pole_pairs;
+    cfg.current_offsets_a = [off[0] as f32, off[1] as f32];
+    cfg.voltage_error_v = (4.0 / 3.0 * sc.inverter.dead_time_s / ts * sc.inverter.u_dc_v) as f32;
+    let mut p = SaturationProbe::new(&cfg).map_err(|e| fail(e.to_string()))?;
+    let (mut moved, mut peak) = (0.0f64, 0.0f64);
+    let pp = f64::from(r.pole_pairs);
+    for k in 0..(5.0 / ts) as u64 {
+        let t = k as f64 * ts;
+        let i_true = plant.i_abc_a();
+        let ab = plant.i_ab_a();
+        peak = peak.max(ab[0].hypot(ab[1]));
+        let meas = sensor.measure(i_true);
+        let u_dc = inverter.u_dc_at(t);
+        let [a, b, c] = meas.i_abc_a.map(|x| x as f32);
+        let out = p.tick(&TickInput::abc(a, b, c, u_dc as f32));
+        if p.is_done() {
+            break;
+        }
+        let applied = inverter.apply(out.duties.map(f64::from), u_dc, u_dc, i_true);
+        if out.pwm_enabled {
+            plant.step(applied.u_ab_v.to_array(), 0.0, ts);
+        } else {
+            plant.step_open(0.0, ts);
+        }
+        moved = moved.max((plant.state().theta_e_rad - theta0_rad).abs() / pp);
+    }
+    let samples = match p.result() {
+        Some(Ok(s)) => *s,
+        Some(Err(e)) => return Err(fail(e.to_string())),
+        None => return Err(fail("the probe did not end within 5 s".into())),
+    };
+    Ok(ProbeRun {
+        samples,
+        duration_s: f64::from(p.ticks()) * ts,
+        rotor_moved_mech_rad: moved,
+        peak_a: peak,
+    })
+}

@@ -197,7 +197,7 @@ impl SideObserver for SatScored {
 /// sensing with this motor's ratings, current limit (twice the rated current), ADC range
 /// and load profile.
 /// `i_rated`: the rated current on the map's MTPA curve ([`rated_mtpa`]), A.
-fn scenario(
+pub(super) fn scenario(
     m: &ekf_core::saturation::SaturatedMotor,
     opts: &SuiteOptions,
     k: f64,
