@@ -206,37 +206,42 @@
 //! drive knows its own torque command).
 //!
 //! **Acceleration feedforward** ([`AccelerationFeedforward`]; opt-in: off in
-//! [`ObserverConfig::new`], [`ObserverConfig::seed`] and foc's drive). Torque is `3/2 p psi_f i_q`, so
-//! the rotor's electrical acceleration is `k i_q - a_load(w)` with `k = 3/2 p^2 psi_f / J`
-//! unknown (the inertia is the drive's, propeller or load included). The feedforward models it as
-//! `a = k i_q + c0 + c1 w` (a constant and a viscous load; with forgetting, the linear term
-//! follows a fan's `w^2` locally) and adds `Ts a` to the predicted speed and `Ts^2 a / 2` to the
-//! angle, `i_q` and `w` from the posterior the prediction starts from (in its frame: the step's
-//! own sine and cosine). Within a dead band of `k` times three standard deviations of the
-//! measurement noise it adds nothing: a steady current's noise moves no speed.
+//! [`ObserverConfig::new`], [`ObserverConfig::seed`] and foc's drive). Torque is
+//! `3/2 p psi_f i_q`, so the rotor's electrical acceleration is `k i_q - a_L` with
+//! `k = 3/2 p^2 psi_f / J` unknown (the inertia is the drive's, propeller or load included) and
+//! `a_L` the load's share. The prediction adds `Ts a` to the speed and `Ts^2 a / 2` to the angle,
+//! `a = k i_q - a_L_hat`, with `i_q` from the posterior the prediction starts from (in its frame:
+//! the step's own sine and cosine). The load estimate `a_L_hat` is a disturbance observer: a
+//! low-pass over 8 samples of `k i_q - dw / Ts`, the part of the filter's own speed change the
+//! current does not explain. A current step therefore moves the predicted speed at once, a load
+//! that follows (a propeller's, a friction that flips at zero speed) is taken up within a few
+//! samples, and a steady state is neutral: `a` averages to zero there. Within a dead band of `k`
+//! times three standard deviations of the measurement noise it adds nothing.
 //!
-//! The three coefficients are learnt by least squares with forgetting (100 blocks): each block
-//! of 32 samples whose angle stayed tracked gives the filter's own speed change `dw` against the
-//! block's sums of `i_q`, `1` and `w`, normalized by `I_c = psi_f / L_q` and `Ts`
-//! (`dw Ts = t0 sum(i_q / I_c) + t1 n + t2 sum(w Ts)`), solved by Cramer's rule once the
-//! information matrix's determinant is at least `10^-3` of its diagonal's product. Until then
-//! the speed is today's random walk exactly. `k` is bounded to `[0, 0.1 / (Ts^2 I_c)]` (a rate
-//! at which `I_c` turns `w Ts` by 0.1 rad per period); a fit with `k <= 0` switches the model
-//! off.
+//! `k` is learnt by least squares with forgetting (100 blocks): each block of 32 samples whose
+//! angle stayed tracked gives the filter's speed change against the block's sums of `i_q`, `1`
+//! and `w` (normalized by `I_c = psi_f / L_q` and `Ts`: `dw Ts = t0 sum(i_q / I_c) + t1 n +
+//! t2 sum(w Ts)`); the constant and speed terms absorb a load that moves with the speed, so that
+//! `k = t0 / (I_c Ts^2)` is not biased by it. It is solved by Cramer's rule once the information
+//! matrix's determinant is at least `10^-3` of its diagonal's product, bounded to
+//! `[0, 0.1 / (Ts^2 I_c)]` (a rate at which `I_c` turns `w Ts` by 0.1 rad per period); until then,
+//! and after a fit with `k <= 0`, the speed is the random walk exactly.
 //!
-//! Observability: all three are ratios of what the filter measures while it tracks, the speed's
-//! change against the q current and the speed. `k` is told from the load only when the current
-//! moves independently of the speed (current or duty steps: the conditioning test); a drive that
-//! never changes its torque never uses the model. A speed estimate that lags an acceleration
-//! biases `k` low (simulated: 12 % low), toward the random walk.
+//! Observability: `k` is a ratio of what the filter measures while it tracks, the speed's change
+//! against the q current; it is told from the load only when the current moves independently of
+//! the speed (current or duty steps: the conditioning test), so a drive that never changes its
+//! torque never uses it. A speed estimate that lags an acceleration biases `k` low (simulated:
+//! 3 % low), toward the random walk.
 //!
 //! Why: at low speed the back-EMF is small beside the resistive and inverter voltage errors, and
 //! a current step there (a duty or torque step) is when a filter whose speed is a random walk
 //! reads the voltage error as a speed and slips; the model keeps the speed on the trajectory the
-//! current sets until the EMF is large enough to correct it. Its input is not covariance-weighted
-//! (the current and speed enter as inputs, their Jacobian left out). The model is kept through
-//! resets; a branch flip turns the sign of its constant term. Measured in `docs/accuracy.md`
-//! ("Recorded drives", "Transients").
+//! current sets until the EMF is large enough to correct it. Its input is not
+//! covariance-weighted (the current enters as an input, its Jacobian left out). `k` is kept
+//! through resets; a branch flip turns the sign of the load estimate. Why opt-in: it costs a
+//! regression per block and a few operations per step, and on simulated drives whose filter
+//! already follows (the suite, the default run) it changes nothing that matters; measured in
+//! `docs/accuracy.md` ("Recorded drives").
 //!
 //! **Voltage timing** ([`ObserverConfig::voltage_delay_s`], default 0). The model takes `u_prev`
 //! as the voltage held over the period. A drive's log may not hold that: firmware that updates

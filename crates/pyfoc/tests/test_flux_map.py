@@ -131,3 +131,10 @@ def test_tracking_flux_is_refused_on_a_map():
 def test_malformed_maps_are_refused_by_name(change, match):
     with pytest.raises(pyfoc.ConfigError, match=match):
         pyfoc.Motor.from_flux_map(RS, P, *change(grid()))
+
+
+def test_acceleration_feedforward_is_refused_on_a_map():
+    m = pyfoc.Motor.from_flux_map(RS, P, *grid())
+    with pytest.raises(pyfoc.ConfigError, match="acceleration_feedforward"):
+        pyfoc.Ekf(m, TS, acceleration_feedforward=True)
+    pyfoc.Ekf(m, TS, acceleration_feedforward=False)

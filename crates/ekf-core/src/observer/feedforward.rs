@@ -137,6 +137,10 @@ impl<T: Float> FeedforwardState<T> {
     /// the dead band, nothing.
     #[inline(always)]
     pub(crate) fn feedforward(&self, xm: &mut Vector4<T>, iq: T, ts: T) {
+        if self.k == T::zero() {
+            // Not learnt (or switched off by the fit): the random walk exactly.
+            return;
+        }
         let a = self.k * iq - self.load;
         let a = if a > self.band {
             a - self.band

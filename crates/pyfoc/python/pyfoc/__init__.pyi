@@ -196,8 +196,9 @@ class Ekf:
     the signs of the estimated phase currents. Within [0, 100] (ConfigError otherwise); 0: none.
     acceleration_feedforward: True: the speed prediction follows the q current through the
     rotor's acceleration per ampere, learnt online from the filter's own speed changes
-    (ekf-core's AccelerationFeedforward with its defaults; not on a flux map); False (the
-    default): the speed is a random walk.
+    (ekf-core's AccelerationFeedforward with its defaults; worth it on drives with current or
+    duty steps at low speed); False (the default, as ekf-core's ObserverConfig::new): the speed
+    is a random walk. Not available on a flux map (ConfigError).
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
