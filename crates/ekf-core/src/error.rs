@@ -153,6 +153,9 @@ pub enum ConfigError {
     /// Parameter tracking was asked of the observer on a flux map, whose map is the model
     /// ([`MapObserver`](crate::saturated::MapObserver)).
     TrackingWithFluxMap,
+    /// The acceleration feedforward was asked of an observer built without the cargo feature
+    /// `acceleration-feedforward` (on with `std`).
+    FeedforwardNotCompiled,
 }
 
 impl fmt::Display for Param {
@@ -257,6 +260,10 @@ impl fmt::Display for ConfigError {
             ConfigError::TrackingWithFluxMap => f.write_str(
                 "parameter_tracking is not available on a flux map (the map is the motor's \
                  model): set it to None",
+            ),
+            ConfigError::FeedforwardNotCompiled => f.write_str(
+                "acceleration_feedforward needs ekf-core's cargo feature \
+                 `acceleration-feedforward` (on with `std`): enable it or set it to None",
             ),
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",

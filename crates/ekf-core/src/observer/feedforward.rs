@@ -2,6 +2,7 @@
 //! model learnt online ([`AccelerationFeedforward`]; the method is in the module docs of
 //! [`observer`](crate::observer), "Acceleration feedforward").
 
+#[cfg(feature = "acceleration-feedforward")]
 use nalgebra::Vector4;
 
 use crate::error::Param;
@@ -58,6 +59,7 @@ impl<T: Float> AccelerationFeedforward<T> {
 }
 
 /// The feedforward's running state: the model in use, the learning's block and sums.
+#[cfg(feature = "acceleration-feedforward")]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct FeedforwardState<T> {
     /// Learnt gain in use, rad/s^2 per A (0 until learnt).
@@ -67,7 +69,8 @@ pub(crate) struct FeedforwardState<T> {
     load: T,
     /// Its gain per sample.
     k_load: T,
-    /// The previous sample's `i_q` and `w` (the step between them is the load's measurement).
+    /// The last sample's `i_q` and `w` (the feedforward's current; the step from them to the
+    /// next sample is the load's measurement).
     iq_prev: T,
     w_prev: T,
     primed: bool,
@@ -96,6 +99,7 @@ pub(crate) struct FeedforwardState<T> {
     b: [T; 3],
 }
 
+#[cfg(feature = "acceleration-feedforward")]
 impl<T: Float> FeedforwardState<T> {
     /// The state for `c` for `motor` at the period `ts_s`, with the measurement noise variance
     /// `r_a2` (A^2, the larger diagonal entry of `R`).
@@ -132,11 +136,12 @@ impl<T: Float> FeedforwardState<T> {
     }
 
     /// Adds the modelled acceleration over a period of `ts` to the prior `xm`, from the q
-    /// current `iq` and the speed of the posterior the prediction started from: the speed by
-    /// `ts a`, the angle by half of that times `ts` (the mean speed over the period). Within
-    /// the dead band, nothing.
+    /// current of the posterior the prediction started from (the last sample given to
+    /// [`watch`](Self::watch)): the speed by `ts a`, the angle by half of that times `ts` (the
+    /// mean speed over the period). Within the dead band, and while `k` is 0, nothing.
     #[inline(always)]
-    pub(crate) fn feedforward(&self, xm: &mut Vector4<T>, iq: T, ts: T) {
+    pub(crate) fn feedforward(&self, xm: &mut Vector4<T>, ts: T) {
+        let iq = self.iq_prev;
         if self.k == T::zero() {
             // Not learnt (or switched off by the fit): the random walk exactly.
             return;

@@ -157,7 +157,7 @@ impl<T: Float> PmsmObserver<T> {
             return Err(EkfError::NonFiniteMeasurement);
         }
         let (xm, pm) = self.map_prior(map, u_prev, dt_s);
-        self.correct_prior::<false, true>(xm, pm, None, None, i)
+        self.correct_prior::<false, true>(xm, pm, None, i)
     }
 
     /// Prediction only on the map (the body of
@@ -171,7 +171,7 @@ impl<T: Float> PmsmObserver<T> {
             return Err(EkfError::NonFiniteInput);
         }
         let (x, p) = self.map_prior(map, u_prev, self.model.ts());
-        self.commit_prediction(x, p, None, None)
+        self.commit_prediction(x, p, None)
     }
 }
 

@@ -1,5 +1,6 @@
 //! The observer type [`PmsmObserver`]: its state, its construction and its accessors.
 
+#[cfg(feature = "acceleration-feedforward")]
 use super::feedforward::FeedforwardState;
 use super::{AdaptationState, ObserverConfig, ObserverCounters, PmsmModel};
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
@@ -37,6 +38,7 @@ pub struct PmsmObserver<T: Float> {
     pub(super) consistency: Option<ConsistencyState<T>>,
     pub(super) adaptation: Option<AdaptationState<T>>,
     /// The acceleration feedforward's state (`None` when off).
+    #[cfg(feature = "acceleration-feedforward")]
     pub(super) feedforward: Option<FeedforwardState<T>>,
     /// `ObserverConfig::voltage_delay_s`.
     pub(super) voltage_delay: T,
@@ -84,6 +86,10 @@ impl<T: Float> PmsmObserver<T> {
     /// Validates `cfg` and builds the observer at `x0`, `P0`.
     pub fn new(cfg: &ObserverConfig<T>) -> Result<Self, ConfigError> {
         cfg.validate()?;
+        #[cfg(not(feature = "acceleration-feedforward"))]
+        if cfg.acceleration_feedforward.is_some() {
+            return Err(ConfigError::FeedforwardNotCompiled);
+        }
         let mut x0 = cfg.x0;
         x0[3] = wrap_angle(x0[3]);
         let ts = cfg.ts_s;
@@ -142,6 +148,7 @@ impl<T: Float> PmsmObserver<T> {
                 .speed_noise_adaptation
                 .as_ref()
                 .map(AdaptationState::new),
+            #[cfg(feature = "acceleration-feedforward")]
             feedforward: cfg.acceleration_feedforward.as_ref().map(|c| {
                 let r = cfg.noise.r;
                 FeedforwardState::new(c, &cfg.motor, cfg.ts_s, r[(0, 0)].max(r[(1, 1)]))
@@ -223,7 +230,10 @@ impl<T: Float> PmsmObserver<T> {
     /// of `i_q` (module docs, "Acceleration feedforward"); 0 while it has not seen enough
     /// current steps, or when it is off.
     pub fn acceleration_gain(&self) -> T {
-        self.feedforward.as_ref().map_or(T::zero(), |f| f.k)
+        #[cfg(feature = "acceleration-feedforward")]
+        return self.feedforward.as_ref().map_or(T::zero(), |f| f.k);
+        #[cfg(not(feature = "acceleration-feedforward"))]
+        T::zero()
     }
 
     /// Tracked `(psi_f, Rs)` (Wb, ohm); the configured values when tracking is off.

@@ -74,6 +74,7 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(k) = &mut self.tracking {
             k.t.flip_speed();
         }
+        #[cfg(feature = "acceleration-feedforward")]
         if let Some(f) = &mut self.feedforward {
             f.flip();
         }
@@ -167,6 +168,7 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(a) = &mut self.adaptation {
             a.restart();
         }
+        #[cfg(feature = "acceleration-feedforward")]
         if let Some(f) = &mut self.feedforward {
             f.restart();
         }

@@ -7,7 +7,6 @@ use super::pmsm::Tracking;
 use super::{Estimate, PmsmObserver};
 use nalgebra::{Matrix4, Vector4};
 
-use super::model::TransitionTerms;
 use super::safeguards::{Events, Verdict, gate_accepted_high, gate_verdict};
 use super::structured::{self, Outcome, Sym4};
 use super::tracking::TrackerStep;
@@ -16,9 +15,6 @@ use crate::{Float, to_t};
 
 /// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
 pub const MAX_PERIOD_FACTOR: f64 = 64.0;
-
-/// A prediction: `(x-, P-)`, the tracker's prior, the acceleration feedforward's sample.
-pub(super) type Prior<T> = (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>, Option<(T, T)>);
 
 impl<T: Float> PmsmObserver<T> {
     /// One sample: predict with `u_prev = [u_a, u_b]` (V, held over the previous period), then
@@ -94,33 +90,41 @@ impl<T: Float> PmsmObserver<T> {
         // surface ones none of the salient model's.
         match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
-                let (xm, pm, tm, ff) = self.prior::<true, false>(u_prev);
-                self.correct_prior::<true, false>(xm, pm, tm, ff, i)
+                let (xm, pm, tm) = self.prior::<true, false>(u_prev);
+                #[cfg(feature = "acceleration-feedforward")]
+                let xm = self.feedforward_prior(xm);
+                self.correct_prior::<true, false>(xm, pm, tm, i)
             }
             (false, false) => {
-                let (xm, pm, _, ff) = self.prior::<false, false>(u_prev);
-                self.correct_prior::<false, false>(xm, pm, None, ff, i)
+                let (xm, pm, _) = self.prior::<false, false>(u_prev);
+                #[cfg(feature = "acceleration-feedforward")]
+                let xm = self.feedforward_prior(xm);
+                self.correct_prior::<false, false>(xm, pm, None, i)
             }
             (true, true) => {
-                let (xm, pm, tm, ff) = self.prior::<true, true>(u_prev);
-                self.correct_prior::<true, true>(xm, pm, tm, ff, i)
+                let (xm, pm, tm) = self.prior::<true, true>(u_prev);
+                #[cfg(feature = "acceleration-feedforward")]
+                let xm = self.feedforward_prior(xm);
+                self.correct_prior::<true, true>(xm, pm, tm, i)
             }
             (false, true) => {
-                let (xm, pm, _, ff) = self.prior::<false, true>(u_prev);
-                self.correct_prior::<false, true>(xm, pm, None, ff, i)
+                let (xm, pm, _) = self.prior::<false, true>(u_prev);
+                #[cfg(feature = "acceleration-feedforward")]
+                let xm = self.feedforward_prior(xm);
+                self.correct_prior::<false, true>(xm, pm, None, i)
             }
         }
     }
 
     /// The prediction `(x-, P-)` and, with tracking (`TRACK`, the tracker present), the prior
-    /// of the tracked parameters; with the acceleration feedforward, the q current and the
-    /// speed of the posterior it started from (its learning's sample). Nothing is stored here.
-    /// `S`: the motor is salient.
+    /// of the tracked parameters (nothing is stored here). `S`: the motor is salient.
     #[inline(always)]
-    pub(super) fn prior<const TRACK: bool, const S: bool>(&self, u_prev: [T; 2]) -> Prior<T> {
-        // One test on the common path each for the voltage timing, the speed noise
-        // adaptation's raised `Q` and the acceleration feedforward (all off in foc's drive);
-        // their work is out of line.
+    pub(super) fn prior<const TRACK: bool, const S: bool>(
+        &self,
+        u_prev: [T; 2],
+    ) -> (Vector4<T>, Sym4<T>, Option<TrackerStep<T>>) {
+        // One test on the common path each for the voltage timing and the speed noise
+        // adaptation's raised `Q` (both off in foc's drive); their work is out of line.
         let q_adapted;
         let mut q = self.model.q_sym();
         let mut u_prev = u_prev;
@@ -147,13 +151,11 @@ impl<T: Float> PmsmObserver<T> {
                 let (xm, mut pm, t) =
                     structured::predict::<T, S>(&disc, q, &self.x, &self.p, u_prev, trusted);
                 let tm = tr.predict::<S>(k, &disc, &t, &self.x, &mut pm, active);
-                let mut xm = xm;
-                let ff = self.feedforward(&mut xm, &t);
-                (xm, pm, Some(tm), ff)
+                (xm, pm, Some(tm))
             }
             _ => {
                 let trusted = self.locked;
-                let (mut xm, pm, t) = structured::predict::<T, S>(
+                let (xm, pm, _) = structured::predict::<T, S>(
                     self.model.discrete(),
                     q,
                     &self.x,
@@ -161,8 +163,7 @@ impl<T: Float> PmsmObserver<T> {
                     u_prev,
                     trusted,
                 );
-                let ff = self.feedforward(&mut xm, &t);
-                (xm, pm, None, ff)
+                (xm, pm, None)
             }
         }
     }
@@ -208,6 +209,42 @@ impl<T: Float> PmsmObserver<T> {
         u
     }
 
+    /// The acceleration feedforward's share of the prior `xm` (module docs, "Acceleration
+    /// feedforward"; out of line: it is opt-in).
+    #[cfg(feature = "acceleration-feedforward")]
+    #[inline(always)]
+    fn feedforward_prior(&self, xm: Vector4<T>) -> Vector4<T> {
+        if self.feedforward.is_some() {
+            self.feedforward_add(xm)
+        } else {
+            xm
+        }
+    }
+
+    /// The work of [`feedforward_prior`](Self::feedforward_prior), out of line.
+    #[cfg(feature = "acceleration-feedforward")]
+    #[cold]
+    #[inline(never)]
+    fn feedforward_add(&self, mut xm: Vector4<T>) -> Vector4<T> {
+        if let Some(f) = &self.feedforward {
+            f.feedforward(&mut xm, self.model.ts());
+        }
+        xm
+    }
+
+    /// The acceleration feedforward's sample of the committed posterior: its q current (in its
+    /// own frame) and speed (`trusted`: the step's angle was tracked and corrected).
+    #[cfg(feature = "acceleration-feedforward")]
+    #[cold]
+    #[inline(never)]
+    fn feedforward_commit(&mut self, trusted: bool) {
+        if let Some(f) = &mut self.feedforward {
+            let x = &self.x;
+            let (s, c) = x[3].sin_cos_angle();
+            f.watch(x[1] * c - x[0] * s, x[2], trusted);
+        }
+    }
+
     /// `Q` with `Q_ww` raised by the speed noise adaptation's `factor`.
     #[cold]
     #[inline(never)]
@@ -215,27 +252,6 @@ impl<T: Float> PmsmObserver<T> {
         let mut q = *self.model.q_sym();
         q[(2, 2)] *= factor;
         q
-    }
-
-    /// The acceleration feedforward's share of the prior `xm` (module docs, "Acceleration
-    /// feedforward"), from the posterior's q current (in its frame: the step's `sin`, `cos`
-    /// of the angle in `t`) and speed, which it returns (the learning's sample).
-    #[inline(always)]
-    fn feedforward(&self, xm: &mut Vector4<T>, t: &TransitionTerms<T>) -> Option<(T, T)> {
-        let f = self.feedforward.as_ref()?;
-        let (x, w) = (&self.x, self.x[2]);
-        let iq = x[1] * t.cos_th - x[0] * t.sin_th;
-        f.feedforward(xm, iq, self.model.ts());
-        Some((iq, w))
-    }
-
-    /// The acceleration feedforward's learning sample `ff` of a committed step (`trusted`: the
-    /// step's angle was tracked and corrected).
-    #[inline(always)]
-    fn feedforward_watch(&mut self, ff: Option<(T, T)>, trusted: bool) {
-        if let (Some(f), Some((iq, w))) = (&mut self.feedforward, ff) {
-            f.watch(iq, w, trusted);
-        }
     }
 
     /// The speed noise adaptation's bookkeeping after an accepted correction (when it is on).
@@ -273,13 +289,15 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p, tm, ff) = match (self.tracking.is_some(), self.model.discrete().salient) {
+        let (x, p, tm) = match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => self.prior::<true, false>(u_prev),
             (false, false) => self.prior::<false, false>(u_prev),
             (true, true) => self.prior::<true, true>(u_prev),
             (false, true) => self.prior::<false, true>(u_prev),
         };
-        self.commit_prediction(x, p, tm, ff)
+        #[cfg(feature = "acceleration-feedforward")]
+        let x = self.feedforward_prior(x);
+        self.commit_prediction(x, p, tm)
     }
 
     /// Stores a prediction `(x, p)` (and the tracker's prior `tm`) as the new estimate, with
@@ -292,7 +310,6 @@ impl<T: Float> PmsmObserver<T> {
         x: Vector4<T>,
         p: Sym4<T>,
         tm: Option<TrackerStep<T>>,
-        ff: Option<(T, T)>,
     ) -> Result<(), EkfError> {
         let tracker_finite = match (&tm, &self.tracking) {
             (Some(s), Some(Tracking { t, .. })) => t.finite_with(s, t.psi),
@@ -313,7 +330,10 @@ impl<T: Float> PmsmObserver<T> {
             t.commit(s, t.psi);
             self.tracker_housekeeping();
         }
-        self.feedforward_watch(ff, false);
+        #[cfg(feature = "acceleration-feedforward")]
+        if self.feedforward.is_some() {
+            self.feedforward_commit(false);
+        }
         self.events = Events::default();
         if self.unhealthy(&self.x, &self.p) {
             self.self_reset(None);
@@ -330,14 +350,14 @@ impl<T: Float> PmsmObserver<T> {
         match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
                 let tm = self.tracking.map(|k| k.t.as_step());
-                self.correct_prior::<true, false>(self.x, self.p, tm, None, i)
+                self.correct_prior::<true, false>(self.x, self.p, tm, i)
             }
-            (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, None, i),
+            (false, false) => self.correct_prior::<false, false>(self.x, self.p, None, i),
             (true, true) => {
                 let tm = self.tracking.map(|k| k.t.as_step());
-                self.correct_prior::<true, true>(self.x, self.p, tm, None, i)
+                self.correct_prior::<true, true>(self.x, self.p, tm, i)
             }
-            (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, None, i),
+            (false, true) => self.correct_prior::<false, true>(self.x, self.p, None, i),
         }
     }
 
@@ -349,7 +369,6 @@ impl<T: Float> PmsmObserver<T> {
         xm: Vector4<T>,
         pm: Sym4<T>,
         tm: Option<TrackerStep<T>>,
-        ff: Option<(T, T)>,
         i: [T; 2],
     ) -> Result<Estimate<T>, EkfError> {
         // Common path first: every test below is one comparison on good data; the rare
@@ -392,7 +411,10 @@ impl<T: Float> PmsmObserver<T> {
                 // Rejected by the gate: the step is the prediction only.
                 self.x = xm;
                 self.p = pm;
-                self.feedforward_watch(ff, false);
+                #[cfg(feature = "acceleration-feedforward")]
+                if self.feedforward.is_some() {
+                    self.feedforward_commit(false);
+                }
                 if TRACK && let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
                     t.commit(s, t.psi);
                     self.tracker_housekeeping();
@@ -429,8 +451,11 @@ impl<T: Float> PmsmObserver<T> {
                 self.fused -= 1;
             }
         }
-        self.feedforward_watch(ff, tracking);
         self.adaptation_watch(c.nis, tracking);
+        #[cfg(feature = "acceleration-feedforward")]
+        if self.feedforward.is_some() {
+            self.feedforward_commit(tracking);
+        }
         self.last = c;
         self.events = Events::default();
         if let Some(g) = &mut self.gate {
