@@ -75,8 +75,8 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use ekf_core::{
-    DriveConfig, DriveObserver, FluxObserver, FluxObserverConfig, MotorParams, ObserverConfig,
-    PmsmObserver, Status, wrap_angle,
+    AccelerationFeedforward, DriveConfig, DriveObserver, FluxObserver, FluxObserverConfig,
+    MotorParams, ObserverConfig, PmsmObserver, Status, wrap_angle,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -208,10 +208,22 @@ fn trace(
 /// Runs the default EKF (`ObserverConfig::new(motor, ts)` with the motor file's
 /// `voltage_delay_s` and `inverter_voltage_v`) over `log`.
 pub fn run_ekf(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
+    run_ekf_with(log, motor, false)
+}
+
+/// [`run_ekf`], with the acceleration feedforward
+/// ([`ekf_core::AccelerationFeedforward::default_for`]) when `feedforward`.
+pub fn run_ekf_with(
+    log: &DriveLog,
+    motor: &ReplayMotor,
+    feedforward: bool,
+) -> Result<ObserverTrace, ReplayError> {
     log.check()?;
     let cfg = ObserverConfig {
         voltage_delay_s: motor.voltage_delay_s,
         inverter_voltage_v: motor.inverter_voltage_v,
+        acceleration_feedforward: feedforward
+            .then(|| AccelerationFeedforward::default_for(&motor.params, motor.ts_s)),
         ..ObserverConfig::new(motor.params, motor.ts_s)
     };
     let mut obs = PmsmObserver::new(&cfg)?;
@@ -422,6 +434,9 @@ pub struct ReplayReport {
     pub has_reference: bool,
     /// The default EKF's score (`null` without a reference).
     pub ekf: Option<Score>,
+    /// The default EKF with the acceleration feedforward (`ekf_core::AccelerationFeedforward`,
+    /// opt-in): its score.
+    pub ekf_feedforward: Option<Score>,
     /// The drive observer's score.
     pub drive: Option<Score>,
     /// The flux + PLL baseline's score.
@@ -455,6 +470,8 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
     let mut flux = run_flux(log, motor)?;
     let ts = motor.ts_s;
     let ekf_score = score(log, ts, &ekf.theta, &ekf.status);
+    let ff = run_ekf_with(log, motor, true)?;
+    let ff_score = score(log, ts, &ff.theta, &ff.status);
     let drive_score = score(log, ts, &drive.theta, &drive.status);
     let flux_score = score(log, ts, &flux.theta, &flux.status);
     if let Some(th_ref) = &log.theta_ref {
@@ -483,6 +500,7 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
             .count(),
         has_reference: log.theta_ref.is_some(),
         ekf: ekf_score,
+        ekf_feedforward: ff_score,
         drive: drive_score,
         flux: flux_score,
         ekf_reference_periodic: mechanical_component(
@@ -530,6 +548,7 @@ pub fn markdown(r: &ReplayReport) -> String {
     );
     for (name, sc) in [
         ("EKF (default)", &r.ekf),
+        ("EKF + acceleration feedforward", &r.ekf_feedforward),
         ("drive observer", &r.drive),
         ("flux + PLL", &r.flux),
     ] {
