@@ -231,17 +231,19 @@
 //! against the q current; it is told from the load only when the current moves independently of
 //! the speed (current or duty steps: the conditioning test), so a drive that never changes its
 //! torque never uses it. A speed estimate that lags an acceleration biases `k` low (simulated:
-//! 3 % low), toward the random walk.
+//! 5 % low), toward the random walk.
 //!
 //! Why: at low speed the back-EMF is small beside the resistive and inverter voltage errors, and
 //! a current step there (a duty or torque step) is when a filter whose speed is a random walk
 //! reads the voltage error as a speed and slips; the model keeps the speed on the trajectory the
 //! current sets until the EMF is large enough to correct it. Its input is not
 //! covariance-weighted (the current enters as an input, its Jacobian left out). `k` is kept
-//! through resets; a branch flip turns the sign of the load estimate. Why opt-in: it costs a
-//! regression per block and a few operations per step, and on simulated drives whose filter
-//! already follows (the suite, the default run) it changes nothing that matters; measured in
-//! `docs/accuracy.md` ("Recorded drives").
+//! through resets; a branch flip turns the sign of the load estimate. Why opt-in: the filter told
+//! it is no longer the one the simulator and foc run (pyfoc's default reproduces the
+//! simulator's EKF), and on simulated drives whose filter already follows it changes little; it
+//! is compiled only with the cargo feature `acceleration-feedforward` (on with `std`), so the
+//! `no_std` step carries none of its code. Measured in `docs/accuracy.md` ("Recorded
+//! drives").
 //!
 //! **Voltage timing** ([`ObserverConfig::voltage_delay_s`], default 0). The model takes `u_prev`
 //! as the voltage held over the period. A drive's log may not hold that: firmware that updates

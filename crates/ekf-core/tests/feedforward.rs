@@ -11,8 +11,8 @@
 //! Gaussian noise.
 //!
 //! Measured (`cargo test --release -p ekf-core --test feedforward -- --nocapture`): learnt gain
-//! 371 000 (12 % below the true `k`); max angle error through the last four steps up 0.63-0.65
-//! deg with the feedforward, 2.90-2.95 deg without; told `Rs` 30 % high, 0.60-0.61 deg against
+//! 400 000 (5 % below the true `k`); max angle error through the last four steps up 1.18-1.20
+//! deg with the feedforward, 2.90-2.95 deg without; told `Rs` 30 % high, 0.85-0.87 deg against
 //! 2.88-2.98 deg. At `w Ts = 0.6` the status reads `Tracking` 100 % of the time (0 % when the
 //! speed drift check wrapped the block's advance instead of its deviation).
 use ekf_core::testing::Rng;
