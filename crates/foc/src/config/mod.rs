@@ -167,13 +167,46 @@ impl StartupConfig {
     /// The default hand-over speed, rad/s el.: `max(2 Rs I_f / psi_f, 0.02 max_speed)`, the
     /// speed whose back-EMF is twice the resistive drop of the I/f current `if_current_a`
     /// (observable, and an `Rs` error biases the angle little), at least 2 % of
-    /// `max_speed_rad_s` (module docs, "Defaults and where they come from").
+    /// `max_speed_rad_s` (module docs, "Defaults and where they come from"). The rule of
+    /// the classic start (no damping, no kick); with the damped start
+    /// [`handover_speed_for`](Self::handover_speed_for) hands over lower.
     pub fn default_handover_speed_rad_s(
         motor: &MotorParams<f32>,
         if_current_a: f32,
         max_speed_rad_s: f32,
     ) -> f32 {
         (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s)
+    }
+
+    /// Hand-over speed of the damped start as a fraction of the rated speed (3 %): the
+    /// damped start hands over there on every reference motor (docs/startup.md), twice the
+    /// exit speed ([`EXIT_SPEED_OF_RATED`](Self::EXIT_SPEED_OF_RATED)).
+    pub const HANDOVER_SPEED_OF_RATED: f64 = 0.03;
+
+    /// Exit speed of closed loop as a fraction of the rated speed (1.5 %): 1.5 times the
+    /// lowest speed that the low-speed table (docs/accuracy.md, "Low speed") shows the
+    /// observer carrying under rated load on every reference motor (1 %).
+    pub const EXIT_SPEED_OF_RATED: f64 = 0.015;
+
+    /// The largest default `exit_speed_ratio` (0.7): a hysteresis of at least 30 % of the
+    /// hand-over speed.
+    pub const EXIT_SPEED_RATIO_MAX: f32 = 0.7;
+
+    /// The damped start's hand-over speed for a known rated speed `rated_speed_e_rad_s`
+    /// (rad/s el.): [`HANDOVER_SPEED_OF_RATED`](Self::HANDOVER_SPEED_OF_RATED) times it. A
+    /// host-side helper, in `f64` like [`kick_speed_ratio_for`](Self::kick_speed_ratio_for).
+    pub fn handover_speed_for(rated_speed_e_rad_s: f64) -> f32 {
+        (Self::HANDOVER_SPEED_OF_RATED * rated_speed_e_rad_s) as f32
+    }
+
+    /// The `exit_speed_ratio` that puts the exit speed at
+    /// [`EXIT_SPEED_OF_RATED`](Self::EXIT_SPEED_OF_RATED) of the rated speed
+    /// `rated_speed_e_rad_s` (rad/s el.) for the hand-over speed `handover_speed_rad_s`:
+    /// `0.015 w_rated / w_handover`, within `[0.01, 0.7]`. `FocConfig::new` passes the base
+    /// speed `max_speed_rad_s` for the rated speed it does not know. Computed in `f64`.
+    pub fn exit_speed_ratio_for(rated_speed_e_rad_s: f64, handover_speed_rad_s: f32) -> f32 {
+        let r = Self::EXIT_SPEED_OF_RATED * rated_speed_e_rad_s / f64::from(handover_speed_rad_s);
+        r.clamp(0.01, f64::from(Self::EXIT_SPEED_RATIO_MAX)) as f32
     }
 
     /// The default I/f acceleration, rad/s^2 el.: the hand-over speed reached in
@@ -464,7 +497,10 @@ impl FocConfig {
                 accel_rad_s2: StartupConfig::default_accel_rad_s2(handover),
                 handover_speed_rad_s: handover,
                 blend_time_s: 20e-3,
-                exit_speed_ratio: 0.7,
+                exit_speed_ratio: StartupConfig::exit_speed_ratio_for(
+                    f64::from(max_speed_rad_s),
+                    handover,
+                ),
                 reversal: Reversal::ClosedLoop,
                 acquire_timeout_s: 1.0,
                 damping_ratio: 0.0,
@@ -645,6 +681,14 @@ mod tests {
             c.startup.if_current_a,
             c.max_speed_rad_s,
         );
+        // The exit at 1.5 % of the base speed: 0.015 * 940.4 / 82.14 (servo at 300 V).
+        let exit = c.startup.exit_speed_ratio * h;
+        assert!((exit - 0.015 * c.max_speed_rad_s).abs() < 1e-3, "{exit}");
+        assert!((c.startup.exit_speed_ratio - 0.1717).abs() < 1e-3);
+        assert!((StartupConfig::handover_speed_for(1000.0) - 30.0).abs() < 1e-4);
+        assert_eq!(StartupConfig::exit_speed_ratio_for(1000.0, 30.0), 0.5);
+        assert_eq!(StartupConfig::exit_speed_ratio_for(1000.0, 10.0), 0.7);
+        assert_eq!(StartupConfig::exit_speed_ratio_for(1000.0, 5000.0), 0.01);
         assert_eq!(c.startup.handover_speed_rad_s.to_bits(), h.to_bits());
         assert_eq!(
             c.startup.accel_rad_s2.to_bits(),
