@@ -70,7 +70,7 @@ impl Scenario {
         let damped = self.inverter.dead_time_s == 0.0 || dead_time >= self.inverter.dead_time_s;
         let on = if damped { 1.0 } else { 0.0 };
         st.damping_ratio = s.startup_damping_ratio.unwrap_or(on) as f32;
-        // The damped start hands over at 3 % of rated speed, the classic one (undamped: its
+        // The damped start hands over at 2 % of rated speed, the classic one (undamped: its
         // rotor swings faster than that) by foc's rule.
         st.handover_speed_rad_s = match s.handover_speed_rpm {
             Some(rpm) => rpm_to_e(rpm),
@@ -104,7 +104,8 @@ impl Scenario {
             ReversalMode::ClosedLoop => Reversal::ClosedLoop,
             ReversalMode::OpenLoop => Reversal::OpenLoop,
         };
-        // The exit at 1.5 % of rated speed (foc's rule, on the rated speed it is not told).
+        // The exit at 1.5 % of rated speed, at most 0.7 of the hand-over speed (foc's rule, on
+        // the rated speed foc is not told).
         st.exit_speed_ratio = match s.exit_speed_ratio {
             Some(r) => r as f32,
             None => StartupConfig::exit_speed_ratio_for(

@@ -128,7 +128,9 @@ pub struct FocSettings {
     pub align_current_a: Option<f64>,
     /// Current of the open-loop I/f ramp, A. Default: half of `controller.current_limit_a`.
     pub if_current_a: Option<f64>,
-    /// Speed of the hand-over to the observer, mechanical rpm. Default (foc's rule):
+    /// Speed of the hand-over to the observer, mechanical rpm. Default: 2 % of
+    /// `rated_speed_rpm` with the damped start (`startup_damping_ratio` > 0;
+    /// `foc::StartupConfig::handover_speed_for`), else foc's rule for the classic start,
     /// `max(2 Rs I_f / psi_f, 0.02 w_max)` electrical, the back-EMF twice the resistive drop.
     pub handover_speed_rpm: Option<f64>,
     /// Acceleration of the I/f ramp, mechanical rpm per second. Default: the hand-over speed
@@ -155,8 +157,9 @@ pub struct FocSettings {
     #[serde(skip_serializing_if = "StartupTiming::is_fixed")]
     pub startup_timing: StartupTiming,
     /// Closed loop returns to I/f below this fraction of the hand-over speed (for a stop or
-    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default foc's,
-    /// 0.7.
+    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default: the
+    /// exit at 1.5 % of `rated_speed_rpm`, at most 0.7 of the hand-over speed
+    /// (`foc::StartupConfig::exit_speed_ratio_for`; 0.7 with the damped start's hand-over).
     pub exit_speed_ratio: Option<f64>,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
     /// `inverter.dead_time_s` (the drive knows its bridge); 0 turns the compensation off.
