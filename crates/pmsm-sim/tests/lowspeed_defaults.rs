@@ -1,10 +1,12 @@
 //! The default drive at 3 % of rated speed under rated load (module
-//! `pmsm_sim::analysis::low_speed`, "The default drive"): on the five reference motors
-//! `foc` sensorless with pmsm-sim's defaults (damped start handing over at 2 % of rated
-//! speed, closed loop left below 1.4 % of rated) stays in closed loop, and draws at most
-//! 1.15 times the rated-torque current; and with foc's classic start (no damping, no kick:
-//! its own hand-over rule, 9.8 % of rated on the servo) the exit at 1.5 % of rated keeps the servo and
-//! small_fast there too.
+//! `pmsm_sim::analysis::low_speed`, "The default drive"): on the three surface reference
+//! motors `foc` sensorless with pmsm-sim's defaults (damped start handing over at 3 % of
+//! rated speed, closed loop left below 1.5 % of rated) stays in closed loop and draws at most
+//! 1.15 times the rated-torque current; with foc's classic start (no damping, no kick: its
+//! own hand-over rule, 9.8 % of rated on the servo) the exit at 1.5 % of rated keeps the
+//! servo and small_fast there too. The interior motors keep foc's rule for the hand-over
+//! (18.3 % of rated on industrial_ipm: this job's rated load, at 0.8 s, finds it still in
+//! I/f and the observer is lost); docs/startup.md, "Hand-over and exit speed".
 //!
 //! Goals asserted over the window (5 s held at 3 % of rated after the ramp down from 20 %
 //! under rated load): no fault, closed loop in every period (no exit, no fall-back), mean
@@ -12,11 +14,11 @@
 //! angle error of foc's observer <= 3 deg el.
 //!
 //! Measured (`cargo test --release -p pmsm-sim --test lowspeed_defaults -- --nocapture`
-//! prints the rows): current ratio 1.000-1.005, angle error RMS 0.25 (small_fast) to 1.01
+//! prints the rows): current ratio 1.000-1.005, angle error RMS 0.24 (small_fast) to 1.09
 //! deg (servo), in closed loop throughout (classic start: servo 1.004 / 0.90 deg, small_fast
-//! 1.000 / 0.25 deg); with the previous defaults (the hand-over by foc's classic rule, exit at 0.7
-//! of it: 6.9 % of rated on the servo) the servo ran I/f in the whole window at 1.75 times
-//! the rated-torque current, which the last test asserts still fails the goals.
+//! 1.000 / 0.25 deg); with the previous defaults (the hand-over by foc's classic rule,
+//! exit at 0.7 of it: 6.9 % of rated on the servo) the servo ran I/f in the whole window at
+//! 1.75 times the rated-torque current, which the last test asserts still fails the goals.
 
 use pmsm_sim::analysis::low_speed::{LowSpeedRun, default_drive_scenario, run_scenario, scenario};
 use pmsm_sim::analysis::suite::SuiteMotor;
@@ -57,11 +59,11 @@ fn default_drive_stays_closed_loop_at_three_percent_of_rated_under_rated_load() 
         "| motor | start | closed loop (% window) | exits | mean speed (rpm) | current ratio | angle error RMS (deg) | fault |"
     );
     println!("|---|---|---|---|---|---|---|---|");
-    for motor in SuiteMotor::ALL {
+    for motor in SuiteMotor::SURFACE {
         let sc = default_drive_scenario(motor, SPEED_PCT, HOLD_S)
             .unwrap_or_else(|e| panic!("{}: {e}", motor.name()));
-        // The defaults under test: the damped start hands over at 2 % of rated speed and
-        // closed loop is left below 0.7 of that, 1.4 % of rated.
+        // The defaults under test: the damped start hands over at 3 % of rated speed and
+        // closed loop is left below 1.5 % of rated.
         let cfg = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
         let rated_e = sc.rated_speed_e_rad_s();
         let st = cfg.startup;
@@ -69,11 +71,11 @@ fn default_drive_stays_closed_loop_at_three_percent_of_rated_under_rated_load() 
         let handover = f64::from(st.handover_speed_rad_s) / rated_e;
         let exit = f64::from(st.exit_speed_ratio * st.handover_speed_rad_s) / rated_e;
         assert!(
-            (handover - 0.02).abs() < 1e-6,
+            (handover - 0.03).abs() < 1e-6,
             "{}: {handover}",
             motor.name()
         );
-        assert!((exit - 0.014).abs() < 1e-6, "{}: {exit}", motor.name());
+        assert!((exit - 0.015).abs() < 1e-6, "{}: {exit}", motor.name());
         let r = run_scenario(&sc, SPEED_PCT).unwrap_or_else(|e| panic!("{e}"));
         print(motor.name(), "damped (default)", &r);
         assert_goals(motor.name(), &r);

@@ -33,11 +33,11 @@
 //! | `dead_time_s` | `0` (compensation off) | a property of the bridge: set it to the gate driver's dead time |
 //! | `dead_time_band_a` | `None`: `0.02 current_limit_a` at [`Foc::new`](crate::Foc::new) | the smooth sign's linear band (module [`deadtime`](crate::deadtime)): in pmsm-sim 1 and 2 % do alike, 5 % doubles the residual observer error; on hardware about half the current ripple |
 //! | `startup.if_current_a`, `align_current_a` | `0.5 current_limit_a` | |
-//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` ([`StartupConfig::default_handover_speed_rad_s`]) | the classic start (no damping, no kick): back-EMF twice the resistive drop, observable, and an `Rs` error biases the angle little; lower, the undamped I/f rotor swings faster than the ramp (the servo from its dead point at 3 % of `max_speed`: no hand-over in 1.5 s). With the damped start on, 2 % of the rated speed ([`StartupConfig::handover_speed_for`], pmsm-sim's default): the lowest of 3, 2, 1.5 % that meets the start-up goals on every cell of the start-up grid |
+//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` ([`StartupConfig::default_handover_speed_rad_s`]) | the classic start (no damping, no kick): back-EMF twice the resistive drop, observable, and an `Rs` error biases the angle little; lower, the undamped I/f rotor swings faster than the ramp (the servo from its dead point at 3 % of `max_speed`: no hand-over in 1.5 s). With the damped start on, 3 % of the rated speed ([`StartupConfig::handover_speed_for`], pmsm-sim's default): the start-up grid meets its goals at 3 and 2 %, not at 1.5 %; the interior motor with field weakening hands over only from 2.5 % |
 //! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` ([`StartupConfig::default_accel_rad_s2`]) | hand-over speed in half a second |
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
-//! | `startup.exit_speed_ratio` | exit at 1.5 % of `max_speed` (the rated speed's stand-in), at most 0.7 of the hand-over speed ([`StartupConfig::exit_speed_ratio_for`]; servo at 300 V: 0.17) | closed loop is left below it (a stop, a slow command): 1.5 times the lowest speed the low-speed table shows the observer carrying under rated load on every reference motor (1 %, industrial_2k2), so that 3 % of rated under rated load runs closed loop (before, at 0.7 of the hand-over, the servo ran I/f there with 1.75 times the rated-torque current); with the damped start's hand-over at 2 % of rated, 0.7 (1.4 %) |
+//! | `startup.exit_speed_ratio` | exit at 1.5 % of `max_speed` (the rated speed's stand-in), at most 0.7 of the hand-over speed ([`StartupConfig::exit_speed_ratio_for`]; servo at 300 V: 0.17) | closed loop is left below it (a stop, a slow command): 1.5 times the lowest speed the low-speed table shows the observer carrying under rated load on every reference motor (1 %, industrial_2k2), so that 3 % of rated under rated load runs closed loop (before, at 0.7 of the hand-over, the servo ran I/f there with 1.75 times the rated-torque current); with the damped start's hand-over at 3 % of rated, 0.5 |
 //! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
 //! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended; [`StartupConfig::kick_speed_ratio_for`] puts the kick at 0.6 % of a known rated speed) | as `damping_ratio` |
@@ -178,11 +178,12 @@ impl StartupConfig {
         (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s)
     }
 
-    /// Hand-over speed of the damped start as a fraction of the rated speed (2 %): the lowest
-    /// of 3, 2 and 1.5 % at which the damped start meets its goals on every cell of the
-    /// start-up grid (docs/startup.md, "Hand-over speed"), above the exit speed
-    /// ([`exit_speed_ratio_for`](Self::exit_speed_ratio_for): 0.7 of it, 1.4 % of rated).
-    pub const HANDOVER_SPEED_OF_RATED: f64 = 0.02;
+    /// Hand-over speed of the damped start as a fraction of the rated speed (3 %): the
+    /// damped start meets its goals on every cell of the start-up grid there and at 2 %, not
+    /// at 1.5 %, and the interior motor with field weakening hands over only from 2.5 %
+    /// (docs/startup.md, "Hand-over speed"); twice the exit speed
+    /// ([`EXIT_SPEED_OF_RATED`](Self::EXIT_SPEED_OF_RATED), 1.5 %).
+    pub const HANDOVER_SPEED_OF_RATED: f64 = 0.03;
 
     /// Exit speed of closed loop as a fraction of the rated speed (1.5 %), at most
     /// [`EXIT_SPEED_RATIO_MAX`](Self::EXIT_SPEED_RATIO_MAX) of the hand-over speed: 1.5
@@ -204,8 +205,8 @@ impl StartupConfig {
     /// The `exit_speed_ratio` that puts the exit speed at
     /// [`EXIT_SPEED_OF_RATED`](Self::EXIT_SPEED_OF_RATED) of the rated speed
     /// `rated_speed_e_rad_s` (rad/s el.) for the hand-over speed `handover_speed_rad_s`:
-    /// `0.015 w_rated / w_handover`, within `[0.01, 0.7]` (0.7 for the damped start's
-    /// hand-over at 2 % of rated: the exit at 1.4 %). `FocConfig::new` passes the base
+    /// `0.015 w_rated / w_handover`, within `[0.01, 0.7]` (0.5 for the damped start's
+    /// hand-over at 3 % of rated). `FocConfig::new` passes the base
     /// speed `max_speed_rad_s` for the rated speed it does not know. Computed in `f64`.
     pub fn exit_speed_ratio_for(rated_speed_e_rad_s: f64, handover_speed_rad_s: f32) -> f32 {
         let r = Self::EXIT_SPEED_OF_RATED * rated_speed_e_rad_s / f64::from(handover_speed_rad_s);

@@ -21,10 +21,10 @@
 //! default hysteresis sits.
 //!
 //! **The default drive** ([`default_drive_scenario`]): the same job with the drive's own exit
-//! speed (`foc::StartupConfig::exit_speed_ratio_for`: 1.5 % of rated speed, about 1.5 times
-//! the table's worst lowest speed, 1 % on industrial_2k2; at most 0.7 of the hand-over speed,
-//! so 1.4 % with the damped start's hand-over at 2 % of rated,
-//! `StartupConfig::handover_speed_for`): at 3 % of rated it stays in closed loop (the test
+//! speed (`foc::StartupConfig::exit_speed_ratio_for`: 1.5 % of rated speed, 1.5 times the
+//! table's worst lowest speed, 1 % on industrial_2k2; half the damped start's hand-over at 3 %
+//! of rated, `StartupConfig::handover_speed_for`): at 3 % of rated it stays in closed loop
+//! (the test
 //! `tests/lowspeed_defaults.rs`).
 //!
 //! **Pass** at a speed: no fault, closed loop in every period of the window (no exit, no

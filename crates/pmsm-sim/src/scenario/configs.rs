@@ -70,11 +70,12 @@ impl Scenario {
         let damped = self.inverter.dead_time_s == 0.0 || dead_time >= self.inverter.dead_time_s;
         let on = if damped { 1.0 } else { 0.0 };
         st.damping_ratio = s.startup_damping_ratio.unwrap_or(on) as f32;
-        // The damped start hands over at 2 % of rated speed, the classic one (undamped: its
-        // rotor swings faster than that) by foc's rule.
+        // The damped start hands over at 3 % of rated speed on a surface motor; an interior
+        // motor and the classic start (undamped: its rotor swings faster than that) by foc's
+        // rule (docs/startup.md, "Hand-over and exit speed").
         st.handover_speed_rad_s = match s.handover_speed_rpm {
             Some(rpm) => rpm_to_e(rpm),
-            None if st.damping_ratio > 0.0 => {
+            None if st.damping_ratio > 0.0 && !motor.is_salient() => {
                 StartupConfig::handover_speed_for(self.rated_speed_e_rad_s())
             }
             None => StartupConfig::default_handover_speed_rad_s(
