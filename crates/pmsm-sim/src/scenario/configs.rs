@@ -106,13 +106,17 @@ impl Scenario {
             ReversalMode::OpenLoop => Reversal::OpenLoop,
         };
         // The exit at 1.5 % of rated speed, at most 0.7 of the hand-over speed (foc's rule, on
-        // the rated speed foc is not told).
+        // the rated speed foc is not told), where the dead time is compensated (or none):
+        // measured so (docs/accuracy.md, "Low speed"). An uncompensated dead time biases the
+        // observer at low speed: 0.7 of the hand-over speed there (the default job's I/f
+        // reversal without compensation lost 0.5 s with the exit at 1.5 %).
         st.exit_speed_ratio = match s.exit_speed_ratio {
             Some(r) => r as f32,
-            None => StartupConfig::exit_speed_ratio_for(
+            None if damped => StartupConfig::exit_speed_ratio_for(
                 self.rated_speed_e_rad_s(),
                 st.handover_speed_rad_s,
             ),
+            None => StartupConfig::EXIT_SPEED_RATIO_MAX,
         };
         cfg.health.policy = match s.observer_loss {
             ObserverLoss::FallBack => ObserverLossPolicy::FallBackAndReacquire,

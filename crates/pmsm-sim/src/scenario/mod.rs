@@ -158,7 +158,8 @@ pub struct FocSettings {
     pub startup_timing: StartupTiming,
     /// Closed loop returns to I/f below this fraction of the hand-over speed (for a stop or
     /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default: the
-    /// exit at 1.5 % of `rated_speed_rpm`, at most 0.7 of the hand-over speed
+    /// exit at 1.5 % of `rated_speed_rpm`, at most 0.7 of the hand-over speed, when the dead
+    /// time is compensated (or none; else 0.7)
     /// (`foc::StartupConfig::exit_speed_ratio_for`; 0.5 with the damped start's 3 %).
     pub exit_speed_ratio: Option<f64>,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
