@@ -195,6 +195,15 @@ impl StartupConfig {
     /// gives (0.7): a hysteresis of at least 30 % of the hand-over speed.
     pub const EXIT_SPEED_RATIO_MAX: f32 = 0.7;
 
+    /// `FocConfig::new`'s `exit_speed_ratio`: [`exit_speed_ratio_for`](Self::exit_speed_ratio_for)
+    /// with the base speed `max_speed_rad_s` for the rated speed, in `f32` (no `f64` on the
+    /// MCU).
+    pub fn default_exit_speed_ratio(max_speed_rad_s: f32, handover_speed_rad_s: f32) -> f32 {
+        const EXIT: f32 = StartupConfig::EXIT_SPEED_OF_RATED as f32;
+        let r = EXIT * max_speed_rad_s / handover_speed_rad_s;
+        r.clamp(0.01, Self::EXIT_SPEED_RATIO_MAX)
+    }
+
     /// The damped start's hand-over speed for a known rated speed `rated_speed_e_rad_s`
     /// (rad/s el.): [`HANDOVER_SPEED_OF_RATED`](Self::HANDOVER_SPEED_OF_RATED) times it. A
     /// host-side helper, in `f64` like [`kick_speed_ratio_for`](Self::kick_speed_ratio_for).
@@ -502,8 +511,8 @@ impl FocConfig {
                 accel_rad_s2: StartupConfig::default_accel_rad_s2(handover),
                 handover_speed_rad_s: handover,
                 blend_time_s: 20e-3,
-                exit_speed_ratio: StartupConfig::exit_speed_ratio_for(
-                    f64::from(max_speed_rad_s),
+                exit_speed_ratio: StartupConfig::default_exit_speed_ratio(
+                    max_speed_rad_s,
                     handover,
                 ),
                 reversal: Reversal::ClosedLoop,
