@@ -30,7 +30,7 @@
 //!   open phase, a demagnetized or wrong motor). A warm motor is no loss: the tracked flux
 //!   and resistance keep the NIS consistent.
 //! - **Stall** (closed loop): the speed loop at its current limit while the estimated speed
-//!   stays below half the exit speed or has the wrong sign (an overload that drives the
+//!   stays below half of `max(exit speed, 0.7 hand-over speed)` or has the wrong sign (an overload that drives the
 //!   rotor backwards). While this holds, the loss checks are suspended: a rotor that does
 //!   not follow a saturated speed loop is reported as a stall after `stall_time_s`, not as
 //!   an observer loss after `lost_time_s`.
@@ -98,6 +98,9 @@ pub struct HealthMonitor {
     inv_ts: f32,
     handover: f32,
     exit_speed: f32,
+    /// Below this estimated speed a saturated speed loop is a stall, rad/s el.:
+    /// `0.5 max(exit_speed, 0.7 handover)`.
+    stall_speed: f32,
     /// EMA coefficient `Ts / window`.
     k: f32,
     lost_ticks: u32,
@@ -115,6 +118,12 @@ pub struct HealthMonitor {
     flux_lo: f32,
     flux_hi: f32,
 }
+
+/// The stall check's speed is half of at least this fraction of the hand-over speed (the
+/// largest default exit ratio): a low exit speed does not lower it. With an exit at 1.5 % of
+/// the base speed, half of it missed foc's jammed-rotor stall on the test rig (the observer's
+/// speed of a jammed rotor under the saturated current crossed it).
+const STALL_HANDOVER_RATIO: f32 = 0.7;
 
 /// Number of ticks in `t` seconds, at least 1.
 pub(crate) fn ticks(t_s: f32, ts_s: f32) -> u32 {
@@ -140,6 +149,7 @@ impl HealthMonitor {
             inv_ts: 1.0 / ts_s,
             handover: handover_rad_s,
             exit_speed: exit_rad_s,
+            stall_speed: 0.5 * max2(exit_rad_s, STALL_HANDOVER_RATIO * handover_rad_s),
             k: if k < 1.0 { k } else { 1.0 },
             lost_ticks: ticks(cfg.lost_time_s, ts_s),
             lock_ticks: ticks(cfg.lock_time_s, ts_s),
@@ -233,7 +243,7 @@ impl HealthMonitor {
                 saturated,
             } => {
                 let wrong_way = w * speed_ref < 0.0;
-                stall = saturated && (w.abs() < 0.5 * self.exit_speed || wrong_way);
+                stall = saturated && (w.abs() < self.stall_speed || wrong_way);
                 if stall {
                     // A rotor that does not follow a saturated speed loop is a stall (or an
                     // overload), not an observer failure: the stall timer decides.

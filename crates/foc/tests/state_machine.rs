@@ -149,13 +149,18 @@ fn reversal_in_closed_loop_through_zero_speed() {
 #[test]
 fn low_speed_command_stays_in_open_loop_and_returns_up() {
     let mut rig = closed_loop_at(100.0);
-    // Below the exit speed (0.7 * 84.6 / 4 = 14.8 rad/s mech): back to I/f, held there.
-    rig.foc.set_speed_ref_mech_rad_s(8.0).unwrap();
+    // Below the exit speed (1.5 % of the base speed, 0.015 * 940 / 4 = 3.5 rad/s mech):
+    // back to I/f, held there.
+    let c = *rig.foc.config();
+    let exit_mech =
+        c.startup.exit_speed_ratio * c.startup.handover_speed_rad_s / c.motor.pole_pairs as f32;
+    assert!((exit_mech - 3.53).abs() < 0.05, "{exit_mech}");
+    rig.foc.set_speed_ref_mech_rad_s(2.5).unwrap();
     let seen = visit(&mut rig, 1.0);
     assert_eq!(seen, [State::ClosedLoop, State::OpenLoop]);
     let mut mean = 0.0;
     rig.run(0.5, |r, _| mean += r.plant.omega_mech() / 10_000.0);
-    assert!((mean - 8.0).abs() < 1.0, "I/f mean speed {mean}");
+    assert!((mean - 2.5).abs() < 1.0, "I/f mean speed {mean}");
     // And up again.
     rig.foc.set_speed_ref_mech_rad_s(100.0).unwrap();
     let seen = visit(&mut rig, 1.0);

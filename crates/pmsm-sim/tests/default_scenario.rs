@@ -203,8 +203,9 @@ fn a_custom_controller_can_open_the_bridge() {
 /// The built-in default runs the `foc` crate's sensorless controller through the whole job
 /// without a fault, and reports foc's own observer next to the simulator's. Measured (seed 1,
 /// 0.5 us dead time compensated by foc): no closed-loop exit (the reversal stays in closed
-/// loop), final speed -999.5 rpm, settled speed error 0.32 rpm RMS, foc observer after the
-/// hand-over 0.071 deg RMS, 0.448 deg max, -0.011 deg mean over 1.78 s. The bounds below are
+/// loop), final speed -999.7 rpm, settled speed error 0.40 rpm RMS, foc observer after the
+/// hand-over (at 3 % of rated speed) 0.073 deg RMS, 0.426 deg max, -0.010 deg mean over
+/// 1.79 s. The bounds below are
 /// those values with a margin of about 1.5x (the run is deterministic; the margin absorbs a
 /// last-digit change of the float math, not a regression). A last-digit change moves the run
 /// onto another noise path, so the mean's bound covers its spread over noise seeds: seeds 1-8

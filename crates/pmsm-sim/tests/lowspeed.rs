@@ -56,9 +56,8 @@ fn surface_motors_run_closed_loop_at_low_speed_under_rated_load() {
     }
 }
 
-/// A run that cannot hold closed loop is a failure in the table, not a pass: with foc's
-/// default exit speed (0.7 of the hand-over speed, about 7 % of rated on the servo) a
-/// command of 1 % of rated leaves closed loop for I/f.
+/// A run that cannot hold closed loop is a failure in the table, not a pass: with the
+/// default exit speed (1.5 % of rated) a command of 1 % of rated leaves closed loop for I/f.
 #[test]
 fn a_command_below_the_exit_speed_fails_the_run() {
     let mut sc = pmsm_sim::analysis::low_speed::scenario(SuiteMotor::Servo, 1.0, 1.0)

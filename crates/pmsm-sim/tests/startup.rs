@@ -5,8 +5,9 @@
 //! - the rotor never turns backwards faster than 1 % of rated speed;
 //! - from 0.1 s after the alignment to the hand-over the speed stays within 10 % of rated
 //!   speed of the I/f ramp;
-//! - the hand-over takes place at or below 3 % of rated speed (the hand-over speed is set to
-//!   3 % of rated here; the run checks that the hand-over happens, without a fault).
+//! - the hand-over takes place at or below 3 % of rated speed (pmsm-sim's default for the
+//!   damped start, `foc::StartupConfig::handover_speed_for`; the run checks that the
+//!   hand-over happens, without a fault).
 //!
 //! The figures are pmsm-sim's own start-up metrics ([`pmsm_sim::output::metrics::StartupMetrics`]).
 //! `cargo test --release -p pmsm-sim --test startup -- --nocapture` prints the table.
@@ -45,7 +46,6 @@ fn scenario(preset: &str, theta0: f64, dseed: u64) -> Scenario {
     let mut foc = sc.controller.foc.unwrap_or_default();
     foc.start_time_s = 0.0;
     foc.stop_time_s = None;
-    foc.handover_speed_rpm = Some(HANDOVER_MAX_PCT / 100.0 * sc.rated_speed_rpm);
     sc.controller.foc = Some(foc);
     sc.speed_ref_rpm = Profile::steps(vec![(0.0, sc.rated_speed_rpm)]);
     // The alignment (0.2 s by default, up to twice that and a coast), the ramp to the

@@ -33,11 +33,11 @@
 //! | `dead_time_s` | `0` (compensation off) | a property of the bridge: set it to the gate driver's dead time |
 //! | `dead_time_band_a` | `None`: `0.02 current_limit_a` at [`Foc::new`](crate::Foc::new) | the smooth sign's linear band (module [`deadtime`](crate::deadtime)): in pmsm-sim 1 and 2 % do alike, 5 % doubles the residual observer error; on hardware about half the current ripple |
 //! | `startup.if_current_a`, `align_current_a` | `0.5 current_limit_a` | |
-//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` ([`StartupConfig::default_handover_speed_rad_s`]) | back-EMF twice the resistive drop: observable, and an `Rs` error biases the angle little |
+//! | `startup.handover_speed_rad_s` | `max(2 Rs I_f / psi_f, 0.02 max_speed)` ([`StartupConfig::default_handover_speed_rad_s`]) | the classic start (no damping, no kick): back-EMF twice the resistive drop, observable, and an `Rs` error biases the angle little; lower, the undamped I/f rotor swings faster than the ramp (the servo from its dead point at 3 % of `max_speed`: no hand-over in 1.5 s). With the damped start on, 3 % of the rated speed ([`StartupConfig::handover_speed_for`], pmsm-sim's default): the start-up grid meets its goals at 3 and 2 %, not at 1.5 %; the interior motor with field weakening hands over only from 2.5 % |
 //! | `startup.accel_rad_s2` | `handover_speed / 0.5 s` ([`StartupConfig::default_accel_rad_s2`]) | hand-over speed in half a second |
 //! | `startup.align_time_s` | 0.2 s | |
 //! | `startup.blend_time_s` | 20 ms | |
-//! | `startup.exit_speed_ratio` | 0.7 | closed loop is left below 0.7 of the hand-over speed (hysteresis): a stop, a slow command |
+//! | `startup.exit_speed_ratio` | exit at 1.5 % of `max_speed` (the rated speed's stand-in), at most 0.7 of the hand-over speed ([`StartupConfig::exit_speed_ratio_for`]; servo at 300 V: 0.17) | closed loop is left below it (a stop, a slow command): 1.5 times the lowest speed the low-speed table shows the observer carrying under rated load on every reference motor (1 %, industrial_2k2), so that 3 % of rated under rated load runs closed loop (before, at 0.7 of the hand-over, the servo ran I/f there with 1.75 times the rated-torque current); with the damped start's hand-over at 3 % of rated, 0.5. With an uncompensated dead time the observer is biased at low speed: pmsm-sim then keeps 0.7 |
 //! | `startup.reversal` | `Reversal::ClosedLoop` | a reversal stays on the observer through zero (fast pass under load: the EKF's model carries the angle); `OpenLoop`: the classic exit to I/f |
 //! | `startup.damping_ratio` | 0 (off; 1 recommended: critically damped) | the damped start (module [`startup`](crate::startup)) relies on the observer near 1 % of rated speed, which an uncompensated dead time biases: opt-in until measured on hardware (pmsm-sim turns it on) |
 //! | `startup.kick_speed_ratio` | 0 (off; 0.2 recommended; [`StartupConfig::kick_speed_ratio_for`] puts the kick at 0.6 % of a known rated speed) | as `damping_ratio` |
@@ -167,13 +167,59 @@ impl StartupConfig {
     /// The default hand-over speed, rad/s el.: `max(2 Rs I_f / psi_f, 0.02 max_speed)`, the
     /// speed whose back-EMF is twice the resistive drop of the I/f current `if_current_a`
     /// (observable, and an `Rs` error biases the angle little), at least 2 % of
-    /// `max_speed_rad_s` (module docs, "Defaults and where they come from").
+    /// `max_speed_rad_s` (module docs, "Defaults and where they come from"). The rule of
+    /// the classic start (no damping, no kick); with the damped start
+    /// [`handover_speed_for`](Self::handover_speed_for) hands over lower.
     pub fn default_handover_speed_rad_s(
         motor: &MotorParams<f32>,
         if_current_a: f32,
         max_speed_rad_s: f32,
     ) -> f32 {
         (2.0 * motor.rs_ohm * if_current_a / motor.psi_f_wb).max(0.02 * max_speed_rad_s)
+    }
+
+    /// Hand-over speed of the damped start as a fraction of the rated speed (3 %): the
+    /// damped start meets its goals on every cell of the start-up grid there and at 2 %, not
+    /// at 1.5 %, and the interior motor with field weakening hands over only from 2.5 %
+    /// (docs/startup.md, "Hand-over speed"); twice the exit speed
+    /// ([`EXIT_SPEED_OF_RATED`](Self::EXIT_SPEED_OF_RATED), 1.5 %).
+    pub const HANDOVER_SPEED_OF_RATED: f64 = 0.03;
+
+    /// Exit speed of closed loop as a fraction of the rated speed (1.5 %), at most
+    /// [`EXIT_SPEED_RATIO_MAX`](Self::EXIT_SPEED_RATIO_MAX) of the hand-over speed: 1.5
+    /// times the lowest speed that the low-speed table (docs/accuracy.md, "Low speed") shows
+    /// the observer carrying under rated load on every reference motor (1 %).
+    pub const EXIT_SPEED_OF_RATED: f64 = 0.015;
+
+    /// The largest `exit_speed_ratio` that [`exit_speed_ratio_for`](Self::exit_speed_ratio_for)
+    /// gives (0.7): a hysteresis of at least 30 % of the hand-over speed.
+    pub const EXIT_SPEED_RATIO_MAX: f32 = 0.7;
+
+    /// `FocConfig::new`'s `exit_speed_ratio`: [`exit_speed_ratio_for`](Self::exit_speed_ratio_for)
+    /// with the base speed `max_speed_rad_s` for the rated speed, in `f32` (no `f64` on the
+    /// MCU).
+    pub fn default_exit_speed_ratio(max_speed_rad_s: f32, handover_speed_rad_s: f32) -> f32 {
+        const EXIT: f32 = StartupConfig::EXIT_SPEED_OF_RATED as f32;
+        let r = EXIT * max_speed_rad_s / handover_speed_rad_s;
+        r.clamp(0.01, Self::EXIT_SPEED_RATIO_MAX)
+    }
+
+    /// The damped start's hand-over speed for a known rated speed `rated_speed_e_rad_s`
+    /// (rad/s el.): [`HANDOVER_SPEED_OF_RATED`](Self::HANDOVER_SPEED_OF_RATED) times it. A
+    /// host-side helper, in `f64` like [`kick_speed_ratio_for`](Self::kick_speed_ratio_for).
+    pub fn handover_speed_for(rated_speed_e_rad_s: f64) -> f32 {
+        (Self::HANDOVER_SPEED_OF_RATED * rated_speed_e_rad_s) as f32
+    }
+
+    /// The `exit_speed_ratio` that puts the exit speed at
+    /// [`EXIT_SPEED_OF_RATED`](Self::EXIT_SPEED_OF_RATED) of the rated speed
+    /// `rated_speed_e_rad_s` (rad/s el.) for the hand-over speed `handover_speed_rad_s`:
+    /// `0.015 w_rated / w_handover`, within `[0.01, 0.7]` (0.5 for the damped start's
+    /// hand-over at 3 % of rated). `FocConfig::new` passes the base
+    /// speed `max_speed_rad_s` for the rated speed it does not know. Computed in `f64`.
+    pub fn exit_speed_ratio_for(rated_speed_e_rad_s: f64, handover_speed_rad_s: f32) -> f32 {
+        let r = Self::EXIT_SPEED_OF_RATED * rated_speed_e_rad_s / f64::from(handover_speed_rad_s);
+        r.clamp(0.01, f64::from(Self::EXIT_SPEED_RATIO_MAX)) as f32
     }
 
     /// The default I/f acceleration, rad/s^2 el.: the hand-over speed reached in
@@ -185,8 +231,9 @@ impl StartupConfig {
     /// Time the default I/f ramp takes from standstill to the hand-over speed, s.
     pub const DEFAULT_RAMP_TIME_S: f32 = 0.5;
 
-    /// Kick speed as a fraction of the rated speed when the kick is on (0.6 %: a fifth of
-    /// a hand-over at 3 % of rated speed), whatever the hand-over speed.
+    /// Kick speed as a fraction of the rated speed when the kick is on (0.6 %, measured
+    /// with the hand-over at 3 % of rated speed; docs/startup.md), whatever the hand-over
+    /// speed.
     pub const KICK_SPEED_OF_RATED: f64 = 0.006;
 
     /// The kick speed ratio that puts the kick at [`KICK_SPEED_OF_RATED`](Self::KICK_SPEED_OF_RATED)
@@ -464,7 +511,10 @@ impl FocConfig {
                 accel_rad_s2: StartupConfig::default_accel_rad_s2(handover),
                 handover_speed_rad_s: handover,
                 blend_time_s: 20e-3,
-                exit_speed_ratio: 0.7,
+                exit_speed_ratio: StartupConfig::default_exit_speed_ratio(
+                    max_speed_rad_s,
+                    handover,
+                ),
                 reversal: Reversal::ClosedLoop,
                 acquire_timeout_s: 1.0,
                 damping_ratio: 0.0,
@@ -645,6 +695,15 @@ mod tests {
             c.startup.if_current_a,
             c.max_speed_rad_s,
         );
+        // The exit at 1.5 % of the base speed (the rated speed's stand-in), below 0.7 of the
+        // hand-over speed here.
+        let exit = c.startup.exit_speed_ratio * h;
+        assert!((exit - 0.015 * c.max_speed_rad_s).abs() < 1e-3, "{exit}");
+        assert!(c.startup.exit_speed_ratio < 0.7);
+        assert!((StartupConfig::handover_speed_for(1000.0) - 30.0).abs() < 1e-4);
+        assert_eq!(StartupConfig::exit_speed_ratio_for(1000.0, 30.0), 0.5);
+        assert_eq!(StartupConfig::exit_speed_ratio_for(1000.0, 10.0), 0.7);
+        assert_eq!(StartupConfig::exit_speed_ratio_for(1000.0, 5000.0), 0.01);
         assert_eq!(c.startup.handover_speed_rad_s.to_bits(), h.to_bits());
         assert_eq!(
             c.startup.accel_rad_s2.to_bits(),

@@ -20,6 +20,13 @@
 //! hand-over speed): the run asks whether the observer carries the loop there, not where the
 //! default hysteresis sits.
 //!
+//! **The default drive** ([`default_drive_scenario`]): the same job with the drive's own exit
+//! speed (`foc::StartupConfig::exit_speed_ratio_for`: 1.5 % of rated speed, 1.5 times the
+//! table's worst lowest speed, 1 % on industrial_2k2; half the damped start's hand-over at 3 %
+//! of rated, `StartupConfig::handover_speed_for`): at 3 % of rated it stays in closed loop
+//! (the test
+//! `tests/lowspeed_defaults.rs`).
+//!
 //! **Pass** at a speed: no fault, closed loop in every period of the window (no exit, no
 //! fall-back), and the mean true speed over the window within [`SPEED_TOLERANCE`] of the
 //! test speed. The **lowest speed** of a motor is the lowest of [`SPEEDS_PCT`] down to which
@@ -95,6 +102,21 @@ pub fn scenario(motor: SuiteMotor, speed_pct: f64, hold_s: f64) -> Result<Scenar
     let handover_rpm = f64::from(cfg.startup.handover_speed_rad_s) / f64::from(sc.motor.pole_pairs)
         * crate::scenario::RPM_PER_RAD_S;
     foc.exit_speed_ratio = Some((0.5 * speed / handover_rpm).clamp(0.01, 0.7));
+    sc.controller.foc = Some(foc);
+    Ok(sc)
+}
+
+/// The same job with the drive's own defaults (module docs, "The default drive"): foc's
+/// exit speed (1.5 % of rated speed) instead of the table's half test speed.
+pub fn default_drive_scenario(
+    motor: SuiteMotor,
+    speed_pct: f64,
+    hold_s: f64,
+) -> Result<Scenario, SimError> {
+    let mut sc = scenario(motor, speed_pct, hold_s)?;
+    sc.name = format!("{} at {speed_pct} % rated, default drive", motor.name());
+    let mut foc = sc.controller.foc.unwrap_or_default();
+    foc.exit_speed_ratio = None;
     sc.controller.foc = Some(foc);
     Ok(sc)
 }
@@ -207,15 +229,20 @@ impl SampleSink for Window {
 
 /// Runs `motor` at `speed_pct` % of rated for `hold_s` (module docs).
 pub fn run_speed(motor: SuiteMotor, speed_pct: f64, hold_s: f64) -> Result<LowSpeedRun, SimError> {
-    let sc = scenario(motor, speed_pct, hold_s)?;
-    let i_rated = rated_torque_current_a(&sc)?;
+    run_scenario(&scenario(motor, speed_pct, hold_s)?, speed_pct)
+}
+
+/// Runs `sc`, a run of [`scenario`] or [`default_drive_scenario`] at `speed_pct` % of rated,
+/// and measures its window.
+pub fn run_scenario(sc: &Scenario, speed_pct: f64) -> Result<LowSpeedRun, SimError> {
+    let i_rated = rated_torque_current_a(sc)?;
     let speed_rpm = speed_pct / 100.0 * sc.rated_speed_rpm;
     let mut win = Window {
         speed_rpm,
         ..Window::default()
     };
     let out = sim::run_with(
-        &sc,
+        sc,
         RunOptions {
             sinks: vec![&mut win],
             ..RunOptions::default()

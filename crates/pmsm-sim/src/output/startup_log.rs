@@ -267,7 +267,7 @@ mod tests {
     fn state_changes_read_as_a_timeline_with_reasons() {
         let sc = Scenario::default_servo();
         let mut log = StartupLog::new(&sc);
-        // The default: align 0.1 s at 2.5 A, 2000 rpm/s; exit at 0.7 of the hand-over speed.
+        // The default: align 0.1 s at 2.5 A, 2000 rpm/s; exit at 1.5 % of rated (30 rpm).
         let exit = log.settings.map(|c| c.exit_rpm).unwrap_or_default();
         assert!(exit > 10.0, "{exit}");
         let seq = [

@@ -63,8 +63,21 @@ impl Scenario {
         if let Some(t) = s.align_time_s.or(motor_timing.map(|m| m.0)) {
             st.align_time_s = t as f32;
         }
+        // The damped start reads the observer near 1 % of rated speed, where an
+        // uncompensated dead time biases it: on by default only with the dead time
+        // compensated (or none).
+        let dead_time = s.dead_time_s.unwrap_or(self.inverter.dead_time_s);
+        let damped = self.inverter.dead_time_s == 0.0 || dead_time >= self.inverter.dead_time_s;
+        let on = if damped { 1.0 } else { 0.0 };
+        st.damping_ratio = s.startup_damping_ratio.unwrap_or(on) as f32;
+        // The damped start hands over at 3 % of rated speed on a surface motor; an interior
+        // motor and the classic start (undamped: its rotor swings faster than that) by foc's
+        // rule (docs/startup.md, "Hand-over and exit speed").
         st.handover_speed_rad_s = match s.handover_speed_rpm {
             Some(rpm) => rpm_to_e(rpm),
+            None if st.damping_ratio > 0.0 && !motor.is_salient() => {
+                StartupConfig::handover_speed_for(self.rated_speed_e_rad_s())
+            }
             None => StartupConfig::default_handover_speed_rad_s(
                 &motor,
                 st.if_current_a,
@@ -79,13 +92,6 @@ impl Scenario {
             }
             (None, None) => StartupConfig::default_accel_rad_s2(st.handover_speed_rad_s),
         };
-        // The damped start reads the observer near 1 % of rated speed, where an
-        // uncompensated dead time biases it: on by default only with the dead time
-        // compensated (or none).
-        let dead_time = s.dead_time_s.unwrap_or(self.inverter.dead_time_s);
-        let damped = self.inverter.dead_time_s == 0.0 || dead_time >= self.inverter.dead_time_s;
-        let on = if damped { 1.0 } else { 0.0 };
-        st.damping_ratio = s.startup_damping_ratio.unwrap_or(on) as f32;
         // foc's kick at 0.6 % of rated speed, whatever the hand-over speed.
         let kick = StartupConfig::kick_speed_ratio_for(
             self.rated_speed_e_rad_s(),
@@ -99,9 +105,19 @@ impl Scenario {
             ReversalMode::ClosedLoop => Reversal::ClosedLoop,
             ReversalMode::OpenLoop => Reversal::OpenLoop,
         };
-        if let Some(r) = s.exit_speed_ratio {
-            st.exit_speed_ratio = r as f32;
-        }
+        // The exit at 1.5 % of rated speed, at most 0.7 of the hand-over speed (foc's rule, on
+        // the rated speed foc is not told), where the dead time is compensated (or none):
+        // measured so (docs/accuracy.md, "Low speed"). An uncompensated dead time biases the
+        // observer at low speed: 0.7 of the hand-over speed there (the default job's I/f
+        // reversal without compensation lost 0.5 s with the exit at 1.5 %).
+        st.exit_speed_ratio = match s.exit_speed_ratio {
+            Some(r) => r as f32,
+            None if damped => StartupConfig::exit_speed_ratio_for(
+                self.rated_speed_e_rad_s(),
+                st.handover_speed_rad_s,
+            ),
+            None => StartupConfig::EXIT_SPEED_RATIO_MAX,
+        };
         cfg.health.policy = match s.observer_loss {
             ObserverLoss::FallBack => ObserverLossPolicy::FallBackAndReacquire,
             ObserverLoss::Trip => ObserverLossPolicy::Trip,

@@ -128,7 +128,9 @@ pub struct FocSettings {
     pub align_current_a: Option<f64>,
     /// Current of the open-loop I/f ramp, A. Default: half of `controller.current_limit_a`.
     pub if_current_a: Option<f64>,
-    /// Speed of the hand-over to the observer, mechanical rpm. Default (foc's rule):
+    /// Speed of the hand-over to the observer, mechanical rpm. Default: 3 % of
+    /// `rated_speed_rpm` with the damped start (`startup_damping_ratio` > 0) on a surface
+    /// motor (`foc::StartupConfig::handover_speed_for`), else foc's rule,
     /// `max(2 Rs I_f / psi_f, 0.02 w_max)` electrical, the back-EMF twice the resistive drop.
     pub handover_speed_rpm: Option<f64>,
     /// Acceleration of the I/f ramp, mechanical rpm per second. Default: the hand-over speed
@@ -155,8 +157,10 @@ pub struct FocSettings {
     #[serde(skip_serializing_if = "StartupTiming::is_fixed")]
     pub startup_timing: StartupTiming,
     /// Closed loop returns to I/f below this fraction of the hand-over speed (for a stop or
-    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default foc's,
-    /// 0.7.
+    /// a slow command; `StartupConfig::exit_speed_ratio`, in `[0.01, 0.99]`). Default: the
+    /// exit at 1.5 % of `rated_speed_rpm`, at most 0.7 of the hand-over speed, when the dead
+    /// time is compensated (or none; else 0.7)
+    /// (`foc::StartupConfig::exit_speed_ratio_for`; 0.5 with the damped start's 3 %).
     pub exit_speed_ratio: Option<f64>,
     /// Dead time foc compensates (`FocConfig::dead_time_s`), s. Default:
     /// `inverter.dead_time_s` (the drive knows its bridge); 0 turns the compensation off.
@@ -780,9 +784,22 @@ mod tests {
         assert_eq!(c.inertia_kg_m2, 8e-4);
         assert_eq!(c.startup.if_current_a, 2.5);
         assert_eq!(c.startup.align_time_s, 0.1);
-        // 2000 rpm/s mech. = 837.8 rad/s^2 el.; hand-over 2 Rs I_f / psi_f = 82.1 rad/s el.
+        // 2000 rpm/s mech. = 837.8 rad/s^2 el.; the damped start's hand-over at 3 % of the
+        // rated 2000 rpm: 25.13 rad/s el., the exit at half of it (1.5 % of rated).
         assert!((c.startup.accel_rad_s2 - 837.758).abs() < 1e-2);
+        assert!((c.startup.handover_speed_rad_s - 25.132_74).abs() < 1e-3);
+        assert!((c.startup.exit_speed_ratio - 0.5).abs() < 1e-6);
+        // The classic start (no damping): foc's rule, 2 Rs I_f / psi_f = 82.1 rad/s el., the
+        // exit at 1.5 % of rated speed (12.57 rad/s el.).
+        let mut classic = sc.clone();
+        let mut f = classic.controller.foc.unwrap_or_default();
+        f.startup_damping_ratio = Some(0.0);
+        classic.controller.foc = Some(f);
+        let c = classic.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
         assert!((c.startup.handover_speed_rad_s - 82.142_86).abs() < 1e-3);
+        let exit = c.startup.exit_speed_ratio * c.startup.handover_speed_rad_s;
+        assert!((exit - 12.566_37).abs() < 1e-3, "{exit}");
+        let c = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
         assert!((c.current_bw_rad_s - 3141.5927).abs() < 1e-2);
         let ideal = Scenario::preset("servo-ideal").unwrap_or_else(|e| panic!("{e}"));
         let c = ideal.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
@@ -801,8 +818,8 @@ mod tests {
         // By hand (small_fast, I_align = I_f = 7.5 A, J = 2e-5): tau_e = 0.15 mH / 0.12 ohm
         // = 1.25 ms; w_n^2 = 1.5 49 0.006 7.5 / 2e-5 = 165375, T = 2 pi / 406.66 = 15.451 ms;
         // alignment 5 tau_e + 2 T = 37.15 ms; acceleration 0.25 7 0.063 7.5 / 2e-5 = 41344
-        // rad/s^2 el., but the ramp to the hand-over speed (2 Rs I_f / psi_f = 300 rad/s el.)
-        // at least 2 T = 30.90 ms: 9708 rad/s^2 el.
+        // rad/s^2 el., but the ramp to the hand-over speed (the damped start's 3 % of the
+        // rated 3429 rpm, 75.41 rad/s el.) at least 2 T = 30.90 ms: 2440.2 rad/s^2 el.
         let (align, accel, ramp) = drone.motor_startup_timing(7.5, 7.5, 2e-5);
         assert!((align - 0.037_15).abs() < 1e-5, "{align}");
         assert!((accel - 41_343.75).abs() < 1e-2, "{accel}");
@@ -814,7 +831,7 @@ mod tests {
         let c = sc.foc_config().unwrap_or_else(|e| panic!("{e:?}"));
         assert!((c.startup.align_time_s - 0.037_15).abs() < 1e-5);
         assert!(
-            (c.startup.accel_rad_s2 - 9708.0).abs() < 2.0,
+            (c.startup.accel_rad_s2 - 2440.2).abs() < 1.0,
             "{}",
             c.startup.accel_rad_s2
         );
