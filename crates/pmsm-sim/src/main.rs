@@ -553,6 +553,7 @@ fn identify_command(
         svg: Some(svg),
         seed,
         log,
+        flux_map_a: None,
     };
     let r = identify(&scenario, &opts)?;
     if json {

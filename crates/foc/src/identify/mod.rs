@@ -144,6 +144,7 @@ mod if_drive;
 mod inductance;
 mod inertia;
 mod lsq;
+mod map_step;
 mod numeric;
 mod offsets;
 mod outcome;
@@ -153,6 +154,7 @@ pub mod saturation;
 mod spin;
 
 pub use config::{IdentifyConfig, IdentifyConfigError};
+pub use map_step::{FluxMapError, FluxMapStep, IdentifyWithMap, MapPart};
 pub use numeric::ln;
 pub use outcome::{
     Identified, IdentifyError, IdentifyFailure, IdentifyOutput, IdentifyStep, Quantity,
