@@ -151,6 +151,14 @@ enum Command {
         /// stamps for identical runs).
         #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
         log_time: LogTimeArg,
+        /// After the sequence, measure the flux map at standstill (coast at zero current for
+        /// psi_f, stop, re-align, probe a 7 x 9 grid of i_d, i_q): table (markdown, and in the
+        /// JSON), error against the plant's flux, identify-flux-map.{md,svg} in <out>.
+        #[arg(long)]
+        flux_map: bool,
+        /// Largest current of the flux map's grid, A (default 0.85 x the current limit).
+        #[arg(long, requires = "flux_map")]
+        flux_map_current: Option<f64>,
     },
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
@@ -400,7 +408,16 @@ fn main() -> ExitCode {
             seed,
             out,
             log_time,
-        }) => identify_command(scenario.as_deref(), json, seed, out, log_time.options()),
+            flux_map,
+            flux_map_current,
+        }) => identify_command(
+            scenario.as_deref(),
+            json,
+            seed,
+            out,
+            log_time.options(),
+            flux_map.then_some(flux_map_current),
+        ),
         Some(Command::Tune(args)) => Ok(args.run()),
         Some(Command::Sweep(args)) => sweep_command(&args),
         Some(Command::Datasheet(args)) => {
@@ -542,6 +559,7 @@ fn identify_command(
     seed: Option<u64>,
     out: Option<PathBuf>,
     log: LogOptions,
+    flux_map: Option<Option<f64>>,
 ) -> Result<ExitCode, SimError> {
     use pmsm_sim::analysis::identify::{IdentifyOptions, identify, output_paths, table};
     let scenario = load(what.unwrap_or("default"))?;
@@ -553,16 +571,36 @@ fn identify_command(
         svg: Some(svg),
         seed,
         log,
-        flux_map_a: None,
+        flux_map_a: flux_map.map(|i| i.unwrap_or(0.85 * scenario.controller.current_limit_a)),
     };
     let r = identify(&scenario, &opts)?;
+    let map_files = match &r.flux_map {
+        Some(m) if m.ok => {
+            let md = dir.join("identify-flux-map.md");
+            let svg = dir.join("identify-flux-map.svg");
+            std::fs::write(&md, m.table()).map_err(|e| out_err(&md, e))?;
+            m.write_svg(
+                &svg,
+                &format!("pmsm-sim identify --flux-map: {}", scenario.name),
+            )?;
+            Some((md, svg))
+        }
+        _ => None,
+    };
     if json {
         let text = pmsm_sim::analysis::identify::json(&r).map_err(|e| out_err(&dir, e))?;
         println!("{text}");
     } else {
         print!("{}", table(&r));
+        if let Some(m) = &r.flux_map {
+            print!("{}", m.table());
+        }
     }
-    Ok(if r.ok {
+    if let Some((md, svg)) = map_files {
+        eprintln!("flux map: {} {}", md.display(), svg.display());
+    }
+    let map_ok = r.flux_map.as_ref().is_none_or(|m| m.ok);
+    Ok(if r.ok && map_ok {
         ExitCode::SUCCESS
     } else {
         ExitCode::FAILURE

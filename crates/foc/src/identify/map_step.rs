@@ -22,18 +22,22 @@ use crate::controller::{PhaseCurrents, TickInput};
 use crate::pi::{Pi, PiGains};
 use crate::svpwm::{SAFE_DUTIES, svpwm};
 use crate::transforms::AlphaBeta;
-use crate::trig::{sin_cos, sqrt};
+use crate::trig::{atan2, sin_cos, sqrt};
 
 use super::context::{Context, HoldLoop, Saturation};
-use super::if_drive::{IfDrive, Move};
+use super::if_drive::{IfDrive, Move, load_angle};
 use super::numeric::ticks;
 use super::saturation::{FluxSamples, SaturationConfig, SaturationError, SaturationProbe};
 use super::{
-    Identified, IdentifyConfig, IdentifyError, IdentifyFailure, IdentifyOutput, IdentifyStep,
-    Identifier,
+    Identified, Identifier, IdentifyConfig, IdentifyError, IdentifyFailure, IdentifyOutput,
+    IdentifyStep,
 };
 
 const INV_SQRT3: f32 = 0.577_350_26;
+/// Settling of the coast's zero current, s.
+const COAST_SETTLE_S: f32 = 0.02;
+/// The coast's EMF window, s.
+const COAST_MEASURE_S: f32 = 0.04;
 
 /// Settings of the flux-map step (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,6 +66,8 @@ impl FluxMapStep {
 pub enum MapPart {
     /// A step of the identification sequence.
     Identify(IdentifyStep),
+    /// Zero current at the spin speed: `psi_f` from the EMF.
+    Coast,
     /// The frame decelerates to standstill.
     Stop,
     /// The rotor is held at the frame's angle.
@@ -78,6 +84,7 @@ impl MapPart {
     pub fn name(self) -> &'static str {
         match self {
             MapPart::Identify(s) => s.name(),
+            MapPart::Coast => "coast",
             MapPart::Stop => "stop",
             MapPart::Realign => "realign",
             MapPart::Probe => "flux_map",
@@ -117,8 +124,24 @@ impl core::fmt::Display for FluxMapError {
 #[allow(clippy::large_enum_variant)]
 enum State {
     Identify,
-    Stop { drive: IfDrive, n: u32 },
-    Realign { hold: HoldLoop, n: u32 },
+    /// Zero current, the frame turning on: `g_end` the load angle summed over the last
+    /// quarter of the window, `e_sum` the EMF summed.
+    Coast {
+        drive: IfDrive,
+        n: u32,
+        e_sum: [f32; 2],
+        g_end: f32,
+    },
+    Stop {
+        drive: IfDrive,
+        n: u32,
+    },
+    /// `i_sum`: the current summed over the last fifth (its angle is the rotor's d axis).
+    Realign {
+        hold: HoldLoop,
+        n: u32,
+        i_sum: AlphaBeta,
+    },
     Probe(SaturationProbe),
     Done,
 }
@@ -131,8 +154,10 @@ pub struct IdentifyWithMap {
     state: State,
     /// Last voltage the identification applied (the stop's preset), V.
     u_prev: AlphaBeta,
-    /// Ticks of the stop, the re-alignment and the probe.
+    /// Ticks of the coast and the stop, the re-alignment and the probe.
     map_ticks: [u32; 3],
+    /// `psi_f` at zero current (the coast), Wb.
+    psi_f0: Option<f32>,
     map: Option<Result<FluxSamples, FluxMapError>>,
 }
 
@@ -153,6 +178,7 @@ impl IdentifyWithMap {
             state: State::Identify,
             u_prev: AlphaBeta::default(),
             map_ticks: [0; 3],
+            psi_f0: None,
             map: None,
         })
     }
@@ -172,7 +198,12 @@ impl IdentifyWithMap {
         self.map.as_ref()
     }
 
-    /// Ticks of the stop, the re-alignment and the probe.
+    /// `psi_f` measured at zero current by the coast (what the probe is told), Wb.
+    pub fn psi_f_zero_current_wb(&self) -> Option<f32> {
+        self.psi_f0
+    }
+
+    /// Ticks of the coast and the stop, the re-alignment and the probe.
     pub fn map_ticks(&self) -> [u32; 3] {
         self.map_ticks
     }
@@ -191,6 +222,7 @@ impl IdentifyWithMap {
     pub fn part(&self) -> MapPart {
         match &self.state {
             State::Identify => MapPart::Identify(self.id.step()),
+            State::Coast { .. } => MapPart::Coast,
             State::Stop { .. } => MapPart::Stop,
             State::Realign { .. } => MapPart::Realign,
             State::Probe(_) => MapPart::Probe,
@@ -202,7 +234,8 @@ impl IdentifyWithMap {
     /// motor; allow about 1 s more for it).
     pub fn max_duration_s(&self) -> f32 {
         let c = self.id.config();
-        self.id.max_duration_s() + 1.3 * 1.4 * c.spin_speed_rad_s / c.spin_accel_rad_s2
+        self.id.max_duration_s()
+            + 1.3 * 1.4 * c.spin_speed_rad_s / c.spin_accel_rad_s2
             + c.align_time_s
     }
 
@@ -233,9 +266,11 @@ impl IdentifyWithMap {
                     }
                     Some(Ok(_)) => {
                         // The spin's drive goes on in this very tick.
-                        self.state = State::Stop {
-                            drive: self.stop_drive(out.i_ab),
+                        self.state = State::Coast {
+                            drive: self.coast_drive(),
                             n: 0,
+                            e_sum: [0.0; 2],
+                            g_end: 0.0,
                         };
                         out.i_ab
                     }
@@ -262,7 +297,7 @@ impl IdentifyWithMap {
                 self.id.tick = self.id.tick.wrapping_add(1);
                 return self.off(AlphaBeta::default());
             }
-            State::Stop { .. } | State::Realign { .. } => {
+            State::Coast { .. } | State::Stop { .. } | State::Realign { .. } => {
                 self.id.tick = self.id.tick.wrapping_add(1);
                 match self.check(input) {
                     Ok(i) => i,
@@ -283,9 +318,9 @@ impl IdentifyWithMap {
         }
     }
 
-    /// The I/f drive that stops the frame: the spin's gains, the loops preset to the last
-    /// voltage the sequence applied.
-    fn stop_drive(&self, i_ab: AlphaBeta) -> IfDrive {
+    /// The loops of the coast: the spin's gains, preset to the last voltage the sequence
+    /// applied (no tick with the PWM off).
+    fn coast_drive(&self) -> IfDrive {
         let ctx = &self.id.ctx;
         let (cfg, f) = (&ctx.cfg, &ctx.found);
         let bw = cfg.current_bw_rad_s;
@@ -296,13 +331,8 @@ impl IdentifyWithMap {
         // The voltage was rotated ahead by (d + 1/2) w Ts: back to the frame.
         let adv = (ctx.d as f32 + 0.5) * w * cfg.ts_s;
         let (s, c) = sin_cos(ctx.frame.angle + adv);
-        let (u_d, u_q) = (
-            c * self.u_prev.alpha + s * self.u_prev.beta,
-            -s * self.u_prev.alpha + c * self.u_prev.beta,
-        );
-        let (i_d, i_q) = ctx.frame.dq(i_ab);
-        pi_d.preset_output(u_d, cfg.spin_current_a - i_d, -w * f.lq * i_q);
-        pi_q.preset_output(u_q, -i_q, w * f.ld * i_d);
+        pi_d.set_integrator(c * self.u_prev.alpha + s * self.u_prev.beta);
+        pi_q.set_integrator(-s * self.u_prev.alpha + c * self.u_prev.beta);
         IfDrive {
             pi_d,
             pi_q,
@@ -352,6 +382,73 @@ impl IdentifyWithMap {
         let ctx = &mut self.id.ctx;
         let ts = ctx.cfg.ts_s;
         match &mut self.state {
+            State::Coast {
+                drive,
+                n,
+                e_sum,
+                g_end,
+            } => {
+                let k = *n;
+                *n += 1;
+                let f = ctx.found;
+                let (i_d, i_q) = ctx.frame.dq(i_ab);
+                let (w, lim) = (ctx.frame.omega, ctx.u_lim);
+                let u_d = drive.pi_d.step(-i_d, -w * f.lq * i_q, -lim, lim);
+                let u_q_lim = sqrt((lim * lim - u_d * u_d).max(0.0));
+                let u_q = drive.pi_q.step(-i_q, w * f.ld * i_d, -u_q_lim, u_q_lim);
+                let adv = (ctx.d as f32 + 0.5) * w * ts;
+                let (sa, ca) = sin_cos(ctx.frame.angle + adv);
+                let u = AlphaBeta {
+                    alpha: ca * u_d - sa * u_q,
+                    beta: sa * u_d + ca * u_q,
+                };
+                let e = (
+                    u_d - f.rs * i_d + w * f.lq * i_q,
+                    u_q - f.rs * i_q - w * f.ld * i_d,
+                );
+                let (settle, len) = (ticks(COAST_SETTLE_S, ts), ticks(COAST_MEASURE_S, ts));
+                let m = (len / 4).max(1);
+                if k >= settle {
+                    let j = k - settle;
+                    e_sum[0] += e.0;
+                    e_sum[1] += e.1;
+                    if j >= len - m {
+                        *g_end += load_angle(e);
+                    }
+                }
+                ctx.frame.set(ctx.frame.angle + w * ts);
+                if k + 1 >= settle + len {
+                    let mag = sqrt(e_sum[0] * e_sum[0] + e_sum[1] * e_sum[1]) / len as f32;
+                    // The frame's speed: the rotor kept it (the drift of the load angle, as
+                    // the spin corrects with it, measured 4 % high on the interior PM motor).
+                    let w_r = w;
+                    let psi = mag / w_r;
+                    if !(psi.is_finite() && psi > 1e-5 && psi < 50.0) {
+                        return Err(IdentifyError::Implausible {
+                            quantity: super::Quantity::FluxLinkage,
+                            value: psi,
+                        });
+                    }
+                    self.psi_f0 = Some(psi);
+                    // The frame on the rotor's d axis, at its speed.
+                    let g = *g_end / m as f32;
+                    ctx.frame.set(ctx.frame.angle - g);
+                    ctx.frame.omega = w_r;
+                    let cfg = &ctx.cfg;
+                    let i_f = cfg.spin_current_a;
+                    drive
+                        .pi_d
+                        .set_integrator(f.rs * i_f + f.v_err * i_f / cfg.test_current_a);
+                    drive.pi_q.set_integrator(w_r * psi);
+                    let drive = IfDrive {
+                        mv: Move::new(-w_r, cfg.spin_accel_rad_s2, ts),
+                        ..*drive
+                    };
+                    self.map_ticks[0] = *n;
+                    self.state = State::Stop { drive, n: 0 };
+                }
+                Ok(Some(u))
+            }
             State::Stop { drive, n } => {
                 let k = *n;
                 *n += 1;
@@ -359,26 +456,34 @@ impl IdentifyWithMap {
                 ctx.frame.set(ctx.frame.angle + t.w * ts);
                 if *n >= drive.mv.len() {
                     ctx.frame.omega = 0.0;
-                    self.map_ticks[0] = *n;
+                    self.map_ticks[0] += *n;
                     let hold = HoldLoop {
                         pi: drive.pi_d,
                         sat: Saturation::default(),
                     };
-                    self.state = State::Realign { hold, n: 0 };
+                    self.state = State::Realign {
+                        hold,
+                        n: 0,
+                        i_sum: AlphaBeta::default(),
+                    };
                 }
                 Ok(Some(t.u))
             }
-            State::Realign { hold, n } => {
+            State::Realign { hold, n, i_sum } => {
                 *n += 1;
                 let u = hold.hold(ctx, i_ab, ctx.cfg.spin_current_a)?;
-                if *n >= ticks(ctx.cfg.align_time_s, ts) {
+                let len = ticks(ctx.cfg.align_time_s, ts);
+                if 5 * *n >= 4 * len {
+                    *i_sum = *i_sum + i_ab;
+                }
+                if *n >= len {
                     self.map_ticks[1] = *n;
                     let f = &ctx.found;
                     let cfg = probe_config(
                         ctx,
                         &self.map_cfg,
-                        f.psi.unwrap_or(0.0),
-                        ctx.frame.angle,
+                        self.psi_f0.or(f.psi).unwrap_or(0.0),
+                        atan2(i_sum.beta, i_sum.alpha),
                         f.j,
                     );
                     match SaturationProbe::new(&cfg) {
@@ -439,14 +544,7 @@ fn probe_config(
 ) -> SaturationConfig {
     let (c, f) = (&ctx.cfg, &ctx.found);
     let l = |x: f32| if x > 0.0 { x } else { 1e-3 };
-    let mut p = SaturationConfig::new(
-        c.ts_s,
-        f.rs,
-        theta,
-        psi_f,
-        (l(f.ld), l(f.lq)),
-        map.i_max_a,
-    );
+    let mut p = SaturationConfig::new(c.ts_s, f.rs, theta, psi_f, (l(f.ld), l(f.lq)), map.i_max_a);
     p.delay = c.delay;
     p.voltage_error_v = f.v_err;
     p.n_d = map.n_d;
