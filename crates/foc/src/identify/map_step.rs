@@ -6,17 +6,23 @@
 //!
 //! | part | what | how |
 //! |---|---|---|
-//! | [`MapPart::Stop`] | back to standstill | the I/f drive of the spin takes over where the sequence ended (the frame at its speed, the loops preset to the last voltage, no tick with the PWM off) and ramps the frame speed to zero at `spin_accel_rad_s2` (jerk-limited, as the spin's ramp) |
-//! | [`MapPart::Realign`] | rotor to a known angle | the spin current along the frame, now at rest, with the q voltage at zero (the swinging rotor's EMF drives a braking current, as in the alignment) for `align_time_s`; the probe's angle is the frame's |
-//! | [`MapPart::Probe`] | the flux map | [`SaturationProbe`] told what the sequence measured: `Rs`, the inverter voltage error, `Ld`, `Lq`, `psi_f`, `J` (0 without the inertia move: the rotor's motion is then not followed), the current offsets, the pole pairs; its grid `n_d x n_q` up to `+-i_max_a` ([`FluxMapStep`]) |
+//! | [`MapPart::Coast`] | `psi_f` at zero current | where the sequence ended (the I/f frame at the spin speed; no tick with the PWM off) the current loops (the spin's gains, preset to the last voltage) hold zero current in the turning frame; after 20 ms, the frame voltage `E` over 40 ms: `psi_f = |E| / w` (`w` the frame's speed), the load angle `pi/2 - arg E` of the last quarter the rotor's d axis |
+//! | [`MapPart::Stop`] | back to standstill | the frame put on the rotor's d axis, the spin current along it (integrators preset to `Rs I_f` and `w psi_f`), the frame speed ramped to zero at `spin_accel_rad_s2` (jerk-limited, as the spin's ramp) |
+//! | [`MapPart::Realign`] | rotor to a known angle | the spin current along the frame, now at rest, with the q voltage at zero (the swinging rotor's EMF drives a braking current, as in the alignment) for `align_time_s`; the probe's angle is the mean current's angle over the last fifth (the dead-time voltage turns the current, and the rotor with it, off the frame) |
+//! | [`MapPart::Probe`] | the flux map | [`SaturationProbe`] told what was measured: `Rs`, the inverter voltage error, `Ld`, `Lq`, the coast's `psi_f`, `J` (0 without the inertia move: the rotor's motion is then not followed), the current offsets, the pole pairs; its grid `n_d x n_q` up to `+-i_max_a` ([`FluxMapStep`]) |
+//!
+//! Why the coast: the spin's `psi_f` is taken at the spin current and corrected with the
+//! small-signal `Ld`, which the injection measures at the test current's d bias; on a
+//! saturating motor both are off (5 % high on pmsm-sim's interior PM motor), and the probe's
+//! `psi_d` samples carry the anchor's error. At zero current the EMF is `w psi_f` exactly.
 //!
 //! The step needs the spin ([`IdentifyConfig::spin_speed_rad_s`] `> 0`): without `psi_f`
 //! the probe has no anchor for `psi_d`. It is kept out of [`Identifier`] (its state, about
 //! 1 KB, would grow every identifier, and the board's firmware does not run it):
 //! [`Identifier`], [`IdentifyStep`] and [`Identified`] are the same with and without it. Its
-//! time is counted apart ([`IdentifyWithMap::map_ticks`]); with the defaults it adds about
-//! 1.3 x the spin's ramp time, `align_time_s` and the probe (0.2-0.3 s on the reference
-//! motors), measured in `docs/identify.md`.
+//! time is counted apart ([`IdentifyWithMap::map_ticks`]); with the defaults it adds 60 ms,
+//! about 1.3 x the spin's ramp time, `align_time_s` and the probe (0.2-0.3 s on the
+//! reference motors), measured in `docs/identify.md`.
 
 use crate::controller::{PhaseCurrents, TickInput};
 use crate::pi::{Pi, PiGains};
@@ -555,4 +561,32 @@ fn probe_config(
     p.inertia_kg_m2 = j.unwrap_or(0.0);
     p.pole_pairs = c.pole_pairs;
     p
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refuses_without_the_spin_and_a_bad_grid() {
+        let cfg = IdentifyConfig::new(1e-4, 24.0, 2.0);
+        assert!(matches!(
+            IdentifyWithMap::new(&cfg, &FluxMapStep::new(4.0)),
+            Err(FluxMapError::NoFluxLinkage)
+        ));
+        let spin = cfg.with_spin(100.0, 250.0);
+        let mut bad = FluxMapStep::new(4.0);
+        bad.n_d = 4;
+        assert_eq!(
+            IdentifyWithMap::new(&spin, &bad).err(),
+            Some(FluxMapError::Config("n_d"))
+        );
+        assert!(matches!(
+            IdentifyWithMap::new(&spin, &FluxMapStep::new(f32::NAN)),
+            Err(FluxMapError::Config("i_max_a"))
+        ));
+        let m = IdentifyWithMap::new(&spin, &FluxMapStep::new(4.0)).unwrap();
+        assert_eq!(m.part(), MapPart::Identify(IdentifyStep::Offsets));
+        assert!(m.flux_map().is_none() && !m.is_done());
+    }
 }
