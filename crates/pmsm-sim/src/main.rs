@@ -7,7 +7,9 @@ mod motor_command;
 mod table_commands;
 mod tune_command;
 
-use table_commands::{faults_command, low_speed_command, parse_suite_motor, suite};
+use table_commands::{
+    faults_command, identify_command, low_speed_command, parse_suite_motor, suite,
+};
 use tune_command::TuneArgs;
 
 use std::io::IsTerminal;
@@ -553,60 +555,6 @@ fn out_err(path: &Path, e: impl std::fmt::Display) -> SimError {
 }
 
 /// `pmsm-sim identify`: exit 0 when identified, 1 when the sequence stopped with an error.
-fn identify_command(
-    what: Option<&str>,
-    json: bool,
-    seed: Option<u64>,
-    out: Option<PathBuf>,
-    log: LogOptions,
-    flux_map: Option<Option<f64>>,
-) -> Result<ExitCode, SimError> {
-    use pmsm_sim::analysis::identify::{IdentifyOptions, identify, output_paths, table};
-    let scenario = load(what.unwrap_or("default"))?;
-    let dir = out.unwrap_or_else(|| Path::new("out").join(dir_name(&scenario.name)));
-    std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
-    let (mcap, svg) = output_paths(&dir);
-    let opts = IdentifyOptions {
-        mcap: Some(mcap),
-        svg: Some(svg),
-        seed,
-        log,
-        flux_map_a: flux_map.map(|i| i.unwrap_or(0.85 * scenario.controller.current_limit_a)),
-    };
-    let r = identify(&scenario, &opts)?;
-    let map_files = match &r.flux_map {
-        Some(m) if m.ok => {
-            let md = dir.join("identify-flux-map.md");
-            let svg = dir.join("identify-flux-map.svg");
-            std::fs::write(&md, m.table()).map_err(|e| out_err(&md, e))?;
-            m.write_svg(
-                &svg,
-                &format!("pmsm-sim identify --flux-map: {}", scenario.name),
-            )?;
-            Some((md, svg))
-        }
-        _ => None,
-    };
-    if json {
-        let text = pmsm_sim::analysis::identify::json(&r).map_err(|e| out_err(&dir, e))?;
-        println!("{text}");
-    } else {
-        print!("{}", table(&r));
-        if let Some(m) = &r.flux_map {
-            print!("{}", m.table());
-        }
-    }
-    if let Some((md, svg)) = map_files {
-        eprintln!("flux map: {} {}", md.display(), svg.display());
-    }
-    let map_ok = r.flux_map.as_ref().is_none_or(|m| m.ok);
-    Ok(if r.ok && map_ok {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::FAILURE
-    })
-}
-
 fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError> {
     let mut scenario = load(what.unwrap_or("default"))?;
     if let Some(seed) = args.seed {
