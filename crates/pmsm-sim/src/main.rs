@@ -7,7 +7,9 @@ mod motor_command;
 mod table_commands;
 mod tune_command;
 
-use table_commands::{faults_command, low_speed_command, parse_suite_motor, suite};
+use table_commands::{
+    faults_command, identify_command, low_speed_command, parse_suite_motor, suite,
+};
 use tune_command::TuneArgs;
 
 use std::io::IsTerminal;
@@ -151,6 +153,14 @@ enum Command {
         /// stamps for identical runs).
         #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
         log_time: LogTimeArg,
+        /// After the sequence, measure the flux map at standstill (coast at zero current for
+        /// psi_f, stop, re-align, probe a 7 x 9 grid of i_d, i_q): table (markdown, and in the
+        /// JSON), error against the plant's flux, identify-flux-map.{md,svg} in <out>.
+        #[arg(long)]
+        flux_map: bool,
+        /// Largest current of the flux map's grid, A (default 0.85 x the current limit).
+        #[arg(long, requires = "flux_map")]
+        flux_map_current: Option<f64>,
     },
     /// Propose the observer's Q and R from a run's MCAP log (innovation likelihood), with the
     /// NIS and angle error of the default and the tuned filter.
@@ -400,7 +410,16 @@ fn main() -> ExitCode {
             seed,
             out,
             log_time,
-        }) => identify_command(scenario.as_deref(), json, seed, out, log_time.options()),
+            flux_map,
+            flux_map_current,
+        }) => identify_command(
+            scenario.as_deref(),
+            json,
+            seed,
+            out,
+            log_time.options(),
+            flux_map.then_some(flux_map_current),
+        ),
         Some(Command::Tune(args)) => Ok(args.run()),
         Some(Command::Sweep(args)) => sweep_command(&args),
         Some(Command::Datasheet(args)) => {
@@ -536,38 +555,6 @@ fn out_err(path: &Path, e: impl std::fmt::Display) -> SimError {
 }
 
 /// `pmsm-sim identify`: exit 0 when identified, 1 when the sequence stopped with an error.
-fn identify_command(
-    what: Option<&str>,
-    json: bool,
-    seed: Option<u64>,
-    out: Option<PathBuf>,
-    log: LogOptions,
-) -> Result<ExitCode, SimError> {
-    use pmsm_sim::analysis::identify::{IdentifyOptions, identify, output_paths, table};
-    let scenario = load(what.unwrap_or("default"))?;
-    let dir = out.unwrap_or_else(|| Path::new("out").join(dir_name(&scenario.name)));
-    std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
-    let (mcap, svg) = output_paths(&dir);
-    let opts = IdentifyOptions {
-        mcap: Some(mcap),
-        svg: Some(svg),
-        seed,
-        log,
-    };
-    let r = identify(&scenario, &opts)?;
-    if json {
-        let text = pmsm_sim::analysis::identify::json(&r).map_err(|e| out_err(&dir, e))?;
-        println!("{text}");
-    } else {
-        print!("{}", table(&r));
-    }
-    Ok(if r.ok {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::FAILURE
-    })
-}
-
 fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError> {
     let mut scenario = load(what.unwrap_or("default"))?;
     if let Some(seed) = args.seed {

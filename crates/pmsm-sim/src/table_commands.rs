@@ -1,14 +1,15 @@
-//! The table commands of `pmsm-sim` (`faults`, `suite`, `low-speed`): run, print the Markdown,
+//! The table commands of `pmsm-sim` (`faults`, `suite`, `low-speed`, `identify`): run, print the Markdown,
 //! write `<stem>.md` and `<stem>.json`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use pmsm_sim::SimError;
 use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions, run_suite, run_suite_motors};
 use pmsm_sim::output::file::write_bytes;
+use pmsm_sim::output::mcap::LogOptions;
 
-use crate::out_err;
+use crate::{dir_name, load, out_err};
 
 /// `pmsm-sim faults` (module `pmsm_sim::analysis::fault_suite`).
 pub(crate) fn faults_command(
@@ -142,4 +143,60 @@ pub(crate) fn low_speed_command(
         rows.push(run_motor(m, &SPEEDS_PCT, hold)?);
     }
     write_table(out, "lowspeed", &to_markdown(&rows), &rows)
+}
+
+/// `pmsm-sim identify`: the report (table or JSON), the log, the plot and, with the flux-map
+/// step, its table and plot.
+pub(crate) fn identify_command(
+    what: Option<&str>,
+    json: bool,
+    seed: Option<u64>,
+    out: Option<PathBuf>,
+    log: LogOptions,
+    flux_map: Option<Option<f64>>,
+) -> Result<ExitCode, SimError> {
+    use pmsm_sim::analysis::identify::{IdentifyOptions, identify, output_paths, table};
+    let scenario = load(what.unwrap_or("default"))?;
+    let dir = out.unwrap_or_else(|| Path::new("out").join(dir_name(&scenario.name)));
+    std::fs::create_dir_all(&dir).map_err(|e| out_err(&dir, e))?;
+    let (mcap, svg) = output_paths(&dir);
+    let opts = IdentifyOptions {
+        mcap: Some(mcap),
+        svg: Some(svg),
+        seed,
+        log,
+        flux_map_a: flux_map.map(|i| i.unwrap_or(0.85 * scenario.controller.current_limit_a)),
+    };
+    let r = identify(&scenario, &opts)?;
+    let map_files = match &r.flux_map {
+        Some(m) if m.ok => {
+            let md = dir.join("identify-flux-map.md");
+            let svg = dir.join("identify-flux-map.svg");
+            std::fs::write(&md, m.table()).map_err(|e| out_err(&md, e))?;
+            m.write_svg(
+                &svg,
+                &format!("pmsm-sim identify --flux-map: {}", scenario.name),
+            )?;
+            Some((md, svg))
+        }
+        _ => None,
+    };
+    if json {
+        let text = pmsm_sim::analysis::identify::json(&r).map_err(|e| out_err(&dir, e))?;
+        println!("{text}");
+    } else {
+        print!("{}", table(&r));
+        if let Some(m) = &r.flux_map {
+            print!("{}", m.table());
+        }
+    }
+    if let Some((md, svg)) = map_files {
+        eprintln!("flux map: {} {}", md.display(), svg.display());
+    }
+    let map_ok = r.flux_map.as_ref().is_none_or(|m| m.ok);
+    Ok(if r.ok && map_ok {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
 }

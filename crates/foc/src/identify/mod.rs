@@ -127,7 +127,8 @@
 //! (`offsets`, `probe`, `align`, `resistance`, `inductance`, `spin`, `inertia`; the I/f drive
 //! of the last two in `if_drive`). The standstill flux-map measurement of saturating motors,
 //! [`SaturationProbe`] (module [`saturation`]), is a separate state machine run after this
-//! sequence, not part of it. Each step's `step` returns the voltage and whether the step
+//! sequence, not part of it; [`IdentifyWithMap`] runs the sequence and then it (coast at zero
+//! current for `psi_f`, stop, re-align, probe), opt-in. Each step's `step` returns the voltage and whether the step
 //! is over, its `next` the state that follows; [`Identifier::tick`] checks the inputs, picks
 //! the step and modulates.
 
@@ -144,6 +145,7 @@ mod if_drive;
 mod inductance;
 mod inertia;
 mod lsq;
+mod map_step;
 mod numeric;
 mod offsets;
 mod outcome;
@@ -153,6 +155,7 @@ pub mod saturation;
 mod spin;
 
 pub use config::{IdentifyConfig, IdentifyConfigError};
+pub use map_step::{FluxMapError, FluxMapStep, IdentifyWithMap, MapPart};
 pub use numeric::ln;
 pub use outcome::{
     Identified, IdentifyError, IdentifyFailure, IdentifyOutput, IdentifyStep, Quantity,

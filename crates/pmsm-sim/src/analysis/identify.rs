@@ -19,7 +19,7 @@
 
 use std::path::{Path, PathBuf};
 
-use foc::{Identified, Identifier, IdentifyConfig, IdentifyStep, TickInput};
+use foc::{Identified, IdentifyConfig, IdentifyStep, TickInput};
 use glam::DVec2;
 use serde::Serialize;
 
@@ -46,6 +46,9 @@ pub struct IdentifyOptions {
     pub seed: Option<u64>,
     /// How the MCAP log is written (its time stamps' origin: `start_time_unix_ns`).
     pub log: LogOptions,
+    /// Run the flux-map step after the sequence (module `flux_map`): its grid's largest
+    /// current, A (`None`: no flux-map step).
+    pub flux_map_a: Option<f64>,
 }
 
 /// The motor parameters, true or identified (SI).
@@ -110,6 +113,9 @@ pub struct IdentifyReport {
     pub mcap: Option<String>,
     /// The SVG written, if any.
     pub svg: Option<String>,
+    /// The flux-map step's outcome (with `IdentifyOptions::flux_map_a`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flux_map: Option<super::identify_map::FluxMapReport>,
 }
 
 /// The identifier's settings for a scenario (module docs).
@@ -212,10 +218,12 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
         sc.seed = seed;
     }
     let cfg = identify_config(&sc)?;
-    let mut id = Identifier::new(&cfg).map_err(|e| SimError::Scenario {
-        file: sc.name.clone(),
-        field: "controller".into(),
-        problem: e.to_string(),
+    let mut id = super::identify_map::Runner::new(&cfg, opts.flux_map_a).map_err(|problem| {
+        SimError::Scenario {
+            file: sc.name.clone(),
+            field: "controller".into(),
+            problem,
+        }
     })?;
     let ts = sc.ts_s();
     let max_ticks = ((f64::from(id.max_duration_s()) + 0.1) / ts).ceil() as u64;
@@ -305,7 +313,7 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
                     speed_ref_rpm: frame_rpm,
                     duties,
                     telemetry: ControllerTelemetry {
-                        state: out.step.name(),
+                        state: id.part_name(),
                         theta_e_rad: frame,
                         omega_e_rad_s: f64::from(out.frame_speed_rad_s),
                         i_dq_a: park(i_ab, DVec2::new(fc, fs)).to_array(),
@@ -368,8 +376,9 @@ pub fn identify(scenario: &Scenario, opts: &IdentifyOptions) -> Result<IdentifyR
         peak_current_a: peak,
         mcap: None,
         svg: None,
+        flux_map: id.map_report(&motor, cfg.test_current_a.into(), ts),
     };
-    match id.result() {
+    match id.identifier().result() {
         Some(Ok(r)) => {
             let v = identified_values(r);
             report.ok = true;

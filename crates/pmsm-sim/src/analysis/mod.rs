@@ -15,6 +15,7 @@
 pub mod datasheet;
 pub mod fault_suite;
 pub mod identify;
+pub mod identify_map;
 pub mod low_speed;
 pub(crate) mod mcap_input;
 pub mod replay;

@@ -265,3 +265,15 @@ pub fn probe_realistic(
         peak_a: peak,
     })
 }
+
+/// The saturated rows' scenario of `m` (module `saturated`: the realistic drive, current
+/// limit twice the rated current, sensor seed `seed`) and its rated current (A), for the
+/// identification with the flux-map step (`analysis::identify`).
+pub fn saturated_scenario(m: &SaturatedMotor, seed: u64) -> (crate::scenario::Scenario, f64) {
+    let (_, _, i_rated) = super::saturated::rated_mtpa(m);
+    let opts = super::SuiteOptions {
+        seed,
+        ..super::SuiteOptions::default()
+    };
+    (super::saturated::scenario(m, &opts, 1.0, i_rated), i_rated)
+}

@@ -1,0 +1,47 @@
+//! The identification with the flux-map step (`foc::identify::IdentifyWithMap`, `pmsm-sim
+//! identify --flux-map`) on the saturating reference motor `saturating_ipm` (on `pm_syrm`
+//! the identification's spin itself loses the rotor on this drive, before the step),
+//! on the saturated rows' realistic drive (dead time, delay, ADC, noise, gain and offset
+//! errors): the whole run (identification, stop, re-align, probe) within 5 s simulated, the
+//! map within 2 % of the plant's flux (error over `|psi|`) at the nodes within the rated
+//! current, the current within the probe's trip (`2 i_max`, the grid `+-1.7 I_r`).
+//!
+//! Run: `cargo test --release -p pmsm-sim --test identify_flux_map -- --nocapture`.
+
+use ekf_core::saturation::{SATURATED_IPM, SaturatedMotor};
+use pmsm_sim::analysis::identify::{IdentifyOptions, identify};
+use pmsm_sim::analysis::suite::identified::saturated_scenario;
+
+fn check(m: &SaturatedMotor) {
+    let name = m.reference.name;
+    let (sc, i_rated) = saturated_scenario(m, 2);
+    let opts = IdentifyOptions {
+        flux_map_a: Some(1.7 * i_rated),
+        ..IdentifyOptions::default()
+    };
+    let r = identify(&sc, &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(r.ok, "{name}: {:?}", r.error);
+    let f = r.flux_map.as_ref().expect("flux-map report");
+    println!("{name}: {}", f.table());
+    assert!(f.ok, "{name}: {:?}", f.error);
+    let (ed, eq) = f.max_error_rated_pct.unwrap();
+    println!(
+        "{name}: total {:.3} s (flux-map step {:.3} s), peak {:.2} A (limit {:.2} A), \
+         rated-range error psi_d {ed:.2} %, psi_q {eq:.2} %",
+        r.total_time_s,
+        f.time_s(),
+        r.peak_current_a,
+        sc.controller.current_limit_a
+    );
+    assert!(r.total_time_s <= 5.0, "{name}: {} s", r.total_time_s);
+    assert!(f.time_s() > 0.0 && f.probe_s > 0.0);
+    assert!(ed <= 2.0 && eq <= 2.0, "{name}: {ed:.2} / {eq:.2} %");
+    // The grid's corners reach sqrt(2) i_max: the probe's trip is 2 i_max.
+    assert!(r.peak_current_a <= 2.0 * 1.7 * i_rated);
+    assert!(r.pwm_off_at_end);
+}
+
+#[test]
+fn saturating_ipm_identification_with_flux_map() {
+    check(&SATURATED_IPM);
+}
