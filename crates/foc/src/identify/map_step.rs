@@ -24,9 +24,9 @@
 //! about 1.3 x the spin's ramp time, `align_time_s` and the probe (0.2-0.3 s on the
 //! reference motors), measured in `docs/identify.md`.
 
-use crate::controller::{PhaseCurrents, TickInput};
+use crate::controller::TickInput;
 use crate::pi::{Pi, PiGains};
-use crate::svpwm::{SAFE_DUTIES, svpwm};
+use crate::svpwm::SAFE_DUTIES;
 use crate::transforms::AlphaBeta;
 use crate::trig::{atan2, sin_cos, sqrt};
 
@@ -39,7 +39,7 @@ use super::{
     IdentifyStep,
 };
 
-const INV_SQRT3: f32 = 0.577_350_26;
+use super::numeric::INV_SQRT3;
 /// Settling of the coast's zero current, s.
 const COAST_SETTLE_S: f32 = 0.02;
 /// The coast's EMF window, s.
@@ -349,20 +349,7 @@ impl IdentifyWithMap {
 
     /// The input checks of the identification; the currents with the offsets removed.
     fn check(&mut self, input: &TickInput) -> Result<AlphaBeta, IdentifyError> {
-        let o = self.id.ctx.found.offsets;
-        let i_ab = match input.currents {
-            PhaseCurrents::Abc(a) => {
-                let (ia, ib) = (a.a - o[0], a.b - o[1]);
-                AlphaBeta {
-                    alpha: ia,
-                    beta: (ia + 2.0 * ib) * INV_SQRT3,
-                }
-            }
-            PhaseCurrents::AlphaBeta(ab) => AlphaBeta {
-                alpha: ab.alpha - o[0],
-                beta: ab.beta - o[1],
-            },
-        };
+        let i_ab = super::numeric::less_offsets(input.currents, self.id.ctx.found.offsets);
         let u_dc = input.u_dc_v;
         if !(u_dc.is_finite() && i_ab.alpha.is_finite() && i_ab.beta.is_finite()) {
             return Err(IdentifyError::NonFiniteInput);
@@ -508,14 +495,7 @@ impl IdentifyWithMap {
 
     fn modulate(&self, u: AlphaBeta, i_ab: AlphaBeta, u_dc: f32) -> IdentifyOutput {
         let ctx = &self.id.ctx;
-        let u_lim = ctx.u_lim;
-        let mag2 = u.norm_squared();
-        let u = if mag2 > u_lim * u_lim {
-            u * (u_lim / sqrt(mag2))
-        } else {
-            u
-        };
-        let m = svpwm(u, u_dc);
+        let m = super::numeric::limited_svpwm(u, ctx.u_lim, u_dc);
         IdentifyOutput {
             duties: m.duties,
             pwm_enabled: true,

@@ -134,7 +134,7 @@
 
 use crate::controller::{PhaseCurrents, TickInput};
 use crate::hal::{CurrentSense, Inverter, write_bridge};
-use crate::svpwm::{SAFE_DUTIES, svpwm};
+use crate::svpwm::SAFE_DUTIES;
 use crate::transforms::AlphaBeta;
 use crate::trig::sqrt;
 
@@ -175,7 +175,7 @@ use probe::{PROBE_MAX_M, Probe};
 use resistance::Resistance;
 use spin::Spin;
 
-const INV_SQRT3: f32 = 0.577_350_26;
+use numeric::INV_SQRT3;
 
 /// The step in progress, with its own state. (`repr(u8)`: a one-byte tag the dispatch
 /// reads directly; the niche layout Rust picks otherwise costs the worst tick, the
@@ -384,25 +384,11 @@ impl Identifier {
         }
         let u_dc = input.u_dc_v;
         let offsets = self.ctx.found.offsets;
-        let (raw, i_ab) = match input.currents {
-            PhaseCurrents::Abc(a) => {
-                let (ia, ib) = (a.a - offsets[0], a.b - offsets[1]);
-                (
-                    [a.a, a.b],
-                    AlphaBeta {
-                        alpha: ia,
-                        beta: (ia + 2.0 * ib) * INV_SQRT3,
-                    },
-                )
-            }
-            PhaseCurrents::AlphaBeta(ab) => (
-                [ab.alpha, ab.beta],
-                AlphaBeta {
-                    alpha: ab.alpha - offsets[0],
-                    beta: ab.beta - offsets[1],
-                },
-            ),
+        let raw = match input.currents {
+            PhaseCurrents::Abc(a) => [a.a, a.b],
+            PhaseCurrents::AlphaBeta(ab) => [ab.alpha, ab.beta],
         };
+        let i_ab = numeric::less_offsets(input.currents, offsets);
         if !(u_dc.is_finite() && i_ab.alpha.is_finite() && i_ab.beta.is_finite()) {
             self.fail(IdentifyError::NonFiniteInput);
             return self.off_output(AlphaBeta::default());
@@ -449,14 +435,7 @@ impl Identifier {
             }
         };
         // Voltage limit (circle), then the modulator (hexagon; the circle is inside it).
-        let u_lim = self.ctx.u_lim;
-        let mag2 = u.norm_squared();
-        let u = if mag2 > u_lim * u_lim {
-            u * (u_lim / sqrt(mag2))
-        } else {
-            u
-        };
-        let m = svpwm(u, u_dc);
+        let m = numeric::limited_svpwm(u, self.ctx.u_lim, u_dc);
         IdentifyOutput {
             duties: m.duties,
             pwm_enabled: true,

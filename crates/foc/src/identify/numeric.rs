@@ -1,4 +1,45 @@
-//! Small numerical helpers of the identification: window sums, durations in ticks, `ln`.
+//! Small numerical helpers of the identification: window sums, durations in ticks, `ln`, the
+//! measured currents less their offsets, the voltage limit before the modulator.
+
+use crate::controller::PhaseCurrents;
+use crate::svpwm::{Modulation, svpwm};
+use crate::transforms::AlphaBeta;
+use crate::trig::sqrt;
+
+/// `1 / sqrt(3)`.
+pub(super) const INV_SQRT3: f32 = 0.577_350_26;
+
+/// The measured currents in alpha-beta less the offsets `o` (A; two phases: `i_a`, `i_b` of the
+/// amplitude-invariant Clarke transform, or alpha and beta as measured).
+#[inline(always)]
+pub(super) fn less_offsets(currents: PhaseCurrents, o: [f32; 2]) -> AlphaBeta {
+    match currents {
+        PhaseCurrents::Abc(a) => {
+            let (ia, ib) = (a.a - o[0], a.b - o[1]);
+            AlphaBeta {
+                alpha: ia,
+                beta: (ia + 2.0 * ib) * INV_SQRT3,
+            }
+        }
+        PhaseCurrents::AlphaBeta(ab) => AlphaBeta {
+            alpha: ab.alpha - o[0],
+            beta: ab.beta - o[1],
+        },
+    }
+}
+
+/// `u` limited to the circle of radius `u_lim` (V), then the modulator (the hexagon at `u_dc`
+/// holds the circle).
+#[inline(always)]
+pub(super) fn limited_svpwm(u: AlphaBeta, u_lim: f32, u_dc: f32) -> Modulation {
+    let mag2 = u.norm_squared();
+    let u = if mag2 > u_lim * u_lim {
+        u * (u_lim / sqrt(mag2))
+    } else {
+        u
+    };
+    svpwm(u, u_dc)
+}
 
 const LN_2: f32 = core::f32::consts::LN_2;
 

@@ -94,7 +94,7 @@
 //! reference motors (docs/identify.md).
 
 use crate::config::ComputationDelay;
-use crate::io::{PhaseCurrents, TickInput};
+use crate::io::TickInput;
 use crate::pi::{Pi, PiGains};
 use crate::svpwm::{SAFE_DUTIES, svpwm};
 use crate::transforms::AlphaBeta;
@@ -111,7 +111,7 @@ pub use types::{
     SaturationPhase,
 };
 
-const INV_SQRT3: f32 = 0.577_350_26;
+use super::numeric::INV_SQRT3;
 
 /// What follows a rest.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -379,20 +379,7 @@ impl SaturationProbe {
     /// modulator.
     pub fn tick(&mut self, input: &TickInput) -> SaturationOutput {
         self.tick = self.tick.wrapping_add(1);
-        let o = self.cfg.current_offsets_a;
-        let i_ab = match input.currents {
-            PhaseCurrents::Abc(a) => {
-                let (ia, ib) = (a.a - o[0], a.b - o[1]);
-                AlphaBeta {
-                    alpha: ia,
-                    beta: (ia + 2.0 * ib) * INV_SQRT3,
-                }
-            }
-            PhaseCurrents::AlphaBeta(ab) => AlphaBeta {
-                alpha: ab.alpha - o[0],
-                beta: ab.beta - o[1],
-            },
-        };
+        let i_ab = super::numeric::less_offsets(input.currents, self.cfg.current_offsets_a);
         if self.result.is_some() {
             return self.off(i_ab);
         }
