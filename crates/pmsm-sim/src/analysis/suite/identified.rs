@@ -121,17 +121,7 @@ pub fn probe_plant(
         u_prev = [f64::from(out.u_ab.alpha), f64::from(out.u_ab.beta)];
         moved = moved.max((plant.state().theta_e_rad - theta0_rad).abs() / pp);
     }
-    let samples = match p.result() {
-        Some(Ok(s)) => *s,
-        Some(Err(e)) => return Err(fail(e.to_string())),
-        None => return Err(fail("the probe did not end within 5 s".into())),
-    };
-    Ok(ProbeRun {
-        samples,
-        duration_s: f64::from(p.ticks()) * ts,
-        rotor_moved_mech_rad: moved,
-        peak_a: peak,
-    })
+    finish(&p, ts, moved, peak, fail)
 }
 
 /// The identified map and what its measurement took.
@@ -253,6 +243,18 @@ pub fn probe_realistic(
         }
         moved = moved.max((plant.state().theta_e_rad - theta0_rad).abs() / pp);
     }
+    finish(&p, ts, moved, peak, fail)
+}
+
+/// A probe's run after its last tick: its samples (`fail` names the problem when it failed or
+/// did not end), its duration at the period `ts`, the largest rotor motion and the peak current.
+fn finish(
+    p: &SaturationProbe,
+    ts: f64,
+    moved: f64,
+    peak: f64,
+    fail: impl Fn(String) -> SimError,
+) -> Result<ProbeRun, SimError> {
     let samples = match p.result() {
         Some(Ok(s)) => *s,
         Some(Err(e)) => return Err(fail(e.to_string())),
