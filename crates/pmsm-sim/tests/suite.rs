@@ -3,9 +3,10 @@
 //! named, with the weaker statement that holds there. (Debug profile: about 0.2 s per run.)
 
 use pmsm_sim::analysis::suite::{
-    GOAL_IPM_CONVERGENCE_S, GOAL_MEAN_DEG, GOAL_MISMATCH_PSI_PCT, GOAL_MISMATCH_RMS_DEG,
-    GOAL_RMS_RATIO, LIMIT_LOAD_STEP_DEG, MISMATCHES, ObserverKind, SuiteMotor, SuiteOptions,
-    SuiteReport, run_suite_motors, suite_scenario,
+    self, GOAL_IPM_CONVERGENCE_S, GOAL_MEAN_DEG, GOAL_MISMATCH_LOW_SPEED_RMS_DEG,
+    GOAL_MISMATCH_PSI_PCT, GOAL_MISMATCH_RMS_DEG, GOAL_RMS_RATIO, KNOWN_LIMIT_LS,
+    LIMIT_LOAD_STEP_DEG, MISMATCHES, ObserverKind, SuiteMotor, SuiteOptions, SuiteReport,
+    run_suite_motors, suite_scenario,
 };
 
 fn opts(ideal: bool) -> SuiteOptions {
@@ -141,8 +142,15 @@ fn short_run_with_ideal_sensing_meets_every_goal() {
             && c.motor == SuiteMotor::SmallFast
             && c.row == "10 %"
             && c.value < 0.55;
+        // The reversal's Ls rows: the same physical bias (a documented known limit).
+        let ls_known = c.known_limit == Some(KNOWN_LIMIT_LS);
+        // The measured miss of the reversal rows (`mismatch_rows`): the small fast motor told
+        // it is 100 K colder loses the angle at the load step before any window has shown
+        // its resistance.
+        let cold_miss = c.motor == SuiteMotor::SmallFast
+            && c.row == format!("{}, 100 K cold", suite::reversal::CONDITION);
         assert!(
-            c.pass || ls_at_load || known,
+            c.pass || ls_at_load || known || ls_known || cold_miss,
             "{} {:?} {}: {} > {}",
             c.name,
             c.motor,
@@ -152,8 +160,12 @@ fn short_run_with_ideal_sensing_meets_every_goal() {
         );
     }
     // 12 rows x (ratio, mean, RMS, max, speed) + 3 x (convergence, load step), and per motor
-    // 3 rows at >= 50 % speed x 8 cases (RMS) + 3 x 2 psi_f cases (tracked flux).
-    assert_eq!(r.checks.len(), 12 * 5 + 3 * 2 + 3 * (3 * 8 + 3 * 2));
+    // 3 rows at >= 50 % speed x 8 cases (RMS) + 3 x 2 psi_f cases (tracked flux), and the
+    // 10 % rows: the steady one x 8 cases + the reversal x (8 cases + the exact motor).
+    assert_eq!(
+        r.checks.len(),
+        12 * 5 + 3 * 2 + 3 * (3 * 8 + 3 * 2) + 3 * (8 + 8 + 1)
+    );
 }
 
 /// The observers told a wrong motor (module docs of `suite`, realistic short run): the EKF
@@ -164,7 +176,10 @@ fn short_run_with_ideal_sensing_meets_every_goal() {
 #[test]
 fn mismatch_rows() {
     let r = short(false);
-    assert_eq!(r.mismatch.len(), 3 * MISMATCHES.len() * 2 * 4);
+    // 4 windows of the main run and the reversal, x 2 observers; the reversal also told the
+    // true motor.
+    assert_eq!(r.mismatch.len(), 3 * (MISMATCHES.len() * 2 * 5 + 2));
+    reversal_rows(&r);
     let opts = SuiteOptions {
         short: true,
         seed: 1,
@@ -396,5 +411,52 @@ fn the_full_suite_lists_all_five_motors() {
         let sc = suite_scenario(m, &opts(false));
         assert_eq!(sc.validate(), Ok(()), "{m:?}");
         assert_eq!(sc.motor.lq_h > sc.motor.ld_h, m.is_interior(), "{m:?}");
+    }
+}
+
+/// The reversal under rated load at 10 % speed (module docs of `suite`, "Mismatch through a
+/// reversal"; realistic short run). Measured (`pmsm-sim suite --short`): told the true motor
+/// 0.32 / 0.61 / 0.35 deg RMS (servo / industrial / small fast); told a wrong psi_f, Rs or
+/// temperature 0.26-0.84 deg (the windows of the resistance tracking find `Rs` at the loaded
+/// low speed before the reversal), against 16-75 deg for the baseline told the same; told a
+/// wrong Ls the physical bias (0.8-3.0 deg). The miss: the small fast motor told it is 100 K
+/// colder (told `Rs` 64 % high, its drop 36 % of the back-EMF at the load step) loses the angle
+/// at the load step before any loaded window has shown its resistance (56 deg).
+fn reversal_rows(r: &SuiteReport) {
+    let rows: Vec<_> = r
+        .mismatch
+        .iter()
+        .filter(|x| x.condition == suite::reversal::CONDITION)
+        .collect();
+    assert_eq!(rows.len(), 3 * (MISMATCHES.len() * 2 + 2));
+    for ekf in rows
+        .iter()
+        .filter(|x| x.observer == ObserverKind::DefaultEkf)
+    {
+        let what = format!("{:?} {}", ekf.motor, ekf.case);
+        let case = MISMATCHES.iter().find(|m| m.name == ekf.case);
+        if case.is_some_and(|c| c.is_ls()) {
+            assert!(ekf.angle_rms_deg < 3.5, "{what}: {}", ekf.angle_rms_deg);
+            continue;
+        }
+        if ekf.motor == SuiteMotor::SmallFast && ekf.case == "100 K cold" {
+            continue;
+        }
+        assert!(
+            ekf.angle_rms_deg <= GOAL_MISMATCH_LOW_SPEED_RMS_DEG,
+            "{what}: {}",
+            ekf.angle_rms_deg
+        );
+        if case.is_some_and(|c| c.rs != 1.0) {
+            let base = rows
+                .iter()
+                .find(|b| {
+                    b.motor == ekf.motor
+                        && b.case == ekf.case
+                        && b.observer == ObserverKind::FluxBaseline
+                })
+                .expect("baseline row");
+            assert!(ekf.angle_rms_deg < 0.1 * base.angle_rms_deg, "{what}");
+        }
     }
 }

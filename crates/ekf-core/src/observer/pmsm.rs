@@ -95,7 +95,8 @@ impl<T: Float> PmsmObserver<T> {
         let ts = cfg.ts_s;
         let p0 = Sym4::from_matrix(&cfg.p0);
         let tracking = cfg.parameter_tracking.map(|t| {
-            let (t, slow) = Tracker::new(&t, cfg.motor.psi_f_wb, cfg.motor.rs_ohm, ts);
+            let m = &cfg.motor;
+            let (t, slow) = Tracker::new(&t, m.psi_f_wb, m.rs_ohm, (m.ld_h, m.lq_h), ts);
             Tracking { t, slow }
         });
         let model = PmsmModel::new(cfg);

@@ -69,6 +69,10 @@ impl<T: Float> PmsmObserver<T> {
         let out = self.step_portable(u_prev, i);
         self.model = model;
         self.rs_constants = cached;
+        // The resistance tracking's window assumes periods of `Ts`: it restarts.
+        if let Some(Tracking { t, .. }) = &mut self.tracking {
+            t.break_window();
+        }
         out
     }
 
@@ -150,7 +154,7 @@ impl<T: Float> PmsmObserver<T> {
                 };
                 let (xm, mut pm, t) =
                     structured::predict::<T, S>(&disc, q, &self.x, &self.p, u_prev, trusted);
-                let tm = tr.predict::<S>(k, &disc, &t, &self.x, &mut pm, active);
+                let tm = tr.predict::<S>(k, &disc, &t, (&self.x, u_prev), &mut pm, active);
                 (xm, pm, Some(tm))
             }
             _ => {
@@ -502,7 +506,7 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(Tracking { t, slow }) = &mut self.tracking
             && t.housekeeping_due(&slow.k)
         {
-            t.housekeeping(slow);
+            t.housekeeping(slow, &self.x);
             self.refresh_rs_constants();
         }
     }

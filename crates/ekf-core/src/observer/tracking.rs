@@ -73,6 +73,8 @@ use nalgebra::Vector4;
 
 use super::model::{Discrete, TransitionTerms};
 use super::structured::{Posterior, Sym4};
+use crate::angle::wrap_angle;
+use crate::trig::sin_cos_small;
 use crate::{Float, to_t};
 
 mod config;
@@ -111,11 +113,18 @@ pub(super) struct TrackerStep<T> {
     pub settled: u32,
     /// Low-pass of the speed estimate (steadiness test), rad/s.
     pub w_lp: T,
-    /// Window sums of the split filter: lumped flux, `i_q`, `w`; samples in the window.
-    pub sum_psi: T,
+    /// Window sums of the split filter (module docs, "Resistance"): the voltage `u_d`,
+    /// `u_q` and the current `i_d`, `i_q` in the frame of the angle at the start of each
+    /// period, the speed estimate `w`; samples in the window.
+    pub sum_ud: T,
+    pub sum_uq: T,
+    pub sum_id: T,
     pub sum_iq: T,
     pub sum_w: T,
     pub n: u32,
+    /// Whether the window follows the previous one without a gap (its start is the previous
+    /// window's end).
+    pub contiguous: bool,
     /// Steps since the reported deviations were refreshed.
     pub since_sigma: u32,
 }
@@ -146,21 +155,36 @@ pub(super) struct Split<T> {
     pub c00: T,
     pub c01: T,
     pub c11: T,
-    /// Constants: process noise per window, measurement variance, link gradient
-    /// `(1 / (psi_a beta), -1 / (Rs_a alpha))` at the anchor, offset and variance of the link.
+    /// Process noise per window: the temperature's random walk (K^2) and the magnets' own
+    /// drift (Wb^2); the measurement variance (Wb^2).
+    pub q_t: T,
     pub q_psi: T,
-    pub q_rs: T,
     pub r_m: T,
-    pub h_psi: T,
-    pub h_rs: T,
-    pub link_offset: T,
+    /// The thermal link's anchor `(psi_a, Rs_a)` and variance (K^2).
+    pub psi_a: T,
+    pub rs_a: T,
     pub r_link: T,
-    /// Whether the link is anchored (module docs: the temperature reference is the state at
-    /// the first convergence, or the values given to `set_parameters`).
+    /// Whether the filter has started (module docs: at the first window after the EKF's
+    /// flux has converged, from the EKF's flux and `Rs`).
     pub anchored: bool,
     /// Temperature coefficients `alpha_cu`, `beta` (1/K).
     pub alpha: T,
     pub beta: T,
+    /// The state at the end of the last window: angle (rad), `i_q` (A) in its frame.
+    pub end_theta: T,
+    pub end_iq: T,
+}
+
+/// The sums of one window of the split filter (module docs, "Resistance").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Window<T> {
+    pub ud: T,
+    pub uq: T,
+    pub id: T,
+    pub iq: T,
+    pub w: T,
+    pub n: u32,
+    pub contiguous: bool,
 }
 
 /// Constants of the tracking.
@@ -186,6 +210,10 @@ pub(super) struct TrackerConstants<T> {
     /// Configured values.
     pub psi0: T,
     pub rs0: T,
+    /// Sample time, s; the inductances `L_d`, `L_q`, H.
+    pub ts: T,
+    pub ld: T,
+    pub lq: T,
     pub t_ref: T,
     /// `1 / (alpha_cu Rs0)`, K/ohm.
     pub kelvin_per_ohm: T,
@@ -193,7 +221,13 @@ pub(super) struct TrackerConstants<T> {
 
 impl<T: Float> Tracker<T> {
     /// A tracker at the configured parameters with the initial covariance, and its slow part.
-    pub fn new(cfg: &ParameterTracking<T>, psi0: T, rs0: T, ts_s: T) -> (Self, TrackerSlow<T>) {
+    pub fn new(
+        cfg: &ParameterTracking<T>,
+        psi0: T,
+        rs0: T,
+        (ld, lq): (T, T),
+        ts_s: T,
+    ) -> (Self, TrackerSlow<T>) {
         let sq = |v: T| v * v;
         let var0_psi = sq(cfg.psi_f_sigma0 * psi0);
         let mut k = TrackerConstants {
@@ -210,6 +244,9 @@ impl<T: Float> Tracker<T> {
             rs_max: cfg.rs_range[1] * rs0,
             psi0,
             rs0,
+            ts: ts_s,
+            ld,
+            lq,
             t_ref: cfg.reference_temperature_c,
             kelvin_per_ohm: T::one() / (cfg.rs_temperature_coefficient_per_k * rs0),
         };
@@ -230,17 +267,19 @@ impl<T: Float> Tracker<T> {
                     c00: k.var0_psi,
                     c01: T::zero(),
                     c11: k.var0_rs,
-                    q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * window_s,
-                    q_rs: sq(cfg.rs_walk_per_sqrt_s * rs0) * window_s,
+                    // The temperature walks by rs_walk / alpha_cu per root second; the
+                    // magnets' flux besides by link_sigma_k |beta| (fractions) per root second.
+                    q_t: sq(cfg.rs_walk_per_sqrt_s / alpha) * window_s,
+                    q_psi: sq(link_sigma_k * b * psi0) * window_s,
                     r_m: sq(measurement_sigma * psi0),
-                    // h(psi, Rs) = (psi / psi_a - 1) / beta - (Rs / Rs_a - 1) / alpha, in K.
-                    h_psi: T::one() / (psi0 * b),
-                    h_rs: -T::one() / (rs0 * alpha),
-                    link_offset: T::one() / alpha - T::one() / b,
-                    r_link: sq(link_sigma_k),
+                    psi_a: psi0,
+                    rs_a: rs0,
+                    r_link: sq(to_t::<T>(60.0)),
                     anchored: false,
                     alpha,
                     beta: b,
+                    end_theta: T::zero(),
+                    end_iq: T::zero(),
                 })
             }
         };
@@ -259,10 +298,13 @@ impl<T: Float> Tracker<T> {
                 active: false,
                 settled: 0,
                 w_lp: T::zero(),
-                sum_psi: T::zero(),
+                sum_ud: T::zero(),
+                sum_uq: T::zero(),
+                sum_id: T::zero(),
                 sum_iq: T::zero(),
                 sum_w: T::zero(),
                 n: 0,
+                contiguous: false,
                 since_sigma: 0,
             },
         };
@@ -311,7 +353,7 @@ impl<T: Float> Tracker<T> {
 
     /// The tracker's part of the prediction (module docs): returns the prior tracker and
     /// adds the flux's terms to the prior `P-` of the state. `t` holds the step's EMF terms,
-    /// `x` is the posterior the step starts from. While active, also one sample of the split
+    /// `x` is the posterior the step starts from, `u` the period's voltage. While active, also one sample of the split
     /// filter's window.
     #[inline(always)]
     pub fn predict<const S: bool>(
@@ -319,7 +361,7 @@ impl<T: Float> Tracker<T> {
         k: &TrackerConstants<T>,
         disc: &Discrete<T>,
         t: &TransitionTerms<T>,
-        x: &Vector4<T>,
+        (x, u): (&Vector4<T>, [T; 2]),
         pm: &mut Sym4<T>,
         a: Activity<T>,
     ) -> TrackerStep<T> {
@@ -331,17 +373,21 @@ impl<T: Float> Tracker<T> {
         } = a;
         if !active {
             // Frozen: the flux is a known constant for this step (the 4-state filter
-            // exactly, at the frozen value); its correlation with the state is dropped.
+            // exactly, at the frozen value); its correlation with the state is dropped. The
+            // split filter's window restarts (a window holds consecutive periods only).
             return TrackerStep {
                 x: [T::zero(); 4],
                 c_pp: self.s.c_pp,
                 active,
                 settled,
                 w_lp,
-                sum_psi: self.s.sum_psi,
-                sum_iq: self.s.sum_iq,
-                sum_w: self.s.sum_w,
-                n: self.s.n,
+                sum_ud: T::zero(),
+                sum_uq: T::zero(),
+                sum_id: T::zero(),
+                sum_iq: T::zero(),
+                sum_w: T::zero(),
+                n: 0,
+                contiguous: false,
                 since_sigma,
             };
         }
@@ -379,12 +425,16 @@ impl<T: Float> Tracker<T> {
             w_lp,
             // Process noise, not above the ceiling (the variance stays bounded).
             c_pp: if c < k.var0_psi { c + k.q_psi } else { c },
-            // One sample of the split filter's window: the flux, i_q and w at the start of
-            // the period (the posterior the prediction starts from).
-            sum_psi: self.s.sum_psi + self.psi,
+            // One sample of the split filter's window: the period's voltage and the current
+            // at its start in the frame of the angle at its start (the posterior the
+            // prediction starts from), and the speed estimate.
+            sum_ud: self.s.sum_ud + (u[0] * t.cos_th + u[1] * t.sin_th),
+            sum_uq: self.s.sum_uq + (u[1] * t.cos_th - u[0] * t.sin_th),
+            sum_id: self.s.sum_id + (x[0] * t.cos_th + x[1] * t.sin_th),
             sum_iq: self.s.sum_iq + (x[1] * t.cos_th - x[0] * t.sin_th),
             sum_w: self.s.sum_w + x[2],
             n: self.s.n + 1,
+            contiguous: self.s.contiguous,
             since_sigma,
         }
     }
@@ -454,7 +504,10 @@ impl<T: Float> Tracker<T> {
     #[inline(always)]
     fn check_sum(&self, s: &TrackerStep<T>, psi: T) -> T {
         let x = &s.x;
-        psi + s.c_pp + (x[0] + x[1]) + (x[2] + x[3]) + (s.sum_psi + s.sum_iq + s.sum_w)
+        psi + s.c_pp
+            + (x[0] + x[1])
+            + (x[2] + x[3])
+            + ((s.sum_ud + s.sum_uq) + (s.sum_id + s.sum_iq) + s.sum_w)
     }
 
     /// Whether the slow work is due (a full window, or the deviations to refresh).
@@ -467,15 +520,23 @@ impl<T: Float> Tracker<T> {
     /// window (its `Rs` taken into use), the reported deviations.
     #[cold]
     #[inline(never)]
-    pub fn housekeeping(&mut self, slow: &mut TrackerSlow<T>) {
+    pub fn housekeeping(&mut self, slow: &mut TrackerSlow<T>, x: &Vector4<T>) {
         let k = &slow.k;
         if self.s.n >= k.window {
-            let (sum_psi, sum_iq, sum_w, n) =
-                (self.s.sum_psi, self.s.sum_iq, self.s.sum_w, self.s.n);
+            let sums = Window {
+                ud: self.s.sum_ud,
+                uq: self.s.sum_uq,
+                id: self.s.sum_id,
+                iq: self.s.sum_iq,
+                w: self.s.sum_w,
+                n: self.s.n,
+                contiguous: self.s.contiguous,
+            };
             self.clear_window();
+            self.s.contiguous = true;
             if let Some(s) = &mut slow.split {
                 let before = *s;
-                match s.update(self.rs, self.s.c_pp, (sum_psi, sum_iq, sum_w, n), k) {
+                match s.update(self.rs, self.psi, self.s.c_pp, &sums, x, k) {
                     Some(rs) if s.finite() => self.rs = rs,
                     Some(_) => *s = before,
                     None => {}
@@ -489,11 +550,19 @@ impl<T: Float> Tracker<T> {
         }
     }
 
+    /// Restarts the split filter's window (a period other than `Ts` went into it).
+    pub fn break_window(&mut self) {
+        self.clear_window();
+    }
+
     fn clear_window(&mut self) {
-        self.s.sum_psi = T::zero();
+        self.s.sum_ud = T::zero();
+        self.s.sum_uq = T::zero();
+        self.s.sum_id = T::zero();
         self.s.sum_iq = T::zero();
         self.s.sum_w = T::zero();
         self.s.n = 0;
+        self.s.contiguous = false;
     }
 
     /// After a branch flip (`w = -w`): the speed row of `X` changes sign; the window
@@ -534,7 +603,7 @@ impl<T: Float> Tracker<T> {
         self.s.active = false;
         self.s.settled = 0;
         self.s.since_sigma = 64;
-        self.housekeeping(slow);
+        self.housekeeping(slow, &Vector4::zeros());
     }
 
     /// Winding temperature from the tracked `Rs`, deg C.
@@ -546,47 +615,104 @@ impl<T: Float> Tracker<T> {
 impl<T: Float> Split<T> {
     /// All values finite.
     fn finite(&self) -> bool {
-        (self.psi + self.rs + (self.c00 + self.c01 + self.c11) + (self.h_psi + self.h_rs))
-            .is_finite()
+        (self.psi + self.rs + (self.c00 + self.c01 + self.c11)).is_finite()
     }
 
-    /// The split filter's step at the end of a window `(sums of psi, i_q, w; samples)`, with
-    /// the `Rs` the EKF used over it and its flux variance `c_pp`: random walk, the window's
-    /// measurement `m = psi_mean + Rs_used r` with `r = mean(i_q) / mean(w)`, then the thermal
-    /// link. Returns the new `Rs` (bounded), `None` when the window is not used.
+    /// The split filter's step at the end of a window (module docs, "Resistance"): the
+    /// window's lumped flux `m = (u_q - w L_d i_d - L_q di_q/dt) / w` from its voltage
+    /// equation, with `w` the rotation rate of the estimated angle over the window, is a
+    /// measurement of `psi_f + Rs r`, `r = i_q / w`; random walk, that update, then the
+    /// thermal link. `rs_used` and `psi` are the EKF's `Rs` and flux, `c_pp` its flux
+    /// variance, `x` its state at the window's end. Returns the new `Rs` (bounded), `None`
+    /// when the window is not used.
     fn update(
         &mut self,
         rs_used: T,
+        psi: T,
         c_pp: T,
-        (sum_psi, sum_iq, sum_w, n): (T, T, T, u32),
+        sums: &Window<T>,
+        x: &Vector4<T>,
         k: &TrackerConstants<T>,
     ) -> Option<T> {
-        let inv_n = T::one() / to_t::<T>(f64::from(n));
+        // The window's end: the next window's start.
+        let (s_end, c_end) = x[3].sin_cos_angle();
+        let iq_end = x[1] * c_end - x[0] * s_end;
+        let (theta0, iq0) = (self.end_theta, self.end_iq);
+        self.end_theta = x[3];
+        self.end_iq = iq_end;
         if !self.anchored {
             // The link's reference: the first window after the EKF's flux has converged
             // (standard deviation within 0.5 % of the configured flux).
             let converged = c_pp <= k.psi0 * k.psi0 * to_t(2.5e-5);
             if converged {
-                self.anchor(sum_psi * inv_n, rs_used, c_pp, k);
+                self.anchor(psi, rs_used, c_pp, k);
             }
             return None;
         }
-        // Only where the resistive drop is small beside the EMF (`|Rs0 i_q| <= 0.1 |w| psi0`):
-        // at low speed and high current the two nearly cancel along the thermal link, and
-        // the EKF's flux follows a change of Rs too strongly for the loop to be stable.
-        let small_drop = (sum_iq * k.rs0).abs() <= to_t::<T>(0.1) * k.psi0 * sum_w.abs();
-        if !small_drop {
+        if !sums.contiguous {
             return None;
         }
-        let r = sum_iq / sum_w;
-        let m = sum_psi * inv_n + rs_used * r;
-        self.c00 += self.q_psi;
-        self.c11 += self.q_rs;
-        // Measurement of the window: m = psi + r Rs.
-        self.scalar_update(T::one(), r, m - (self.psi + r * self.rs), self.r_m);
-        // Thermal link: 0 = h_psi psi + h_rs Rs + offset (K).
-        let h = self.h_psi * self.psi + self.h_rs * self.rs + self.link_offset;
-        self.scalar_update(self.h_psi, self.h_rs, -h, self.r_link);
+        let n = to_t::<T>(f64::from(sums.n));
+        let inv_n = T::one() / n;
+        let span = n * k.ts;
+        // Rotation rate of the estimated angle: the speed estimate's advance, corrected by
+        // the angle's own advance modulo a turn (the speed estimate is off by far less than
+        // half a turn per window).
+        let advance = sums.w * k.ts;
+        let w = (advance + wrap_angle(x[3] - theta0 - advance)) / span;
+        // Enough back-EMF to read the flux from: at least twice the tracking's minimum speed.
+        if w * w < to_t::<T>(4.0) * k.min_speed2 {
+            return None;
+        }
+        // The period's voltage is held while the frame turns by w Ts: its mean in the
+        // rotating frame is the start frame's value turned back by half of that and scaled
+        // by sinc(w Ts / 2).
+        let half = w * k.ts * to_t(0.5);
+        let (sh, ch) = sin_cos_small(half);
+        let sinc = if half.abs() > to_t(1e-6) {
+            sh / half
+        } else {
+            T::one()
+        };
+        let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
+        let uq = (uq0 * ch - ud0 * sh) * sinc;
+        let (id, iq) = (sums.id * inv_n, sums.iq * inv_n);
+        // Windows with little current (the inverter's voltage error is least known there,
+        // its compensation hinges on the current's sign) or a current step (the window's
+        // speed and angle are in transit) are left out.
+        let i2 = id * id + iq * iq;
+        let i_min = to_t::<T>(0.02) * k.psi0 / k.ld;
+        let diq = iq_end - iq0;
+        if i2 < i_min * i_min || diq * diq > to_t::<T>(0.04) * i2 {
+            return None;
+        }
+        let m = (uq - w * k.ld * id - k.lq * (iq_end - iq0) / span) / w;
+        let r = iq / w;
+        // Random walk: the temperature moves both along (psi beta, Rs alpha_cu) per kelvin;
+        // the magnets' flux drifts besides.
+        let (g0, g1) = (self.psi * self.beta, self.rs * self.alpha);
+        self.c00 += self.q_t * g0 * g0 + self.q_psi;
+        self.c01 += self.q_t * g0 * g1;
+        self.c11 += self.q_t * g1 * g1;
+        // Measurement of the window: m = psi + r Rs. A voltage error reads as a flux error
+        // divided by the speed: below ten times the minimum speed the deviation grows as 1/w.
+        let knee2 = to_t::<T>(100.0) * k.min_speed2;
+        let r_m = if w * w < knee2 {
+            self.r_m * knee2 / (w * w)
+        } else {
+            self.r_m
+        };
+        self.scalar_update(T::one(), r, m - (self.psi + r * self.rs), r_m);
+        // Thermal link, where the window measures the flux (the resistive drop below 15 % of
+        // the back-EMF): the temperatures read from psi and from Rs agree (K). Where the drop
+        // is larger the window measures Rs itself, and the link is left out: applied on
+        // every window it would outweigh that measurement.
+        if (r * self.rs).abs() <= to_t::<T>(0.15) * self.psi {
+            let h_psi = T::one() / (self.psi_a * self.beta);
+            let h_rs = -T::one() / (self.rs_a * self.alpha);
+            let h = h_psi * (self.psi - self.psi_a) + h_rs * (self.rs - self.rs_a);
+            self.scalar_update(h_psi, h_rs, -h, self.r_link);
+        }
         self.psi = clamp(self.psi, k.psi_min, k.psi_max);
         self.rs = clamp(self.rs, k.rs_min, k.rs_max);
         Some(self.rs)
@@ -600,8 +726,8 @@ impl<T: Float> Split<T> {
         self.c00 = c_pp;
         self.c01 = T::zero();
         self.c11 = k.var0_rs;
-        self.h_psi = T::one() / (psi * self.beta);
-        self.h_rs = -T::one() / (rs * self.alpha);
+        self.psi_a = psi;
+        self.rs_a = rs;
         self.anchored = true;
     }
 

@@ -20,11 +20,11 @@ pub enum RsTracking<T> {
         /// Temperature coefficient of the magnets' flux, 1/K (NdFeB about -0.0012, ferrite
         /// about -0.002). Must be negative.
         magnet_coefficient_per_k: T,
-        /// Standard deviation of the thermal link, K: how far the windings' and the magnets'
-        /// temperature rises may differ.
+        /// How fast the magnets' temperature may drift from the windings', K per square root
+        /// of a second: the flux's own random walk beside the common temperature's.
         link_sigma_k: T,
-        /// Samples averaged into one measurement of the split filter. Windows in which the
-        /// resistive drop exceeds a tenth of the back-EMF are skipped (low speed, high current).
+        /// Samples averaged into one measurement of the split filter. Windows turning slower
+        /// than twice the tracking's minimum speed are skipped.
         window_samples: u32,
         /// Standard deviation of one window's lumped flux, fraction of the configured
         /// `psi_f`.
@@ -90,9 +90,9 @@ impl<T: Float> ParameterTracking<T> {
             rs_temperature_coefficient_per_k: to_t(0.00393),
             rs: RsTracking::Split {
                 magnet_coefficient_per_k: to_t(-0.0012),
-                link_sigma_k: to_t(20.0),
+                link_sigma_k: to_t(2.0),
                 window_samples: 100,
-                measurement_sigma: to_t(0.002),
+                measurement_sigma: to_t(0.01),
             },
         }
     }

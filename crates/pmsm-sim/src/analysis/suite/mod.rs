@@ -60,6 +60,14 @@
 //! after which `|e_th| < 5 deg` holds to the end of the convergence phase (`None`: not
 //! converged by then). `w_e Ts` of every row is in the tables.
 //!
+//! # Mismatch through a reversal
+//!
+//! On each surface motor a run of its own (module [`reversal`]) scores the default EKF and
+//! the baseline told each wrong motor of [`MISMATCHES`] through a speed reversal from +10 % to
+//! -10 % of rated speed under the rated load torque (a constant torque: the drive generates
+//! on the way back), over a window from 0.25 s after the load step to the end of the run.
+//! Goal: RMS <= [`GOAL_MISMATCH_LOW_SPEED_RMS_DEG`], as in the steady 10 % window.
+//!
 //! # Real-drive effects ([`SuiteReport::real_drive`])
 //!
 //! What real drives do and the observers' model leaves out, on the servo and the small fast
@@ -125,6 +133,7 @@ use crate::sim::{SideObserver, run_with_side_observers};
 pub use crate::output::metrics::CONVERGED_DEG;
 
 pub mod identified;
+pub mod reversal;
 mod runs;
 mod saturated;
 mod tables;
@@ -166,6 +175,9 @@ pub const KNOWN_LIMIT_LS: &str =
     "known limit: Ls is not tracked online, bias about atan(dL i_q / psi_f) under load";
 /// Goal: EKF angle RMS (deg el.) told a wrong `Ls`, at >= 50 % speed.
 pub const GOAL_MISMATCH_LS_RMS_DEG: f64 = 1.0;
+/// Goal: EKF angle RMS (deg el.) told any wrong motor at 10 % speed, in the steady window
+/// and through the reversal under rated load ([`reversal`]).
+pub const GOAL_MISMATCH_LOW_SPEED_RMS_DEG: f64 = 1.0;
 /// Goal: the tracked `psi_f` within this of the truth (%) when told a wrong `psi_f`, at
 /// >= 50 % speed.
 pub const GOAL_MISMATCH_PSI_PCT: f64 = 1.0;
@@ -700,25 +712,9 @@ pub fn run_suite_motors(
             duration_s: sc.duration_s,
             end,
         });
-        for s in scored.iter().filter(|s| s.told.is_some()) {
-            let case = MISMATCHES[s.told.unwrap_or(0)].name;
-            for ((sums, w), ps) in s.windows.iter().zip(&plan.windows).zip(&s.param_sums) {
-                let n = sums.n as f64;
-                let ekf = s.kind == ObserverKind::DefaultEkf;
-                mismatch.push(MismatchRow {
-                    observer: s.kind,
-                    motor,
-                    case,
-                    condition: w.0.to_string(),
-                    speed_fraction: w.1,
-                    samples: sums.n,
-                    angle_rms_deg: sums.angle_rms_deg(),
-                    angle_max_deg: sums.max_e,
-                    angle_mean_deg: sums.angle_mean_deg(),
-                    psi_f_error_pct: ekf.then(|| 100.0 * (ps[0] / n / truth.0 - 1.0)),
-                    rs_error_pct: 100.0 * (ps[1] / n / truth.1 - 1.0),
-                });
-            }
+        mismatch.extend(reversal::mismatch_rows(motor, &plan, &scored, truth));
+        if !motor.is_interior() {
+            mismatch.extend(reversal::reversal_rows(motor, opts)?);
         }
         for (s, times) in scored.iter().filter(|s| s.told.is_none()).zip(&conv) {
             for (sums, w) in s.windows.iter().zip(&plan.windows) {
