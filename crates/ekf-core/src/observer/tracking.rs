@@ -56,6 +56,45 @@
 //! reversal they keep their last values; they never wander. The estimates are also held
 //! inside configured bounds.
 //!
+//! # Resistance (the split filter)
+//!
+//! The EKF's flux is the lumped `psi_f + dRs i_q / w` of the operating point. `Rs` comes from
+//! a slow filter on `(psi_f, Rs)` fed once per window of samples (100 by default) with the
+//! window's voltage equation, read in the estimated frame:
+//!
+//! ```text
+//! m = (u_q - w L_d i_d - L_q di_q/dt) / w = psi_f + Rs r,      r = i_q / w
+//! ```
+//!
+//! with the means over the window of the voltage (each period's turned to the period's middle
+//! and scaled by `sinc(w Ts / 2)`, as a voltage held while the frame turns), of `i_d`, `i_q`,
+//! the change of `i_q` over the window, and `w` the rotation rate of the **estimated angle**
+//! over the window. The speed state is not used for `w`: told a wrong `Rs` at low speed under
+//! load, the filter reads the drop as back-EMF and its speed state is off by `dRs i_q /
+//! psi_f`, while its angle still turns at the rotor's speed on average (it cannot drift
+//! without bound). An angle error `e` scales `u_q` by `cos e` only, so the measurement holds
+//! while the angle is a few degrees off. Independent of the EKF's flux, the measurement does
+//! not feed the EKF's own correction back into itself.
+//!
+//! What a window tells: `m` at one `r` pins `psi_f + Rs r`. At small `r` (light load, high
+//! speed) that is the flux; at large `r` (low speed, high current, where the resistive drop is
+//! a sizeable part of the voltage) mostly `Rs`; two windows of different `r` (a speed change, a
+//! load step, a braking ramp, the two sides of a reversal) give both. What the data leaves open
+//! is decided by the thermal link, a pseudo-measurement that the temperatures read from `psi_f`
+//! (`beta`) and from `Rs` (`alpha_cu`) agree, applied only where the window measures the flux
+//! (the drop `|Rs r|` within 15 % of `psi_f`): there it carries the flux's temperature over to
+//! `Rs` (a motor warming at one operating point); applied where the window measures `Rs`, once
+//! per window, it would outweigh that measurement.
+//!
+//! Windows left out: below twice the tracking's minimum speed (no EMF to read); with a mean
+//! current below 2 % of `psi_f / L_d` (the inverter's voltage error, which a drive compensates
+//! by the current's sign, is least known there and reads as a flux error); with a change of
+//! `i_q` over the window above a fifth of the current (a load step: the angle and speed are in
+//! transit); with a period other than `Ts` (`step_dt`); and not consecutive with the last
+//! one (tracking paused in between). Below ten times the minimum speed a window's variance
+//! grows as `1 / w^2` (a voltage error over the speed). Measured: the suite's reversal rows
+//! (`pmsm-sim suite`, `docs/accuracy.md`).
+//!
 //! # Inductance
 //!
 //! `Ls` is not tracked. An error `dL` shows on the d axis as `w dL i_q`, the same signature as
@@ -267,14 +306,14 @@ impl<T: Float> Tracker<T> {
                     c00: k.var0_psi,
                     c01: T::zero(),
                     c11: k.var0_rs,
-                    // The temperature walks by rs_walk / alpha_cu per root second; the
-                    // magnets' flux besides by link_sigma_k |beta| (fractions) per root second.
+                    // The temperature walks by rs_walk / alpha_cu per root second; the flux
+                    // besides by its own walk.
                     q_t: sq(cfg.rs_walk_per_sqrt_s / alpha) * window_s,
-                    q_psi: sq(link_sigma_k * b * psi0) * window_s,
+                    q_psi: sq(cfg.psi_f_walk_per_sqrt_s * psi0) * window_s,
                     r_m: sq(measurement_sigma * psi0),
                     psi_a: psi0,
                     rs_a: rs0,
-                    r_link: sq(to_t::<T>(60.0)),
+                    r_link: sq(link_sigma_k),
                     anchored: false,
                     alpha,
                     beta: b,

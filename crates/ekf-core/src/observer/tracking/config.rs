@@ -20,8 +20,8 @@ pub enum RsTracking<T> {
         /// Temperature coefficient of the magnets' flux, 1/K (NdFeB about -0.0012, ferrite
         /// about -0.002). Must be negative.
         magnet_coefficient_per_k: T,
-        /// How fast the magnets' temperature may drift from the windings', K per square root
-        /// of a second: the flux's own random walk beside the common temperature's.
+        /// Standard deviation of the thermal link, K: how far the windings' and the magnets'
+        /// temperature rises may differ (module docs, "Resistance").
         link_sigma_k: T,
         /// Samples averaged into one measurement of the split filter. Windows turning slower
         /// than twice the tracking's minimum speed are skipped.
@@ -75,7 +75,7 @@ impl<T: Float> ParameterTracking<T> {
     /// servo's rated speed) and for the first 500 samples (50 ms at 10 kHz) after the angle
     /// is tracked; `psi_f` within `[0.5, 1.5]` and `Rs` within `[0.3, 3]` times the
     /// configured values, which hold at 20 deg C; copper; `Rs` by the split filter with an
-    /// NdFeB thermal link of 20 K, windows of 100 samples, 0.2 % per window.
+    /// NdFeB thermal link of 60 K, windows of 100 samples, 1 % per window.
     pub fn default_for(ts_s: T) -> Self {
         Self {
             psi_f_sigma0: to_t(0.1),
@@ -90,7 +90,7 @@ impl<T: Float> ParameterTracking<T> {
             rs_temperature_coefficient_per_k: to_t(0.00393),
             rs: RsTracking::Split {
                 magnet_coefficient_per_k: to_t(-0.0012),
-                link_sigma_k: to_t(2.0),
+                link_sigma_k: to_t(60.0),
                 window_samples: 100,
                 measurement_sigma: to_t(0.01),
             },
