@@ -675,12 +675,7 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     }
     eprint!("{}", startup_log.summary());
     if let Some((m, rs)) = &map {
-        let t0 = 0.5f64.min(0.25 * scenario.duration_s);
-        eprintln!("the run against the same told the plant's map (scored from {t0} s on):");
-        eprint!(
-            "{}",
-            plug_map::compare(&original, &scenario, m, *rs, t0)?.table()
-        );
+        eprint!("{}", plug_map::compared(&original, &scenario, m, *rs)?);
     }
     let metrics = &out.metrics;
 

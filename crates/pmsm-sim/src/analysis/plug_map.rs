@@ -464,3 +464,90 @@ pub fn plug(scenario: &Scenario, flux_map: Option<Option<f64>>) -> Result<Plugge
         text,
     })
 }
+
+/// [`compare`] for `pmsm-sim run --identify --flux-map`: scored from 0.5 s (at most a quarter
+/// of the run) on, as text for the terminal; the run's own tables score the map EKF in their
+/// "foc EKF" rows.
+pub fn compared(
+    scenario: &Scenario,
+    sc: &Scenario,
+    map: &FluxMap<f64, MAP_POINTS>,
+    rs: f64,
+) -> Result<String, SimError> {
+    let t0 = 0.5f64.min(0.25 * sc.duration_s);
+    Ok(format!(
+        "(the run's \"foc EKF\" rows: the map EKF); against the plant's map from {t0} s:\n{}",
+        compare(scenario, sc, map, rs, t0)?.table()
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(ok: bool) -> FluxMapReport {
+        let i_d = vec![-2.0, 0.0, 2.0];
+        let i_q = vec![-2.0, 0.0, 2.0];
+        // Linear flux plus an asymmetric error on the node (0, +2).
+        let psi_d: Vec<Vec<f64>> = i_d
+            .iter()
+            .map(|&d| {
+                i_q.iter()
+                    .map(|&q| 0.1 + 0.01 * d + if d == 0.0 && q > 0.0 { 0.004 } else { 0.0 })
+                    .collect()
+            })
+            .collect();
+        let psi_q: Vec<Vec<f64>> = i_d
+            .iter()
+            .map(|&d| {
+                i_q.iter()
+                    .map(|&q| 0.02 * q + if d == 0.0 && q > 0.0 { 0.002 } else { 0.0 })
+                    .collect()
+            })
+            .collect();
+        FluxMapReport {
+            ok,
+            error: (!ok).then(|| "probe failed".into()),
+            i_max_a: 2.0,
+            i_rated_a: 1.0,
+            i_d_a: i_d,
+            i_q_a: i_q,
+            psi_d_wb: psi_d,
+            psi_q_wb: psi_q,
+            true_psi_d_wb: Vec::new(),
+            true_psi_q_wb: Vec::new(),
+            max_error_rated_pct: None,
+            max_error_grid_pct: None,
+            stop_s: 0.0,
+            realign_s: 0.0,
+            probe_s: 0.0,
+            rotor_angle_max_rad: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_identified_map_is_made_symmetric_in_i_q() {
+        let m = identified_map(&report(true)).unwrap();
+        let (a, b) = (m.eval(0.0, 2.0), m.eval(0.0, -2.0));
+        // psi_d even, psi_q odd: each node the mean of it and its mirror.
+        assert!((a.psi_d - b.psi_d).abs() < 1e-12);
+        assert!((a.psi_q + b.psi_q).abs() < 1e-12);
+        assert!((a.psi_d - 0.102).abs() < 1e-12, "{}", a.psi_d);
+        assert!((a.psi_q - 0.041).abs() < 1e-12, "{}", a.psi_q);
+    }
+
+    #[test]
+    fn a_failed_flux_map_step_is_an_error() {
+        let e = identified_map(&report(false)).unwrap_err();
+        assert!(e.contains("probe failed"), "{e}");
+    }
+
+    #[test]
+    fn the_true_map_of_a_linear_plant_is_psi_f_plus_l_i() {
+        let motor = MotorModel::industrial_ipm();
+        let m = true_map(&motor, 2.0).unwrap();
+        let p = m.eval(-1.0, 1.5);
+        assert!((p.psi_d - (motor.psi_f_wb - motor.ld_h)).abs() < 1e-9);
+        assert!((p.psi_q - 1.5 * motor.lq_h).abs() < 1e-9);
+    }
+}
