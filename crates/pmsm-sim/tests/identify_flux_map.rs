@@ -1,6 +1,7 @@
 //! The identification with the flux-map step (`foc::identify::IdentifyWithMap`, `pmsm-sim
 //! identify --flux-map`) on the saturating reference motor `saturating_ipm` (on `pm_syrm`
-//! the identification's spin itself loses the rotor on this drive, before the step),
+//! the identification fails before the step: above 3.8 A its reluctance torque pulls the
+//! rotor off the d axis the sequence aligns to, docs/identify.md),
 //! on the saturated rows' realistic drive (dead time, delay, ADC, noise, gain and offset
 //! errors): the whole run (identification, stop, re-align, probe) within 5 s simulated, the
 //! map within 2 % of the plant's flux (error over `|psi|`) at the nodes within the rated
