@@ -22,6 +22,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use pmsm_sim::SimError;
+use pmsm_sim::analysis::plug_map;
 use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions};
 use pmsm_sim::analysis::sweep::period_table::PeriodTable;
 use pmsm_sim::output::file::write_bytes;
@@ -245,6 +246,14 @@ struct RunArgs {
     /// identified parameters only (the true ones stay in the plant).
     #[arg(long)]
     identify: bool,
+    /// With --identify: also measure the flux map at standstill, then run foc on it (MTPA,
+    /// gains) with its angle from the EKF on the map; the run told the plant's true map is
+    /// compared after it (docs/identify.md).
+    #[arg(long, requires = "identify")]
+    flux_map: bool,
+    /// Largest current of the flux map's grid, A (default 0.85 x the current limit).
+    #[arg(long, requires = "flux_map")]
+    flux_map_current: Option<f64>,
     /// Do not run the reference filter alongside.
     #[arg(long, alias = "no-seed-filter")]
     no_reference_filter: bool,
@@ -566,10 +575,11 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
     if args.no_reference_filter {
         scenario.observer.reference_filter = false;
     }
+    let (original, mut map) = (scenario.clone(), None);
     if args.identify {
-        let (sc, report) = pmsm_sim::analysis::identify::plug_and_spin(&scenario)?;
-        eprint!("{}", pmsm_sim::analysis::identify::table(&report));
-        scenario = sc;
+        let p = plug_map::plug(&scenario, args.flux_map.then_some(args.flux_map_current))?;
+        eprint!("{}", p.text);
+        (scenario, map) = (p.scenario, p.map);
     }
     scenario.validate().map_err(|e| SimError::Scenario {
         file: what.unwrap_or("preset default").to_string(),
@@ -648,21 +658,25 @@ fn run_command(what: Option<&str>, args: &RunArgs) -> Result<ExitCode, SimError>
         .map(|(_, parquet)| PeriodTable::create(&dir, parquet))
         .collect::<Result<Vec<_>, _>>()?;
     sinks.extend(tables.iter_mut().map(|t| t as &mut dyn SampleSink));
-    let out = sim::run_with(
-        &scenario,
-        RunOptions {
-            record_trace: false,
-            sinks,
-            interrupt: Some(&signals.stop),
-            progress: Some(&mut progress),
-            inline_observers,
-            ..RunOptions::default()
-        },
-    )?;
+    let opts = RunOptions {
+        record_trace: false,
+        sinks,
+        interrupt: Some(&signals.stop),
+        progress: Some(&mut progress),
+        inline_observers,
+        ..RunOptions::default()
+    };
+    let out = match &map {
+        Some((m, rs)) => plug_map::run_with_map(&scenario, m, *rs, opts)?,
+        None => sim::run_with(&scenario, opts)?,
+    };
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
     eprint!("{}", startup_log.summary());
+    if let Some((m, rs)) = &map {
+        eprint!("{}", plug_map::compared(&original, &scenario, m, *rs)?);
+    }
     let metrics = &out.metrics;
 
     let mut written = Vec::new();

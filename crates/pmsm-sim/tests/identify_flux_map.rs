@@ -1,15 +1,27 @@
 //! The identification with the flux-map step (`foc::identify::IdentifyWithMap`, `pmsm-sim
 //! identify --flux-map`) on the saturating reference motor `saturating_ipm` (on `pm_syrm`
-//! the identification's spin itself loses the rotor on this drive, before the step),
+//! the identification fails before the step: above 3.8 A its reluctance torque pulls the
+//! rotor off the d axis the sequence aligns to, docs/identify.md),
 //! on the saturated rows' realistic drive (dead time, delay, ADC, noise, gain and offset
 //! errors): the whole run (identification, stop, re-align, probe) within 5 s simulated, the
 //! map within 2 % of the plant's flux (error over `|psi|`) at the nodes within the rated
 //! current, the current within the probe's trip (`2 i_max`, the grid `+-1.7 I_r`).
 //!
+//! And plug and spin on the identified map (`pmsm-sim run SCENARIO --identify --flux-map`,
+//! `pmsm_sim::analysis::plug_map`) on the same drive with the suite rows' run (load steps
+//! 100/150/-100/100 % and a reversal under rated load at 50 % rated speed, a flying start):
+//! foc told the identified map (MTPA and gains from it) with its angle from the EKF on the
+//! identified map. Asserted: no fault, no scored sample more than 45 deg off, the angle RMS at
+//! most 1.5 deg and the torque per ampere within 0.5 % of the same drive's told the plant's
+//! true map. The goal of 1.5 x the true-map run's angle RMS is printed, not asserted: it is
+//! missed (0.92 / 0.17 deg, 5.5 x; the identified map's 1-2 % flux errors, a +6 mWb offset in
+//! `psi_d`, set the angle bias).
+//!
 //! Run: `cargo test --release -p pmsm-sim --test identify_flux_map -- --nocapture`.
 
 use ekf_core::saturation::{SATURATED_IPM, SaturatedMotor};
 use pmsm_sim::analysis::identify::{IdentifyOptions, identify};
+use pmsm_sim::analysis::plug_map::{compare, plug_and_spin_map};
 use pmsm_sim::analysis::suite::identified::saturated_scenario;
 
 fn check(m: &SaturatedMotor) {
@@ -44,4 +56,44 @@ fn check(m: &SaturatedMotor) {
 #[test]
 fn saturating_ipm_identification_with_flux_map() {
     check(&SATURATED_IPM);
+}
+
+fn check_plug(m: &SaturatedMotor) {
+    let name = m.reference.name;
+    let (sc, i_rated) = saturated_scenario(m, 2);
+    let (plug, report, map) =
+        plug_and_spin_map(&sc, 1.7 * i_rated).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let rs = report.identified.as_ref().map_or(f64::NAN, |v| v.rs_ohm);
+    let c = compare(&sc, &plug, &map, rs, 0.5).unwrap_or_else(|e| panic!("{name}: {e}"));
+    println!(
+        "{name}: identification with the flux-map step {:.3} s\n{}",
+        report.total_time_s,
+        c.table()
+    );
+    for r in [&c.identified, &c.truth] {
+        assert!(r.samples > 1000, "{name}: {r:?}");
+        assert_eq!(r.fault, None, "{name}: {r:?}");
+        assert!(r.angle_max_deg < 45.0, "{name}: {r:?}");
+    }
+    assert!(
+        c.identified.angle_rms_deg <= 1.5,
+        "{name}: {:?}",
+        c.identified
+    );
+    let tpa = c.torque_per_ampere_ratio();
+    assert!((tpa - 1.0).abs() <= 0.005, "{name}: {tpa:.4}");
+    println!(
+        "{name}: goal angle RMS <= 1.5 x the true-map run's: {:.2} x ({})",
+        c.rms_ratio(),
+        if c.rms_ratio() <= 1.5 {
+            "met"
+        } else {
+            "missed"
+        }
+    );
+}
+
+#[test]
+fn saturating_ipm_plug_and_spin_on_the_identified_map() {
+    check_plug(&SATURATED_IPM);
 }

@@ -18,6 +18,7 @@ pub mod identify;
 pub mod identify_map;
 pub mod low_speed;
 pub(crate) mod mcap_input;
+pub mod plug_map;
 pub mod replay;
 pub mod suite;
 pub mod sweep;
