@@ -741,7 +741,15 @@ impl<T: Float> Split<T> {
         } else {
             self.r_m
         };
-        self.scalar_update(T::one(), r, m - (self.psi + r * self.rs), r_m);
+        // A window the filter's own uncertainty cannot explain (beyond 5 standard deviations:
+        // a model that does not fit, e.g. inductances far off on a saturating motor) is left
+        // out rather than read as a resistance.
+        let y = m - (self.psi + r * self.rs);
+        let s = self.c00 + r * (self.c01 + self.c01) + r * r * self.c11 + r_m;
+        if y * y > to_t::<T>(25.0) * s {
+            return None;
+        }
+        self.scalar_update(T::one(), r, y, r_m);
         // Thermal link, where the window measures the flux (the resistive drop below 15 % of
         // the back-EMF): the temperatures read from psi and from Rs agree (K). Where the drop
         // is larger the window measures Rs itself, and the link is left out: applied on
