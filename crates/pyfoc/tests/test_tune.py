@@ -104,9 +104,11 @@ def test_mcap_log_gives_the_same_proposal(simulated):
     a = pyfoc.tune_qr(pyfoc.Motor(**SERVO), ts, sim["u_ab"], sim["i_ab_meas"], theta_true=sim["theta"],
                       omega_true=sim["omega"], skip=500, min_speed=0.05 * rated)
     # The log gives the tuner the observer's voltage (foc's f32 expectation of its duties),
-    # the arrays the applied one: the proposals agree to that rounding.
-    np.testing.assert_allclose(m["r"], a["r"], rtol=1e-6)
-    np.testing.assert_allclose(m["q"], a["q"], rtol=1e-6)
+    # the arrays the applied one: the proposals agree to that rounding, carried through the
+    # resistance tracking, which reads the voltage itself and feeds its Rs back (measured:
+    # R 2.5e-5 relative, the tuned Q's tiny entries 0.5 %).
+    np.testing.assert_allclose(m["r"], a["r"], rtol=1e-4)
+    np.testing.assert_allclose(m["q"], a["q"], rtol=1e-2)
     assert abs(m["after"]["angle_error"]["rms_deg"] - a["after"]["angle_error"]["rms_deg"]) < 1e-5
     # os.PathLike and str both work.
     assert pyfoc.tune_qr_mcap(str(path), skip=500, max_evals=10)["evaluations"] >= 10

@@ -153,11 +153,10 @@ pub(super) struct TrackerStep<T> {
     /// Low-pass of the speed estimate (steadiness test), rad/s.
     pub w_lp: T,
     /// Window sums of the split filter (module docs, "Resistance"): the voltage `u_d`,
-    /// `u_q` and the current `i_d`, `i_q` in the frame of the angle at the start of each
-    /// period, the speed estimate `w`; samples in the window.
+    /// `u_q` and the current `i_q` in the frame of the angle at the start of each period,
+    /// the speed estimate `w`; samples in the window.
     pub sum_ud: T,
     pub sum_uq: T,
-    pub sum_id: T,
     pub sum_iq: T,
     pub sum_w: T,
     pub n: u32,
@@ -211,6 +210,7 @@ pub(super) struct Split<T> {
     pub beta: T,
     /// The state at the end of the last window: angle (rad), `i_q` (A) in its frame.
     pub end_theta: T,
+    pub end_id: T,
     pub end_iq: T,
 }
 
@@ -219,7 +219,6 @@ pub(super) struct Split<T> {
 pub(super) struct Window<T> {
     pub ud: T,
     pub uq: T,
-    pub id: T,
     pub iq: T,
     pub w: T,
     pub n: u32,
@@ -318,6 +317,7 @@ impl<T: Float> Tracker<T> {
                     alpha,
                     beta: b,
                     end_theta: T::zero(),
+                    end_id: T::zero(),
                     end_iq: T::zero(),
                 })
             }
@@ -339,7 +339,6 @@ impl<T: Float> Tracker<T> {
                 w_lp: T::zero(),
                 sum_ud: T::zero(),
                 sum_uq: T::zero(),
-                sum_id: T::zero(),
                 sum_iq: T::zero(),
                 sum_w: T::zero(),
                 n: 0,
@@ -422,7 +421,6 @@ impl<T: Float> Tracker<T> {
                 w_lp,
                 sum_ud: T::zero(),
                 sum_uq: T::zero(),
-                sum_id: T::zero(),
                 sum_iq: T::zero(),
                 sum_w: T::zero(),
                 n: 0,
@@ -469,7 +467,6 @@ impl<T: Float> Tracker<T> {
             // prediction starts from), and the speed estimate.
             sum_ud: self.s.sum_ud + (u[0] * t.cos_th + u[1] * t.sin_th),
             sum_uq: self.s.sum_uq + (u[1] * t.cos_th - u[0] * t.sin_th),
-            sum_id: self.s.sum_id + (x[0] * t.cos_th + x[1] * t.sin_th),
             sum_iq: self.s.sum_iq + (x[1] * t.cos_th - x[0] * t.sin_th),
             sum_w: self.s.sum_w + x[2],
             n: self.s.n + 1,
@@ -546,7 +543,7 @@ impl<T: Float> Tracker<T> {
         psi + s.c_pp
             + (x[0] + x[1])
             + (x[2] + x[3])
-            + ((s.sum_ud + s.sum_uq) + (s.sum_id + s.sum_iq) + s.sum_w)
+            + ((s.sum_ud + s.sum_uq) + (s.sum_iq + s.sum_w))
     }
 
     /// Whether the slow work is due (a full window, or the deviations to refresh).
@@ -565,7 +562,6 @@ impl<T: Float> Tracker<T> {
             let sums = Window {
                 ud: self.s.sum_ud,
                 uq: self.s.sum_uq,
-                id: self.s.sum_id,
                 iq: self.s.sum_iq,
                 w: self.s.sum_w,
                 n: self.s.n,
@@ -597,7 +593,6 @@ impl<T: Float> Tracker<T> {
     fn clear_window(&mut self) {
         self.s.sum_ud = T::zero();
         self.s.sum_uq = T::zero();
-        self.s.sum_id = T::zero();
         self.s.sum_iq = T::zero();
         self.s.sum_w = T::zero();
         self.s.n = 0;
@@ -675,9 +670,11 @@ impl<T: Float> Split<T> {
     ) -> Option<T> {
         // The window's end: the next window's start.
         let (s_end, c_end) = x[3].sin_cos_angle();
+        let id_end = x[0] * c_end + x[1] * s_end;
         let iq_end = x[1] * c_end - x[0] * s_end;
-        let (theta0, iq0) = (self.end_theta, self.end_iq);
+        let (theta0, id0, iq0) = (self.end_theta, self.end_id, self.end_iq);
         self.end_theta = x[3];
+        self.end_id = id_end;
         self.end_iq = iq_end;
         if !self.anchored {
             // The link's reference: the first window after the EKF's flux has converged
@@ -715,7 +712,9 @@ impl<T: Float> Split<T> {
         };
         let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
         let uq = (uq0 * ch - ud0 * sh) * sinc;
-        let (id, iq) = (sums.id * inv_n, sums.iq * inv_n);
+        // i_d (in the cross term only) as the mean of the window's ends: a window with a
+        // current step is left out below.
+        let (id, iq) = ((id0 + id_end) * to_t(0.5), sums.iq * inv_n);
         // Windows with little current (the inverter's voltage error is least known there,
         // its compensation hinges on the current's sign) or a current step (the window's
         // speed and angle are in transit) are left out.
