@@ -167,6 +167,28 @@ pub(super) struct TrackerStep<T> {
     pub since_sigma: u32,
 }
 
+impl<T: Float> TrackerStep<T> {
+    /// A frozen step (not tracking) with the flux variance `c_pp`, no cross-covariance and an
+    /// empty split-filter window; the activity test's running values as given.
+    #[inline(always)]
+    fn frozen(c_pp: T, settled: u32, w_lp: T, since_sigma: u32) -> Self {
+        Self {
+            x: [T::zero(); 4],
+            c_pp,
+            active: false,
+            settled,
+            w_lp,
+            sum_ud: T::zero(),
+            sum_uq: T::zero(),
+            sum_iq: T::zero(),
+            sum_w: T::zero(),
+            n: 0,
+            contiguous: false,
+            since_sigma,
+        }
+    }
+}
+
 /// The activity test's verdict for a step and its running values (committed with the step).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct Activity<T> {
@@ -331,20 +353,7 @@ impl<T: Float> Tracker<T> {
             } else {
                 T::zero()
             },
-            s: TrackerStep {
-                x: [T::zero(); 4],
-                c_pp: k.var0_psi,
-                active: false,
-                settled: 0,
-                w_lp: T::zero(),
-                sum_ud: T::zero(),
-                sum_uq: T::zero(),
-                sum_iq: T::zero(),
-                sum_w: T::zero(),
-                n: 0,
-                contiguous: false,
-                since_sigma: 0,
-            },
+            s: TrackerStep::frozen(k.var0_psi, 0, T::zero(), 0),
         };
         (tracker, TrackerSlow { k, split })
     }
@@ -413,20 +422,7 @@ impl<T: Float> Tracker<T> {
             // Frozen: the flux is a known constant for this step (the 4-state filter
             // exactly, at the frozen value); its correlation with the state is dropped. The
             // split filter's window restarts (a window holds consecutive periods only).
-            return TrackerStep {
-                x: [T::zero(); 4],
-                c_pp: self.s.c_pp,
-                active,
-                settled,
-                w_lp,
-                sum_ud: T::zero(),
-                sum_uq: T::zero(),
-                sum_iq: T::zero(),
-                sum_w: T::zero(),
-                n: 0,
-                contiguous: false,
-                since_sigma,
-            };
+            return TrackerStep::frozen(self.s.c_pp, settled, w_lp, since_sigma);
         }
         let d = disc.decay;
         // Jacobian column of psi_f (current rows): the EMF term per weber.
