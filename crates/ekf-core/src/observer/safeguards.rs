@@ -265,6 +265,12 @@ pub(crate) struct ConsistencyState<T> {
     /// The mean angle correction is above its limit / at or below half of it.
     pub(crate) drifting: bool,
     pub(crate) drift_calm: bool,
+    /// `9 sigma_Rs^2 Ts^2 / psi_f^2` from the parameter tracking (0 without; refreshed with
+    /// its deviations), and whether the last block's `(w Ts)^2` was below it times `|i|^2`:
+    /// the back-EMF is then within three deviations of the resistive drop's uncertainty (module
+    /// docs, "Consistency").
+    pub(crate) emf_floor: T,
+    pub(crate) emf_low: bool,
 }
 
 /// The baseline is updated once per block of this many samples, from their clamped mean (it
@@ -303,6 +309,8 @@ impl<T: Float> ConsistencyState<T> {
             drift_sigmas: c.drift_sigmas,
             drifting: false,
             drift_calm: true,
+            emf_floor: T::zero(),
+            emf_low: false,
         };
         if s.k_block > T::one() {
             s.k_block = T::one();
@@ -351,7 +359,8 @@ impl<T: Float> ConsistencyState<T> {
     /// once in eight samples, when [`watch`](Self::watch) has just closed a block.
     #[cold]
     #[inline(never)]
-    pub(crate) fn update_drift(&mut self, theta: T, w_ts: T, var_w_ts2: T) {
+    pub(crate) fn update_drift(&mut self, theta: T, w_ts: T, var_w_ts2: T, i: (T, T)) {
+        self.emf_low = w_ts * w_ts < self.emf_floor * (i.0 * i.0 + i.1 * i.1);
         let n: T = to_t(f64::from(BASELINE_BLOCK));
         let start = self.block_theta;
         self.block_theta = theta;

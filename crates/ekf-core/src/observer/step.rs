@@ -427,7 +427,7 @@ impl<T: Float> PmsmObserver<T> {
                     && w.watch(c.nis)
                 {
                     let ts = self.model.ts();
-                    w.update_drift(xm[3], xm[2] * ts, pm.p22 * ts * ts);
+                    w.update_drift(xm[3], xm[2] * ts, pm.p22 * ts * ts, (xm[0], xm[1]));
                 }
                 self.last = c;
                 self.gate_rejected();
@@ -449,7 +449,7 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(w) = &mut self.consistency {
             if w.watch(c.nis) {
                 let ts = self.model.ts();
-                w.update_drift(x[3], x[2] * ts, post.p.p22 * ts * ts);
+                w.update_drift(x[3], x[2] * ts, post.p.p22 * ts * ts, (x[0], x[1]));
             }
             if self.fused != 0 {
                 self.fused -= 1;
@@ -511,12 +511,25 @@ impl<T: Float> PmsmObserver<T> {
         }
     }
 
+    /// The consistency check's EMF floor from the tracking's `Rs` deviation and flux (module
+    /// docs, "Consistency"): `9 (sigma_Rs Ts / psi_f)^2`.
+    pub(super) fn refresh_emf_floor(&mut self) {
+        let ts = self.model.ts();
+        if let (Some(c), Some(Tracking { t, .. })) = (&mut self.consistency, &self.tracking)
+            && t.psi > T::zero()
+        {
+            let r = t.rs_sigma * ts / t.psi;
+            c.emf_floor = to_t::<T>(9.0) * r * r;
+        }
+    }
+
     /// Recomputes the step's constants for the tracked `Rs` when it has changed (after the
-    /// split filter's window, `set_parameters`, a restart). Only a cache: a step whose `Rs`
+    /// split filter's window, `set_parameters`, a restart), and the EMF floor. Only a cache: a step whose `Rs`
     /// differs from the cached one computes its constants itself.
     #[cold]
     #[inline(never)]
     pub(super) fn refresh_rs_constants(&mut self) {
+        self.refresh_emf_floor();
         if let Some(Tracking { t, .. }) = &self.tracking
             && t.rs != self.rs_constants.0
         {

@@ -112,6 +112,9 @@ fn rows_of(
                 angle_mean_deg: sums.angle_mean_deg(),
                 psi_f_error_pct: ekf.then(|| 100.0 * (ps[0] / n / truth.0 - 1.0)),
                 rs_error_pct: 100.0 * (ps[1] / n / truth.1 - 1.0),
+                tracking_pct: sums.tracking_pct(),
+                tracking_while_lost: sums.tracking_lost,
+                run_tracking_while_lost: s.run.tracking_lost,
             }
         })
         .collect()

@@ -162,6 +162,19 @@ impl SuiteReport {
             }
             out.push(c);
         }
+        for r in self
+            .mismatch
+            .iter()
+            .filter(|r| r.observer == ObserverKind::DefaultEkf)
+        {
+            out.push(check(
+                "goal: EKF Tracking while > 45 deg off told a wrong motor (samples in the window)",
+                r.motor,
+                &format!("{}, {}", r.condition, r.case),
+                r.tracking_while_lost as f64,
+                0.0,
+            ));
+        }
         for t in self
             .transients
             .iter()
@@ -332,9 +345,9 @@ impl SuiteReport {
         );
         let _ = writeln!(
             s,
-            "| motor | told | speed | EKF angle RMS / max / mean (deg) | baseline angle RMS / max / mean (deg) | EKF psi_f error (%) | EKF Rs error (%) |"
+            "| motor | told | speed | EKF angle RMS / max / mean (deg) | baseline angle RMS / max / mean (deg) | EKF psi_f error (%) | EKF Rs error (%) | EKF Tracking (%) | EKF Tracking while > 45 deg off, window / whole run |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
         for r in self
             .mismatch
             .iter()
@@ -351,7 +364,7 @@ impl SuiteReport {
             });
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {:.3} / {:.3} / {:+.3} | {:.3} / {:.3} / {:+.3} | {:+.2} | {:+.1} |",
+                "| {} | {} | {} | {:.3} / {:.3} / {:+.3} | {:.3} / {:.3} / {:+.3} | {:+.2} | {:+.1} | {:.1} | {} / {} |",
                 r.motor.name(),
                 r.case,
                 r.condition,
@@ -362,7 +375,10 @@ impl SuiteReport {
                 bmax,
                 bmean,
                 r.psi_f_error_pct.unwrap_or(f64::NAN),
-                r.rs_error_pct
+                r.rs_error_pct,
+                r.tracking_pct,
+                r.tracking_while_lost,
+                r.run_tracking_while_lost
             );
         }
         if !self.real_drive.is_empty() {
