@@ -165,15 +165,19 @@
 //! loss from teaching it, its ceiling (400) bounds the error ever accepted as noise. It changes
 //! no state: only the status. With the check on, the status also requires the back-EMF to be
 //! known to be there: the speed estimate away from zero by three of its standard deviations
-//! (`w^2 >= 9 P22`), or an angle fused by [`PmsmObserver::correct_angle`] within the last 64
-//! steps (high-frequency injection at standstill); and the back-EMF above what the
-//! resistance's uncertainty can fake, `|w| psi_f >= 3 sigma_Rs |i|` with the tracking's
-//! standard deviation of `Rs` (none without tracking). Told a resistance too high at low speed
-//! under load, the filter can settle on a wrong solution, its speed of the wrong sign, whose
-//! innovations are as small as the right one's: the voltage a wrong `Rs` leaves is read as
-//! back-EMF, and nothing in the innovations tells it apart while the EMF is below that drop
-//! (the suite's reversal row of the small fast motor told it 100 K cold: 54 samples
-//! `Tracking` while more than 45 deg off without this rule, none with it). At a start from rest the filter's angle
+//! (`w^2 >= 9 P22`) at the step and, at the ends of the last 8 blocks of 8 samples in a row,
+//! by five deviations (`w^2 >= 25 P22`) and above what the resistance's uncertainty can fake,
+//! `|w| psi_f >= 3 sigma_Rs |i|` with the tracking's standard deviation of `Rs` (none without
+//! tracking); or an angle fused by [`PmsmObserver::correct_angle`] within the last 64 steps
+//! (high-frequency injection at standstill). Two wrong solutions have innovations as small as
+//! the right one's there. (1) The `theta + pi` branch: `(w, th)` and `(-w, th + pi)` give the
+//! same EMF, and only the angle's motion tells them apart, which the speed drift below sees
+//! once `|w|` is several of its deviations and it has had its time constant (32 samples)
+//! twice: a filter started from rest, or coming out of a zero crossing, on the wrong branch
+//! (the drone and 2.2 kW presets' starts) read `Tracking` for up to 73 samples before the
+//! hold. (2) Told a resistance too high at low speed under load, the voltage a wrong `Rs`
+//! leaves is read as back-EMF, and the filter can settle at a speed of the wrong sign (the
+//! suite's reversal row of the small fast motor told it 100 K cold). At a start from rest the filter's angle
 //! variance collapses within a few samples although no EMF has told it anything; this rule keeps
 //! such a start `Uncertain`. ([`Estimate::angle_tracked`] and [`Estimate::inconsistent`] give the
 //! parts; the check's effect on recorded drives is in `docs/accuracy.md`.)

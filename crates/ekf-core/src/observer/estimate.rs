@@ -92,7 +92,7 @@ impl<T: Float> PmsmObserver<T> {
         let (inconsistent, observable) = match &self.consistency {
             Some(w) => (
                 w.inconsistent,
-                self.fused > 0 || (x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22 && !w.emf_low),
+                self.fused > 0 || (x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22 && w.observed),
             ),
             None => (false, true),
         };

@@ -266,16 +266,23 @@ pub(crate) struct ConsistencyState<T> {
     pub(crate) drifting: bool,
     pub(crate) drift_calm: bool,
     /// `9 sigma_Rs^2 Ts^2 / psi_f^2` from the parameter tracking (0 without; refreshed with
-    /// its deviations), and whether the last block's `(w Ts)^2` was below it times `|i|^2`:
-    /// the back-EMF is then within three deviations of the resistive drop's uncertainty (module
-    /// docs, "Consistency").
+    /// its deviations): the back-EMF is observable at a block's end when `(w Ts)^2` is above
+    /// it times `|i|^2` and above `9 P_ww Ts^2` (module docs, "Consistency").
     pub(crate) emf_floor: T,
-    pub(crate) emf_low: bool,
+    /// Blocks in a row, up to [`OBSERVED_BLOCKS`], whose ends found the back-EMF observable;
+    /// `observed`: at least that many (the status may read `Tracking`).
+    pub(crate) observed_blocks: u32,
+    pub(crate) observed: bool,
 }
 
 /// The baseline is updated once per block of this many samples, from their clamped mean (it
 /// moves over about a thousand samples: the block changes nothing of it but the cost).
 const BASELINE_BLOCK: u32 = 8;
+
+/// Blocks in a row with the back-EMF observable before the status may read `Tracking`: 64
+/// samples, twice the speed drift's time constant, in which a filter that has started (or come
+/// out of a zero crossing) on the `theta + pi` branch shows it in its mean angle correction.
+pub(crate) const OBSERVED_BLOCKS: u32 = 8;
 
 impl<T: Float> ConsistencyState<T> {
     pub(crate) fn new(c: &ConsistencyCheck<T>) -> Self {
@@ -310,7 +317,8 @@ impl<T: Float> ConsistencyState<T> {
             drifting: false,
             drift_calm: true,
             emf_floor: T::zero(),
-            emf_low: false,
+            observed_blocks: 0,
+            observed: false,
         };
         if s.k_block > T::one() {
             s.k_block = T::one();
@@ -347,6 +355,8 @@ impl<T: Float> ConsistencyState<T> {
         self.drift_primed = false;
         self.drifting = false;
         self.drift_calm = true;
+        self.observed_blocks = 0;
+        self.observed = false;
         self.refresh();
     }
 
@@ -360,7 +370,15 @@ impl<T: Float> ConsistencyState<T> {
     #[cold]
     #[inline(never)]
     pub(crate) fn update_drift(&mut self, theta: T, w_ts: T, var_w_ts2: T, i: (T, T)) {
-        self.emf_low = w_ts * w_ts < self.emf_floor * (i.0 * i.0 + i.1 * i.1);
+        let w2 = w_ts * w_ts;
+        let observable =
+            w2 >= to_t::<T>(25.0) * var_w_ts2 && w2 >= self.emf_floor * (i.0 * i.0 + i.1 * i.1);
+        self.observed_blocks = if observable {
+            (self.observed_blocks + 1).min(OBSERVED_BLOCKS)
+        } else {
+            0
+        };
+        self.observed = self.observed_blocks >= OBSERVED_BLOCKS;
         let n: T = to_t(f64::from(BASELINE_BLOCK));
         let start = self.block_theta;
         self.block_theta = theta;
