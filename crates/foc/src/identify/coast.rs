@@ -18,30 +18,39 @@
 //! cross-coupling, `L di/dt` of the mirror-image transitions, and the inverter's dead-time
 //! voltage. That voltage opposes the current; over a whole sector (`pi/3` of the current's
 //! angle, the period of its 6th harmonic in the frame) its mean along a current of fixed
-//! direction is a constant, so the `+I` and `-I` halves carry opposite ones. At zero current
-//! (what the coast held before) it is not defined: the loops settle on a current of a few tens
+//! direction is a constant, so the `+I` and `-I` halves carry opposite ones. At zero current it
+//! is not defined: the loops settle on a current of a few tens
 //! of mA whose direction decides the phases' signs, and the bridge then loses the full
 //! dead-time voltage along it (5.8 V in a 55 V EMF on the interior PM motor with 1 us, its
 //! `psi_f` 7 % high).
 //!
 //! `(psi(+I) + psi(-I)) / 2` is `psi(0)` up to the curvature of `psi_d(i_d)`: `psi_d'' I^2/2`,
 //! -0.6 mWb (0.1 %) on the interior PM motor. It holds for any angle of the current to the
-//! rotor's d axis (the frame is not on it), as does the cancellation of the torque
+//! rotor's d axis (the frame is not on it during the acquisition), as does the cancellation of the torque
 //! `3/2 p psi_f I sin g`, which alternates with the current.
 //!
 //! The rotor slips against the frame at `s = w_r - w`: the angles `phi_k` of the cycles'
 //! `E_k` grow by `s T_c` a cycle (`T_c = (2 pi/3) / |w|`); `s` is the slope of a straight
-//! line fitted to them, and
+//! line fitted to them. After [`ACQUIRE_CYCLES`] cycles the frame is put on the rotor's d
+//! axis (the fitted angle at the end, less `pi/2`) and at its speed `w + s`, the loops'
+//! integrators turned with it; one cycle settles; then the measured cycles (at least
+//! [`MIN_CYCLES`] and [`MEASURE_S`], at most [`MAX_CYCLES`]), with their own line:
 //!
 //! ```text
-//! psi_d(0, 0) = mean_k |E_k| / (|w + s| sinc(s T_c / 2))
+//! psi_d(0, 0) = mean_k |E_k| / (|w + s| sinc(s T_c / 2)) - L i_k along the rotor's d axis
 //! ```
 //!
-//! (`sinc` undoes the cycle's averaging of a vector turning at `s`). The rotor's d axis at the
-//! end is the fitted angle extrapolated to the end of the last cycle, less `pi/2`.
+//! (`sinc` undoes the cycle's averaging of a vector turning at `s`; the last term the flux of
+//! the cycles' mean current `i_k`, with the identified `Ld`, `Lq`). The rotor's d axis at the
+//! end is the fitted angle half a cycle after the last cycle, less `pi/2`. The first cycle
+//! (the current rising from zero) is not used.
 //!
-//! The first cycle (the current rising from zero) is not used; then at least [`MIN_CYCLES`]
-//! cycles and enough for [`MEASURE_S`], at most [`MAX_CYCLES`].
+//! Why the frame is put on the rotor: while it slips, the EMF's d component in the frame
+//! ramps, and the d loop follows a ramp with a constant error (40 mA on the interior PM
+//! motor, whose flux `Ld i` does not cancel). The d loop's feed-forward carries the square
+//! wave's odd voltage `+-(Rs I + 3/pi U_err)` (`U_err` the resistance step's voltage error
+//! along a phase axis, `3/pi` of it the dead-time voltage's mean along a turning current), so
+//! the integrator need not swing with it at each change of sign.
 
 use core::f32::consts::{FRAC_PI_2, FRAC_PI_3, PI};
 
