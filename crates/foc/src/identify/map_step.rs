@@ -6,7 +6,7 @@
 //!
 //! | part | what | how |
 //! |---|---|---|
-//! | [`MapPart::Coast`] | `psi_d(0, 0)`, the rotor's speed and d axis | where the sequence ended (the I/f frame at the spin speed; no tick with the PWM off) the current loops (the spin's gains, preset to the last voltage) hold zero current for 20 ms, then a square wave `i_d = +-0.15 I_test` along the turning frame, the sign changing each `pi/3` of the frame; each cycle's mean frame voltage is the EMF `j w_r psi(0)` (what is odd in the current, the dead-time voltage among it, cancels between the halves); the slip of its angle gives the rotor's speed and d axis, the frame is put on the rotor, and `psi_d(0, 0) = |E| / |w_r|` over at least 60 ms (module `coast`) |
+//! | [`MapPart::Coast`] | `psi_d(0, 0)`, the rotor's speed and d axis | where the sequence ended (the I/f frame at the spin speed; no tick with the PWM off) the current loops (the spin's gains, preset to the last voltage) hold zero current for 20 ms, then a square wave `i_d = +-0.15 I_test` along the turning frame, the sign changing each `pi/3` of the frame; each cycle's mean frame voltage is the EMF `j w_r psi(0)` (what is odd in the current, the dead-time voltage among it, cancels between the halves); the slip of its angle gives the rotor's speed and d axis, the frame is put on the rotor, and `psi_d(0, 0) = |E| / |w_r|` over at least 60 ms (`coast.rs`) |
 //! | [`MapPart::Stop`] | back to standstill | the frame put on the rotor's d axis, the spin current along it (integrators preset to `Rs I_f` and `w psi_f`), the frame speed ramped to zero at `spin_accel_rad_s2` (jerk-limited, as the spin's ramp) |
 //! | [`MapPart::Realign`] | rotor to a known angle | the spin current along the frame, now at rest, with the q voltage at zero (the swinging rotor's EMF drives a braking current, as in the alignment) for `align_time_s`; the probe's angle is the mean current's angle over the last fifth (the dead-time voltage turns the current, and the rotor with it, off the frame) |
 //! | [`MapPart::Probe`] | the flux map | [`SaturationProbe`] told what was measured: `Rs`, the inverter voltage error, `Ld`, `Lq`, the coast's `psi_f`, `J` (0 without the inertia move: the rotor's motion is then not followed), the current offsets, the pole pairs; its grid `n_d x n_q` up to `+-i_max_a` ([`FluxMapStep`]) |
@@ -18,7 +18,7 @@
 //! zero current the dead-time voltage is not defined (the loops settle on a residual current
 //! whose direction sets the phases' signs, and the bridge loses the full dead-time voltage
 //! along it), and the rotor does not turn at the frame's speed (the I/f drive leaves it
-//! swinging): both errors are several per cent of `psi_f` (module `coast`).
+//! swinging): both errors are several per cent of `psi_f` (`coast.rs`).
 //!
 //! The step needs the spin ([`IdentifyConfig::spin_speed_rad_s`] `> 0`): without `psi_f`
 //! the probe has no anchor for `psi_d`. It is kept out of [`Identifier`] (its state, about
