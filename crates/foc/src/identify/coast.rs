@@ -336,3 +336,33 @@ fn ceil(x: f32) -> f32 {
     let t = x as u32 as f32;
     if t < x { t + 1.0 } else { t }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// EMF vectors turning by a fixed slip a cycle, of magnitude 50 V: the line gives the
+    /// slip and the angle half a cycle after the last, across the wrap at pi; the flux of
+    /// the mean current adds `Ld i_d` along the rotor's d axis.
+    #[test]
+    fn the_cycles_line_gives_the_slip_and_the_end_angle() {
+        let (slip, start) = (-0.11f32, -3.0f32);
+        let mut c = Cycles::default();
+        for k in 0..5 {
+            let (s, co) = sin_cos(start + slip * k as f32);
+            c.add([50.0 * co, 50.0 * s], [0.0, 0.0], 100.0, (0.02, 0.04));
+        }
+        let l = c.line();
+        assert!((l.slope - slip).abs() < 1e-5, "{l:?}");
+        let want = wrap(start + slip * 4.5);
+        assert!(wrap(l.arg_end - want).abs() < 1e-5, "{l:?}");
+        assert!((c.s[4] / 5.0 - 50.0).abs() < 1e-3);
+        // The rotor's d axis is pi/2 behind E turning forward: a current of 1 A along the
+        // frame's d axis with E on the frame's q axis is all along the rotor's d axis.
+        let mut c = Cycles::default();
+        c.add([0.0, 50.0], [1.0, 0.0], 100.0, (0.02, 0.04));
+        assert!((c.s[5] - 0.02).abs() < 1e-7, "{:?}", c.s);
+        assert!(delta_of(FRAC_PI_2, 100.0).abs() < 1e-7);
+        assert!(delta_of(-FRAC_PI_2, -100.0).abs() < 1e-7);
+    }
+}
