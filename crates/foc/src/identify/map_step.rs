@@ -6,7 +6,7 @@
 //!
 //! | part | what | how |
 //! |---|---|---|
-//! | [`MapPart::Coast`] | `psi_f` at zero current | where the sequence ended (the I/f frame at the spin speed; no tick with the PWM off) the current loops (the spin's gains, preset to the last voltage) hold zero current in the turning frame; after 20 ms, the frame voltage `E` over 40 ms: `psi_f = |E| / w` (`w` the frame's speed), the load angle `pi/2 - arg E` of the last quarter the rotor's d axis |
+//! | [`MapPart::Coast`] | `psi_d(0, 0)`, the rotor's speed and d axis | where the sequence ended (the I/f frame at the spin speed; no tick with the PWM off) the current loops (the spin's gains, preset to the last voltage) hold zero current for 20 ms, then a square wave `i_d = +-0.15 I_test` along the turning frame, the sign changing each `pi/3` of the frame; each cycle's mean frame voltage is the EMF `j w_r psi(0)` (what is odd in the current, the dead-time voltage among it, cancels between the halves); the slip of its angle gives the rotor's speed and d axis, the frame is put on the rotor, and `psi_d(0, 0) = |E| / |w_r|` over at least 60 ms (`coast.rs`) |
 //! | [`MapPart::Stop`] | back to standstill | the frame put on the rotor's d axis, the spin current along it (integrators preset to `Rs I_f` and `w psi_f`), the frame speed ramped to zero at `spin_accel_rad_s2` (jerk-limited, as the spin's ramp) |
 //! | [`MapPart::Realign`] | rotor to a known angle | the spin current along the frame, now at rest, with the q voltage at zero (the swinging rotor's EMF drives a braking current, as in the alignment) for `align_time_s`; the probe's angle is the mean current's angle over the last fifth (the dead-time voltage turns the current, and the rotor with it, off the frame) |
 //! | [`MapPart::Probe`] | the flux map | [`SaturationProbe`] told what was measured: `Rs`, the inverter voltage error, `Ld`, `Lq`, the coast's `psi_f`, `J` (0 without the inertia move: the rotor's motion is then not followed), the current offsets, the pole pairs; its grid `n_d x n_q` up to `+-i_max_a` ([`FluxMapStep`]) |
@@ -14,14 +14,19 @@
 //! Why the coast: the spin's `psi_f` is taken at the spin current and corrected with the
 //! small-signal `Ld`, which the injection measures at the test current's d bias; on a
 //! saturating motor both are off (5 % high on pmsm-sim's interior PM motor), and the probe's
-//! `psi_d` samples carry the anchor's error. At zero current the EMF is `w psi_f` exactly.
+//! `psi_d` samples carry the anchor's error. Why the square wave and not zero current: at
+//! zero current the dead-time voltage is not defined (the loops settle on a residual current
+//! whose direction sets the phases' signs, and the bridge loses the full dead-time voltage
+//! along it), and the rotor does not turn at the frame's speed (the I/f drive leaves it
+//! swinging): both errors are several per cent of `psi_f` (`coast.rs`).
 //!
 //! The step needs the spin ([`IdentifyConfig::spin_speed_rad_s`] `> 0`): without `psi_f`
 //! the probe has no anchor for `psi_d`. It is kept out of [`Identifier`] (its state, about
 //! 1 KB, would grow every identifier, and the board's firmware does not run it):
 //! [`Identifier`], [`IdentifyStep`] and [`Identified`] are the same with and without it. Its
-//! time is counted apart ([`IdentifyWithMap::map_ticks`]); with the defaults it adds 60 ms,
-//! about 1.3 x the spin's ramp time, `align_time_s` and the probe (0.2-0.3 s on the
+//! time is counted apart ([`IdentifyWithMap::map_ticks`]); the coast takes 20 ms and eight
+//! cycles of `2 pi/3` at the spin speed (0.16 s on the interior PM motor), the stop about 1.3 x
+//! the spin's ramp time, `align_time_s` and the probe (0.2-0.3 s on the
 //! reference motors), measured in `docs/identify.md`.
 
 use crate::controller::TickInput;
@@ -30,8 +35,9 @@ use crate::svpwm::SAFE_DUTIES;
 use crate::transforms::AlphaBeta;
 use crate::trig::{atan2, sin_cos, sqrt};
 
+use super::coast::Coast;
 use super::context::{Context, HoldLoop, Saturation};
-use super::if_drive::{IfDrive, Move, load_angle};
+use super::if_drive::{IfDrive, Move};
 use super::numeric::ticks;
 use super::saturation::{FluxSamples, SaturationConfig, SaturationError, SaturationProbe};
 use super::{
@@ -40,10 +46,6 @@ use super::{
 };
 
 use super::numeric::INV_SQRT3;
-/// Settling of the coast's zero current, s.
-const COAST_SETTLE_S: f32 = 0.02;
-/// The coast's EMF window, s.
-const COAST_MEASURE_S: f32 = 0.04;
 
 /// Settings of the flux-map step (module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -130,14 +132,8 @@ impl core::fmt::Display for FluxMapError {
 #[allow(clippy::large_enum_variant)]
 enum State {
     Identify,
-    /// Zero current, the frame turning on: `g_end` the load angle summed over the last
-    /// quarter of the window, `e_sum` the EMF summed.
-    Coast {
-        drive: IfDrive,
-        n: u32,
-        e_sum: [f32; 2],
-        g_end: f32,
-    },
+    /// The square wave of current along the turning frame (module `coast`).
+    Coast(Coast),
     Stop {
         drive: IfDrive,
         n: u32,
@@ -164,6 +160,8 @@ pub struct IdentifyWithMap {
     map_ticks: [u32; 3],
     /// `psi_f` at zero current (the coast), Wb.
     psi_f0: Option<f32>,
+    /// The rotor's electrical speed the coast measured, rad/s.
+    coast_w: Option<f32>,
     map: Option<Result<FluxSamples, FluxMapError>>,
 }
 
@@ -185,6 +183,7 @@ impl IdentifyWithMap {
             u_prev: AlphaBeta::default(),
             map_ticks: [0; 3],
             psi_f0: None,
+            coast_w: None,
             map: None,
         })
     }
@@ -209,6 +208,12 @@ impl IdentifyWithMap {
         self.psi_f0
     }
 
+    /// The rotor's electrical speed the coast measured (the frame's speed corrected by the
+    /// slip of the EMF's angle), rad/s.
+    pub fn coast_speed_rad_s(&self) -> Option<f32> {
+        self.coast_w
+    }
+
     /// Ticks of the coast and the stop, the re-alignment and the probe.
     pub fn map_ticks(&self) -> [u32; 3] {
         self.map_ticks
@@ -228,7 +233,7 @@ impl IdentifyWithMap {
     pub fn part(&self) -> MapPart {
         match &self.state {
             State::Identify => MapPart::Identify(self.id.step()),
-            State::Coast { .. } => MapPart::Coast,
+            State::Coast(_) => MapPart::Coast,
             State::Stop { .. } => MapPart::Stop,
             State::Realign { .. } => MapPart::Realign,
             State::Probe(_) => MapPart::Probe,
@@ -241,6 +246,7 @@ impl IdentifyWithMap {
     pub fn max_duration_s(&self) -> f32 {
         let c = self.id.config();
         self.id.max_duration_s()
+            + Coast::max_ticks(c.spin_speed_rad_s, c.ts_s) as f32 * c.ts_s
             + 1.3 * 1.4 * c.spin_speed_rad_s / c.spin_accel_rad_s2
             + c.align_time_s
     }
@@ -272,12 +278,8 @@ impl IdentifyWithMap {
                     }
                     Some(Ok(_)) => {
                         // The spin's drive goes on in this very tick.
-                        self.state = State::Coast {
-                            drive: self.coast_drive(),
-                            n: 0,
-                            e_sum: [0.0; 2],
-                            g_end: 0.0,
-                        };
+                        let w = self.id.ctx.frame.omega;
+                        self.state = State::Coast(Coast::new(self.coast_drive(), w));
                         out.i_ab
                     }
                 }
@@ -303,7 +305,7 @@ impl IdentifyWithMap {
                 self.id.tick = self.id.tick.wrapping_add(1);
                 return self.off(AlphaBeta::default());
             }
-            State::Coast { .. } | State::Stop { .. } | State::Realign { .. } => {
+            State::Coast(_) | State::Stop { .. } | State::Realign { .. } => {
                 self.id.tick = self.id.tick.wrapping_add(1);
                 match self.check(input) {
                     Ok(i) => i,
@@ -375,69 +377,23 @@ impl IdentifyWithMap {
         let ctx = &mut self.id.ctx;
         let ts = ctx.cfg.ts_s;
         match &mut self.state {
-            State::Coast {
-                drive,
-                n,
-                e_sum,
-                g_end,
-            } => {
-                let k = *n;
-                *n += 1;
-                let f = ctx.found;
-                let (i_d, i_q) = ctx.frame.dq(i_ab);
-                let (w, lim) = (ctx.frame.omega, ctx.u_lim);
-                let u_d = drive.pi_d.step(-i_d, -w * f.lq * i_q, -lim, lim);
-                let u_q_lim = sqrt((lim * lim - u_d * u_d).max(0.0));
-                let u_q = drive.pi_q.step(-i_q, w * f.ld * i_d, -u_q_lim, u_q_lim);
-                let adv = (ctx.d as f32 + 0.5) * w * ts;
-                let (sa, ca) = sin_cos(ctx.frame.angle + adv);
-                let u = AlphaBeta {
-                    alpha: ca * u_d - sa * u_q,
-                    beta: sa * u_d + ca * u_q,
-                };
-                let e = (
-                    u_d - f.rs * i_d + w * f.lq * i_q,
-                    u_q - f.rs * i_q - w * f.ld * i_d,
-                );
-                let (settle, len) = (ticks(COAST_SETTLE_S, ts), ticks(COAST_MEASURE_S, ts));
-                let m = (len / 4).max(1);
-                if k >= settle {
-                    let j = k - settle;
-                    e_sum[0] += e.0;
-                    e_sum[1] += e.1;
-                    if j >= len - m {
-                        *g_end += load_angle(e);
-                    }
-                }
-                ctx.frame.set(ctx.frame.angle + w * ts);
-                if k + 1 >= settle + len {
-                    let mag = sqrt(e_sum[0] * e_sum[0] + e_sum[1] * e_sum[1]) / len as f32;
-                    // The frame's speed: the rotor kept it (the drift of the load angle, as
-                    // the spin corrects with it, measured 4 % high on the interior PM motor).
-                    let w_r = w;
-                    let psi = mag / w_r;
-                    if !(psi.is_finite() && psi > 1e-5 && psi < 50.0) {
-                        return Err(IdentifyError::Implausible {
-                            quantity: super::Quantity::FluxLinkage,
-                            value: psi,
-                        });
-                    }
-                    self.psi_f0 = Some(psi);
+            State::Coast(coast) => {
+                let (u, done) = coast.tick(ctx, i_ab)?;
+                if let Some(r) = done {
+                    self.psi_f0 = Some(r.psi_wb);
+                    self.coast_w = Some(r.w_r);
+                    self.map_ticks[0] = coast.n;
                     // The frame on the rotor's d axis, at its speed.
-                    let g = *g_end / m as f32;
-                    ctx.frame.set(ctx.frame.angle - g);
-                    ctx.frame.omega = w_r;
-                    let cfg = &ctx.cfg;
+                    ctx.frame.set(ctx.frame.angle + r.delta);
+                    ctx.frame.omega = r.w_r;
+                    let (f, cfg) = (&ctx.found, &ctx.cfg);
                     let i_f = cfg.spin_current_a;
+                    let mut drive = coast.drive;
                     drive
                         .pi_d
                         .set_integrator(f.rs * i_f + f.v_err * i_f / cfg.test_current_a);
-                    drive.pi_q.set_integrator(w_r * psi);
-                    let drive = IfDrive {
-                        mv: Move::new(-w_r, cfg.spin_accel_rad_s2, ts),
-                        ..*drive
-                    };
-                    self.map_ticks[0] = *n;
+                    drive.pi_q.set_integrator(r.w_r * r.psi_wb);
+                    drive.mv = Move::new(-r.w_r, cfg.spin_accel_rad_s2, ts);
                     self.state = State::Stop { drive, n: 0 };
                 }
                 Ok(Some(u))

@@ -139,6 +139,7 @@ use crate::transforms::AlphaBeta;
 use crate::trig::sqrt;
 
 mod align;
+mod coast;
 mod config;
 mod context;
 mod if_drive;

@@ -3,7 +3,8 @@
 //! # The sequence
 //!
 //! 1. [`identify`](super::identify::identify) with the flux-map step (foc's
-//!    `IdentifyWithMap`: the identification, a coast at zero current for `psi_f`, stop,
+//!    `IdentifyWithMap`: the identification, a coast (a square wave of current along the
+//!    turning frame) for `psi_d(0, 0)`, stop,
 //!    re-align, the standstill probe of a 7 x 9 grid up to `i_max`, default 0.85 x the
 //!    current limit); a failed step is an error, never a run on guessed values.
 //! 2. The map ([`identified_map`]): the probe's `psi_d`, `psi_q` on its grid as an
