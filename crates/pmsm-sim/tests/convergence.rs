@@ -23,7 +23,10 @@
 //!
 //! The default EKF (`ObserverConfig::new`, online `psi_f` and `Rs` tracking) steps alongside,
 //! told `psi_f` +10 % and -10 % (and the motor 100 K hot and cold: `psi_f` and `Rs` both off;
-//! reported, not held to the goal), and once told the right motor (the reference below).
+//! reported, not held to the goal), and once told the right motor (the reference below); then
+//! the same five with the start-up flux (`ParameterTracking::transient_flux`: the split
+//! filter's windows correct the flux while it is frozen), each set against its own filter
+//! told the right motor.
 //!
 //! # Measure
 //!
@@ -38,8 +41,12 @@
 //! the filter told the right motor in the same run (what the wrong flux costs; the sensing's
 //! own errors, the same for both, drop out) and against the truth.
 //!
-//! Not met (docs/accuracy.md has the table): converged 0.10-0.18 s after `t10` on the servo,
-//! 0.27-0.34 s on the 2.2 kW motor, 0.28 s on the small fast motor. The tracking is frozen
+//! With the start-up flux the goal is met on the servo (0.03-0.07 s after `t10`) and, against
+//! the filter told the right motor, on the small fast motor (0.06-0.07 s; 0.12 s against the
+//! truth); not on the 2.2 kW motor (0.27 s, for the reasons below).
+//!
+//! Not met by the default (docs/accuracy.md has the table): converged 0.10-0.18 s after `t10`
+//! on the servo, 0.27-0.34 s on the 2.2 kW motor, 0.28 s on the small fast motor. The tracking is frozen
 //! while the speed estimate departs from its 64-sample low-pass by more than 1 % (module docs
 //! of `ekf_core::observer::tracking`), which holds it off through the whole ramp; it starts at
 //! the ramp's end. Besides, on the 2.2 kW motor the speed loop sheds its overshoot after the
@@ -106,6 +113,9 @@ fn scenario(motor: SuiteMotor) -> Scenario {
 /// The default EKF told a wrong motor, recording what the measure needs.
 struct Told {
     case: Mismatch,
+    /// With the start-up flux from the split filter's windows
+    /// (`ParameterTracking::transient_flux`).
+    transient: bool,
     obs: PmsmObserver<f64>,
     psi_true: f64,
     /// Per sample: `(t, true electrical speed, psi_f_hat / psi_f - 1, angle error deg,
@@ -203,6 +213,8 @@ fn converged(t: &[f64], psi: &[f64], angle: &[f64], t10: f64) -> Converged {
 struct Row {
     motor: &'static str,
     case: &'static str,
+    /// With the start-up flux (`ParameterTracking::transient_flux`).
+    transient: bool,
     t10: f64,
     /// The angle error against the truth.
     absolute: Converged,
@@ -228,15 +240,23 @@ fn run(motor: SuiteMotor) -> Vec<Row> {
             .filter(|m| m.is_psi_only() || m.name.starts_with("100 K"))
             .copied(),
     );
-    let mut told: Vec<Told> = cases
-        .map(|m| {
+    let cases: Vec<Mismatch> = cases.collect();
+    // The defaults first (the right motor at 0), then the same with the start-up flux.
+    let mut told: Vec<Told> = [false, true]
+        .into_iter()
+        .flat_map(|transient| cases.iter().map(move |m| (transient, *m)))
+        .map(|(transient, m)| {
             let mut p = truth;
             p.psi_f_wb *= m.psi_f;
             p.rs_ohm *= m.rs;
-            let obs = PmsmObserver::new(&ObserverConfig::new(p, ts))
-                .unwrap_or_else(|e| panic!("{}: {e}", m.name));
+            let mut cfg = ObserverConfig::new(p, ts);
+            if let Some(t) = &mut cfg.parameter_tracking {
+                t.transient_flux = transient;
+            }
+            let obs = PmsmObserver::new(&cfg).unwrap_or_else(|e| panic!("{}: {e}", m.name));
             Told {
                 case: m,
+                transient,
                 obs,
                 psi_true: truth.psi_f_wb,
                 trace: Vec::new(),
@@ -263,12 +283,22 @@ fn run(motor: SuiteMotor) -> Vec<Row> {
         .iter()
         .find(|r| r.1.abs() >= w10)
         .map_or(f64::NAN, |r| r.0);
-    let e_right: Vec<f64> = told[0].trace.iter().map(|r| r.3).collect();
+    // The reference of each set: its filter told the right motor.
+    let e_right = |transient: bool| -> Vec<f64> {
+        let i = if transient { cases.len() } else { 0 };
+        told[i].trace.iter().map(|r| r.3).collect()
+    };
+    let (e_default, e_transient) = (e_right(false), e_right(true));
     told.iter()
         .map(|c| {
             let psi: Vec<f64> = c.trace.iter().map(|r| r.2).collect();
             let e: Vec<f64> = c.trace.iter().map(|r| r.3).collect();
-            let rel: Vec<f64> = e.iter().zip(&e_right).map(|(a, b)| a - b).collect();
+            let e_ref = if c.transient {
+                &e_transient
+            } else {
+                &e_default
+            };
+            let rel: Vec<f64> = e.iter().zip(e_ref).map(|(a, b)| a - b).collect();
             let start_psi_pct = (0..t.len())
                 .filter(|&k| t[k] < STEP_S)
                 .map(|k| psi[k].abs() * 100.0)
@@ -276,6 +306,7 @@ fn run(motor: SuiteMotor) -> Vec<Row> {
             Row {
                 motor: motor.name(),
                 case: c.case.name,
+                transient: c.transient,
                 t10,
                 absolute: converged(&t, &psi, &trailing_mean(&e, n_mean), t10),
                 relative: converged(&t, &psi, &trailing_mean(&rel, n_mean), t10),
@@ -290,14 +321,15 @@ fn tracked_flux_and_angle_converge_within_0_1_s_of_10_percent_speed() {
     let rows: Vec<Row> = SuiteMotor::SURFACE.into_iter().flat_map(run).collect();
     let f = |v: Option<f64>, t10: f64| v.map_or("never".to_string(), |v| format!("{:.3}", v - t10));
     println!(
-        "| motor | told | t10 (s) | converged - t10 (s), angle against the right-motor filter | worst psi_f % / angle deg, t10 + 0.1 s to the step | the same after the step + {STEP_SETTLE_S} s | converged - t10 (s), angle against the truth | worst angle deg against the truth, t10 + 0.1 s to the step / after | largest psi_f % before the step |"
+        "| motor | told | start-up flux | t10 (s) | converged - t10 (s), angle against the right-motor filter | worst psi_f % / angle deg, t10 + 0.1 s to the step | the same after the step + {STEP_SETTLE_S} s | converged - t10 (s), angle against the truth | worst angle deg against the truth, t10 + 0.1 s to the step / after | largest psi_f % before the step |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         println!(
-            "| {} | {} | {:.3} | {} | {:.2} / {:.3} | {:.2} / {:.3} | {} | {:.3} / {:.3} | {:.2} |",
+            "| {} | {} | {} | {:.3} | {} | {:.2} / {:.3} | {:.2} / {:.3} | {} | {:.3} / {:.3} | {:.2} |",
             r.motor,
             r.case,
+            if r.transient { "on" } else { "off" },
             r.t10,
             f(r.relative.t_conv, r.t10),
             r.relative.before.0,
@@ -312,7 +344,7 @@ fn tracked_flux_and_angle_converge_within_0_1_s_of_10_percent_speed() {
     }
     // The goal is not met (module docs): the asserts hold the measured bounds, with a small
     // margin, so that a regression fails and an improvement shows in the table.
-    for r in &rows {
+    for r in rows.iter().filter(|r| !r.transient) {
         let name = format!("{} told {}", r.motor, r.case);
         let rel = r.relative.t_conv.map_or(f64::INFINITY, |t| t - r.t10);
         let abs = r.absolute.t_conv.map_or(f64::INFINITY, |t| t - r.t10);
@@ -368,6 +400,36 @@ fn tracked_flux_and_angle_converge_within_0_1_s_of_10_percent_speed() {
         // The thermal cases (Rs 39 % off as well) are reported, not held to the goal: under
         // the rated load the lumped flux carries the Rs error until the split filter has
         // told them apart (measured up to 4.6 deg after the step, small fast motor cold).
+        assert!(r.absolute.after.1 <= 5.0, "{name}: {:?}", r.absolute.after);
+    }
+    // With the start-up flux the goal is met on the servo and, against the filter told the
+    // right motor, on the small fast motor (measured 0.044 / 0.027 s and 0.059 / 0.071 s
+    // after t10; against the truth 0.066 / 0.039 s and 0.123 / 0.065 s: told the right motor
+    // the small fast motor's angle is within 0.3 deg of the truth only 0.107 s after t10).
+    // Not on the 2.2 kW motor (0.266 / 0.272 s): told the right motor its flux too is 2.6 %
+    // off between t10 + 0.1 s and the step (the EKF's own tracking, from the ramp's end).
+    for r in rows.iter().filter(|r| r.transient) {
+        let name = format!("{} told {}, start-up flux", r.motor, r.case);
+        let rel = r.relative.t_conv.map_or(f64::INFINITY, |t| t - r.t10);
+        let abs = r.absolute.t_conv.map_or(f64::INFINITY, |t| t - r.t10);
+        let (rel_bound, abs_bound, after_psi_pct, after_deg) = match r.motor {
+            "servo" => (GOAL_S, GOAL_S, PSI_TOL * 100.0, ANGLE_TOL_DEG),
+            "industrial_2k2" => (0.3, 0.36, 1.6, 0.35),
+            _ => (GOAL_S, 0.15, PSI_TOL * 100.0, ANGLE_TOL_DEG),
+        };
+        if r.case.starts_with("psi_f") {
+            assert!(rel <= rel_bound, "{name}: {rel:.3} s (bound {rel_bound} s)");
+            assert!(abs <= abs_bound, "{name}: {abs:.3} s (bound {abs_bound} s)");
+            assert!(
+                r.relative.after.0 <= after_psi_pct && r.relative.after.1 <= after_deg,
+                "{name}: after the step {:?}",
+                r.relative.after
+            );
+        }
+        if r.case == "right motor" {
+            // Measured 0.36 / 2.63 / 0.73 % (servo / 2.2 kW / small fast).
+            assert!(r.start_psi_pct <= 3.5, "{name}: {:.2} %", r.start_psi_pct);
+        }
         assert!(r.absolute.after.1 <= 5.0, "{name}: {:?}", r.absolute.after);
     }
 }

@@ -65,6 +65,11 @@ pub struct ParameterTracking<T> {
     pub rs_temperature_coefficient_per_k: T,
     /// How `Rs` is tracked.
     pub rs: RsTracking<T>,
+    /// Start-up flux from the split filter's windows (with [`RsTracking::Split`] only; off by
+    /// default): until the EKF's own tracking has ended a window, the windows also run while
+    /// the flux is frozen (a speed change, the settling time), and each corrects the frozen
+    /// flux (module docs of `ekf_core::observer::tracking`, "Tracking during transients").
+    pub transient_flux: bool,
 }
 
 impl<T: Float> ParameterTracking<T> {
@@ -94,6 +99,7 @@ impl<T: Float> ParameterTracking<T> {
                 window_samples: 100,
                 measurement_sigma: to_t(0.01),
             },
+            transient_flux: false,
         }
     }
 

@@ -1,0 +1,260 @@
+//! The split filter of `(psi_f, Rs)` (module docs of the parent, "Resistance" and "Tracking
+//! during transients"): its state, the window's measurement, the update.
+
+use nalgebra::Vector4;
+
+use super::{TrackerConstants, Window, clamp};
+use crate::angle::wrap_angle;
+use crate::trig::sin_cos_small;
+use crate::{Float, to_t};
+
+/// The split filter of `(psi_f, Rs)` (module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(in crate::observer) struct Split<T> {
+    /// Estimates `(psi_f, Rs)`.
+    pub psi: T,
+    pub rs: T,
+    /// Covariance entries.
+    pub c00: T,
+    pub c01: T,
+    pub c11: T,
+    /// Process noise per window: the temperature's random walk (K^2) and the magnets' own
+    /// drift (Wb^2); the measurement variance (Wb^2).
+    pub q_t: T,
+    pub q_psi: T,
+    pub r_m: T,
+    /// The thermal link's anchor `(psi_a, Rs_a)` and variance (K^2).
+    pub psi_a: T,
+    pub rs_a: T,
+    pub r_link: T,
+    /// Whether the filter has started (module docs: at the first window after the EKF's
+    /// flux has converged, from the EKF's flux and `Rs`).
+    pub anchored: bool,
+    /// Whether a window has ended with the EKF's tracking active (from then on the windows
+    /// through speed changes leave the EKF's flux alone).
+    pub tracked: bool,
+    /// Temperature coefficients `alpha_cu`, `beta` (1/K).
+    pub alpha: T,
+    pub beta: T,
+    /// The state at the end of the last window: angle (rad), `i_q` (A) in its frame.
+    pub end_theta: T,
+    pub end_id: T,
+    pub end_iq: T,
+}
+
+impl<T: Float> Split<T> {
+    /// All values finite.
+    pub(super) fn finite(&self) -> bool {
+        (self.psi + self.rs + (self.c00 + self.c01 + self.c11)).is_finite()
+    }
+
+    /// The split filter's step at the end of a window (module docs, "Resistance"): the
+    /// window's lumped flux `m = (u_q - w L_d i_d - L_q di_q/dt) / w` from its voltage
+    /// equation, with `w` the rotation rate of the estimated angle over the window, is a
+    /// measurement of `psi_f + Rs r`, `r = i_q / w`; random walk, that update, then the
+    /// thermal link. `rs_used` and `psi` are the EKF's `Rs` and flux, `c_pp` its flux
+    /// variance, `x` its state at the window's end. Returns the new `Rs` (bounded), `None`
+    /// when the window is not used.
+    pub(super) fn update(
+        &mut self,
+        rs_used: T,
+        psi: T,
+        c_pp: T,
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+    ) -> Option<T> {
+        let ends = self.take_ends(x);
+        self.tracked = true;
+        if !self.anchored {
+            // The link's reference: the first window after the EKF's flux has converged
+            // (standard deviation within 0.5 % of the configured flux).
+            let converged = c_pp <= k.psi0 * k.psi0 * to_t(2.5e-5);
+            if converged {
+                self.anchor(psi, rs_used, c_pp, k);
+            }
+            return None;
+        }
+        let (m, r, r_m) = self.measure(ends, sums, x, k, false)?;
+        // Random walk: the temperature moves both along (psi beta, Rs alpha_cu) per kelvin;
+        // the magnets' flux drifts besides.
+        let (g0, g1) = (self.psi * self.beta, self.rs * self.alpha);
+        self.c00 += self.q_t * g0 * g0 + self.q_psi;
+        self.c01 += self.q_t * g0 * g1;
+        self.c11 += self.q_t * g1 * g1;
+        // A window the filter's own uncertainty cannot explain (beyond 5 standard deviations:
+        // a model that does not fit, e.g. inductances far off on a saturating motor) is left
+        // out rather than read as a resistance.
+        let y = m - (self.psi + r * self.rs);
+        let s = self.c00 + r * (self.c01 + self.c01) + r * r * self.c11 + r_m;
+        if y * y > to_t::<T>(25.0) * s {
+            return None;
+        }
+        self.scalar_update(T::one(), r, y, r_m);
+        // Thermal link, where the window measures the flux (the resistive drop below 15 % of
+        // the back-EMF): the temperatures read from psi and from Rs agree (K). Where the drop
+        // is larger the window measures Rs itself, and the link is left out: applied on
+        // every window it would outweigh that measurement.
+        if (r * self.rs).abs() <= to_t::<T>(0.15) * self.psi {
+            let h_psi = T::one() / (self.psi_a * self.beta);
+            let h_rs = -T::one() / (self.rs_a * self.alpha);
+            let h = h_psi * (self.psi - self.psi_a) + h_rs * (self.rs - self.rs_a);
+            self.scalar_update(h_psi, h_rs, -h, self.r_link);
+        }
+        self.psi = clamp(self.psi, k.psi_min, k.psi_max);
+        self.rs = clamp(self.rs, k.rs_min, k.rs_max);
+        Some(self.rs)
+    }
+
+    /// The window's correction of the EKF's frozen flux `psi` (variance `c_pp`) through a
+    /// speed change (module docs, "Tracking during transients"): the window's measurement
+    /// `m = psi_f + Rs r`, read at the `Rs` in use `rs_used` as the lumped flux
+    /// `m - rs_used r`, in a scalar Kalman update. Returns the flux (bounded) and its
+    /// variance, `None` when the window is not used (as in [`update`](Self::update), and
+    /// beyond 5 standard deviations).
+    pub(super) fn transient_flux(
+        &mut self,
+        rs_used: T,
+        psi: T,
+        c_pp: T,
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+    ) -> Option<(T, T)> {
+        let ends = self.take_ends(x);
+        if self.tracked {
+            return None;
+        }
+        let (m, r, r_m) = self.measure(ends, sums, x, k, true)?;
+        // Only where the window measures the flux: the resistive drop within 15 % of the
+        // back-EMF (at low speed under load, through a reversal, it measures `Rs` instead).
+        let drop = r * rs_used;
+        if drop.abs() > to_t::<T>(0.15) * psi {
+            return None;
+        }
+        let y = m - drop - psi;
+        let s = c_pp + r_m;
+        if y * y > to_t::<T>(25.0) * s {
+            return None;
+        }
+        let gain = c_pp / s;
+        // The variance not below (1 % of the flux)^2: the EKF's own tracking refines it
+        // (and, at 0.5 %, anchors the split filter, as without these windows).
+        let c = c_pp - gain * c_pp;
+        let floor = k.psi0 * k.psi0 * to_t(1e-4);
+        let next = (
+            clamp(psi + gain * y, k.psi_min, k.psi_max),
+            if c > floor { c } else { floor },
+        );
+        (next.0 + next.1).is_finite().then_some(next)
+    }
+
+    /// The state at the window's end (the next window's start) stored; returns the window's
+    /// start and end: `(theta0, id0, iq0, id_end, iq_end)`.
+    fn take_ends(&mut self, x: &Vector4<T>) -> (T, T, T, T, T) {
+        let (s_end, c_end) = x[3].sin_cos_angle();
+        let id_end = x[0] * c_end + x[1] * s_end;
+        let iq_end = x[1] * c_end - x[0] * s_end;
+        let (theta0, id0, iq0) = (self.end_theta, self.end_id, self.end_iq);
+        self.end_theta = x[3];
+        self.end_id = id_end;
+        self.end_iq = iq_end;
+        (theta0, id0, iq0, id_end, iq_end)
+    }
+
+    /// The window's measurement `(m, r, r_m)`: `m = psi_f + Rs r` and its variance `r_m`
+    /// (module docs, "Resistance"), from the window's sums and its ends (`take_ends`) and the
+    /// state `x` at its end; `None` for a window left out.
+    fn measure(
+        &self,
+        (theta0, id0, iq0, id_end, iq_end): (T, T, T, T, T),
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+        low_current: bool,
+    ) -> Option<(T, T, T)> {
+        if !sums.contiguous {
+            return None;
+        }
+        let n = to_t::<T>(f64::from(sums.n));
+        let inv_n = T::one() / n;
+        let span = n * k.ts;
+        // Rotation rate of the estimated angle: the speed estimate's advance, corrected by
+        // the angle's own advance modulo a turn (the speed estimate is off by far less than
+        // half a turn per window).
+        let advance = sums.w * k.ts;
+        let w = (advance + wrap_angle(x[3] - theta0 - advance)) / span;
+        // Enough back-EMF to read the flux from: at least twice the tracking's minimum speed.
+        if w * w < to_t::<T>(4.0) * k.min_speed2 {
+            return None;
+        }
+        // The period's voltage is held while the frame turns by w Ts: its mean in the
+        // rotating frame is the start frame's value turned back by half of that and scaled
+        // by sinc(w Ts / 2).
+        let half = w * k.ts * to_t(0.5);
+        let (sh, ch) = sin_cos_small(half);
+        let sinc = if half.abs() > to_t(1e-6) {
+            sh / half
+        } else {
+            T::one()
+        };
+        let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
+        let uq = (uq0 * ch - ud0 * sh) * sinc;
+        // i_d (in the cross term only) as the mean of the window's ends: a window with a
+        // current step is left out below.
+        let (id, iq) = ((id0 + id_end) * to_t(0.5), sums.iq * inv_n);
+        // Windows with little current (the inverter's voltage error is least known there,
+        // its compensation hinges on the current's sign) or a current step (the window's
+        // speed and angle are in transit) are left out.
+        let i2 = id * id + iq * iq;
+        let i_min = to_t::<T>(0.02) * k.psi0 / k.ld;
+        let diq = iq_end - iq0;
+        if (i2 < i_min * i_min && !low_current) || diq * diq > to_t::<T>(0.04) * i2 {
+            return None;
+        }
+        let m = (uq - w * k.ld * id - k.lq * (iq_end - iq0) / span) / w;
+        let r = iq / w;
+        // Measurement of the window: m = psi + r Rs. A voltage error reads as a flux error
+        // divided by the speed: below ten times the minimum speed the deviation grows as 1/w.
+        let knee2 = to_t::<T>(100.0) * k.min_speed2;
+        let r_m = if w * w < knee2 {
+            self.r_m * knee2 / (w * w)
+        } else {
+            self.r_m
+        };
+        Some((m, r, r_m))
+    }
+
+    /// Anchors the thermal link at `(psi, rs)` (its temperature reference) and restarts the
+    /// filter there: the flux's variance `c_pp`, the resistance's the initial one.
+    pub(in crate::observer) fn anchor(&mut self, psi: T, rs: T, c_pp: T, k: &TrackerConstants<T>) {
+        self.psi = psi;
+        self.rs = rs;
+        self.c00 = c_pp;
+        self.c01 = T::zero();
+        self.c11 = k.var0_rs;
+        self.psi_a = psi;
+        self.rs_a = rs;
+        self.anchored = true;
+    }
+
+    /// Kalman update of `(psi, Rs)` with a scalar measurement of gradient `(h0, h1)`,
+    /// innovation `y` and variance `r`.
+    fn scalar_update(&mut self, h0: T, h1: T, y: T, r: T) {
+        let (c00, c01, c11) = (self.c00, self.c01, self.c11);
+        let ph0 = c00 * h0 + c01 * h1;
+        let ph1 = c01 * h0 + c11 * h1;
+        let s = h0 * ph0 + h1 * ph1 + r;
+        let positive = s > T::zero();
+        if !positive {
+            return;
+        }
+        let inv_s = T::one() / s;
+        let (k0, k1) = (ph0 * inv_s, ph1 * inv_s);
+        self.psi += k0 * y;
+        self.rs += k1 * y;
+        self.c00 = c00 - k0 * ph0;
+        self.c01 = c01 - k0 * ph1;
+        self.c11 = c11 - k1 * ph1;
+    }
+}
