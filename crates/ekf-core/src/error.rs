@@ -156,6 +156,9 @@ pub enum ConfigError {
     /// The acceleration feedforward was asked of an observer built without the cargo feature
     /// `acceleration-feedforward` (on with `std`).
     FeedforwardNotCompiled,
+    /// [`ParameterTracking::transient_flux`](crate::observer::ParameterTracking::transient_flux)
+    /// was asked of an observer built without the cargo feature `std`.
+    TransientFluxNotCompiled,
 }
 
 impl fmt::Display for Param {
@@ -264,6 +267,10 @@ impl fmt::Display for ConfigError {
             ConfigError::FeedforwardNotCompiled => f.write_str(
                 "acceleration_feedforward needs ekf-core's cargo feature \
                  `acceleration-feedforward` (on with `std`): enable it or set it to None",
+            ),
+            ConfigError::TransientFluxNotCompiled => f.write_str(
+                "parameter_tracking.transient_flux needs ekf-core's cargo feature `std`: \
+                 enable it or set transient_flux to false",
             ),
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",

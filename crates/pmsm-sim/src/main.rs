@@ -154,8 +154,8 @@ enum Command {
         /// stamps for identical runs).
         #[arg(long, value_enum, default_value_t = LogTimeArg::Wall)]
         log_time: LogTimeArg,
-        /// After the sequence, measure the flux map at standstill (coast at zero current for
-        /// psi_f, stop, re-align, probe a 7 x 9 grid of i_d, i_q): table (markdown, and in the
+        /// After the sequence, measure the flux map at standstill (coast with a small square
+        /// wave of d current for psi_d(0, 0), stop, re-align, probe a 7 x 9 grid of i_d, i_q): table (markdown, and in the
         /// JSON), error against the plant's flux, identify-flux-map.{md,svg} in <out>.
         #[arg(long)]
         flux_map: bool,

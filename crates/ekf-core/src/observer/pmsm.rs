@@ -90,6 +90,10 @@ impl<T: Float> PmsmObserver<T> {
         if cfg.acceleration_feedforward.is_some() {
             return Err(ConfigError::FeedforwardNotCompiled);
         }
+        #[cfg(not(feature = "std"))]
+        if cfg.parameter_tracking.is_some_and(|t| t.transient_flux) {
+            return Err(ConfigError::TransientFluxNotCompiled);
+        }
         let mut x0 = cfg.x0;
         x0[3] = wrap_angle(x0[3]);
         let ts = cfg.ts_s;

@@ -100,7 +100,7 @@
 //! The EKF's flux is frozen while the speed estimate departs from its low-pass (a speed
 //! ramp): its speed state is a random walk and lags an acceleration `a` by about `a / k`
 //! (`k` its speed gain), and the lumped flux would absorb that lag as `psi_f dw / w`. With
-//! [`ParameterTracking::transient_flux`] (host builds, feature `std`; ignored without it)
+//! [`ParameterTracking::transient_flux`] (host builds, feature `std`; refused without it)
 //! the split filter's window goes on while the flux is frozen (a speed change, the settling
 //! time) as long as the angle is tracked above the minimum speed, and each such window
 //! corrects the frozen flux. This is a two-time-scale design: the fast part (the EKF's

@@ -68,7 +68,8 @@ pub struct ParameterTracking<T> {
     /// Start-up flux from the split filter's windows (with [`RsTracking::Split`] only; off by
     /// default): until the EKF's own tracking has ended a window, the windows also run while
     /// the flux is frozen (a speed change, the settling time), and each corrects the frozen
-    /// flux (module docs of `ekf_core::observer::tracking`, "Tracking during transients").
+    /// flux (module docs of `ekf_core::observer::tracking`, "Tracking during transients"). Needs the
+    /// cargo feature `std` ([`ConfigError::TransientFluxNotCompiled`](crate::ConfigError) without).
     pub transient_flux: bool,
 }
 
