@@ -2,7 +2,7 @@
 
 use super::PmsmObserver;
 use super::pmsm::Tracking;
-use crate::{Float, to_t};
+use crate::Float;
 
 /// Whether the angle estimate can be trusted.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,14 +86,11 @@ impl<T: Float> PmsmObserver<T> {
         let x = &self.x;
         let angle_tracked = self.p.p33 <= self.angle_var_limit;
         // With the consistency check: the innovations consistent, and the back-EMF known to be
-        // there (the speed away from zero by three standard deviations and, at the last block,
-        // the EMF above three times the drop the resistance's uncertainty leaves), or an angle
-        // fused recently.
+        // there (at the ends of the last 8 blocks: the speed away from zero by five standard
+        // deviations and the EMF above three times the drop the resistance's uncertainty
+        // leaves), or an angle fused recently.
         let (inconsistent, observable) = match &self.consistency {
-            Some(w) => (
-                w.inconsistent,
-                self.fused > 0 || (x[2] * x[2] >= to_t::<T>(9.0) * self.p.p22 && w.observed),
-            ),
+            Some(w) => (w.inconsistent, self.fused > 0 || w.observed),
             None => (false, true),
         };
         let status = if !angle_tracked || inconsistent || !observable {
