@@ -264,3 +264,147 @@ fn realistic_sensing_meets_the_flux_goal() {
         assert!(o.duration_s < 5.0);
     }
 }
+
+/// The probe on the identification's realistic drive with each error source on its own:
+/// the node errors (measured minus the plant's flux at the node), RMS over the grid and
+/// per node, in mWb. Diagnostic (about 5 s in release):
+/// `cargo test --release -p pmsm-sim --test saturated_flux_probe error_sources -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn error_sources() {
+    use foc::identify::saturation::{SaturationConfig, SaturationProbe};
+    use foc::{ComputationDelay, TickInput};
+    use pmsm_sim::analysis::suite::identified::saturated_scenario;
+    use pmsm_sim::plant::inverter::Inverter;
+    use pmsm_sim::plant::sensors::{CurrentSensor, SensorConfig};
+    use pmsm_sim::plant::{MotorModel, Plant, PlantState};
+    let m = &SATURATED_IPM;
+    let r = &m.reference;
+    let variants: [(&str, bool, u8, bool); 8] = [
+        ("realistic", true, 0, true),
+        ("ideal sensors", true, 1, true),
+        ("no noise", true, 2, true),
+        ("noise only", true, 3, true),
+        ("gain only", true, 4, true),
+        ("offset only", true, 5, true),
+        ("adc only", true, 6, true),
+        ("ideal sensors, no dead time", false, 1, true),
+    ];
+    for theta0 in [0.0f64, -2.1] {
+        for (name, dead, sensors, delay) in variants {
+            let (mut sc, i_r) = saturated_scenario(m, 2);
+            if !dead {
+                sc.inverter.dead_time_s = 0.0;
+            }
+            match sensors {
+                1 => sc.sensors = SensorConfig::default(),
+                2 => sc.sensors.current_noise_std_a = 0.0,
+                3 => {
+                    sc.sensors = SensorConfig {
+                        current_noise_std_a: sc.sensors.current_noise_std_a,
+                        ..SensorConfig::default()
+                    }
+                }
+                4 => {
+                    sc.sensors = SensorConfig {
+                        gain_error: sc.sensors.gain_error,
+                        ..SensorConfig::default()
+                    }
+                }
+                5 => {
+                    sc.sensors = SensorConfig {
+                        offset_a: sc.sensors.offset_a,
+                        ..SensorConfig::default()
+                    }
+                }
+                6 => {
+                    sc.sensors = SensorConfig {
+                        adc_bits: sc.sensors.adc_bits,
+                        adc_full_scale_a: sc.sensors.adc_full_scale_a,
+                        ..SensorConfig::default()
+                    }
+                }
+                _ => {}
+            }
+
+            sc.inverter.delay = delay;
+            let ts = sc.ts_s();
+            let mut plant = Plant::new(
+                MotorModel::from_saturated(m),
+                PlantState {
+                    theta_e_rad: theta0,
+                    ..PlantState::default()
+                },
+            );
+            let mut inverter = Inverter::new(sc.inverter);
+            let mut sensor = CurrentSensor::new(sc.sensors, sc.seed);
+            let mut off = [0.0f64; 2];
+            for _ in 0..256 {
+                let s = sensor.measure([0.0; 3]);
+                off[0] += s.i_abc_a[0] / 256.0;
+                off[1] += s.i_abc_a[1] / 256.0;
+            }
+            let mut cfg = SaturationConfig::new(
+                ts as f32,
+                r.rs_ohm as f32,
+                theta0 as f32,
+                r.psi_f_wb as f32,
+                (r.ld_h as f32, r.lq_h as f32),
+                (PROBE_CURRENT * i_r) as f32,
+            );
+            cfg.delay = if delay {
+                ComputationDelay::OnePeriod
+            } else {
+                ComputationDelay::None
+            };
+            cfg.inertia_kg_m2 = r.j_kg_m2 as f32;
+            cfg.pole_pairs = r.pole_pairs;
+            cfg.current_offsets_a = [off[0] as f32, off[1] as f32];
+            cfg.voltage_error_v =
+                (4.0 / 3.0 * sc.inverter.dead_time_s / ts * sc.inverter.u_dc_v) as f32;
+            let mut p = SaturationProbe::new(&cfg).unwrap();
+            for _ in 0..(5.0 / ts) as u64 {
+                let meas = sensor.measure(plant.i_abc_a());
+                let [a, b, c] = meas.i_abc_a.map(|x| x as f32);
+                let u_dc = sc.inverter.u_dc_v;
+                let out = p.tick(&TickInput::abc(a, b, c, u_dc as f32));
+                if p.is_done() {
+                    break;
+                }
+                let applied =
+                    inverter.apply(out.duties.map(f64::from), u_dc, u_dc, plant.i_abc_a());
+                if out.pwm_enabled {
+                    plant.step(applied.u_ab_v.to_array(), 0.0, ts);
+                } else {
+                    plant.step_open(0.0, ts);
+                }
+            }
+            let s = match p.result() {
+                Some(Ok(s)) => *s,
+                other => panic!("{name}: {other:?}"),
+            };
+            let (mut sd, mut sq, mut n) = (0.0, 0.0, 0.0);
+            let mut lines = String::new();
+            for d in 0..s.n_d {
+                lines += &format!("{:7.2} A:", s.i_d[d]);
+                for q in 0..s.n_q {
+                    let (id, iq) = (f64::from(s.i_d[d]), f64::from(s.i_q[q]));
+                    let (td, tq) = m.model.flux(id, iq, (r.psi_f_wb, 0.0)).unwrap();
+                    let ed = 1e3 * (f64::from(s.psi_d[d][q]) - td);
+                    let eq = 1e3 * (f64::from(s.psi_q[d][q]) - tq);
+                    sd += ed * ed;
+                    sq += eq * eq;
+                    n += 1.0;
+                    lines += &format!(" {ed:+5.2}/{eq:+5.2}");
+                }
+                lines += "\n";
+            }
+            println!(
+                "theta0 {theta0}, {name}: RMS node error psi_d {:.2} mWb, psi_q {:.2} mWb \
+                 (d/q per node, rows i_d, columns i_q)\n{lines}",
+                (sd / n).sqrt(),
+                (sq / n).sqrt()
+            );
+        }
+    }
+}

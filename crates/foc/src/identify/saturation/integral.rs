@@ -1,6 +1,5 @@
 //! The flux integral and the rotor's motion, once per tick (module docs of `saturation`).
 
-use crate::transforms::AlphaBeta;
 use crate::trig::sin_cos;
 
 use super::SaturationProbe;
@@ -9,15 +8,16 @@ impl SaturationProbe {
     /// The flux integral over the interval that just ended, in the fixed frame at the
     /// alignment angle (`i_f`: this tick's currents there, A), then the rotor's motion.
     ///
-    /// `psi[k] = psi[k-1] + Ts (u[k-1-d] - e - Rs i_mean)`, `i_mean` the mean current over
-    /// the interval by [`mean_current`].
-    pub(super) fn integrate(&mut self, i_ab: AlphaBeta, i_f: [f32; 2]) {
+    /// `psi[k] = psi[k-1] + Ts (u[k-1-d] - e(i[k-1]) - Rs i_mean)`, `i_mean` the mean
+    /// current over the interval by [`mean_current`], `e` the inverter's voltage error at
+    /// the currents of the interval's start (module docs).
+    pub(super) fn integrate(&mut self, i_f: [f32; 2]) {
         let ts = self.cfg.ts_s;
         if self.running {
             let u = self.u_hist[self.d];
-            let e = self.inverter_error(i_ab);
             let rs = self.cfg.rs_ohm;
             let [i0, i1] = self.i_fix_hist;
+            let e = self.inverter_error(self.ab(i1[0], i1[1]));
             // Predictor: the trapezoidal rule's flux at this tick.
             let pred =
                 [0, 1].map(|x| self.psi[x] + ts * (u[x] - e[x] - rs * 0.5 * (i1[x] + i_f[x])));

@@ -71,7 +71,15 @@
 //! **Inverter voltage error.** `e` is the dead-time voltage of the three phases, each
 //! `V_dt sign(i_x)` with `V_dt = 3/4 U_err` (`U_err` = [`SaturationConfig::voltage_error_v`],
 //! the resistance step's error along the phase-a axis, where the signs `(+, -, -)` give
-//! `4/3 V_dt` along alpha), linear within 5 % of `I_max` of zero current.
+//! `4/3 V_dt` along alpha), linear within 5 % of `I_max` of zero current, at the currents
+//! sampled at the **start** of the interval being integrated: the bridge applies the
+//! interval's voltage with the phase currents' signs of that interval, and the current
+//! sampled at its end has already moved on. Where a pulse drives a phase current through
+//! zero (every q pulse, for every phase not on the d axis) the end sample's sign is the
+//! next interval's: each crossing then cost `2 V_dt Ts` of flux on the wrong side. Measured
+//! on pmsm-sim's interior PM motor (`identify_flux_map`, `across_sensor_seeds`): the EKF
+//! told the identified map 1.67-3.13 x the true map's angle RMS over six sensor seeds,
+//! median 1.83 x (with the end sample: 1.99-4.09 x, median 2.14 x).
 //!
 //! **Rotor motion.** With `T_max` the torque's peak and `t_p` a q pulse's length, the rotor
 //! cannot move more than `T_max t_p^2 / (2 J)` (mechanical rad) during the pulse; the equal
@@ -395,7 +403,7 @@ impl SaturationProbe {
         }
         let u_lim = self.cfg.max_modulation * u_dc * INV_SQRT3;
         let (i_fd, i_fq) = self.dq(i_ab);
-        self.integrate(i_ab, [i_fd, i_fq]);
+        self.integrate([i_fd, i_fq]);
         let [i_d, i_q] = self.to_rotor([i_fd, i_fq]);
         self.psi_rot = self.to_rotor(self.psi);
         self.psi_hist = [self.psi_hist[1], self.psi_hist[2], self.psi_rot];
