@@ -164,9 +164,9 @@
 //! model error that the configured `R` does not describe); its clamp at 4 times itself keeps a
 //! loss from teaching it, its ceiling (400) bounds the error ever accepted as noise. It changes
 //! no state: only the status. With the check on, the status also requires the back-EMF to be
-//! known to be there: the speed estimate away from zero by three of its standard deviations
-//! (`w^2 >= 9 P22`) at the step and, at the ends of the last 8 blocks of 8 samples in a row,
-//! by five deviations (`w^2 >= 25 P22`) and above what the resistance's uncertainty can fake,
+//! known to be there: at the ends of the last 8 blocks of 8 samples in a row (tested once per
+//! block), the speed estimate away from zero by five of its standard deviations
+//! (`w^2 >= 25 P22`) and the back-EMF above what the resistance's uncertainty can fake,
 //! `|w| psi_f >= 3 sigma_Rs |i|` with the tracking's standard deviation of `Rs` (none without
 //! tracking); or an angle fused by [`PmsmObserver::correct_angle`] within the last 64 steps
 //! (high-frequency injection at standstill). Two wrong solutions have innovations as small as
