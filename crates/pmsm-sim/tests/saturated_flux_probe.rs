@@ -272,12 +272,8 @@ fn realistic_sensing_meets_the_flux_goal() {
 #[test]
 #[ignore]
 fn error_sources() {
-    use foc::identify::saturation::{SaturationConfig, SaturationProbe};
-    use foc::{ComputationDelay, TickInput};
-    use pmsm_sim::analysis::suite::identified::saturated_scenario;
-    use pmsm_sim::plant::inverter::Inverter;
-    use pmsm_sim::plant::sensors::{CurrentSensor, SensorConfig};
-    use pmsm_sim::plant::{MotorModel, Plant, PlantState};
+    use pmsm_sim::analysis::suite::identified::{probe_on_drive, saturated_scenario};
+    use pmsm_sim::plant::sensors::SensorConfig;
     let m = &SATURATED_IPM;
     let r = &m.reference;
     let variants: [(&str, bool, u8, bool); 8] = [
@@ -328,61 +324,9 @@ fn error_sources() {
             }
 
             sc.inverter.delay = delay;
-            let ts = sc.ts_s();
-            let mut plant = Plant::new(
-                MotorModel::from_saturated(m),
-                PlantState {
-                    theta_e_rad: theta0,
-                    ..PlantState::default()
-                },
-            );
-            let mut inverter = Inverter::new(sc.inverter);
-            let mut sensor = CurrentSensor::new(sc.sensors, sc.seed);
-            let mut off = [0.0f64; 2];
-            for _ in 0..256 {
-                let s = sensor.measure([0.0; 3]);
-                off[0] += s.i_abc_a[0] / 256.0;
-                off[1] += s.i_abc_a[1] / 256.0;
-            }
-            let mut cfg = SaturationConfig::new(
-                ts as f32,
-                r.rs_ohm as f32,
-                theta0 as f32,
-                r.psi_f_wb as f32,
-                (r.ld_h as f32, r.lq_h as f32),
-                (PROBE_CURRENT * i_r) as f32,
-            );
-            cfg.delay = if delay {
-                ComputationDelay::OnePeriod
-            } else {
-                ComputationDelay::None
-            };
-            cfg.inertia_kg_m2 = r.j_kg_m2 as f32;
-            cfg.pole_pairs = r.pole_pairs;
-            cfg.current_offsets_a = [off[0] as f32, off[1] as f32];
-            cfg.voltage_error_v =
-                (4.0 / 3.0 * sc.inverter.dead_time_s / ts * sc.inverter.u_dc_v) as f32;
-            let mut p = SaturationProbe::new(&cfg).unwrap();
-            for _ in 0..(5.0 / ts) as u64 {
-                let meas = sensor.measure(plant.i_abc_a());
-                let [a, b, c] = meas.i_abc_a.map(|x| x as f32);
-                let u_dc = sc.inverter.u_dc_v;
-                let out = p.tick(&TickInput::abc(a, b, c, u_dc as f32));
-                if p.is_done() {
-                    break;
-                }
-                let applied =
-                    inverter.apply(out.duties.map(f64::from), u_dc, u_dc, plant.i_abc_a());
-                if out.pwm_enabled {
-                    plant.step(applied.u_ab_v.to_array(), 0.0, ts);
-                } else {
-                    plant.step_open(0.0, ts);
-                }
-            }
-            let s = match p.result() {
-                Some(Ok(s)) => *s,
-                other => panic!("{name}: {other:?}"),
-            };
+            let s = probe_on_drive(m, &sc, PROBE_CURRENT * i_r, theta0, &Told::EXACT)
+                .unwrap_or_else(|e| panic!("{name}: {e}"))
+                .samples;
             let (mut sd, mut sq, mut n) = (0.0, 0.0, 0.0);
             let mut lines = String::new();
             for d in 0..s.n_d {

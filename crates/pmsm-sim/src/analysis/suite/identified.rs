@@ -171,6 +171,25 @@ pub fn probe_realistic(
     told: &ProbeTold,
     seed: u64,
 ) -> Result<ProbeRun, SimError> {
+    let opts = super::SuiteOptions {
+        seed,
+        ..super::SuiteOptions::default()
+    };
+    let sc = super::saturated::scenario(m, &opts, 1.0, i_rated);
+    probe_on_drive(m, &sc, i_max_a, theta0_rad, told)
+}
+
+/// The probe on the drive of the scenario `sc` (its inverter and current sensing, sensor
+/// seed `sc.seed`), told as in [`probe_realistic`]: the offsets step's mean of 256 samples,
+/// the inverter's voltage error along the phase-a axis from `sc`'s dead time, the motor's
+/// values scaled by `told`, the computation delay of `sc.inverter.delay`.
+pub fn probe_on_drive(
+    m: &SaturatedMotor,
+    sc: &crate::scenario::Scenario,
+    i_max_a: f64,
+    theta0_rad: f64,
+    told: &ProbeTold,
+) -> Result<ProbeRun, SimError> {
     use crate::plant::inverter::Inverter;
     use crate::plant::sensors::CurrentSensor;
 
@@ -180,11 +199,6 @@ pub fn probe_realistic(
         field: "identified flux map (realistic sensing)".into(),
         problem,
     };
-    let opts = super::SuiteOptions {
-        seed,
-        ..super::SuiteOptions::default()
-    };
-    let sc = super::saturated::scenario(m, &opts, 1.0, i_rated);
     let ts = sc.ts_s();
     let mut plant = Plant::new(
         MotorModel::from_saturated(m),
