@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 
 pub mod angle;
+pub mod calibration;
 pub mod catalog;
 pub mod drive;
 pub mod ekf;
@@ -23,6 +24,7 @@ pub mod testing;
 pub mod trig;
 
 pub use angle::wrap_angle;
+pub use calibration::{Calibration, RecordCalibration};
 pub use drive::{DriveConfig, DriveEstimate, DriveObserver};
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
 pub use error::{ConfigError, Matrix, Param};

@@ -5,7 +5,7 @@
 
 use std::sync::{Mutex, PoisonError};
 
-use ekf_core::{DriveConfig, DriveEstimate, DriveObserver as Inner};
+use ekf_core::{DriveConfig, DriveEstimate, DriveObserver as Inner, RecordCalibration};
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -60,6 +60,8 @@ pub(crate) struct DriveObserver {
 
 struct DriveInner {
     obs: Inner<f64>,
+    /// The record's calibration from every accepted row so far (`calibration()`).
+    cal: RecordCalibration<f64>,
     /// Voltage that predicts the first row of the next `run`.
     u_last: [f64; 2],
 }
@@ -84,6 +86,7 @@ impl DriveObserver {
         Ok(Self {
             inner: Mutex::new(DriveInner {
                 obs,
+                cal: RecordCalibration::new(),
                 u_last: [0.0; 2],
             }),
             ts,
@@ -128,6 +131,9 @@ impl DriveObserver {
                     Ok(e) => (e, RowStatus::Uncertain),
                     Err(_) => (g.obs.estimate(), RowStatus::Rejected),
                 };
+                if s != RowStatus::Rejected {
+                    g.cal.push(&e);
+                }
                 for (c, v) in cols.iter_mut().zip(values(&e)) {
                     c[k] = v;
                 }
@@ -163,6 +169,24 @@ impl DriveObserver {
                 .collect()
         });
         Ok(PyArray2::from_vec2(py, &rows)?)
+    }
+
+    /// The record's input errors from every row run so far (module `ekf_core::calibration`:
+    /// the estimates of the rows where the observer tracked, weighted by the speed squared),
+    /// as the default `Ekf` takes them: a dict with `voltage_delay_s` (minus the lead of the
+    /// applied voltage over the logged one, s), `rs_ohm`, `inverter_voltage_v` and `samples`
+    /// (rows averaged); `None` before a tracked row. The second pass: `Ekf(Motor(rs_ohm, ...),
+    /// ts, voltage_delay_s=..., inverter_voltage_v=..., acceleration_feedforward=True)`.
+    fn calibration<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(c) = self.with(py, |g| g.cal.result()) else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("voltage_delay_s", -c.voltage_lead_s)?;
+        d.set_item("rs_ohm", c.rs_ohm)?;
+        d.set_item("inverter_voltage_v", c.dead_time_v)?;
+        d.set_item("samples", c.samples)?;
+        Ok(Some(d))
     }
 
     fn __repr__(&self) -> String {

@@ -166,3 +166,25 @@ def test_threads_serialize_on_one_observer(log):
     first = run(one, log, 0, 1000)["theta"]
     # The second call continued from the first's state.
     assert any(np.array_equal(r, first) for r in res)
+
+
+def test_calibration_is_the_speed_weighted_mean_of_tracked_rows(log):
+    obs = new()
+    assert obs.calibration() is None
+    out = run(obs, log, u_prev=log["u_prev"])
+    c = obs.calibration()
+    assert set(c) == {"voltage_delay_s", "rs_ohm", "inverter_voltage_v", "samples"}
+    trk = out["status"] == pyfoc.Status.TRACKING
+    w2 = np.where(trk, out["omega"] ** 2, 0.0)
+    assert c["samples"] == int(np.sum(trk & (w2 > 0)))
+    np.testing.assert_allclose(c["voltage_delay_s"], -np.sum(w2 * out["voltage_lead"]) / w2.sum(),
+                               rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(c["rs_ohm"], np.sum(w2 * out["rs"]) / w2.sum(), rtol=1e-9)
+    np.testing.assert_allclose(c["inverter_voltage_v"], np.sum(w2 * out["dead_time"]) / w2.sum(),
+                               rtol=1e-9, atol=1e-12)
+    # The second pass takes it as it is.
+    ekf = pyfoc.Ekf(pyfoc.Motor(c["rs_ohm"], SERVO["ls"], SERVO["psi_f"], SERVO["pole_pairs"]), TS,
+                    voltage_delay_s=c["voltage_delay_s"],
+                    inverter_voltage_v=c["inverter_voltage_v"], acceleration_feedforward=True)
+    e = ekf.run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"], dt=log["dt"])
+    assert np.all(np.isfinite(e["theta"]))

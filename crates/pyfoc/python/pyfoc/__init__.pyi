@@ -335,6 +335,17 @@ class DriveObserver:
     ) -> DriveOutput:
         """Run over a record (Ekf.run's timing), continuing from the current state; ``dt``: the
         period that ended at each row (a period above 64 ts is a REJECTED row)."""
+    def calibration(self) -> Calibration | None:
+        """The record's input errors from every row run so far (the tracked rows' estimates
+        weighted by the speed squared) as Ekf's arguments; None before a tracked row."""
+
+class Calibration(TypedDict):
+    voltage_delay_s: float
+    """Minus the lead of the applied voltage over the logged one, s (Ekf's voltage_delay_s)."""
+    rs_ohm: float
+    inverter_voltage_v: float
+    samples: int
+    """Rows averaged."""
 
 class DriveLog(TypedDict, total=False):
     t: npt.NDArray[np.float64]

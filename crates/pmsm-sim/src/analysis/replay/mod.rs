@@ -56,6 +56,16 @@
 //! baseline has no confidence measure: its status is UNCERTAIN on every accepted sample (it
 //! never claims TRACKING).
 //!
+//! # Two passes: the record's calibration
+//!
+//! The drive observer's estimates of the voltage lead, the resistance and the dead-time
+//! voltage, averaged over the record ([`ekf_core::RecordCalibration`]: its tracked samples,
+//! weighted by the speed squared), are told to the default EKF with the acceleration
+//! feedforward, which runs over the record again ([`run_ekf_calibrated`]): the row "EKF +
+//! feedforward told the record's calibration". It is what a
+//! user does with a log of a drive whose timing and inverter are unknown: replay it once to
+//! find them, then set them (`voltage_delay_s`, `rs_ohm`, `inverter_voltage_v`).
+//!
 //! # Outputs of a replay ([`write_outputs`])
 //!
 //! The MCAP log and the plot reuse the simulator's record ([`Sample`]); the fields a replay
@@ -75,8 +85,9 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
 use ekf_core::{
-    AccelerationFeedforward, DriveConfig, DriveObserver, FluxObserver, FluxObserverConfig,
-    MotorParams, ObserverConfig, PmsmObserver, Status, wrap_angle,
+    AccelerationFeedforward, Calibration, DriveConfig, DriveObserver, FluxObserver,
+    FluxObserverConfig, MotorParams, ObserverConfig, PmsmObserver, RecordCalibration, Status,
+    wrap_angle,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -218,15 +229,46 @@ pub fn run_ekf_with(
     motor: &ReplayMotor,
     feedforward: bool,
 ) -> Result<ObserverTrace, ReplayError> {
-    log.check()?;
     let cfg = ObserverConfig {
-        voltage_delay_s: motor.voltage_delay_s,
-        inverter_voltage_v: motor.inverter_voltage_v,
         acceleration_feedforward: feedforward
             .then(|| AccelerationFeedforward::default_for(&motor.params, motor.ts_s)),
-        ..ObserverConfig::new(motor.params, motor.ts_s)
+        ..default_config(motor)
     };
-    let mut obs = PmsmObserver::new(&cfg)?;
+    run_ekf_config(log, &cfg)
+}
+
+/// The default EKF's configuration for a replay: `ObserverConfig::new(motor, ts)` with the
+/// motor file's `voltage_delay_s` and `inverter_voltage_v`.
+fn default_config(motor: &ReplayMotor) -> ObserverConfig<f64> {
+    ObserverConfig {
+        voltage_delay_s: motor.voltage_delay_s,
+        inverter_voltage_v: motor.inverter_voltage_v,
+        ..ObserverConfig::new(motor.params, motor.ts_s)
+    }
+}
+
+/// The default EKF with the acceleration feedforward, told the record's calibration (module
+/// `ekf_core::calibration`: the drive observer's input errors; the second of two passes):
+/// its trace.
+pub fn run_ekf_calibrated(
+    log: &DriveLog,
+    motor: &ReplayMotor,
+    cal: &Calibration<f64>,
+) -> Result<ObserverTrace, ReplayError> {
+    let cfg = ObserverConfig {
+        acceleration_feedforward: Some(AccelerationFeedforward::default_for(
+            &motor.params,
+            motor.ts_s,
+        )),
+        ..default_config(motor)
+    };
+    run_ekf_config(log, &cal.apply(&cfg))
+}
+
+/// Steps a [`PmsmObserver`] built from `cfg` over `log`.
+fn run_ekf_config(log: &DriveLog, cfg: &ObserverConfig<f64>) -> Result<ObserverTrace, ReplayError> {
+    log.check()?;
+    let mut obs = PmsmObserver::new(cfg)?;
     Ok(trace(log, |u_prev, i, dt| {
         // The period that ended at this row (refused beyond 64 Ts: a rejected row).
         let (e, status) = match obs.step_dt(u_prev, i, dt) {
@@ -294,15 +336,28 @@ pub fn run_flux(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, Re
 /// period (refused beyond 64 Ts: a rejected row). Status: TRACKING when the estimate says
 /// `tracking`, else UNCERTAIN; REJECTED on a refused sample.
 pub fn run_drive(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
+    run_drive_calibrated(log, motor).map(|(tr, _)| tr)
+}
+
+/// [`run_drive`], and the record's calibration from its estimates
+/// ([`RecordCalibration`]; `None` when it never tracked).
+pub fn run_drive_calibrated(
+    log: &DriveLog,
+    motor: &ReplayMotor,
+) -> Result<(ObserverTrace, Option<Calibration<f64>>), ReplayError> {
     log.check()?;
     let cfg = DriveConfig::new(motor.params, motor.ts_s);
     let mut obs = DriveObserver::new(&cfg)?;
-    Ok(trace(log, |u_prev, i, dt| {
+    let mut cal = RecordCalibration::new();
+    let tr = trace(log, |u_prev, i, dt| {
         let (e, status) = match obs.step_dt(u_prev, i, dt) {
             Ok(e) if e.tracking => (e, ReplayStatus::Tracking),
             Ok(e) => (e, ReplayStatus::Uncertain),
             Err(_) => (obs.estimate(), ReplayStatus::Rejected),
         };
+        if status != ReplayStatus::Rejected {
+            cal.push(&e);
+        }
         let p = obs.covariance();
         let sample = ObserverSample {
             theta_e_rad: e.theta_rad,
@@ -319,7 +374,8 @@ pub fn run_drive(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, R
             winding_temperature_c: f64::NAN,
         };
         (sample, status)
-    }))
+    });
+    Ok((tr, cal.result()))
 }
 
 /// One observer's score against the reference (module docs, "Scoring").
@@ -439,6 +495,12 @@ pub struct ReplayReport {
     pub ekf_feedforward: Option<Score>,
     /// The drive observer's score.
     pub drive: Option<Score>,
+    /// The record's input errors from the drive observer (module `ekf_core::calibration`;
+    /// `null` when it never tracked).
+    pub calibration: Option<CalibrationReport>,
+    /// The default EKF with the acceleration feedforward told that calibration (the second
+    /// pass): its score.
+    pub ekf_calibrated: Option<Score>,
     /// The flux + PLL baseline's score.
     pub flux: Option<Score>,
     /// The part of the default EKF's error periodic in the reference's mechanical angle
@@ -448,6 +510,21 @@ pub struct ReplayReport {
     pub ekf_rejected: usize,
     /// Samples refused by the drive observer.
     pub drive_rejected: usize,
+}
+
+/// The record's calibration as the report gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CalibrationReport {
+    /// Lead of the applied voltage over the logged one, s.
+    pub voltage_lead_s: f64,
+    /// The lead in nominal periods.
+    pub voltage_lead_periods: f64,
+    /// Stator resistance, ohm.
+    pub rs_ohm: f64,
+    /// Inverter dead-time voltage, V.
+    pub dead_time_v: f64,
+    /// Samples averaged.
+    pub samples: u64,
 }
 
 /// A replay's traces and report.
@@ -466,9 +543,16 @@ pub struct Replay {
 /// Runs the three observers over `log` and scores them; `name` names the log in the report.
 pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay, ReplayError> {
     let mut ekf = run_ekf(log, motor)?;
-    let mut drive = run_drive(log, motor)?;
+    let (mut drive, cal) = run_drive_calibrated(log, motor)?;
     let mut flux = run_flux(log, motor)?;
     let ts = motor.ts_s;
+    let calibrated_score = match &cal {
+        Some(c) => {
+            let t = run_ekf_calibrated(log, motor, c)?;
+            score(log, ts, &t.theta, &t.status)
+        }
+        None => None,
+    };
     let ekf_score = score(log, ts, &ekf.theta, &ekf.status);
     let ff = run_ekf_with(log, motor, true)?;
     let ff_score = score(log, ts, &ff.theta, &ff.status);
@@ -502,6 +586,14 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
         ekf: ekf_score,
         ekf_feedforward: ff_score,
         drive: drive_score,
+        calibration: cal.map(|c| CalibrationReport {
+            voltage_lead_s: c.voltage_lead_s,
+            voltage_lead_periods: c.voltage_lead_s / ts,
+            rs_ohm: c.rs_ohm,
+            dead_time_v: c.dead_time_v,
+            samples: c.samples,
+        }),
+        ekf_calibrated: calibrated_score,
         flux: flux_score,
         ekf_reference_periodic: mechanical_component(
             log,
@@ -550,6 +642,10 @@ pub fn markdown(r: &ReplayReport) -> String {
         ("EKF (default)", &r.ekf),
         ("EKF + acceleration feedforward", &r.ekf_feedforward),
         ("drive observer", &r.drive),
+        (
+            "EKF + feedforward told the record's calibration (second pass)",
+            &r.ekf_calibrated,
+        ),
         ("flux + PLL", &r.flux),
     ] {
         match sc {
@@ -567,6 +663,18 @@ pub fn markdown(r: &ReplayReport) -> String {
             )),
             None => s.push_str(&format!("| {name} | 0 | | | | | | | | |\n")),
         }
+    }
+    if let Some(c) = &r.calibration {
+        s.push_str(&format!(
+            "\nThe record's calibration (the drive observer's estimates over its {} tracked \
+             samples, weighted by the speed squared): the applied voltage leads the logged one \
+             by {:.3} periods ({:.1} us), Rs {:.4} ohm, dead-time voltage {:.3} V.\n",
+            c.samples,
+            c.voltage_lead_periods,
+            c.voltage_lead_s * 1e6,
+            c.rs_ohm,
+            c.dead_time_v
+        ));
     }
     if let Some(m) = &r.ekf_reference_periodic {
         s.push_str(&format!(
