@@ -192,7 +192,7 @@
 //! (32) steps and reads the status `Uncertain` while `|d| > drift_ratio |w| Ts + drift_sigmas
 //! sqrt(P_ww) Ts` (0.25 and 3), trusted again after the hold with `|d|` at or below half that.
 //! (foc's health monitor makes the same comparison on its own averages.) On the saturated
-//! PM-SyRM told its small-signal constants it finds the 0.4 s after a generating step where the
+//! PM-SyRM told its small-signal constants through [`ObserverConfig::new`] it finds the 0.4 s after a generating step where the
 //! filter sits 145 deg off with its speed 1.8 times the rotor's (`docs/accuracy.md`).
 //!
 //! **Speed noise adaptation** ([`SpeedNoiseAdaptation`]; on in [`ObserverConfig::new`], off in
@@ -303,7 +303,7 @@
 //! 33 deg off (told the constants through [`ObserverConfig::new`]: 60 deg RMS, 16.5 % of the
 //! samples more than 45 deg off), the saturating interior motor 4.2 deg (7.9); never
 //! `Tracking` while more than 45 deg off (`docs/saturation.md`). Other ways were measured
-//! there and rejected: `R` or `Q_ii` widened (lock kept at one scale, lost at the next), and
+//! there and rejected: `R` or `Q_ii` widened (at no scale of 10 to 1000 is the lock kept), and
 //! it is no default: on an interior motor that does not saturate the midpoint leaves a bias of
 //! `atan((Lq - Ld) i_q / (2 psi_a))` under load. It costs nothing per step (a constructor).
 //!
