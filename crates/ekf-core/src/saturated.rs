@@ -55,7 +55,7 @@ use crate::{
     PmsmObserver, to_t, wrap_angle,
 };
 
-/// The prediction of a saturating machine (module docs), for the generic [`Ekf`].
+/// The prediction of a saturating machine (module docs), for the generic [`Ekf`](crate::Ekf).
 #[derive(Clone, Debug)]
 pub struct MapModel<T: Float, const N: usize> {
     map: FluxMap<T, N>,

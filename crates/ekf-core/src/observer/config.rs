@@ -96,6 +96,26 @@ impl<T: Float> ObserverConfig<T> {
         }
     }
 
+    /// The project default ([`new`](Self::new)) for an interior motor whose q axis saturates
+    /// under load (a PM-assisted synchronous reluctance machine, a strongly saturating
+    /// interior PM motor), told the small-signal constants a low-current commissioning
+    /// measures: the model's `Lq` is [`saturating_lq`] (the midpoint of the told `Ld` and
+    /// `Lq`) instead of the told `Lq`; `Q` and `P0` follow from that model. A surface motor
+    /// (`Ld == Lq`) and an inverse-salient one (`Lq < Ld`) get [`new`](Self::new) itself.
+    ///
+    /// Why (module docs of [`observer`](super), "Saturating motors told their small-signal
+    /// constants"): the observer's angle is that of the active flux
+    /// `psi - Lq i`; an `Lq` off by `dLq` turns it by about `dLq i_q / psi_a` at steady state,
+    /// and there nothing tells the angle from `Lq` apart. Under load the q axis saturates and
+    /// its chord inductance falls from the small-signal `Lq` toward `Ld`; the midpoint halves
+    /// the worst error over that range. The price on a motor that does not saturate: at rated
+    /// `i_q` an angle bias of `(Lq - Ld) i_q / (2 psi_a)`, so it is a choice, not the default.
+    pub fn saturating(motor: MotorParams<T>, ts_s: T) -> Self {
+        let mut m = motor;
+        m.lq_h = saturating_lq(&motor);
+        Self::new(m, ts_s)
+    }
+
     /// The seed's filter: [`Discretization::ForwardEuler`], [`NoiseCovariances::seed`] and the
     /// standard covariance update (seed step 6, made symmetric); `x0`, `P0` as in
     /// [`new`](Self::new); no branch check, no innovation gate, no covariance health check,
@@ -203,6 +223,18 @@ pub(super) fn non_negative<T: Float>(v: T, param: Param) -> Result<(), ConfigErr
         Err(ConfigError::NotPositive(param))
     } else {
         Ok(())
+    }
+}
+
+/// The q-axis inductance [`ObserverConfig::saturating`] gives the model, henry: for an
+/// interior motor (`Lq > Ld`) the midpoint `(Ld + Lq) / 2` of the small-signal values (the
+/// minimax choice when the q axis's chord inductance under load may lie anywhere between
+/// `Ld` and the small-signal `Lq`); otherwise `Lq` as told.
+pub fn saturating_lq<T: Float>(motor: &MotorParams<T>) -> T {
+    if motor.lq_h > motor.ld_h {
+        (motor.ld_h + motor.lq_h) * to_t::<T>(0.5)
+    } else {
+        motor.lq_h
     }
 }
 

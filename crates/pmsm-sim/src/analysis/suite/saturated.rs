@@ -36,7 +36,11 @@
 //!   sampled on a 12 x 16 grid over `i_d` in `[-2.2, 0.8] I_r`, `i_q` in `[-2.2, 2.2] I_r`
 //!   (`I_r` the rated current on the MTPA curve of the map);
 //! - flux baseline told the map: [`FluxMapObserver`] (`FluxObserverConfig::new`);
-//! - EKF told the small-signal constants: `PmsmObserver` (`ObserverConfig::new`);
+//! - EKF told the small-signal constants: `PmsmObserver` in the mode for saturating motors,
+//!   `ObserverConfig::saturating` (the model's `Lq` the midpoint of the told `Ld` and `Lq`:
+//!   what a user who knows the motor saturates chooses; `ekf_core::observer` module docs,
+//!   "Saturating motors told their small-signal constants"), its noise from the sensing
+//!   chain on that model (`ObserverConfig::new` told the same: `docs/saturation.md`);
 //! - EKF told the identified map: [`MapObserver`] on the map foc's standstill flux-map
 //!   measurement gives on the plant before the run (module `identified`);
 //! - flux baseline told them: `FluxObserver`.
@@ -47,7 +51,9 @@
 //! 45 deg off; never `Tracking` while more than 45 deg off. EKF told the identified map: no
 //! sample more than 45 deg off, never `Tracking` while lost; its RMS against the row told the
 //! map is reported with its goal ([`GOAL_IDENTIFIED_RATIO`]). The rows told the constants have
-//! no goal here (the report shows what saturation costs a constant model).
+//! no checked goal here (the report shows what saturation costs a constant model; the EKF's
+//! aim, no sample more than 45 deg off and never `Tracking` while lost, is in
+//! `docs/saturation.md`).
 
 use ekf_core::saturated::{FluxMapObserver, MapObserver};
 use ekf_core::saturation::SATURATED;
@@ -401,9 +407,17 @@ pub fn saturated_rows_with(
             noise,
             ..MapObserver::default_config(&ident.map, small.rs_ohm, small.pole_pairs, ts)
         };
+        // Told the small-signal constants, the EKF runs what a user of a saturating motor
+        // chooses: `ObserverConfig::saturating` (module docs); its noise from the sensing
+        // chain on that configuration's model (`ObserverConfig::new` here: docs/saturation.md).
+        let sat = ObserverConfig::saturating(small, ts);
         let ekf_cfg = ObserverConfig {
-            noise,
-            ..ObserverConfig::new(small, ts)
+            noise: if opts.ideal {
+                NoiseCovariances::scaled(&sat.motor, ts)
+            } else {
+                NoiseCovariances::from_sensing(&sat.motor, ts, sc.sensors.current_noise_std_a, lsb)
+            },
+            ..sat
         };
         let flux_cfg = FluxObserverConfig::new(small, ts);
         let scored = |observer, told, est: Box<dyn Observer>| SatScored {
