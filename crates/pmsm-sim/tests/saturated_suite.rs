@@ -32,11 +32,13 @@ fn map_ekf_meets_its_goals_on_the_saturated_motors() {
     for r in report.rows.iter().filter(|r| r.told == Told::Map) {
         assert!(r.samples > 10_000 && r.failures == 0, "{r:?}");
     }
-    // An honest status on every EKF row, also told the small-signal constants (where the
-    // PM-SyRM's EKF settles on a wrong solution after the generating step: the speed drift
-    // of the consistency check reports it).
+    // An honest status on every EKF row, also told the small-signal constants; and told
+    // them (`ObserverConfig::saturating`), the EKF never loses the rotor.
     for r in report.rows.iter().filter(|r| r.observer == "EKF") {
         assert_eq!(r.tracking_while_lost, 0, "{r:?}");
+        if r.told == Told::SmallSignal {
+            assert_eq!(r.lost_pct, 0.0, "{r:?}");
+        }
     }
     // The identified maps: measured at standstill within 5 s, the rotor held within a tenth
     // of a turn; the RMS ratio to the true map's row is reported against its goal (1.5).

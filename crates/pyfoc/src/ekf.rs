@@ -66,6 +66,7 @@ struct Settings {
     voltage_delay_s: f64,
     inverter_voltage_v: f64,
     feedforward: bool,
+    saturating: bool,
 }
 
 /// The observer of `motor` in precision `T`: on constant parameters, or on the motor's flux
@@ -85,7 +86,14 @@ fn build<T: Float, O>(
         .transpose()
         .map_err(ConfigError::new_err)?;
     let mut cfg = match &flux_map {
+        None if s.saturating => ObserverConfig::saturating(motor.params::<T>(), conv(ts)),
         None => ObserverConfig::new(motor.params::<T>(), conv(ts)),
+        Some(_) if s.saturating => {
+            return Err(ConfigError::new_err(
+                "saturating is for a motor told its small-signal constants; on a flux map the \
+                 map is the model: leave it False",
+            ));
+        }
         Some(m) => {
             if matches!(s.tracking, Tracking::Flux) {
                 return Err(ConfigError::new_err(
@@ -159,7 +167,7 @@ impl Ekf {
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
         tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0,
-        acceleration_feedforward = false))]
+        acceleration_feedforward = false, saturating = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -175,6 +183,7 @@ impl Ekf {
         voltage_delay_s: f64,
         inverter_voltage_v: f64,
         acceleration_feedforward: bool,
+        saturating: bool,
     ) -> PyResult<Self> {
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
@@ -219,6 +228,7 @@ impl Ekf {
             voltage_delay_s,
             inverter_voltage_v,
             feedforward: acceleration_feedforward,
+            saturating,
         };
         let (observer, dtype) = match dtype {
             "float64" => (

@@ -138,3 +138,23 @@ def test_acceleration_feedforward_is_refused_on_a_map():
     with pytest.raises(pyfoc.ConfigError, match="acceleration_feedforward"):
         pyfoc.Ekf(m, TS, acceleration_feedforward=True)
     pyfoc.Ekf(m, TS, acceleration_feedforward=False)
+
+
+def test_saturating_constants_follow_a_saturated_q_axis_closer():
+    # Told the small-signal constants, the model's lq the midpoint of ld and lq (the chord lq
+    # at the 20 A step is 0.76 lq here, between the midpoint and lq).
+    u, i, theta = simulate()
+    m = pyfoc.Motor.from_flux_map(RS, P, *grid())
+    small = pyfoc.Motor(RS, None, m.psi_f, P, ld=m.ld, lq=m.lq)
+    start = len(theta) // 3 + 500
+    plain = rms_deg(pyfoc.Ekf(small, TS).run(u, i)["theta"], theta, start)
+    sat = rms_deg(pyfoc.Ekf(small, TS, saturating=True).run(u, i)["theta"], theta, start)
+    print({"small": plain, "small_saturating": sat})
+    assert sat < 0.5 * plain
+    # A surface motor is unchanged; a flux map refuses it.
+    surf = pyfoc.Motor(RS, LD, PSI_F, P)
+    a = pyfoc.Ekf(surf, TS).run(u, i)["theta"]
+    b = pyfoc.Ekf(surf, TS, saturating=True).run(u, i)["theta"]
+    np.testing.assert_array_equal(a, b)
+    with pytest.raises(pyfoc.ConfigError, match="saturating"):
+        pyfoc.Ekf(m, TS, saturating=True)

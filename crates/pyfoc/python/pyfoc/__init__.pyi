@@ -199,6 +199,13 @@ class Ekf:
     (ekf-core's AccelerationFeedforward with its defaults; worth it on drives with current or
     duty steps at low speed); False (the default, as ekf-core's ObserverConfig::new): the speed
     is a random walk. Not available on a flux map (ConfigError).
+    saturating: True for a saturating interior motor (a PM-assisted synchronous reluctance
+    motor, or an interior PM motor whose Lq falls well below its small-signal value at rated
+    current) told the small-signal constants a low-current commissioning measures: the model's
+    Lq is the midpoint of the told ld and lq (ekf-core's ObserverConfig::saturating); a surface
+    motor is unchanged. The price on a motor that does not saturate: an angle bias of about
+    (lq - ld) i_q / (2 psi_a) at steady state. Not available on a flux map (ConfigError): there
+    the map is the model.
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -246,6 +253,7 @@ class Ekf:
         voltage_delay_s: float = 0.0,
         inverter_voltage_v: float = 0.0,
         acceleration_feedforward: bool = False,
+        saturating: bool = False,
     ) -> Ekf: ...
     def run(
         self,
