@@ -241,7 +241,14 @@ fn run(motor: SuiteMotor) -> Vec<Row> {
             .copied(),
     );
     let cases: Vec<Mismatch> = cases.collect();
-    // The defaults first (the right motor at 0), then the same with the start-up flux.
+    // The start-up flux is on by default (host builds): the rows "on" are the default.
+    assert!(
+        ObserverConfig::new(truth, ts)
+            .parameter_tracking
+            .is_some_and(|t| t.transient_flux),
+        "start-up flux on by default"
+    );
+    // Without the start-up flux first (the right motor at 0), then the default.
     let mut told: Vec<Told> = [false, true]
         .into_iter()
         .flat_map(|transient| cases.iter().map(move |m| (transient, *m)))
