@@ -804,4 +804,48 @@ mod tests {
             "window restarted"
         );
     }
+
+    /// The start-up flux corrects on windows of an acceleration only: not the first window
+    /// (no speed to compare with), not at a steady speed, not braking; an accelerating
+    /// window moves the frozen flux toward the window's.
+    #[cfg(feature = "std")]
+    #[test]
+    fn start_up_flux_only_while_accelerating() {
+        let ts = 1e-4_f64;
+        let psi0 = 0.01;
+        let cfg = ParameterTracking::<f64>::default_for(ts);
+        let (_, slow) = Tracker::new(&cfg, psi0, 0.5, (1e-3, 1e-3), ts);
+        let k = slow.k;
+        let mut split = slow.split.expect("split filter configured");
+        let n = 100_u32;
+        // A window at speed w (rad/s) whose voltage reads the flux psi_m (no current).
+        let mut theta = 0.0_f64;
+        let mut window = |split: &mut Split<f64>, w: f64, psi_m: f64| {
+            let span = f64::from(n) * ts;
+            theta += w * span;
+            let sums = Window {
+                ud: 0.0,
+                uq: f64::from(n) * w * psi_m,
+                iq: 0.0,
+                w: f64::from(n) * w,
+                n,
+                contiguous: true,
+            };
+            let x = Vector4::new(0.0, 0.0, w, crate::angle::wrap_angle(theta));
+            split.transient_flux(0.5, psi0, k.var0_psi, &sums, &x, &k)
+        };
+        let psi_m = 1.1 * psi0;
+        assert_eq!(window(&mut split, 500.0, psi_m), None, "first window");
+        assert_eq!(window(&mut split, 500.0, psi_m), None, "steady speed");
+        let (psi, c) = window(&mut split, 550.0, psi_m).expect("accelerating window corrects");
+        assert!((psi - psi_m).abs() < 0.01 * psi0, "psi {psi}");
+        assert!(c < k.var0_psi && c >= 0.99e-4 * psi0 * psi0, "variance {c}");
+        assert_eq!(window(&mut split, 500.0, psi_m), None, "braking");
+        split.tracked = true;
+        assert_eq!(
+            window(&mut split, 600.0, psi_m),
+            None,
+            "after a tracked window"
+        );
+    }
 }
