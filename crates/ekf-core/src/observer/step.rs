@@ -330,9 +330,10 @@ impl<T: Float> PmsmObserver<T> {
         self.refusals = 0;
         self.x = x;
         self.p = p;
+        // The tracking's slow work (a window's end) waits for the correction, whose
+        // posterior it reads, as in `step`.
         if let (Some(s), Some(Tracking { t, .. })) = (&tm, &mut self.tracking) {
             t.commit(s, t.psi);
-            self.tracker_housekeeping();
         }
         #[cfg(feature = "acceleration-feedforward")]
         if self.feedforward.is_some() {

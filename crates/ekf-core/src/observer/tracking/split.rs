@@ -40,6 +40,9 @@ pub(in crate::observer) struct Split<T> {
     pub end_theta: T,
     pub end_id: T,
     pub end_iq: T,
+    /// The speed of the last window read for the start-up flux (the angle's advance), rad/s;
+    /// 0 when that window was left out.
+    pub last_w: T,
 }
 
 impl<T: Float> Split<T> {
@@ -75,7 +78,7 @@ impl<T: Float> Split<T> {
             }
             return None;
         }
-        let (m, r, r_m) = self.measure(ends, sums, x, k, false)?;
+        let (m, r, r_m, _) = self.measure(ends, sums, x, k, false)?;
         // Random walk: the temperature moves both along (psi beta, Rs alpha_cu) per kelvin;
         // the magnets' flux drifts besides.
         let (g0, g1) = (self.psi * self.beta, self.rs * self.alpha);
@@ -125,7 +128,19 @@ impl<T: Float> Split<T> {
         if self.tracked {
             return None;
         }
-        let (m, r, r_m) = self.measure(ends, sums, x, k, true)?;
+        let window = self.measure(ends, sums, x, k, true);
+        // Only through an acceleration: the window's speed (the angle's advance) above the
+        // previous window's by more than 2 % (a start-up). The first window after a gap, a
+        // steady speed, a braking and the angle's pull-in after a lock at speed leave the
+        // EKF's flux alone: its own tracking takes over after the settling time.
+        let last_w = self.last_w;
+        self.last_w = window.map_or(T::zero(), |w| w.3);
+        let (m, r, r_m, w) = window?;
+        let (w2, last2) = (w * w, last_w * last_w);
+        let dw = w - last_w;
+        if last_w == T::zero() || w2 <= last2 || dw * dw <= to_t::<T>(4e-4) * w2 {
+            return None;
+        }
         // Only where the window measures the flux: the resistive drop within 15 % of the
         // back-EMF (at low speed under load, through a reversal, it measures `Rs` instead).
         let drop = r * rs_used;
@@ -162,7 +177,8 @@ impl<T: Float> Split<T> {
         (theta0, id0, iq0, id_end, iq_end)
     }
 
-    /// The window's measurement `(m, r, r_m)`: `m = psi_f + Rs r` and its variance `r_m`
+    /// The window's measurement `(m, r, r_m, w)`: `m = psi_f + Rs r`, its variance `r_m` and
+    /// the window's speed `w`
     /// (module docs, "Resistance"), from the window's sums and its ends (`take_ends`) and the
     /// state `x` at its end; `None` for a window left out.
     fn measure(
@@ -172,7 +188,7 @@ impl<T: Float> Split<T> {
         x: &Vector4<T>,
         k: &TrackerConstants<T>,
         low_current: bool,
-    ) -> Option<(T, T, T)> {
+    ) -> Option<(T, T, T, T)> {
         if !sums.contiguous {
             return None;
         }
@@ -222,7 +238,7 @@ impl<T: Float> Split<T> {
         } else {
             self.r_m
         };
-        Some((m, r, r_m))
+        Some((m, r, r_m, w))
     }
 
     /// Anchors the thermal link at `(psi, rs)` (its temperature reference) and restarts the
