@@ -137,6 +137,7 @@ use crate::sim::{SideObserver, run_with_side_observers};
 
 pub use crate::output::metrics::CONVERGED_DEG;
 
+pub mod excitation;
 pub mod identified;
 pub mod reversal;
 mod runs;
@@ -662,6 +663,8 @@ pub struct SuiteReport {
     pub saturated: SaturatedReport,
     /// Goals and limits.
     pub checks: Vec<Check>,
+    /// Rows with the d-axis excitation and their goals (module [`excitation`]).
+    pub excitation: excitation::ExcitationReport,
 }
 
 /// Runs the suite (module docs): every motor ([`SuiteMotor::ALL`]), three observers.
@@ -781,6 +784,7 @@ pub fn run_suite_motors(
         real_drive,
         saturated: SaturatedReport::default(),
         checks: Vec::new(),
+        excitation: excitation::excitation_rows(opts, selected)?,
     };
     report.checks = report.evaluate();
     report.wall_time_s = started.elapsed().as_secs_f64();
