@@ -580,4 +580,51 @@ mod tests {
         let r = e.estimate().unwrap();
         assert!((r.rs_ohm - 0.5).abs() < 1e-5);
     }
+
+    #[test]
+    fn set_inductances_rebuilds_the_model() {
+        use crate::{MotorParams, ObserverConfig, PmsmObserver};
+        let m = MotorParams::<f64>::servo();
+        for tracking in [false, true] {
+            let cfg = |l: f64| {
+                let mut c = ObserverConfig::new(
+                    MotorParams {
+                        ld_h: l,
+                        lq_h: l,
+                        ..m
+                    },
+                    1e-4,
+                );
+                if !tracking {
+                    c.parameter_tracking = None;
+                }
+                c
+            };
+            let l1 = 1.2 * m.lq_h;
+            let mut told = PmsmObserver::new(&cfg(m.lq_h)).unwrap();
+            // Built for `l1` with the noise tuning and start of the one told `L0` (the
+            // setter keeps `Q`, `R`, the state and `P`).
+            let (c0, mut c1) = (cfg(m.lq_h), cfg(l1));
+            (c1.noise, c1.p0, c1.x0) = (c0.noise, c0.p0, c0.x0);
+            let mut fresh = PmsmObserver::new(&c1).unwrap();
+            told.set_inductances(l1, l1).unwrap();
+            assert_eq!(told.model(), fresh.model());
+            let (ld, lq) = told.inductances();
+            assert!((ld - l1).abs() < 1e-15 && (lq - l1).abs() < 1e-15);
+            for k in 0..200 {
+                let t = f64::from(k) * 1e-4;
+                let u = [10.0 * (300.0 * t).cos(), 10.0 * (300.0 * t).sin()];
+                let i = [0.5 * (300.0 * t).sin(), -0.5 * (300.0 * t).cos()];
+                let a = told.step(u, i).map(|e| e.theta_rad);
+                let b = fresh.step(u, i).map(|e| e.theta_rad);
+                assert_eq!(a, b, "step {k}");
+            }
+            // Refused, nothing changed.
+            let before = told.clone();
+            for (ld, lq) in [(f64::NAN, l1), (l1, -1.0), (l1, 20.0), (1.1 * l1, l1)] {
+                assert!(told.set_inductances(ld, lq).is_err());
+                assert_eq!(told, before);
+            }
+        }
+    }
 }

@@ -281,7 +281,8 @@ impl<T: Float> PmsmObserver<T> {
     /// Hands the observer new inductances `(L_d, L_q)` at run time (e.g. from the d-axis
     /// excitation's estimator, [`crate::excitation`]): the model's step constants, the
     /// tracking's cached constants at its `Rs` and the tracker's `(L_d, L_q)` are rebuilt
-    /// from them; the state, covariance and every other setting are kept. `Rs` is not set
+    /// from them; the state, covariance, `Q`, `R` (scaled from the configured motor by
+    /// `ObserverConfig::new`: a tuning, kept) and every other setting are kept. `Rs` is not set
     /// here: with parameter tracking on it is the tracker's ([`Self::set_parameters`] sets
     /// it), otherwise the configured one. Refused, nothing changed, when a value is not
     /// finite or outside `[MIN_INDUCTANCE_H, MAX_INDUCTANCE_H]`, when `L_d == L_q` does not

@@ -75,7 +75,8 @@ pub struct ExcitationCost {
     pub condition: String,
     /// Excitation amplitude, A.
     pub amplitude_a: f64,
-    /// Extra copper loss: the mean `i_d^2 + i_q^2` with over without, less 1, %.
+    /// Extra copper loss: the mean `i_d^2 + i_q^2` with less without, over the rated
+    /// current squared, % (the rated copper loss's share; `a^2 / I_rated^2` = 1 % expected).
     pub copper_loss_pct: f64,
     /// Torque standard deviation over the window with / without the excitation, N m.
     pub torque_std_nm: [f64; 2],
@@ -289,7 +290,7 @@ pub fn excitation_rows(
                 motor,
                 condition: w.0.to_string(),
                 amplitude_a: a,
-                copper_loss_pct: 100.0 * (i2 / i2_0 - 1.0),
+                copper_loss_pct: 100.0 * (i2 - i2_0) / (i_rated * i_rated),
                 torque_std_nm: [t_std, t_std0],
                 voltage_peak_pct: [100.0 * u_pk, 100.0 * u_pk0],
             });
@@ -421,7 +422,7 @@ impl ExcitationReport {
         }
         let _ = writeln!(
             s,
-            "\nCost (the same run without the excitation for reference):\n\n| motor | row | amplitude (A) | extra copper loss (%) | torque std with / without (N m) | peak |u| / (u_dc / sqrt 3) with / without (%) |\n|---|---|---|---|---|---|"
+            "\nCost (the same run without the excitation for reference):\n\n| motor | row | amplitude (A) | extra copper loss (% of rated) | torque std with / without (N m) | peak |u| / (u_dc / sqrt 3) with / without (%) |\n|---|---|---|---|---|---|"
         );
         for c in &self.cost {
             let _ = writeln!(
