@@ -18,16 +18,29 @@ fn cfg() -> FocConfig {
 fn off_by_default_and_checked() {
     let c = cfg();
     assert_eq!(c.d_excitation, None);
-    for (amplitude_a, half_period_ticks, err) in [
-        (0.0, 10, ConfigError::NotPositive(Field::DExcitation)),
-        (f32::NAN, 10, ConfigError::NonFinite(Field::DExcitation)),
-        (1e3, 10, ConfigError::OutOfRange(Field::DExcitation)),
-        (0.1, 1, ConfigError::OutOfRange(Field::DExcitation)),
+    for (amplitude_a, half_period_ticks, min_speed_rad_s, err) in [
+        (0.0, 10, 0.0, ConfigError::NotPositive(Field::DExcitation)),
+        (
+            f32::NAN,
+            10,
+            0.0,
+            ConfigError::NonFinite(Field::DExcitation),
+        ),
+        (1e3, 10, 0.0, ConfigError::OutOfRange(Field::DExcitation)),
+        (0.1, 1, 0.0, ConfigError::OutOfRange(Field::DExcitation)),
+        (0.1, 10, -1.0, ConfigError::OutOfRange(Field::DExcitation)),
+        (
+            0.1,
+            10,
+            f32::NAN,
+            ConfigError::OutOfRange(Field::DExcitation),
+        ),
     ] {
         let mut bad = c;
         bad.d_excitation = Some(DExcitation {
             amplitude_a,
             half_period_ticks,
+            min_speed_rad_s,
         });
         assert_eq!(bad.validate(), Err(err));
     }
@@ -40,6 +53,7 @@ fn square_wave_on_the_d_reference() {
     let x = DExcitation {
         amplitude_a: a,
         half_period_ticks: n,
+        min_speed_rad_s: 10.0,
     };
     let mut with = cfg().with_mode(Mode::Sensored);
     with.d_excitation = Some(x);
@@ -72,4 +86,21 @@ fn square_wave_on_the_d_reference() {
     }
     assert_eq!(seen, [true, true]);
     assert!(skipped < 10, "{skipped} ticks without the excitation");
+    // Below the minimum speed: off.
+    let mut slow = cfg().with_mode(Mode::Sensored);
+    slow.d_excitation = Some(DExcitation {
+        min_speed_rad_s: 30.0,
+        ..x
+    });
+    let mut foc = Foc::new(&slow).unwrap();
+    let mut plain = Foc::new(&cfg().with_mode(Mode::Sensored)).unwrap();
+    for f in [&mut foc, &mut plain] {
+        f.set_speed_ref_mech_rad_s(50.0).unwrap();
+        f.start().unwrap();
+    }
+    for k in 0..100 {
+        let input = TickInput::abc(1.0, -0.3, -0.7, U_DC).with_sensor(0.01 * k as f32, 20.0);
+        let (o, p) = (foc.tick(&input), plain.tick(&input));
+        assert_eq!(o.telemetry.i_dq_ref, p.telemetry.i_dq_ref);
+    }
 }

@@ -9,7 +9,8 @@
 //! ([`ekf_core::excitation`]) computes it from the same count; the reference with the
 //! excitation is also in the tick's telemetry (`i_dq_ref`). Added after MTPA, field
 //! weakening and the current circle (a small `a` is assumed to fit within the current
-//! limit); the start-up phases (align, I/f) are left alone.
+//! limit); the start-up phases (align, I/f) are left alone, and the excitation is off below
+//! `min_speed_rad_s` (electrical).
 //!
 //! What it costs:
 //!
@@ -27,6 +28,10 @@ pub struct DExcitation {
     pub amplitude_a: f32,
     /// Ticks per half period (at least 2).
     pub half_period_ticks: u32,
+    /// Off while the control frame's electrical speed is below this, rad/s (non-negative):
+    /// through zero speed the observer's angle is weakly observable and the steps of `i_d`
+    /// disturb it, and `Ls` cannot be measured there anyway.
+    pub min_speed_rad_s: f32,
 }
 
 impl DExcitation {

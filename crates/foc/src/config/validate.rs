@@ -79,7 +79,10 @@ impl FocConfig {
         #[cfg(feature = "d-excitation")]
         if let Some(x) = &self.d_excitation {
             positive(x.amplitude_a, F::DExcitation)?;
-            if x.amplitude_a > self.current_limit_a || x.half_period_ticks < 2 {
+            if x.amplitude_a > self.current_limit_a
+                || x.half_period_ticks < 2
+                || !(x.min_speed_rad_s >= 0.0 && x.min_speed_rad_s.is_finite())
+            {
                 return Err(ConfigError::OutOfRange(F::DExcitation));
             }
         }
@@ -219,8 +222,8 @@ pub enum Field {
     StuckAngle,
     /// `flux_map`: its torque constant is not the motor's (`1.5 p psi_f`) within 1e-4.
     FluxMap,
-    /// `d_excitation`: amplitude not positive or above the current limit, or a half period
-    /// under 2 ticks.
+    /// `d_excitation`: amplitude not positive or above the current limit, a half period
+    /// under 2 ticks, or a minimum speed negative or not finite.
     DExcitation,
     /// `field_weakening.voltage_margin`.
     FwVoltageMargin,

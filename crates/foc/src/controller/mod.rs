@@ -563,7 +563,7 @@ impl Foc {
         // The d-axis excitation in closed loop (`FocConfig::d_excitation`).
         #[cfg(feature = "d-excitation")]
         let i_ref = match &self.cfg.d_excitation {
-            Some(x) if plan.frame.emf => Dq {
+            Some(x) if plan.frame.emf && plan.frame.omega.abs() >= x.min_speed_rad_s => Dq {
                 d: i_ref.d + x.offset_a(self.tick_count),
                 q: i_ref.q,
             },

@@ -8,9 +8,10 @@
 //! `set_parameters` would take it).
 //!
 //! The runs are the main run's plan (convergence at 50 %, windows at 10 %, 50 %, 100 % and
-//! 100 % under rated load) on the three surface motors, and once more without the excitation
-//! and without observers for the cost: the extra copper loss, the torque ripple and the
-//! voltage the excitation takes, per window.
+//! 100 % under rated load) and the reversal's (module [`super::reversal`]: +10 % to -10 %
+//! under rated load) on the three surface motors, and the main run once more without the
+//! excitation and without observers for the cost: the extra copper loss, the torque ripple
+//! and the voltage the excitation takes, per window.
 
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -25,12 +26,14 @@ pub const AMPLITUDE_FRACTION: f64 = 0.1;
 pub const HALF_PERIOD: u32 = 50;
 /// `Ls` is handed to the EKF once its standard deviation is at most this fraction of it.
 pub const HANDOVER_SIGMA: f64 = 0.02;
-/// `Ls` from this fraction of rated speed on.
-pub const MIN_LS_SPEED_FRACTION: f64 = 0.05;
+/// `Ls` from this fraction of rated speed on; the excitation is off below it.
+pub const MIN_LS_SPEED_FRACTION: f64 = 0.2;
 /// Goal: RMS angle error (deg el.) with the excitation at >= 50 % speed, any case.
 pub const GOAL_RMS_DEG: f64 = 0.5;
 /// Goal: RMS angle error (deg el.) with the excitation at 10 % speed, any case.
 pub const GOAL_LOW_SPEED_RMS_DEG: f64 = 1.0;
+/// The known limit of a failing reversal row with the excitation: measured, not yet explained.
+pub const KNOWN_LIMIT_REVERSAL: &str = "known limit: with the d excitation on above 20 % of rated speed, the reversal under load at 10 % misses 1 deg on the 2.2 kW motor (cause not isolated)";
 /// Goal: `|Ls|` estimate error (%) at the end of a window at >= 50 % speed.
 pub const GOAL_LS_PCT: f64 = 5.0;
 
@@ -216,8 +219,27 @@ pub fn excitation_rows(
 ) -> Result<ExcitationReport, SimError> {
     let mut report = ExcitationReport::default();
     for &motor in selected.iter().filter(|m| !m.is_interior()) {
-        let plan = Plan::main(opts.short);
-        let mut sc = scenario_with(motor, opts, &plan, INITIAL_ANGLE_RAD);
+        for (plan, reversal) in [
+            (Plan::main(opts.short), false),
+            (Plan::reversal(opts.short), true),
+        ] {
+            motor_rows(opts, motor, &plan, reversal, &mut report)?;
+        }
+    }
+    report.checks = report.evaluate();
+    Ok(report)
+}
+
+/// The rows of one motor over one plan (the cost over the main run's: not `reversal`).
+fn motor_rows(
+    opts: &SuiteOptions,
+    motor: SuiteMotor,
+    plan: &Plan,
+    reversal: bool,
+    report: &mut ExcitationReport,
+) -> Result<(), SimError> {
+    {
+        let mut sc = scenario_with(motor, opts, plan, INITIAL_ANGLE_RAD);
         sc.name = format!("suite-{}-excitation", motor.name());
         let m = &sc.motor;
         let (ls_true, rs_true) = (m.lq_h, m.rs_ohm);
@@ -257,11 +279,13 @@ pub fn excitation_rows(
         }
         let mut drive = sensored_drive(&sc)?;
         drive_with_excitation(&mut drive, &sc, a)?;
-        let mut with = CostSink::new(&plan, &sc);
+        let mut with = CostSink::new(plan, &sc);
         run_excited(&sc, &mut drive, &mut excited, &mut with)?;
-        let mut without = CostSink::new(&plan, &sc);
-        let mut plain = sensored_drive(&sc)?;
-        run_excited(&sc, &mut plain, &mut [], &mut without)?;
+        let mut without = CostSink::new(plan, &sc);
+        if !reversal {
+            let mut plain = sensored_drive(&sc)?;
+            run_excited(&sc, &mut plain, &mut [], &mut without)?;
+        }
         for (i, x) in excited.iter().enumerate() {
             let case = CASES[i].0;
             for (k, w) in plan.windows.iter().enumerate() {
@@ -283,7 +307,7 @@ pub fn excitation_rows(
                 });
             }
         }
-        for (k, w) in plan.windows.iter().enumerate() {
+        for (k, w) in plan.windows.iter().enumerate().filter(|_| !reversal) {
             let (i2, t_std, u_pk) = with.of(k);
             let (i2_0, t_std0, u_pk0) = without.of(k);
             report.cost.push(ExcitationCost {
@@ -296,8 +320,7 @@ pub fn excitation_rows(
             });
         }
     }
-    report.checks = report.evaluate();
-    Ok(report)
+    Ok(())
 }
 
 /// Turns the excitation on in a sensored drive built by [`sensored_drive`].
@@ -315,6 +338,7 @@ fn drive_with_excitation(
     cfg.d_excitation = Some(foc::config::DExcitation {
         amplitude_a: a as f32,
         half_period_ticks: HALF_PERIOD,
+        min_speed_rad_s: (MIN_LS_SPEED_FRACTION * sc.rated_speed_e_rad_s()) as f32,
     });
     *drive = crate::drive::foc_adapter::FocDrive::new(&cfg, 0.0, None).map_err(|e| {
         SimError::Scenario {
@@ -364,13 +388,17 @@ impl ExcitationReport {
             } else {
                 GOAL_LOW_SPEED_RMS_DEG
             };
-            checks.push(tables::check(
+            let mut c = tables::check(
                 "excitation: EKF RMS (deg)",
                 r.motor,
                 &row,
                 r.angle.rms_deg,
                 rms_goal,
-            ));
+            );
+            if !c.pass && r.condition == reversal::CONDITION {
+                c.known_limit = Some(KNOWN_LIMIT_REVERSAL);
+            }
+            checks.push(c);
             if r.speed_fraction >= 0.5 {
                 checks.push(tables::check(
                     "excitation: |Ls estimate error| (%)",
@@ -451,7 +479,11 @@ impl ExcitationReport {
                 c.row,
                 c.value,
                 c.limit,
-                if c.pass { "pass" } else { "**FAIL**" }
+                match (c.pass, c.known_limit) {
+                    (true, _) => "pass".to_string(),
+                    (false, Some(k)) => format!("fail ({k})"),
+                    (false, None) => "**FAIL**".to_string(),
+                }
             );
         }
         s
