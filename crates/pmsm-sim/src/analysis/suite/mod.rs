@@ -179,7 +179,7 @@ pub const LIMIT_SPEED_PCT: f64 = 1.0;
 /// Goal: EKF angle RMS (deg el.) told a wrong `psi_f`, `Rs` or temperature, at >= 50 % speed.
 pub const GOAL_MISMATCH_RMS_DEG: f64 = 0.5;
 /// The known limit of a failing "told a wrong Ls" check (module docs, "Known limits").
-pub const KNOWN_LIMIT_LS: &str = "known limit without the d excitation (its rows: section excitation): Ls is not tracked online, bias about atan(dL i_q / psi_f) under load";
+pub const KNOWN_LIMIT_LS: &str = "known limit: Ls is not tracked online, bias about atan(dL i_q / psi_f) under load (remedy: the d excitation, section excitation)";
 /// Goal: EKF angle RMS (deg el.) told a wrong `Ls`, at >= 50 % speed.
 pub const GOAL_MISMATCH_LS_RMS_DEG: f64 = 1.0;
 /// Goal: EKF angle RMS (deg el.) told any wrong motor at 10 % speed, in the steady window
