@@ -11,6 +11,7 @@ pub mod catalog;
 pub mod drive;
 pub mod ekf;
 mod error;
+pub mod excitation;
 pub mod flux;
 pub mod fluxmap;
 pub mod motor;
@@ -28,6 +29,9 @@ pub use calibration::{Calibration, RecordCalibration};
 pub use drive::{DriveConfig, DriveEstimate, DriveObserver};
 pub use ekf::{Correction, CovarianceUpdate, Ekf, EkfError, MeasurementModel, ProcessModel};
 pub use error::{ConfigError, Matrix, Param};
+pub use excitation::{
+    ExcitationConfig, ExcitationError, ExcitationEstimate, ExcitationEstimator, excitation_sign,
+};
 pub use flux::{FluxAngleOutput, FluxEstimate, FluxObserver, FluxObserverConfig, FluxTiming};
 pub use fluxmap::{FluxMap, FluxMapError, FluxPoint};
 pub use motor::{

@@ -153,6 +153,45 @@ impl<T: Float> PmsmModel<T> {
         }
     }
 
+    /// The same model with the inductances `(ld_h, lq_h)` instead of the configured ones
+    /// (the flux `psi_f_wb` and the configured `Rs`, `Ts`, `Q`, `R` kept): every constant
+    /// that depends on `L` (`a = Rs / Lq`, `c = psi_f / Lq`, `1 / Lq`, the saliency, the
+    /// d-axis correction's gain, the decay and the input gain) recomputed as
+    /// [`PmsmModel::new`] does. The caller validates the values
+    /// ([`PmsmObserver::set_inductances`](super::PmsmObserver::set_inductances)).
+    pub(crate) fn with_inductances(&self, psi_f_wb: T, ld_h: T, lq_h: T) -> Self {
+        let d = &self.disc;
+        let ts = d.ts;
+        let a = self.rs / lq_h;
+        let (decay, input_gain) = match d.discretization {
+            Discretization::ForwardEuler => (T::one() - a * ts, ts / lq_h),
+            Discretization::LagFree => {
+                let one_minus_alpha = -(-a * ts).exp_m1();
+                (T::one() - one_minus_alpha, one_minus_alpha / self.rs)
+            }
+        };
+        Self {
+            disc: Discrete {
+                a,
+                c: psi_f_wb / lq_h,
+                inv_ls: T::one() / lq_h,
+                saliency: (ld_h - lq_h) / lq_h,
+                salient: ld_h != lq_h,
+                kd: lq_h / ld_h - T::one(),
+                decay,
+                one_minus_decay: T::one() - decay,
+                input_gain,
+                ..*d
+            },
+            ..*self
+        }
+    }
+
+    /// Configured `Rs`, ohm (the model's; a tracked one is the observer's).
+    pub(crate) fn rs(&self) -> T {
+        self.rs
+    }
+
     /// Sample time `Ts`, s.
     pub fn ts(&self) -> T {
         self.disc.ts

@@ -277,4 +277,52 @@ impl<T: Float> PmsmObserver<T> {
         self.refresh_rs_constants();
         Ok(())
     }
+
+    /// Hands the observer new inductances `(L_d, L_q)` at run time (e.g. from the d-axis
+    /// excitation's estimator, [`crate::excitation`]): the model's step constants, the
+    /// tracking's cached constants at its `Rs` and the tracker's `(L_d, L_q)` are rebuilt
+    /// from them; the state, covariance, `Q`, `R` (scaled from the configured motor by
+    /// `ObserverConfig::new`: a tuning, kept) and every other setting are kept. `Rs` is not set
+    /// here: with parameter tracking on it is the tracker's ([`Self::set_parameters`] sets
+    /// it), otherwise the configured one. Refused, nothing changed, when a value is not
+    /// finite or outside `[MIN_INDUCTANCE_H, MAX_INDUCTANCE_H]`, when `L_d == L_q` does not
+    /// hold as it did at configuration (a surface motor stays a surface motor: the saliency
+    /// decides the step's path and its safeguards' settings), when `L_q / L_d` leaves
+    /// `[MIN_SALIENCY_RATIO, MAX_SALIENCY_RATIO]`, or (forward Euler) when `Rs Ts >= 2 L_q`.
+    /// Not updated: the covariance health check's current bound and the acceleration
+    /// feedforward's constants (both set from the configured motor; scales, not models).
+    pub fn set_inductances(&mut self, ld_h: T, lq_h: T) -> Result<(), EkfError> {
+        let lo = to_t::<T>(crate::MIN_INDUCTANCE_H);
+        let hi = to_t::<T>(crate::MAX_INDUCTANCE_H);
+        let in_range = |l: T| l >= lo && l <= hi;
+        if !(in_range(ld_h) && in_range(lq_h)) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        let d = self.model.discrete();
+        let ratio = lq_h / ld_h;
+        if (ld_h != lq_h) != d.salient
+            || ratio < to_t(crate::MIN_SALIENCY_RATIO)
+            || ratio > to_t(crate::MAX_SALIENCY_RATIO)
+            || (d.discretization == super::Discretization::ForwardEuler
+                && self.model.rs() * d.ts >= to_t::<T>(2.0) * lq_h)
+        {
+            return Err(EkfError::NonFiniteInput);
+        }
+        self.model = self.model.with_inductances(self.nominal.0, ld_h, lq_h);
+        if let Some(Tracking { slow, .. }) = &mut self.tracking {
+            slow.k.ld = ld_h;
+            slow.k.lq = lq_h;
+        }
+        let rs = self.rs_constants.0;
+        self.rs_constants = (rs, self.model.discrete_at(self.nominal.0, rs));
+        Ok(())
+    }
+
+    /// The model's inductances `(L_d, L_q)`, H: the configured ones or the last set by
+    /// [`Self::set_inductances`].
+    pub fn inductances(&self) -> (T, T) {
+        let d = self.model.discrete();
+        let lq = T::one() / d.inv_ls;
+        (lq / (T::one() + d.saliency), lq)
+    }
 }

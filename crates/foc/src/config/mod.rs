@@ -53,8 +53,12 @@ use core::f32::consts::PI;
 
 use ekf_core::{MotorParams, ObserverConfig};
 
+#[cfg(feature = "d-excitation")]
+mod excitation;
 mod validate;
 
+#[cfg(feature = "d-excitation")]
+pub use excitation::DExcitation;
 pub use validate::{ConfigError, Field};
 
 use crate::pi::PiGains;
@@ -454,6 +458,10 @@ pub struct FocConfig {
     /// (the speed loop's command unit). (Cargo feature `flux-map`.)
     #[cfg(feature = "flux-map")]
     pub flux_map: Option<crate::mapdrive::MapTables>,
+    /// A square-wave d-current excitation in closed loop (module `excitation`), `None` by
+    /// default. (Cargo feature `d-excitation`.)
+    #[cfg(feature = "d-excitation")]
+    pub d_excitation: Option<DExcitation>,
 }
 
 /// `x` rounded to the nearest integer, as `u16` (saturating; NaN gives 0).
@@ -528,6 +536,8 @@ impl FocConfig {
             },
             #[cfg(feature = "flux-map")]
             flux_map: None,
+            #[cfg(feature = "d-excitation")]
+            d_excitation: None,
         }
         .with_inertia(kt / 1000.0)
     }

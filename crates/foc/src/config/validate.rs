@@ -76,6 +76,16 @@ impl FocConfig {
                 return Err(ConfigError::OutOfRange(F::FluxMap));
             }
         }
+        #[cfg(feature = "d-excitation")]
+        if let Some(x) = &self.d_excitation {
+            positive(x.amplitude_a, F::DExcitation)?;
+            if x.amplitude_a > self.current_limit_a
+                || x.half_period_ticks < 2
+                || !(x.min_speed_rad_s >= 0.0 && x.min_speed_rad_s.is_finite())
+            {
+                return Err(ConfigError::OutOfRange(F::DExcitation));
+            }
+        }
         let s = &self.startup;
         positive(s.align_current_a, F::AlignCurrent)?;
         if s.align_current_a > self.current_limit_a {
@@ -212,6 +222,9 @@ pub enum Field {
     StuckAngle,
     /// `flux_map`: its torque constant is not the motor's (`1.5 p psi_f`) within 1e-4.
     FluxMap,
+    /// `d_excitation`: amplitude not positive or above the current limit, a half period
+    /// under 2 ticks, or a minimum speed negative or not finite.
+    DExcitation,
     /// `field_weakening.voltage_margin`.
     FwVoltageMargin,
     /// `field_weakening.bandwidth_rad_s`.

@@ -560,6 +560,15 @@ impl Foc {
         } else {
             plan.i_ref
         };
+        // The d-axis excitation in closed loop (`FocConfig::d_excitation`).
+        #[cfg(feature = "d-excitation")]
+        let i_ref = match &self.cfg.d_excitation {
+            Some(x) if plan.frame.emf && plan.frame.omega.abs() >= x.min_speed_rad_s => Dq {
+                d: i_ref.d + x.offset_a(self.tick_count),
+                q: i_ref.q,
+            },
+            _ => i_ref,
+        };
         let (u_dq, limited) = if sample_ok {
             let e = i_ref - i_dq;
             let u_d = self.pi_d.step(e.d, ff.d, -u_max, u_max);

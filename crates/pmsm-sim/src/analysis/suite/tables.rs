@@ -55,6 +55,7 @@ impl SuiteReport {
     pub fn unexpected_failures(&self) -> impl Iterator<Item = &Check> {
         self.checks
             .iter()
+            .chain(&self.excitation.checks)
             .filter(|c| !c.pass && c.known_limit.is_none())
     }
 
@@ -433,7 +434,9 @@ impl SuiteReport {
             );
         }
         let failed = self.checks.iter().filter(|c| !c.pass).count();
-        let unexpected = self.unexpected_failures().count();
+        let unexpected = (self.checks.iter())
+            .filter(|c| !c.pass && c.known_limit.is_none())
+            .count();
         let _ = writeln!(
             s,
             "\n{} of {} checks pass; of the {} failing, {} known limits (module docs of pmsm_sim::analysis::suite), {} not. Wall time {:.2} s.",
@@ -444,6 +447,7 @@ impl SuiteReport {
             unexpected,
             self.wall_time_s
         );
+        s.push_str(&self.excitation.to_markdown());
         s
     }
 }

@@ -1,0 +1,27 @@
+//! The d-axis excitation rows of the suite (short run, seed 1): told `Ls` +-20 %, the default
+//! EKF handed the excitation estimator's `Ls` meets the goals (the reversal under load but on the 2.2 kW motor) (module
+//! `pmsm_sim::analysis::suite::excitation`).
+
+use pmsm_sim::analysis::suite::excitation::excitation_rows;
+use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions};
+
+#[test]
+fn excitation_rows_meet_their_goals() {
+    let opts = SuiteOptions {
+        short: true,
+        ..SuiteOptions::default()
+    };
+    let report = excitation_rows(&opts, &SuiteMotor::SURFACE).unwrap();
+    println!("{}", report.to_markdown());
+    // 3 motors x 3 cases x (4 main windows + the reversal).
+    assert_eq!(report.rows.len(), 3 * 3 * 5);
+    assert_eq!(report.cost.len(), 3 * 4);
+    // Every check passes but the reversal on the 2.2 kW motor (a known limit, named).
+    for c in &report.checks {
+        let known = c.motor == SuiteMotor::Industrial2k2 && c.row.contains("reversal");
+        assert!(c.pass || (known && c.known_limit.is_some()), "{c:?}");
+        if known {
+            assert!(c.value <= 4.0, "{c:?}");
+        }
+    }
+}
