@@ -25,6 +25,12 @@ fn simulated() -> (PathBuf, ReplayMotor, Scenario) {
     let sc = Scenario::default_servo().with_duration(0.35);
     let path = tmp("run.mcap");
     support::log_run(&sc, &path, LogOptions::default());
+    let motor = motor_of(&sc);
+    (path, motor, sc)
+}
+
+/// The replay's motor file of a scenario (its observer's parameters and `Ts`).
+fn motor_of(sc: &Scenario) -> ReplayMotor {
     let m = sc.observer_params();
     let toml = format!(
         "rs_ohm = {}\nld_h = {}\nlq_h = {}\npsi_f_wb = {}\npole_pairs = {}\nts_s = {}\n",
@@ -35,8 +41,7 @@ fn simulated() -> (PathBuf, ReplayMotor, Scenario) {
         m.pole_pairs,
         sc.ts_s()
     );
-    let motor = parse_motor(&toml, "motor.toml").unwrap_or_else(|e| panic!("{e}"));
-    (path, motor, sc)
+    parse_motor(&toml, "motor.toml").unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The log as a CSV in the documented format: row `k` carries the voltage of the period that
@@ -237,10 +242,14 @@ fn replay_of_simulated_logs() {
 /// RMS 0.069 / 3.96 / 6.17 deg default, 0.070 / 2.91 / 5.35 deg told the calibration.
 #[test]
 fn calibration_finds_a_known_lead() {
+    // A directory of its own: the other tests of this binary run in parallel and remove
+    // theirs.
+    let dir = std::env::temp_dir().join(format!("pmsm-sim-replay-lead-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+    let path = dir.join("lead.mcap");
     let sc = Scenario::default_servo();
-    let path = tmp("lead.mcap");
     support::log_run(&sc, &path, LogOptions::default());
-    let (_, motor, _) = simulated();
+    let motor = motor_of(&sc);
     let exact = read_log(&path, Scaling::Amplitude).unwrap_or_else(|e| panic!("{e}"));
     let ts = motor.ts_s;
     for delay in [0usize, 1, 2] {
@@ -280,6 +289,7 @@ fn calibration_finds_a_known_lead() {
         assert_eq!(sc.tracking_while_lost, 0);
         let _ = ts;
     }
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
