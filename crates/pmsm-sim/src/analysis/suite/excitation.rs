@@ -277,8 +277,7 @@ fn motor_rows(
                 latest,
             });
         }
-        let mut drive = sensored_drive(&sc)?;
-        drive_with_excitation(&mut drive, &sc, a)?;
+        let mut drive = drive_with_excitation(&sc, a)?;
         let mut with = CostSink::new(plan, &sc);
         run_excited(&sc, &mut drive, &mut excited, &mut with)?;
         let mut without = CostSink::new(plan, &sc);
@@ -323,31 +322,18 @@ fn motor_rows(
     Ok(())
 }
 
-/// Turns the excitation on in a sensored drive built by [`sensored_drive`].
+/// A sensored drive ([`sensored_drive`]) with the excitation on.
 fn drive_with_excitation(
-    drive: &mut crate::drive::foc_adapter::FocDrive,
     sc: &Scenario,
     a: f64,
-) -> Result<(), SimError> {
-    let mut cfg = sc.foc_config().map_err(|e| SimError::Scenario {
-        file: sc.name.clone(),
-        field: e.field,
-        problem: e.problem,
-    })?;
-    cfg.speed_slew_rad_s2 *= 100.0;
-    cfg.d_excitation = Some(foc::config::DExcitation {
-        amplitude_a: a as f32,
-        half_period_ticks: HALF_PERIOD,
-        min_speed_rad_s: (MIN_LS_SPEED_FRACTION * sc.rated_speed_e_rad_s()) as f32,
-    });
-    *drive = crate::drive::foc_adapter::FocDrive::new(&cfg, 0.0, None).map_err(|e| {
-        SimError::Scenario {
-            file: sc.name.clone(),
-            field: "controller.foc".into(),
-            problem: e.to_string(),
-        }
-    })?;
-    Ok(())
+) -> Result<crate::drive::foc_adapter::FocDrive, SimError> {
+    sensored_drive_with(sc, |cfg| {
+        cfg.d_excitation = Some(foc::config::DExcitation {
+            amplitude_a: a as f32,
+            half_period_ticks: HALF_PERIOD,
+            min_speed_rad_s: (MIN_LS_SPEED_FRACTION * sc.rated_speed_e_rad_s()) as f32,
+        });
+    })
 }
 
 /// One run with the excited observers alongside and a cost sink.
@@ -470,22 +456,7 @@ impl ExcitationReport {
             s,
             "\n| check | motor | row | value | limit | result |\n|---|---|---|---|---|---|"
         );
-        for c in &self.checks {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {:.3} | {} | {} |",
-                c.name,
-                c.motor.name(),
-                c.row,
-                c.value,
-                c.limit,
-                match (c.pass, c.known_limit) {
-                    (true, _) => "pass".to_string(),
-                    (false, Some(k)) => format!("fail ({k})"),
-                    (false, None) => "**FAIL**".to_string(),
-                }
-            );
-        }
+        super::tables::write_check_rows(&mut s, &self.checks);
         s
     }
 }

@@ -400,12 +400,21 @@ pub(super) fn run_scored_with(
 /// turn the scenario's ramps into slower ones and leave the windows on a ramp; the profile's
 /// ramps are the acceleration here.
 pub(super) fn sensored_drive(sc: &Scenario) -> Result<FocDrive, SimError> {
+    sensored_drive_with(sc, |_| {})
+}
+
+/// [`sensored_drive`] with its configuration changed by `edit` first.
+pub(super) fn sensored_drive_with(
+    sc: &Scenario,
+    edit: impl FnOnce(&mut foc::FocConfig),
+) -> Result<FocDrive, SimError> {
     let mut cfg = sc.foc_config().map_err(|e| SimError::Scenario {
         file: sc.name.clone(),
         field: e.field,
         problem: e.problem,
     })?;
     cfg.speed_slew_rad_s2 *= 100.0;
+    edit(&mut cfg);
     FocDrive::new(&cfg, 0.0, None).map_err(|e| SimError::Scenario {
         file: sc.name.clone(),
         field: "controller.foc".into(),

@@ -417,22 +417,7 @@ impl SuiteReport {
         );
         let _ = writeln!(s, "| check | motor | row | value | limit | result |");
         let _ = writeln!(s, "|---|---|---|---|---|---|");
-        for c in &self.checks {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {:.3} | {} | {} |",
-                c.name,
-                c.motor.name(),
-                c.row,
-                c.value,
-                c.limit,
-                match (c.pass, c.known_limit) {
-                    (true, _) => "pass".to_string(),
-                    (false, Some(k)) => format!("fail ({k})"),
-                    (false, None) => "**FAIL**".to_string(),
-                }
-            );
-        }
+        write_check_rows(&mut s, &self.checks);
         let failed = self.checks.iter().filter(|c| !c.pass).count();
         let unexpected = (self.checks.iter())
             .filter(|c| !c.pass && c.known_limit.is_none())
@@ -458,5 +443,26 @@ pub(super) fn short_name(k: ObserverKind) -> &'static str {
         ObserverKind::SeedEkf => "seed's filter",
         ObserverKind::FluxBaseline => "flux + PLL baseline",
         ObserverKind::DefaultEkf => "default EKF",
+    }
+}
+
+/// The rows of a checks table (`| check | motor | row | value | limit | result |`).
+pub(super) fn write_check_rows(s: &mut String, checks: &[Check]) {
+    use std::fmt::Write as _;
+    for c in checks {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {:.3} | {} | {} |",
+            c.name,
+            c.motor.name(),
+            c.row,
+            c.value,
+            c.limit,
+            match (c.pass, c.known_limit) {
+                (true, _) => "pass".to_string(),
+                (false, Some(k)) => format!("fail ({k})"),
+                (false, None) => "**FAIL**".to_string(),
+            }
+        );
     }
 }
