@@ -1,4 +1,4 @@
-//! Instructions per call on a Cortex-M4F (docs/design.md section 5, "Cortex-M4F cost").
+//! Instructions per call on a Cortex-M4F (docs/design.md, "Metrics", "Cortex-M4F cost").
 //!
 //! Run: `cargo bench -p benches --bench cortex_m4`. It checks that `qemu-system-arm` is there
 //! and runs `scripts/qemu-firmware.sh --no-install`, which builds `crates/foc-firmware` for

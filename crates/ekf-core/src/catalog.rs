@@ -1,4 +1,4 @@
-//! The reference motors, each defined once (docs/design.md section 6): electrical data,
+//! The reference motors, each defined once (docs/design.md, "Reference motors"): electrical data,
 //! mechanics, rated point and the drive they are run on. The observer's presets
 //! ([`MotorParams::servo`], ...), the simulator's plant and scenarios (by [`ReferenceMotor::name`])
 //! and the firmware read them from here.
@@ -182,7 +182,7 @@ impl ReferenceMotor {
 }
 
 /// Motor data from a datasheet, converted to the per-phase, amplitude-invariant quantities
-/// the model uses (docs/design.md section 4).
+/// the model uses (docs/design.md, "Conventions").
 ///
 /// Conventions (state them when you copy a datasheet):
 /// - `R` and `L` are often given **line to line** (measured between two terminals of a star

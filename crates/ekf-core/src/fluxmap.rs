@@ -1,6 +1,6 @@
 //! Flux maps of a saturating machine: `psi_d(i_d, i_q)` and `psi_q(i_d, i_q)` on a current
 //! grid, with an interpolation whose first derivatives (the incremental inductances) are
-//! continuous (docs/design.md section 8).
+//! continuous (docs/design.md, "The motor as it physically is").
 //!
 //! # Model
 //!

@@ -1,5 +1,5 @@
 //! An observer for saturating machines: the EKF of the PMSM observer with its motor model
-//! replaced by a [`FluxMap`] (docs/design.md section 8).
+//! replaced by a [`FluxMap`] (docs/design.md, "The motor as it physically is").
 //!
 //! # Formulation: currents as state, flux-consistent prediction
 //!

@@ -1,6 +1,6 @@
 //! An algebraic saturation model: the stator current as a function of the stator flux,
 //! `i = f(psi)`, with self-, cross- and (for permanent-magnet machines) bridge saturation in a
-//! dozen coefficients, and its sampling into a [`FluxMap`] (docs/design.md section 8).
+//! dozen coefficients, and its sampling into a [`FluxMap`] (docs/design.md, "The motor as it physically is").
 //!
 //! # Model
 //!

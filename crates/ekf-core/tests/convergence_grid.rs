@@ -1,5 +1,5 @@
 //! Convergence from any initial angle error with the rotor spinning and the speed estimate 0
-//! (docs/design.md section 3, "theta+pi lock"): the three reference motors at +-10 %, +-50 % and
+//! (docs/design.md, "The reference filter", "theta+pi lock"): the three reference motors at +-10 %, +-50 % and
 //! +-100 % of their rated speed, initial angle errors every 30 deg (every 10 deg with
 //! `EKF_GRID_FULL=1`). A cell passes when the wrapped angle error is below 5 deg el. from some
 //! time before 50 ms to the end of the 100 ms run.

@@ -237,7 +237,7 @@ fn run() -> Result<(), &'static str> {
             checked: true,
         },
         Variant {
-            // Forward Euler lags by about w Ts / 2 = 1.2 deg here (docs/design.md section 3).
+            // Forward Euler lags by about w Ts / 2 = 1.2 deg here (docs/design.md, "The reference filter").
             name: "ekf_step_euler",
             cfg: ObserverConfig {
                 discretization: Discretization::ForwardEuler,
@@ -249,7 +249,7 @@ fn run() -> Result<(), &'static str> {
         },
         Variant {
             // The seed's tuning, counted only: started from x0 = 0 it can settle in the
-            // theta + pi state with the speed's sign flipped (docs/design.md section 3).
+            // theta + pi state with the speed's sign flipped (docs/design.md, "The reference filter").
             name: "ekf_step_seed",
             cfg: ObserverConfig::seed(MotorParams::servo(), TS_S),
             max_angle_err_deg: 5.0,

@@ -16,7 +16,7 @@
 //!   observer's [`Status`](ekf_core::Status) also reads `Uncertain` while the speed is not
 //!   known to be away from zero; the controller knows that from its own state machine, so
 //!   that part is not a loss here.
-//! - **theta + pi lock** (docs/design.md section 3: `(w, th)` and `(-w, th + pi)` give the same
+//! - **theta + pi lock** (docs/design.md, "The reference filter": `(w, th)` and `(-w, th + pi)` give the same
 //!   back-EMF). Under I/f the rotor's d axis stays within 90 deg of the current vector
 //!   (a stable load angle), so an estimate more than `lock_angle_rad` (default 135 deg) away
 //!   from the vector, or a speed estimate of the opposite sign to the ramp (beyond a quarter

@@ -31,7 +31,7 @@
 //! i_d = (psi_f - sqrt(psi_f^2 + 4 a^2 i_q^2)) / (2 a) = -2 a i_q^2 / (psi_f + sqrt(psi_f^2 + 4 a^2 i_q^2))
 //! ```
 //!
-//! (docs/design.md section 7; the second line is the same curve parameterized by `i_q`, from
+//! (docs/design.md, "The real motor"; the second line is the same curve parameterized by `i_q`, from
 //! `psi_f i_d + a (i_d^2 - i_q^2) = 0`). The right-hand forms are the rationalized ones used
 //! here: exact for `a -> 0` (surface: `i_d = 0`), no cancellation, and the same formula
 //! gives the positive `i_d` of an inversely salient motor (`a < 0`).

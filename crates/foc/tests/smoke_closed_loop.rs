@@ -1,5 +1,5 @@
 //! Minimal closed-loop smoke test: sensorless start from standstill on the self-written plant
-//! of tests/common (servo motor of docs/design.md section 6, J = 8e-4 kg m^2, B = 1e-3, RK4 with 4
+//! of tests/common (servo motor of docs/design.md, "Reference motors", J = 8e-4 kg m^2, B = 1e-3, RK4 with 4
 //! substeps), 20 kHz PWM, 300 V bus, the one-period computation delay of a real inverter, and
 //! 40 mA of current-sensor noise. The full closed-loop scenarios with `pmsm-sim` live elsewhere.
 //!

@@ -2,7 +2,7 @@
 //!
 //! `tests/data/motulator/gen_motulator_trace.py` (workspace root) drives motulator's
 //! synchronous machine and mechanics with an open-loop V/f voltage sequence on the 2.2 kW
-//! motor of docs/design.md section 6 and records, every period, the applied `u_alpha_beta`, the
+//! motor of docs/design.md, "Reference motors" and records, every period, the applied `u_alpha_beta`, the
 //! load torque and the machine's currents, speed and angle. This test feeds the same voltages
 //! and load to [`Plant`] and compares: the currents and the speed must agree within 1 % RMS of
 //! their range over the whole trace (README of that folder: how to regenerate).
@@ -65,7 +65,7 @@ fn rms_of_range(a: &[f64], b: &[f64]) -> f64 {
 fn plant_agrees_with_motulator() {
     let rows = rows();
     assert_eq!(rows.len(), 4000);
-    // The 2.2 kW motor of docs/design.md section 6, with the large friction the fixture's script
+    // The 2.2 kW motor of docs/design.md, "Reference motors", with the large friction the fixture's script
     // uses to damp open-loop hunting.
     let motor = MotorModel {
         b_nm_s_rad: 0.1,

@@ -1,6 +1,6 @@
 """Makes the motulator cross-check fixture for pmsm-sim's plant (see README.md here).
 
-The 2.2 kW motor of docs/design.md section 6 (surface variant: Rs 3.6 ohm, Ld = Lq = 36 mH,
+The 2.2 kW motor of docs/design.md, "Reference motors" (surface variant: Rs 3.6 ohm, Ld = Lq = 36 mH,
 psi_f 0.545 Wb, 3 pole pairs, J 0.015 kg m^2) with viscous friction B = 0.1 N m s/rad
 (chosen large: it damps the open-loop V/f hunting after the load step, so the comparison
 stays well conditioned), on a 540 V inverter at 4 kHz, is driven open loop by a V/f voltage

@@ -15,7 +15,7 @@
 //!      (= the voltage of d[k] unless clamped) into a 2-deep history
 //! ```
 //!
-//! # Timing (docs/design.md section 4) and the computation delay
+//! # Timing (docs/design.md, "Conventions") and the computation delay
 //!
 //! The ADC samples `i[k]` at `t_k`; the duties computed by tick `k` are loaded by the PWM
 //! timer at the next period boundary and applied over `[t_k+1, t_k+2)`

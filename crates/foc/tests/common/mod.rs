@@ -24,7 +24,7 @@ pub struct Plant {
 }
 
 impl Plant {
-    /// The servo motor of docs/design.md section 6 (J 8e-4, B 1e-3).
+    /// The servo motor of docs/design.md, "Reference motors" (J 8e-4, B 1e-3).
     pub fn servo() -> Self {
         Self {
             rs: 2.875,

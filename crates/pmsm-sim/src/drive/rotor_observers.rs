@@ -2,7 +2,7 @@
 //! observer stepped alongside the drive (the default EKF and the reference filter of every run,
 //! the flux + PLL baseline and the EKFs of the suite).
 //!
-//! An observer steps once per period with the timing of docs/design.md section 4: `u_prev` the
+//! An observer steps once per period with the timing of docs/design.md, "Conventions": `u_prev` the
 //! voltage held over the previous period as the controller knows it, `i_ab_a` the currents
 //! measured now. It returns an [`ObserverEstimate`] (angle, speed, and what it can tell of its
 //! uncertainty), which the run loop scores against the truth

@@ -95,7 +95,7 @@ pub const TOPIC_METRICS: &str = "/pmsm_sim/metrics";
 pub const TOPIC_EVENT: &str = "/pmsm_sim/event";
 
 const SCENARIO_SCHEMA: &str = r#"{"title":"pmsm_sim.Scenario","type":"object","properties":{"name":{"type":"string"},"toml":{"type":"string","description":"the scenario as TOML"},"scenario":{"type":"object","description":"the scenario (same fields as the TOML)"}}}"#;
-const METRICS_SCHEMA: &str = r#"{"title":"pmsm_sim.Metrics","type":"object","description":"metrics of the run (docs/design.md section 5; see the crate README)"}"#;
+const METRICS_SCHEMA: &str = r#"{"title":"pmsm_sim.Metrics","type":"object","description":"metrics of the run (docs/design.md, Metrics; see the crate README)"}"#;
 const EVENT_SCHEMA: &str = r#"{"title":"pmsm_sim.Event","type":"object","properties":{"t_s":{"type":"number","description":"simulated time, s"},"level":{"type":"string"},"message":{"type":"string"}}}"#;
 
 /// Chunk compression of the log.

@@ -1,5 +1,5 @@
 //! The plant's reference frames in `f64`: Clarke and Park transforms of phase quantities
-//! (docs/design.md section 4). The drive's own transforms are `foc`'s (`f32`); the plant keeps
+//! (docs/design.md, "Conventions"). The drive's own transforms are `foc`'s (`f32`); the plant keeps
 //! its physics in `f64`.
 //!
 //! Amplitude-invariant Clarke transform:

@@ -4,7 +4,7 @@
 //! # Model (switching-cycle average over one PWM period)
 //!
 //! The PWM period `[t_k, t_k+1)` is the control period (single update, sampling at the PWM
-//! centre, docs/design.md section 4). Over a period the inverter applies the duties `d_x` it
+//! centre, docs/design.md, "Conventions"). Over a period the inverter applies the duties `d_x` it
 //! holds; the averaged pole voltage of leg `x` (against the negative rail) is
 //!
 //! ```text

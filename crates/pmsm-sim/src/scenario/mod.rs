@@ -533,7 +533,7 @@ impl Scenario {
     }
 
     /// The built-in default scenario (`scenarios/default.toml`): the `foc` crate's sensorless
-    /// controller on the servo motor of docs/design.md section 6 at 10 kHz, from standstill to
+    /// controller on the servo motor of docs/design.md, "Reference motors" at 10 kHz, from standstill to
     /// rated speed, a rated load step and a reversal.
     ///
     /// # Panics

@@ -1,6 +1,6 @@
 //! The closed-loop run: plant, inverter, sensors, controller, and the observer(s) alongside.
 //!
-//! # One PWM period `k` (timing of docs/design.md section 4)
+//! # One PWM period `k` (timing of docs/design.md, "Conventions")
 //!
 //! 1. The plant is at `x(t_k)`; the sensor samples the phase currents `i[k]` (PWM centre) and
 //!    the DC bus.

@@ -1,5 +1,5 @@
 //! The scenario suite (`pmsm-sim suite`): a fixed set of runs on the three reference motors
-//! of docs/design.md section 6 and the two interior ones of the README's reference-motor table,
+//! of docs/design.md, "Reference motors" and the two interior ones of the README's reference-motor table,
 //! that scores every observer on identical data, and the tables that compare them over time.
 //!
 //! # What runs
@@ -52,7 +52,7 @@
 //! settle, window                                                       -> row "100 %, rated load"
 //! ```
 //!
-//! # Metrics (docs/design.md section 5)
+//! # Metrics (docs/design.md, "Metrics")
 //!
 //! Over each steady-state window: angle error `wrap(th_hat - th)` RMS, max `|.|` and mean
 //! (electrical degrees), speed error RMS (electrical rad/s and % of rated). Load step: the
@@ -427,7 +427,7 @@ impl Default for SuiteOptions {
     }
 }
 
-/// The reference motors: the three surface motors of docs/design.md section 6 and the two
+/// The reference motors: the three surface motors of docs/design.md, "Reference motors" and the two
 /// interior ones of the README's reference-motor table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]

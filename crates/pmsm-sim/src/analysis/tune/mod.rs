@@ -2,7 +2,7 @@
 //!
 //! # Method
 //!
-//! Given a record (voltages `u_ab`, measured currents `i_ab`, docs/design.md section 4 timing:
+//! Given a record (voltages `u_ab`, measured currents `i_ab`, docs/design.md, "Conventions" timing:
 //! row `k` of `u_ab` is the voltage held over `[t_k, t_k+1)`, so sample `k` predicts with
 //! `u_ab[k-1]`, zero for `k = 0`), the observer ([`ekf_core::PmsmObserver`], `f64`) is run
 //! with candidate noise parameters and scored by the log-likelihood of its innovations
@@ -553,7 +553,7 @@ fn option_err(name: &'static str, problem: String) -> TuneError {
 /// Proposes `Q` and `R` for a record by maximizing the innovation likelihood (module docs).
 ///
 /// `u_ab[k]` is the voltage held over `[t_k, t_k+1)`, `i_ab[k]` the currents sampled at `t_k`
-/// (docs/design.md section 4); non-finite rows are rejected by the filter and not scored.
+/// (docs/design.md, "Conventions"); non-finite rows are rejected by the filter and not scored.
 /// `truth`, when given, adds the angle error of the start and the tuned filter to the report.
 /// Each objective evaluation is one filter pass over the record: the cost is about
 /// `max_evaluations` passes.

@@ -1,4 +1,4 @@
-//! Metrics of a run (docs/design.md section 5), computed on the fly (no trace needed).
+//! Metrics of a run (docs/design.md, "Metrics"), computed on the fly (no trace needed).
 //!
 //! For an observer:
 //!
@@ -23,7 +23,7 @@
 //! `f32` EKF), and for it also over the **closed-loop window**: the periods in which the
 //! controller runs on that observer's angle (`foc` states `handover` and `closed_loop`) with
 //! `|w_e| >= 5 %` of rated, i.e. its accuracy after the hand-over, which is what the drive
-//! depends on (its docs/design.md section 5 convergence time also counts the start-up and the
+//! depends on (its docs/design.md, "Metrics" convergence time also counts the start-up and the
 //! zero-speed crossings, where `foc` does not use it).
 //!
 //! For the run: simulated time, wall time and the real-time factor, and figures of the drive:

@@ -13,7 +13,7 @@
 //! dth/dt      = w_e = p w_mech
 //! ```
 //!
-//! With `Ld = Lq = Ls` this is the surface motor of docs/design.md section 2. `T_load` is the
+//! With `Ld = Lq = Ls` this is the surface motor of docs/design.md, "The motor model". `T_load` is the
 //! torque the load takes from the shaft (positive brakes positive rotation); `Tc` is the
 //! Coulomb friction, with sticking: a shaft at rest stays at rest while
 //! `|Te - T_load| <= Tc`, and a shaft that would cross zero speed within a period under a net
@@ -22,7 +22,7 @@
 //! # Integration ([`Plant::step`])
 //!
 //! The inverter holds the stator voltage `u_ab` constant in the stationary frame over each
-//! period `[t_k, t_k + h)` (docs/design.md section 4), and the load torque is held too. One step:
+//! period `[t_k, t_k + h)` (docs/design.md, "Conventions"), and the load torque is held too. One step:
 //!
 //! 1. **Speed for the period.** The mechanical acceleration at `t_k` gives the mid-period
 //!    speed `w_m = w_e(t_k) + p a(t_k) h / 2`; the rotor turns at `w_m` over the period

@@ -271,7 +271,7 @@ impl EmfHarmonics {
 }
 
 impl MotorModel {
-    /// A reference motor of the catalog (`ekf_core::catalog`, docs/design.md section 6):
+    /// A reference motor of the catalog (`ekf_core::catalog`, docs/design.md, "Reference motors"):
     /// its electrical data and mechanics, no Coulomb friction, a sinusoidal EMF.
     pub fn from_catalog(m: &ReferenceMotor) -> Self {
         Self {
@@ -334,7 +334,7 @@ impl MotorModel {
     }
 
     /// The d-axis current of the maximum-torque-per-ampere law for a current magnitude
-    /// `|i| = i_a` (docs/design.md section 7): `i_d = (psi_f - sqrt(psi_f^2 + 8 (Lq - Ld)^2 i^2))
+    /// `|i| = i_a` (docs/design.md, "The real motor"): `i_d = (psi_f - sqrt(psi_f^2 + 8 (Lq - Ld)^2 i^2))
     /// / (4 (Lq - Ld))`, A; `0` for a surface motor (and for `Lq < Ld`, which this law does not
     /// cover). Non-positive for `Lq > Ld`, and `|i_d| <= |i|`.
     pub fn mtpa_i_d_a(&self, i_a: f64) -> f64 {
