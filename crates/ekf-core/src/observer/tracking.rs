@@ -100,9 +100,9 @@
 //! The EKF's flux is frozen while the speed estimate departs from its low-pass (a speed
 //! ramp): its speed state is a random walk and lags an acceleration `a` by about `a / k`
 //! (`k` its speed gain), and the lumped flux would absorb that lag as `psi_f dw / w`. With
-//! [`ParameterTracking::transient_flux`] (opt-in, host builds, feature `std`; refused
-//! without it, whose step carries none of its code; off by default: on the third-party trace of the 2.2 kW motor (motulator; pyfoc's `test_third_party.py`) the default EKF's RMS grows from 0.059 to 0.137 deg with it) the split filter's window goes on while the flux is frozen (a speed change,
-//! the settling time) as long as the angle is tracked above the minimum speed, and each
+//! [`ParameterTracking::transient_flux`] (the default in host builds, feature `std`; off
+//! and refused without it, whose step carries none of its code) the split filter's window
+//! goes on while the flux is frozen (a speed change, the settling time) as long as the angle is tracked above the minimum speed, and each
 //! window of an acceleration corrects the frozen flux. This is a two-time-scale design: the
 //! fast part (the EKF's current, speed and angle) runs at the frozen flux; the slow part
 //! reads the flux once per window from quantities that an acceleration does not bias.
@@ -117,7 +117,12 @@
 //! read in a frame `e` off: `cos e` on the EMF and `sin e` times `u_d` from the d axis), a
 //! few per cent for the first window after a 10 % flux error, less at each window as the
 //! corrected flux pulls the angle in; and the cross term `mean(w i_d)` read as `mean(w)
-//! mean(i_d)` (exact at `i_d = 0`).
+//! mean(i_d)` (exact at a constant `i_d`). `mean(i_d)` is the window's own mean of the
+//! current in the frame of each period's start, not the mean of the window's two ends: where
+//! a ramp ends within a window the current turns (on motulator's V/f trace of the 2.2 kW
+//! motor `i_d` swings by 0.2 A there), and `w L_d` times the ends' error read as a flux
+//! error of 0.5 % (`test_third_party.py`: the EKF's RMS 0.137 deg with the ends' mean, 0.059
+//! deg with the window's, as without the start-up flux).
 //!
 //! The update: `m - Rs r` (at the `Rs` in use, the lumped flux the EKF's model needs) is a
 //! measurement of the frozen flux with the window's variance, in a scalar Kalman update of the
@@ -218,6 +223,7 @@ pub(super) struct TrackerStep<T> {
     pub sum_uq: T,
     pub sum_iq: T,
     pub sum_w: T,
+    pub sum_id: T,
     pub n: u32,
     /// Whether the window follows the previous one without a gap (its start is the previous
     /// window's end).
@@ -241,6 +247,7 @@ impl<T: Float> TrackerStep<T> {
             sum_uq: T::zero(),
             sum_iq: T::zero(),
             sum_w: T::zero(),
+            sum_id: T::zero(),
             n: 0,
             contiguous: false,
             since_sigma,
@@ -274,6 +281,7 @@ pub(super) struct Window<T> {
     pub uq: T,
     pub iq: T,
     pub w: T,
+    pub id: T,
     pub n: u32,
     pub contiguous: bool,
 }
@@ -544,6 +552,12 @@ impl<T: Float> Tracker<T> {
             sum_uq: base.sum_uq + (u[1] * t.cos_th - u[0] * t.sin_th),
             sum_iq: base.sum_iq + (x[1] * t.cos_th - x[0] * t.sin_th),
             sum_w: base.sum_w + x[2],
+            // The start-up flux's windows only (host builds): the M4F step carries none of it.
+            sum_id: if TRANSIENT {
+                base.sum_id + (x[0] * t.cos_th + x[1] * t.sin_th)
+            } else {
+                T::zero()
+            },
             n: base.n + 1,
             contiguous: base.contiguous,
             since_sigma,
@@ -609,6 +623,9 @@ impl<T: Float> Tracker<T> {
         self.s.sum_uq = s.sum_uq;
         self.s.sum_iq = s.sum_iq;
         self.s.sum_w = s.sum_w;
+        if TRANSIENT {
+            self.s.sum_id = s.sum_id;
+        }
         self.s.n = s.n;
         self.s.contiguous = s.contiguous;
         self.s.since_sigma = s.since_sigma;
@@ -655,6 +672,7 @@ impl<T: Float> Tracker<T> {
                 uq: self.s.sum_uq,
                 iq: self.s.sum_iq,
                 w: self.s.sum_w,
+                id: self.s.sum_id,
                 n: self.s.n,
                 contiguous: self.s.contiguous,
             };
@@ -696,6 +714,7 @@ impl<T: Float> Tracker<T> {
         self.s.sum_uq = T::zero();
         self.s.sum_iq = T::zero();
         self.s.sum_w = T::zero();
+        self.s.sum_id = T::zero();
         self.s.n = 0;
         self.s.contiguous = false;
     }
@@ -827,6 +846,7 @@ mod tests {
                 uq: f64::from(n) * w * psi_m,
                 iq: 0.0,
                 w: f64::from(n) * w,
+                id: 0.0,
                 n,
                 contiguous: true,
             };

@@ -65,8 +65,8 @@ pub struct ParameterTracking<T> {
     pub rs_temperature_coefficient_per_k: T,
     /// How `Rs` is tracked.
     pub rs: RsTracking<T>,
-    /// Start-up flux from the split filter's windows (with [`RsTracking::Split`] only; off by
-    /// default): until the EKF's own tracking has ended a window, the windows
+    /// Start-up flux from the split filter's windows (with [`RsTracking::Split`] only; on by
+    /// default in builds with the cargo feature `std`, off without it): until the EKF's own tracking has ended a window, the windows
     /// also run while the flux is frozen (a speed change, the settling time), and each window
     /// of an acceleration corrects the frozen flux (module docs of
     /// `ekf_core::observer::tracking`, "Tracking during transients"). Needs the cargo feature
@@ -83,8 +83,8 @@ impl<T: Float> ParameterTracking<T> {
     /// is tracked; `psi_f` within `[0.5, 1.5]` and `Rs` within `[0.3, 3]` times the
     /// configured values, which hold at 20 deg C; copper; `Rs` by the split filter with an
     /// NdFeB thermal link of 60 K, windows of 100 samples, 1 % per window; the start-up flux
-    /// off (opt-in, module docs of `ekf_core::observer::tracking`, "Tracking during
-    /// transients").
+    /// on where it is compiled (feature `std`; module docs of `ekf_core::observer::tracking`,
+    /// "Tracking during transients").
     pub fn default_for(ts_s: T) -> Self {
         Self {
             psi_f_sigma0: to_t(0.1),
@@ -103,7 +103,7 @@ impl<T: Float> ParameterTracking<T> {
                 window_samples: 100,
                 measurement_sigma: to_t(0.01),
             },
-            transient_flux: false,
+            transient_flux: cfg!(feature = "std"),
         }
     }
 

@@ -216,9 +216,15 @@ impl<T: Float> Split<T> {
         };
         let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
         let uq = (uq0 * ch - ud0 * sh) * sinc;
-        // i_d (in the cross term only) as the mean of the window's ends: a window with a
-        // current step is left out below.
-        let (id, iq) = ((id0 + id_end) * to_t(0.5), sums.iq * inv_n);
+        // i_d (in the cross term only): the start-up flux's windows (`low_current`, host
+        // builds) take the window's own mean (module docs, "Tracking during transients": a
+        // ramp may end within the window); the split filter's the mean of the window's ends
+        // (a window with a current step is left out below).
+        let (id, iq) = if low_current {
+            (sums.id * inv_n, sums.iq * inv_n)
+        } else {
+            ((id0 + id_end) * to_t(0.5), sums.iq * inv_n)
+        };
         // Windows with little current (the inverter's voltage error is least known there,
         // its compensation hinges on the current's sign) or a current step (the window's
         // speed and angle are in transit) are left out.
