@@ -195,6 +195,48 @@
 //! PM-SyRM told its small-signal constants through [`ObserverConfig::new`] it finds the 0.4 s after a generating step where the
 //! filter sits 145 deg off with its speed 1.8 times the rotor's (`docs/accuracy.md`).
 //!
+//! **Model fit** (part of the consistency check). A model far from the motor can also settle
+//! where its innovations are ordinary and its angle turns at its speed state: the checks above
+//! see nothing, yet the angle is far off. What such a state cannot hide is the flux the model
+//! reads the angle from. The angle is the direction of the active flux
+//! `psi_a = psi_f + (Ld - Lq) i_d` (section "Interior motors"), which a drive keeps along the
+//! magnet: with `Lq > Ld` every control law (MTPA, field weakening) drives `i_d <= 0`, so
+//! `psi_a >= psi_f`; with `Ld > Lq`, `psi_a >= psi_f Lq / Ld` for any `|i_d|` up to the
+//! characteristic current `psi_f / Ld`. At the end of each block of 8 samples the check reads
+//! the estimate as the model does, and finds the fit implausible when
+//!
+//! - the estimate's active flux (the tracked flux, `i_d` in the estimated frame) is below
+//!   `psi_f / 2` (the configured flux): the estimated d axis is not the magnet's. A filter that
+//!   holds the motor's q current as a positive d current reads the EMF of a reluctance flux its
+//!   model invented (below zero, a magnet pointing backwards), or
+//! - the tracked `psi_f` is at a bound of its range ([`ParameterTracking::psi_f_range`], 0.5 to
+//!   1.5 times the configured value by default; within 2 % of the configured value of it): the
+//!   data ask for a flux the motor's magnet cannot have (heat moves it by about 12 % per
+//!   100 K), so the fit has pushed the flux to absorb another error of the model, and the
+//!   angle carries what is left of it.
+//!
+//! While implausible the status reads [`Status::Uncertain`] ([`Estimate::inconsistent`]: foc's
+//! health monitor sees it too) until a block's end finds the fit plausible and the hold (32
+//! steps) has passed. It changes no state. It runs out of line once in 8 samples (the
+//! Cortex-M4F step: 1030 instructions, 1028 without it, a change of register allocation; no
+//! work on the other 7 samples). The observer on a flux map
+//! ([`MapObserver`](crate::saturated::MapObserver)) reads its flux from the map, not from
+//! constants: only the tracked flux's bound applies there, and it tracks none.
+//!
+//! Measured on the independent saturating PM-SyRM plant (`cargo test --release -p ekf-core
+//! --test saturated -- --nocapture`): samples `Tracking` while more than 45 deg off 0 / 0 / 0
+//! for the observer told the small-signal constants through [`ObserverConfig::saturating`] /
+//! [`ObserverConfig::new`] / told the rated chord values (1719 / 8369 / 65 without the model
+//! fit). There the small-signal filter settles 105-125 deg off with an active flux of -0.8 to
+//! -1.7 Wb (`i_d` estimated +10 to +18 A while the motor runs at `i_d = 0`); the other two sit
+//! 38-50 deg off after the 150 % current step with their tracked flux at its lower bound and
+//! a NIS about 300 that the consistency baseline has learnt within 60 ms, then 125-130 deg off
+//! after the generating step with an active flux of -0.4 Wb. The price is there too: their status reads
+//! `Tracking` within 45 deg 38.4 / 8.5 / 53.5 % of the run (55.4 / 8.5 / 64.0 % without), the
+//! difference the 11-19 deg off stretch after the reversal, whose flux is still at its bound.
+//! On `pmsm-sim suite` (every row, the Tracking shares included), `pmsm-sim faults` and the
+//! three recorded drives of the real-data score nothing changes.
+//!
 //! **Speed noise adaptation** ([`SpeedNoiseAdaptation`]; on in [`ObserverConfig::new`], off in
 //! foc's drive configuration and in [`ObserverConfig::seed`]). The model holds the speed constant
 //! between samples, with a random walk sized for a steady drive; a recorded ESC can go from

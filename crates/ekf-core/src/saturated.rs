@@ -243,7 +243,7 @@ impl<T: Float, const N: usize> MapObserver<T, N> {
             return Err(ConfigError::TrackingWithFluxMap);
         }
         Ok(Self {
-            observer: PmsmObserver::new(cfg)?,
+            observer: PmsmObserver::new(cfg)?.on_map(),
             map,
         })
     }

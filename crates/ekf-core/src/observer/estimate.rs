@@ -8,13 +8,14 @@ use crate::Float;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Status {
     /// The angle's standard deviation is below the configured limit and, with the
-    /// consistency check on, the innovations are consistent and the speed is known to be away
-    /// from zero (module docs, "Consistency").
+    /// consistency check on, the innovations are consistent, the model's flux is plausible
+    /// and the speed is known to be away from zero (module docs, "Consistency", "Model fit").
     Tracking,
     /// The angle's standard deviation exceeds the limit (the filter has not converged yet, or
     /// the back-EMF is too small to observe the angle near standstill), or the innovations
     /// are far out of line with the noise seen before (the model no longer explains the
-    /// currents: a lost or re-converging filter).
+    /// currents: a lost or re-converging filter), or the flux the model reads the angle from
+    /// is not the magnet's (module docs, "Model fit").
     Uncertain,
 }
 
@@ -60,8 +61,10 @@ pub struct Estimate<T> {
     /// The parameters were tracked in this step (else frozen: low speed, angle uncertain, or
     /// tracking off).
     pub parameters_tracking: bool,
-    /// The consistency check finds the recent innovations out of line (the status is then
-    /// [`Status::Uncertain`]); `false` with the check off.
+    /// The consistency check finds the recent innovations out of line, the angle moving at
+    /// another speed than the speed state, or the model's flux implausible (module docs,
+    /// "Consistency", "Speed drift", "Model fit"; the status is then [`Status::Uncertain`]);
+    /// `false` with the check off.
     pub inconsistent: bool,
     /// The angle's standard deviation is below the configured limit (the covariance's part of
     /// the status, whatever the innovations say).

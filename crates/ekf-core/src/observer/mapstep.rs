@@ -140,6 +140,15 @@ impl<T: Float> PmsmObserver<T> {
         (xm, structured::predict_cov_salient(&t, dt_s, q, &self.p))
     }
 
+    /// Marks the observer as the map observer's (its prediction runs on the map): the model
+    /// fit's active-flux test, which reads the constant-parameter model's flux, is off.
+    pub(crate) fn on_map(mut self) -> Self {
+        if let Some(w) = &mut self.consistency {
+            w.active_flux = false;
+        }
+        self
+    }
+
     /// One step on the map over a period `dt_s` (the body of
     /// [`MapObserver::step`](crate::saturated::MapObserver::step)); inputs checked as in
     /// [`step`](Self::step).

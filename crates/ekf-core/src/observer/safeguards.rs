@@ -145,7 +145,8 @@ impl<T: Float> Default for CovarianceHealth<T> {
 ///        once per 8 samples, b in [2, max_baseline]                  baseline, clamped
 /// d_k  = d_k-1 + (K_th y_k - d_k-1) / drift_samples                mean angle correction
 /// inconsistent when f_k > ratio b_k or n_k > single_ratio b_k (one sample far out: the onset
-/// of a loss), or |d_k| > drift_ratio |w Ts| + drift_sigmas sqrt(P_ww) Ts (speed drift);
+/// of a loss), or |d_k| > drift_ratio |w Ts| + drift_sigmas sqrt(P_ww) Ts (speed drift), or
+/// at a block's end the model's flux is implausible (module docs, "Model fit");
 /// trusted again after hold_samples steps in a row with f_k <= ratio b_k / 2 and |d_k| at or
 /// below half its limit
 /// ```
@@ -273,6 +274,13 @@ pub(crate) struct ConsistencyState<T> {
     /// `observed`: at least that many (the status may read `Tracking`).
     pub(crate) observed_blocks: u32,
     pub(crate) observed: bool,
+    /// The last block's end found the model's flux implausible (module docs, "Model fit"):
+    /// inconsistent, like a speed drift, until a block's end finds it plausible again and the
+    /// hold has passed.
+    pub(crate) implausible: bool,
+    /// The model fit tests the active flux of the constant-parameter model (off for the
+    /// observer on a flux map; kept through restarts).
+    pub(crate) active_flux: bool,
 }
 
 /// The baseline is updated once per block of this many samples, from their clamped mean (it
@@ -319,6 +327,8 @@ impl<T: Float> ConsistencyState<T> {
             emf_floor: T::zero(),
             observed_blocks: 0,
             observed: false,
+            implausible: false,
+            active_flux: true,
         };
         if s.k_block > T::one() {
             s.k_block = T::one();
@@ -327,16 +337,17 @@ impl<T: Float> ConsistencyState<T> {
         s
     }
 
-    /// The limits from the baseline, overridden by the speed drift: drifting, the fast mean's
-    /// limit is -1 (always exceeded); not calm, its half limit is -1 (never calm). The step's
-    /// test then needs no term of its own.
+    /// The limits from the baseline, overridden by the speed drift and the model fit:
+    /// drifting or implausible, the fast mean's limit is -1 (always exceeded); not calm or
+    /// implausible, its half limit is -1 (never calm). The step's test then needs no term of
+    /// its own.
     fn refresh(&mut self) {
-        self.limit = if self.drifting {
+        self.limit = if self.drifting || self.implausible {
             -T::one()
         } else {
             self.ratio * self.baseline
         };
-        self.half_limit = if self.drift_calm {
+        self.half_limit = if self.drift_calm && !self.implausible {
             self.ratio * self.baseline * to_t(0.5)
         } else {
             -T::one()
@@ -357,6 +368,7 @@ impl<T: Float> ConsistencyState<T> {
         self.drift_calm = true;
         self.observed_blocks = 0;
         self.observed = false;
+        self.implausible = false;
         self.refresh();
     }
 
@@ -365,11 +377,23 @@ impl<T: Float> ConsistencyState<T> {
     /// speed's variance times the period squared `var_w_ts2` (rad^2). The block's mean angle
     /// correction is the angle's advance over the block less `BASELINE_BLOCK w Ts` (the speed
     /// changes little over eight samples), divided by `BASELINE_BLOCK`; it enters the mean
-    /// `drift` (gain `BASELINE_BLOCK / drift_samples`), compared with its limit. Out of line:
+    /// `drift` (gain `BASELINE_BLOCK / drift_samples`), compared with its limit. `implausible`:
+    /// the model fit's verdict at the block's end (module docs, "Model fit"). Out of line:
     /// once in eight samples, when [`watch`](Self::watch) has just closed a block.
     #[cold]
     #[inline(never)]
-    pub(crate) fn update_drift(&mut self, theta: T, w_ts: T, var_w_ts2: T, i: (T, T)) {
+    pub(crate) fn update_drift(
+        &mut self,
+        theta: T,
+        w_ts: T,
+        var_w_ts2: T,
+        i: (T, T),
+        implausible: bool,
+    ) {
+        if implausible != self.implausible {
+            self.implausible = implausible;
+            self.refresh();
+        }
         let w2 = w_ts * w_ts;
         let observable =
             w2 >= to_t::<T>(25.0) * var_w_ts2 && w2 >= self.emf_floor * (i.0 * i.0 + i.1 * i.1);

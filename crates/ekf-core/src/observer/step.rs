@@ -7,6 +7,7 @@ use super::pmsm::Tracking;
 use super::{Estimate, PmsmObserver};
 use nalgebra::{Matrix4, Vector4};
 
+use super::model::Discrete;
 use super::safeguards::{Events, Verdict, gate_accepted_high, gate_verdict};
 use super::structured::{self, Outcome, Sym4};
 use super::tracking::TrackerStep;
@@ -427,8 +428,7 @@ impl<T: Float> PmsmObserver<T> {
                 if let Some(w) = &mut self.consistency
                     && w.watch(c.nis)
                 {
-                    let ts = self.model.ts();
-                    w.update_drift(xm[3], xm[2] * ts, pm.p22 * ts * ts, (xm[0], xm[1]));
+                    self.close_block();
                 }
                 self.last = c;
                 self.gate_rejected();
@@ -449,8 +449,7 @@ impl<T: Float> PmsmObserver<T> {
         }
         if let Some(w) = &mut self.consistency {
             if w.watch(c.nis) {
-                let ts = self.model.ts();
-                w.update_drift(x[3], x[2] * ts, post.p.p22 * ts * ts, (x[0], x[1]));
+                self.close_block();
             }
             if self.fused != 0 {
                 self.fused -= 1;
@@ -500,6 +499,22 @@ impl<T: Float> PmsmObserver<T> {
         Ok(self.estimate())
     }
 
+    /// The consistency check's work at a block's end, on the step's committed state (`self.x`,
+    /// `self.p`): the model fit's verdict ([`flux_implausible`]) and the speed drift with the
+    /// back-EMF's observability ([`ConsistencyState::update_drift`](super::ConsistencyState)).
+    /// Out of line: once in eight samples; the step passes nothing but `self`.
+    #[cold]
+    #[inline(never)]
+    fn close_block(&mut self) {
+        let ts = self.model.ts();
+        let (x, var_w) = (self.x, self.p.p22);
+        let (disc, psi0) = (self.model.discrete(), self.nominal.0);
+        if let Some(w) = &mut self.consistency {
+            let bad = flux_implausible(disc, self.tracking.as_ref(), psi0, w.active_flux, &x);
+            w.update_drift(x[3], x[2] * ts, var_w * ts * ts, (x[0], x[1]), bad);
+        }
+    }
+
     /// The tracking's slow work after a committed step, when due (a full window of the split
     /// filter, the reported deviations).
     #[inline(always)]
@@ -539,4 +554,48 @@ impl<T: Float> PmsmObserver<T> {
             self.rs_constants = (t.rs, self.model.discrete_at(self.nominal.0, t.rs));
         }
     }
+}
+
+/// The model fit at a block's end (module docs of [`observer`](crate::observer), "Model fit"):
+/// `true` when the flux the model reads the angle from is not one a magnet can give. Either
+/// the tracked `psi_f` is at a bound of its range (within 2 % of the configured `psi0`: the
+/// data ask for a flux outside the range declared plausible), or the active flux
+/// `psi_a = psi_f + (Ld - Lq) i_d` (the tracked flux, `i_d` in the estimated frame) is below
+/// `psi0 / 2`: the model reads the EMF of a flux its wrong d current invented, not the
+/// magnet's. Compared as `(psi_f - psi0 / 2) / Lq + (Ld - Lq) / Lq i_d < 0` (no division).
+/// Without `active_flux` (the observer on a flux map, whose flux is the map's, not the active
+/// flux of the constants its configuration carries) only the tracked flux's bound applies
+/// (tracking is off there, so none). Called at a block's end only
+/// ([`PmsmObserver::close_block`]).
+fn flux_implausible<T: Float>(
+    disc: &Discrete<T>,
+    tracking: Option<&Tracking<T>>,
+    psi0: T,
+    active_flux: bool,
+    x: &Vector4<T>,
+) -> bool {
+    let (psi, pinned) = match tracking {
+        Some(Tracking { t, slow }) => {
+            let margin = psi0 * to_t(0.02);
+            let k = &slow.k;
+            (
+                t.psi,
+                t.psi <= k.psi_min + margin || t.psi >= k.psi_max - margin,
+            )
+        }
+        None => (psi0, false),
+    };
+    let excess = psi - psi0 * to_t(0.5);
+    let flux = if !active_flux {
+        T::zero()
+    } else if disc.salient {
+        let (s, c) = x[3].sin_cos_angle();
+        let id = x[0] * c + x[1] * s;
+        excess * disc.inv_ls + disc.saliency * id
+    } else {
+        excess
+    };
+    // A NaN counts as implausible.
+    let plausible = flux.is_finite() && flux >= T::zero();
+    pinned || !plausible
 }
