@@ -52,9 +52,9 @@ impl<T: Float> Split<T> {
     }
 
     /// The split filter's step at the end of a window (module docs, "Resistance"): the
-    /// window's lumped flux `m = (u_q - w L_d i_d - L_q di_q/dt) / w` from its voltage
-    /// equation, with `w` the rotation rate of the estimated angle over the window, is a
-    /// measurement of `psi_f + Rs r`, `r = i_q / w`; random walk, that update, then the
+    /// window's lumped flux `m = (|e0| + Rs0 n.i) / |w|` from the length of its back-EMF
+    /// vector `e0` at the filter's `Rs0` (`n = e0 / |e0|`), with `w` the rotation rate of the estimated angle over the window, is a
+    /// measurement of `psi_f + Rs r`, `r = n.i / |w|`; random walk, that update, then the
     /// thermal link. `rs_used` and `psi` are the EKF's `Rs` and flux, `c_pp` its flux
     /// variance, `x` its state at the window's end. Returns the new `Rs` (bounded), `None`
     /// when the window is not used.
