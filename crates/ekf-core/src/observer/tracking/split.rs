@@ -239,7 +239,7 @@ impl<T: Float> Split<T> {
         let eq = uq - rs0 * iq - w * k.ld * id - k.lq * (iq_end - iq0) / span;
         let e_len = (ed * ed + eq * eq).sqrt();
         let w_abs = w.abs();
-        if !(e_len > T::zero()) {
+        if e_len <= T::zero() || !e_len.is_finite() {
             return None;
         }
         let ni = (ed * id + eq * iq) / e_len;
