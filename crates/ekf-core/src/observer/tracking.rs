@@ -60,21 +60,35 @@
 //!
 //! The EKF's flux is the lumped `psi_f + dRs i_q / w` of the operating point. `Rs` comes from
 //! a slow filter on `(psi_f, Rs)` fed once per window of samples (100 by default) with the
-//! window's voltage equation, read in the estimated frame:
+//! length of the window's back-EMF vector, read in the estimated frame:
 //!
 //! ```text
-//! m = (u_q - w L_d i_d - L_q di_q/dt) / w = psi_f + Rs r,      r = i_q / w
+//! e(Rs) = u - Rs i - L di/dt - j w L i,        |e(Rs)| = |w| psi_f
+//! m = (|e0| + Rs0 n.i) / |w| = psi_f + Rs r,   r = n.i / |w|
 //! ```
 //!
-//! with the means over the window of the voltage (each period's turned to the period's middle
-//! and scaled by `sinc(w Ts / 2)`, as a voltage held while the frame turns), of `i_d`, `i_q`,
-//! the change of `i_q` over the window, and `w` the rotation rate of the **estimated angle**
-//! over the window. The speed state is not used for `w`: told a wrong `Rs` at low speed under
-//! load, the filter reads the drop as back-EMF and its speed state is off by `dRs i_q /
-//! psi_f`, while its angle still turns at the rotor's speed on average (it cannot drift
-//! without bound). An angle error `e` scales `u_q` by `cos e` only, so the measurement holds
-//! while the angle is a few degrees off. Independent of the EKF's flux, the measurement does
-//! not feed the EKF's own correction back into itself.
+//! (`e0 = e(Rs0)` at the filter's own `Rs0`, `n = e0 / |e0|`: `|e(Rs)|` to first order in
+//! `Rs - Rs0`; with the right angle `n` is the q axis and `r = i_q / w`), with the means over
+//! the window of the voltage (each period's turned to the period's middle and scaled by
+//! `sinc(w Ts / 2)`, as a voltage held while the frame turns), of `i_q`, `i_d` (the mean of
+//! the window's ends), the change of the currents over the window, and `w` the rotation rate
+//! of the **estimated angle** over the window. The speed state is not used for `w`: told a
+//! wrong `Rs` at low speed under load, the filter reads the drop as back-EMF and its speed
+//! state is off by `dRs i_q / psi_f`, while its angle still turns at the rotor's speed on
+//! average (it cannot drift without bound).
+//!
+//! Why the length and not the q-axis equation alone: an angle error `e` turns the whole
+//! voltage equation (voltage, currents and EMF alike) by `e`, which leaves the EMF's length
+//! unchanged; the q-axis equation alone reads `u_q cos e + u_d sin e`, and at low speed under
+//! load `u_d = -w L i_q` is a sizeable part of the voltage (a third of the EMF on the 2.2 kW
+//! motor at 10 % speed and rated torque), so a few degrees off mix into the flux and, with
+//! `r` large there, into `Rs`. That is the case where `Rs` matters: after a load step at low
+//! speed told a wrong `Rs` the angle is off by 10-20 deg until the first windows correct it,
+//! and those windows decide the `Rs` carried through a reversal. Independent of the EKF's
+//! flux, the measurement does not feed the EKF's own correction back into itself. What is
+//! left: the window's speed from the angle's advance is biased while the angle pulls in (its
+//! error changes within the window), and a wrong `Ls` adds `w dL i_q` across the EMF (second
+//! order in the length).
 //!
 //! What a window tells: `m` at one `r` pins `psi_f + Rs r`. At small `r` (light load, high
 //! speed) that is the flux; at large `r` (low speed, high current, where the resistive drop is

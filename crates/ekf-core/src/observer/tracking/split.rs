@@ -52,9 +52,9 @@ impl<T: Float> Split<T> {
     }
 
     /// The split filter's step at the end of a window (module docs, "Resistance"): the
-    /// window's lumped flux `m = (u_q - w L_d i_d - L_q di_q/dt) / w` from its voltage
-    /// equation, with `w` the rotation rate of the estimated angle over the window, is a
-    /// measurement of `psi_f + Rs r`, `r = i_q / w`; random walk, that update, then the
+    /// window's lumped flux `m = (|e0| + Rs0 n.i) / |w|` from the length of its back-EMF
+    /// vector `e0` at the filter's `Rs0` (`n = e0 / |e0|`), with `w` the rotation rate of the estimated angle over the window, is a
+    /// measurement of `psi_f + Rs r`, `r = n.i / |w|`; random walk, that update, then the
     /// thermal link. `rs_used` and `psi` are the EKF's `Rs` and flux, `c_pp` its flux
     /// variance, `x` its state at the window's end. Returns the new `Rs` (bounded), `None`
     /// when the window is not used.
@@ -215,6 +215,7 @@ impl<T: Float> Split<T> {
             T::one()
         };
         let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
+        let ud = (ud0 * ch + uq0 * sh) * sinc;
         let uq = (uq0 * ch - ud0 * sh) * sinc;
         // i_d (in the cross term only): the start-up flux's windows (`low_current`, host
         // builds) take the window's own mean (module docs, "Tracking during transients": a
@@ -234,8 +235,22 @@ impl<T: Float> Split<T> {
         if (i2 < i_min * i_min && !low_current) || diq * diq > to_t::<T>(0.04) * i2 {
             return None;
         }
-        let m = (uq - w * k.ld * id - k.lq * (iq_end - iq0) / span) / w;
-        let r = iq / w;
+        // The back-EMF vector of the window at the filter's `Rs` (module docs, "Resistance"):
+        // `e0 = u - Rs i - L di/dt - j w L i`, of length `|w| psi_f` in any frame. Its length
+        // read against `Rs` to first order, `|e(Rs)| = |e0| - (Rs - Rs0) n.i` (`n` the unit
+        // vector along `e0`), is the window's measurement `m = psi_f + Rs r` with
+        // `m = (|e0| + Rs0 n.i) / |w|`, `r = n.i / |w|`: the frame's angle error drops out.
+        let rs0 = self.rs;
+        let ed = ud - rs0 * id + w * k.lq * iq - k.ld * (id_end - id0) / span;
+        let eq = uq - rs0 * iq - w * k.ld * id - k.lq * (iq_end - iq0) / span;
+        let e_len = (ed * ed + eq * eq).sqrt();
+        let w_abs = w.abs();
+        if e_len <= T::zero() || !e_len.is_finite() {
+            return None;
+        }
+        let ni = (ed * id + eq * iq) / e_len;
+        let m = (e_len + rs0 * ni) / w_abs;
+        let r = ni / w_abs;
         // Measurement of the window: m = psi + r Rs. A voltage error reads as a flux error
         // divided by the speed: below ten times the minimum speed the deviation grows as 1/w.
         let knee2 = to_t::<T>(100.0) * k.min_speed2;
