@@ -412,10 +412,10 @@ fn tracked_flux_and_angle_converge_within_0_1_s_of_10_percent_speed() {
         assert!(r.absolute.after.1 <= 5.0, "{name}: {:?}", r.absolute.after);
     }
     // With the start-up flux the goal is met on the servo and, against the filter told
-    // the right motor, on the small fast motor (measured 0.064 / 0.061 s and 0.012 / 0.071 s
-    // after t10; against the truth 0.073 / 0.037 s and 0.123 / 0.071 s: told the right motor
-    // the small fast motor's angle is within 0.3 deg of the truth only 0.099 s after t10).
-    // Not on the 2.2 kW motor (0.272 / 0.272 s): told the right motor its flux too is 2.6 %
+    // the right motor, on the small fast motor (measured 0.063 / 0.062 s and 0.020 / 0.069 s
+    // after t10; against the truth 0.071 / 0.057 s and 0.124 / 0.107 s: told the right motor
+    // the small fast motor's angle is within 0.3 deg of the truth only 0.107 s after t10).
+    // Not on the 2.2 kW motor (0.272 / 0.272 s): told the right motor its flux too is 2.5 %
     // off between t10 + 0.1 s and the step (the EKF's own tracking, from the ramp's end);
     // after the step, told psi_f -10 %, the resistance tracking's first loaded windows move
     // the lumped flux by 1.08 % and the angle by 0.52 deg before they settle.
