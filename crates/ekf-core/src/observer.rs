@@ -199,16 +199,20 @@
 //! where its innovations are ordinary and its angle turns at its speed state: the checks above
 //! see nothing, yet the angle is far off. What such a state cannot hide is the flux the model
 //! reads the angle from. The angle is the direction of the active flux
-//! `psi_a = psi_f + (Ld - Lq) i_d` (section "Interior motors"), which a drive keeps along the
-//! magnet: with `Lq > Ld` every control law (MTPA, field weakening) drives `i_d <= 0`, so
-//! `psi_a >= psi_f`; with `Ld > Lq`, `psi_a >= psi_f Lq / Ld` for any `|i_d|` up to the
-//! characteristic current `psi_f / Ld`. At the end of each block of 8 samples the check reads
-//! the estimate as the model does, and finds the fit implausible when
+//! `psi_a = psi_f + (Ld - Lq) i_d` (section "Interior motors"), which points along the magnet
+//! (`psi_a > 0`) for every current a drive applies: with `Lq > Ld` every closed-loop law (MTPA,
+//! field weakening) drives `i_d <= 0`, so `psi_a >= psi_f`, and an open-loop start (I/f), whose
+//! current leads the rotor and so has `i_d > 0`, keeps it positive as long as `i_d` stays below
+//! the reluctance limit `psi_f / (Lq - Ld)` (120 A on the traction IPM, whose I/f current is
+//! 81 A: `psi_a` falls to a third there, which is why the bound is zero and not a fraction of
+//! `psi_f`); with `Ld > Lq`, `psi_a >= psi_f Lq / Ld` for any `|i_d|` up to the characteristic
+//! current `psi_f / Ld`. At the end of each block of 8 samples the check reads the estimate as
+//! the model does, and finds the fit implausible when
 //!
 //! - the estimate's active flux (the tracked flux, `i_d` in the estimated frame) is below
-//!   `psi_f / 2` (the configured flux): the estimated d axis is not the magnet's. A filter that
-//!   holds the motor's q current as a positive d current reads the EMF of a reluctance flux its
-//!   model invented (below zero, a magnet pointing backwards), or
+//!   zero: the estimated d axis is not the magnet's. A filter that holds the motor's q current
+//!   as a positive d current reads the EMF of a reluctance flux its model invented, a magnet
+//!   pointing backwards, or
 //! - the tracked `psi_f` is at a bound of its range ([`ParameterTracking::psi_f_range`], 0.5 to
 //!   1.5 times the configured value by default; within 2 % of the configured value of it): the
 //!   data ask for a flux the motor's magnet cannot have (heat moves it by about 12 % per

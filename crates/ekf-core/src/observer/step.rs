@@ -561,8 +561,8 @@ impl<T: Float> PmsmObserver<T> {
 /// the tracked `psi_f` is at a bound of its range (within 2 % of the configured `psi0`: the
 /// data ask for a flux outside the range declared plausible), or the active flux
 /// `psi_a = psi_f + (Ld - Lq) i_d` (the tracked flux, `i_d` in the estimated frame) is below
-/// `psi0 / 2`: the model reads the EMF of a flux its wrong d current invented, not the
-/// magnet's. Compared as `(psi_f - psi0 / 2) / Lq + (Ld - Lq) / Lq i_d < 0` (no division).
+/// zero: the model reads the EMF of a flux its wrong d current invented, pointing against the
+/// magnet. Compared as `psi_f / Lq + (Ld - Lq) / Lq i_d < 0` (no division).
 /// Without `active_flux` (the observer on a flux map, whose flux is the map's, not the active
 /// flux of the constants its configuration carries) only the tracked flux's bound applies
 /// (tracking is off there, so none). Called at a block's end only
@@ -585,7 +585,7 @@ fn flux_implausible<T: Float>(
         }
         None => (psi0, false),
     };
-    let excess = psi - psi0 * to_t(0.5);
+    let excess = psi;
     let flux = if !active_flux {
         T::zero()
     } else if disc.salient {
