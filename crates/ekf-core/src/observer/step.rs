@@ -585,15 +585,14 @@ fn flux_implausible<T: Float>(
         }
         None => (psi0, false),
     };
-    let excess = psi;
     let flux = if !active_flux {
         T::zero()
     } else if disc.salient {
         let (s, c) = x[3].sin_cos_angle();
         let id = x[0] * c + x[1] * s;
-        excess * disc.inv_ls + disc.saliency * id
+        psi * disc.inv_ls + disc.saliency * id
     } else {
-        excess
+        psi
     };
     // A NaN counts as implausible.
     let plausible = flux.is_finite() && flux >= T::zero();

@@ -53,11 +53,11 @@ impl<T: Float> Split<T> {
 
     /// The split filter's step at the end of a window (module docs, "Resistance"): the
     /// window's lumped flux `m = (|e0| + Rs0 n.i) / |w|` from the length of its back-EMF
-    /// vector `e0` at the filter's `Rs0` (`n = e0 / |e0|`), with `w` the rotation rate of the estimated angle over the window, is a
-    /// measurement of `psi_f + Rs r`, `r = n.i / |w|`; random walk, that update, then the
-    /// thermal link. `rs_used` and `psi` are the EKF's `Rs` and flux, `c_pp` its flux
-    /// variance, `x` its state at the window's end. Returns the new `Rs` (bounded), `None`
-    /// when the window is not used.
+    /// vector `e0` at the filter's `Rs0` (`n = e0 / |e0|`), with `w` the rotation rate of the
+    /// estimated angle over the window, is a measurement of `psi_f + Rs r`, `r = n.i / |w|`;
+    /// random walk, that update, then the thermal link. `rs_used` and `psi` are the EKF's `Rs`
+    /// and flux, `c_pp` its flux variance, `x` its state at the window's end. Returns the new
+    /// `Rs` (bounded), `None` when the window is not used.
     pub(super) fn update(
         &mut self,
         rs_used: T,
@@ -217,14 +217,15 @@ impl<T: Float> Split<T> {
         let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
         let ud = (ud0 * ch + uq0 * sh) * sinc;
         let uq = (uq0 * ch - ud0 * sh) * sinc;
-        // i_d (in the cross term only): the start-up flux's windows (`low_current`, host
-        // builds) take the window's own mean (module docs, "Tracking during transients": a
-        // ramp may end within the window); the split filter's the mean of the window's ends
-        // (a window with a current step is left out below).
-        let (id, iq) = if low_current {
-            (sums.id * inv_n, sums.iq * inv_n)
+        // The window's mean i_d: the start-up flux's windows (`low_current`, host builds)
+        // take its own mean (module docs, "Tracking during transients": a ramp may end
+        // within the window); the split filter's the mean of the window's ends (a window
+        // with a current step is left out below).
+        let iq = sums.iq * inv_n;
+        let id = if low_current {
+            sums.id * inv_n
         } else {
-            ((id0 + id_end) * to_t(0.5), sums.iq * inv_n)
+            (id0 + id_end) * to_t(0.5)
         };
         // Windows with little current (the inverter's voltage error is least known there,
         // its compensation hinges on the current's sign) or a current step (the window's
