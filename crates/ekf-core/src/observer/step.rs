@@ -522,7 +522,8 @@ impl<T: Float> PmsmObserver<T> {
         if let Some(Tracking { t, slow }) = &mut self.tracking
             && t.housekeeping_due(&slow.k)
         {
-            t.housekeeping(slow, &self.x);
+            let troubled = self.consistency.as_ref().is_some_and(|c| c.inconsistent);
+            t.housekeeping(slow, &self.x, troubled);
             self.refresh_rs_constants();
         }
     }

@@ -79,6 +79,34 @@ impl<T: Float> Split<T> {
             return None;
         }
         let (m, r, r_m, _) = self.measure(ends, sums, x, k, false)?;
+        self.update_with(m, r, r_m, k)
+    }
+
+    /// The split filter's step on a window of a filter in trouble (module docs of the parent,
+    /// "Resistance while the filter is in trouble"): the EKF's tracking frozen and its
+    /// innovations out of line, after the filter has tracked once and anchored. Only a window
+    /// that measures `Rs` (the resistive drop `|Rs r|` above 15 % of the flux) is used, with
+    /// ten times the window's variance (its speed, the angle's advance, is biased while the
+    /// angle pulls in). Returns the new `Rs` (bounded), `None` when the window is not used.
+    pub(super) fn update_troubled(
+        &mut self,
+        psi: T,
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+    ) -> Option<T> {
+        let ends = self.take_ends(x);
+        let (m, r, r_m, _) = self.measure(ends, sums, x, k, false)?;
+        if (r * self.rs).abs() <= to_t::<T>(0.15) * psi {
+            return None;
+        }
+        self.update_with(m, r, r_m * to_t::<T>(10.0), k)
+    }
+
+    /// The update with a window's measurement `m = psi_f + Rs r` of variance `r_m`: random
+    /// walk, the scalar update (unless beyond 5 standard deviations), the thermal link, the
+    /// bounds. Returns the new `Rs`, `None` when the window is not used.
+    fn update_with(&mut self, m: T, r: T, r_m: T, k: &TrackerConstants<T>) -> Option<T> {
         // Random walk: the temperature moves both along (psi beta, Rs alpha_cu) per kelvin;
         // the magnets' flux drifts besides.
         let (g0, g1) = (self.psi * self.beta, self.rs * self.alpha);
