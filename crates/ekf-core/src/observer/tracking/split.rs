@@ -43,6 +43,9 @@ pub(in crate::observer) struct Split<T> {
     /// The speed of the last window read for the start-up flux (the angle's advance), rad/s;
     /// 0 when that window was left out.
     pub last_w: T,
+    /// Whether a window of a braking has been read for the start-up flux (the start-up is
+    /// over: no window corrects the EKF's flux any more).
+    pub braked: bool,
 }
 
 impl<T: Float> Split<T> {
@@ -163,10 +166,21 @@ impl<T: Float> Split<T> {
         // EKF's flux alone: its own tracking takes over after the settling time.
         let last_w = self.last_w;
         self.last_w = window.map_or(T::zero(), |w| w.3);
+        if self.braked {
+            return None;
+        }
         let (m, r, r_m, w) = window?;
         let (w2, last2) = (w * w, last_w * last_w);
         let dw = w - last_w;
-        if last_w == T::zero() || w2 <= last2 || dw * dw <= to_t::<T>(4e-4) * w2 {
+        let changed = dw * dw > to_t::<T>(4e-4) * w2;
+        // The start-up ends at the first braking (the window's speed below the previous
+        // window's by more than 2 %): later accelerations are steps and reversals of a drive
+        // under way, not its start.
+        if last_w != T::zero() && w2 < last2 && changed {
+            self.braked = true;
+            return None;
+        }
+        if last_w == T::zero() || w2 <= last2 || !changed {
             return None;
         }
         // Only where the window measures the flux: the resistive drop within 15 % of the
