@@ -144,8 +144,10 @@ fn short_run_with_ideal_sensing_meets_every_goal() {
             && c.value < 0.55;
         // The reversal's Ls rows: the same physical bias (a documented known limit).
         let ls_known = c.known_limit == Some(KNOWN_LIMIT_LS);
-        // The measured misses of the reversal rows (`mismatch_rows`): told 100 K colder.
-        let cold_miss = c.row == format!("{}, 100 K cold", suite::reversal::CONDITION);
+        // The measured miss of the reversal rows (`mismatch_rows`): the 2.2 kW motor told
+        // 100 K colder.
+        let cold_miss = c.row == format!("{}, 100 K cold", suite::reversal::CONDITION)
+            && c.motor == SuiteMotor::Industrial2k2;
         assert!(
             c.pass || ls_at_load || known || ls_known || cold_miss,
             "{} {:?} {}: {} > {}",
@@ -418,10 +420,12 @@ fn the_full_suite_lists_all_five_motors() {
 /// 0.32 / 0.61 / 0.35 deg RMS (servo / industrial / small fast); told a wrong psi_f, Rs or
 /// temperature 0.26-0.84 deg (the windows of the resistance tracking find `Rs` at the loaded
 /// low speed before the reversal), against 16-75 deg for the baseline told the same; told a
-/// wrong Ls the physical bias (0.8-3.0 deg). The misses are the motors told they are 100 K
-/// colder (told `Rs` 64 % high; the drop error 36-37 % of the back-EMF at the load step): the
-/// 2.2 kW motor 1.9 deg, the small fast motor loses the angle at the load step before any
-/// loaded window has shown its resistance (56 deg).
+/// wrong Ls the physical bias (0.8-3.0 deg). Told they are 100 K colder (told `Rs` 64 % high;
+/// the drop error 36-37 % of the back-EMF at the load step): the small fast motor 0.36 deg (it
+/// loses the angle in the load step's speed dip, and the windows of a filter in trouble find
+/// `Rs` again: module docs of `ekf_core::observer::tracking`; without them 56 deg), the 2.2 kW
+/// motor 0.95 deg here and 2.3 deg in the full run (its known miss: 11-16 deg off for 0.2 s
+/// after the load step with consistent innovations).
 fn reversal_rows(r: &SuiteReport) {
     let rows: Vec<_> = r
         .mismatch
@@ -446,12 +450,10 @@ fn reversal_rows(r: &SuiteReport) {
             assert!(ekf.angle_rms_deg < 3.5, "{what}: {}", ekf.angle_rms_deg);
             continue;
         }
-        if ekf.case == "100 K cold" {
-            // The misses: told `Rs` 64 % high. The 2.2 kW motor holds the angle within 3 deg
-            // (measured 1.9); the small fast motor loses it (module docs above).
-            if ekf.motor == SuiteMotor::Industrial2k2 {
-                assert!(ekf.angle_rms_deg < 3.0, "{what}: {}", ekf.angle_rms_deg);
-            }
+        if ekf.case == "100 K cold" && ekf.motor == SuiteMotor::Industrial2k2 {
+            // The known miss: told `Rs` 64 % high, the 2.2 kW motor holds the angle within
+            // 3 deg (measured 0.95 here, 2.3 in the full run).
+            assert!(ekf.angle_rms_deg < 3.0, "{what}: {}", ekf.angle_rms_deg);
             continue;
         }
         assert!(
