@@ -739,19 +739,19 @@ impl<T: Float> Tracker<T> {
             self.clear_window();
             self.s.contiguous = true;
             if let Some(s) = &mut slow.split {
-                if self.s.active {
+                // A window of the active tracking, or (host builds) one that ends with the
+                // EKF's tracking frozen and its innovations out of line, which corrects `Rs`
+                // where it measures `Rs` (module docs, "Resistance while the filter is in
+                // trouble"). A result that is not finite leaves the filter as it was.
+                let troubled = TRANSIENT && k.transient && troubled && s.tracked && s.anchored;
+                if self.s.active || troubled {
                     let before = *s;
-                    match s.update(self.rs, self.psi, self.s.c_pp, &sums, x, k) {
-                        Some(rs) if s.finite() => self.rs = rs,
-                        Some(_) => *s = before,
-                        None => {}
-                    }
-                } else if TRANSIENT && k.transient && troubled && s.tracked && s.anchored {
-                    // The EKF's tracking is frozen and its innovations are out of line: a
-                    // window that measures `Rs` corrects it (module docs, "Resistance while
-                    // the filter is in trouble").
-                    let before = *s;
-                    match s.update_troubled(self.psi, &sums, x, k) {
+                    let rs = if self.s.active {
+                        s.update(self.rs, self.psi, self.s.c_pp, &sums, x, k)
+                    } else {
+                        s.update_troubled(self.psi, &sums, x, k)
+                    };
+                    match rs {
                         Some(rs) if s.finite() => self.rs = rs,
                         Some(_) => *s = before,
                         None => {}

@@ -100,7 +100,7 @@ impl<T: Float> Split<T> {
     ) -> Option<T> {
         let ends = self.take_ends(x);
         let (m, r, r_m, _) = self.measure(ends, sums, x, k, false)?;
-        if (r * self.rs).abs() <= to_t::<T>(0.15) * psi {
+        if measures_flux(r, self.rs, psi) {
             return None;
         }
         self.update_with(m, r, r_m * to_t::<T>(10.0), k)
@@ -129,7 +129,7 @@ impl<T: Float> Split<T> {
         // the back-EMF): the temperatures read from psi and from Rs agree (K). Where the drop
         // is larger the window measures Rs itself, and the link is left out: applied on
         // every window it would outweigh that measurement.
-        if (r * self.rs).abs() <= to_t::<T>(0.15) * self.psi {
+        if measures_flux(r, self.rs, self.psi) {
             let h_psi = T::one() / (self.psi_a * self.beta);
             let h_rs = -T::one() / (self.rs_a * self.alpha);
             let h = h_psi * (self.psi - self.psi_a) + h_rs * (self.rs - self.rs_a);
@@ -185,11 +185,10 @@ impl<T: Float> Split<T> {
         }
         // Only where the window measures the flux: the resistive drop within 15 % of the
         // back-EMF (at low speed under load, through a reversal, it measures `Rs` instead).
-        let drop = r * rs_used;
-        if drop.abs() > to_t::<T>(0.15) * psi {
+        if !measures_flux(r, rs_used, psi) {
             return None;
         }
-        let y = m - drop - psi;
+        let y = m - r * rs_used - psi;
         let s = c_pp + r_m;
         if y * y > to_t::<T>(25.0) * s {
             return None;
@@ -337,4 +336,11 @@ impl<T: Float> Split<T> {
         self.c01 = c01 - k0 * ph1;
         self.c11 = c11 - k1 * ph1;
     }
+}
+
+/// Whether a window of `r = n.i / |w|` measures the flux rather than `Rs` at the resistance
+/// `rs` and flux `psi` (module docs of the parent, "Resistance"): the resistive drop `|Rs r|`
+/// within 15 % of the flux.
+fn measures_flux<T: Float>(r: T, rs: T, psi: T) -> bool {
+    (r * rs).abs() <= to_t::<T>(0.15) * psi
 }
