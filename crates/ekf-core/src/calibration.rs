@@ -23,13 +23,33 @@
 //! result: `voltage_delay_s = -tau`, `Rs`, `inverter_voltage_v = v_dt`
 //! ([`Calibration::apply`]).
 //!
+//! # Online (one pass)
+//!
+//! [`OnlineCalibration`] runs the drive observer on the same samples as a default
+//! [`PmsmObserver`](crate::PmsmObserver) (`ObserverConfig::input_calibration`, host builds).
+//! It averages as above, over the samples where the drive observer's input errors adapt (before
+//! that they sit at their priors: a zero lead would be averaged in), with the lead held to the
+//! physical range `[0, 2 Ts]` (the applied voltage leads the logged command by up to two
+//! periods; a lead the drive observer reads negative while it settles is not one) and the
+//! dead-time voltage at or above zero. Every 0.1 s, once 200 such samples are in, the averages
+//! are handed over: `voltage_delay_s = -tau` and `inverter_voltage_v = v_dt` always, `Rs`
+//! when it differs from the tracked one by more than 5 % (a hand-over restarts the tracking's
+//! settling, so small differences are left to the split filter). The filter's own states are
+//! untouched: the hand-over changes the model its next prediction uses. Before the first
+//! hand-over the filter is the plain one, bit for bit.
+//!
+//! Measured on the three real ESC records (`pyfoc.Ekf(..., input_calibration=True)`,
+//! `docs/accuracy.md`, "Recorded drives"): the first run's 180 deg flips at duty steps go (its
+//! `Rs` is handed over at 0.066 ohm, told 0.102), a 1 s record at constant speed loses its first
+//! half to the wait (the lead is found at 0.43 s).
+//!
 //! Measured on three real ESC records (4.5 kHz; `docs/accuracy.md`, "Recorded drives";
 //! `pmsm-sim replay LOG.csv --motor RUN.toml`): see the replay table's row "EKF told the
 //! record's calibration".
 
-use crate::Float;
 use crate::drive::DriveEstimate;
 use crate::observer::ObserverConfig;
+use crate::{Float, to_t};
 
 /// The input errors found in a record ([`RecordCalibration::result`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -119,6 +139,60 @@ impl<T: Float> RecordCalibration<T> {
     }
 }
 
+/// The record's input errors learnt while the default observer runs (module docs, "Online"):
+/// a [`DriveObserver`](crate::DriveObserver) on the same samples, its estimates averaged as
+/// [`RecordCalibration`] does with the lead held to the physical range `[0, 2 Ts]`, handed
+/// over every `every` samples once `min_samples` tracked samples are in.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OnlineCalibration<T: Float> {
+    drive: crate::DriveObserver<T>,
+    acc: RecordCalibration<T>,
+    max_lead_s: T,
+    every: u32,
+    count: u32,
+    min_samples: u64,
+}
+
+impl<T: Float> OnlineCalibration<T> {
+    /// Samples between hand-overs, as a time: 0.1 s.
+    pub const EVERY_S: f64 = 0.1;
+    /// Tracked samples before the first hand-over.
+    pub const MIN_SAMPLES: u64 = 200;
+
+    /// A drive observer on `cfg` (its defaults for the motor and `Ts`, [`crate::DriveConfig::new`]).
+    pub fn new(cfg: &crate::DriveConfig<T>) -> Result<Self, crate::ConfigError> {
+        let drive = crate::DriveObserver::new(cfg)?;
+        let every = (to_t::<T>(Self::EVERY_S) / cfg.ts_s).round().trunc_index();
+        Ok(Self {
+            drive,
+            acc: RecordCalibration::new(),
+            max_lead_s: cfg.ts_s + cfg.ts_s,
+            every: u32::try_from(every).unwrap_or(u32::MAX).max(1),
+            count: 0,
+            min_samples: Self::MIN_SAMPLES,
+        })
+    }
+
+    /// One sample (the drive observer's [`step_dt`](crate::DriveObserver::step_dt)); a sample it
+    /// refuses is skipped. Returns the calibration to hand over on every `every`-th sample once
+    /// enough samples are in, else `None`.
+    pub fn step(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) -> Option<Calibration<T>> {
+        if let Ok(mut e) = self.drive.step_dt(u_prev, i, dt_s)
+            && e.adapting
+        {
+            e.voltage_lead_s = e.voltage_lead_s.max(T::zero()).min(self.max_lead_s);
+            e.dead_time_v = e.dead_time_v.max(T::zero());
+            self.acc.push(&e);
+        }
+        self.count += 1;
+        if self.count < self.every {
+            return None;
+        }
+        self.count = 0;
+        self.acc.result().filter(|c| c.samples >= self.min_samples)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,5 +236,65 @@ mod tests {
         assert_eq!(cfg.voltage_delay_s, -r.voltage_lead_s);
         assert_eq!(cfg.motor.rs_ohm, r.rs_ohm);
         assert_eq!(cfg.inverter_voltage_v, r.dead_time_v);
+    }
+
+    #[test]
+    fn online_calibration_hands_over_nothing_before_its_samples_and_leaves_the_filter_alone() {
+        let m = crate::MotorParams::<f64>::servo();
+        let ts = 1e-4;
+        let mut cfg = ObserverConfig::new(m, ts);
+        let mut plain = crate::PmsmObserver::new(&cfg).unwrap();
+        cfg.input_calibration = true;
+        let mut cal = crate::PmsmObserver::new(&cfg).unwrap();
+        // 0.05 s of a spinning record: the drive observer has not settled, nothing is handed
+        // over, and the filter is the plain one bit for bit.
+        let w: f64 = 300.0;
+        for k in 0..500 {
+            let th = w * ts * k as f64;
+            let (s, c) = th.sin_cos();
+            let u = [-w * m.psi_f_wb * s, w * m.psi_f_wb * c];
+            let i = [0.1 * c, 0.1 * s];
+            assert_eq!(plain.step(u, i), cal.step(u, i));
+        }
+        let mut on = OnlineCalibration::new(&crate::DriveConfig::new(m, ts)).unwrap();
+        assert_eq!(on.every, 1000);
+        for _ in 0..3000 {
+            assert_eq!(
+                on.step([0.0; 2], [0.0; 2], ts),
+                None,
+                "standstill: nothing adapts"
+            );
+        }
+        // A refused sample is skipped.
+        assert_eq!(on.step([f64::NAN; 2], [0.0; 2], ts), None);
+    }
+
+    #[test]
+    fn voltage_errors_are_set_at_run_time_and_refused_out_of_range() {
+        let m = crate::MotorParams::<f64>::servo();
+        let ts = 1e-4;
+        let mut obs = crate::PmsmObserver::new(&ObserverConfig::new(m, ts)).unwrap();
+        let mut told = ObserverConfig::new(m, ts);
+        told.voltage_delay_s = -0.5 * ts;
+        told.inverter_voltage_v = 0.3;
+        let mut reference = crate::PmsmObserver::new(&told).unwrap();
+        let before = obs.clone();
+        for (d, v) in [
+            (3.0 * ts, 0.0),
+            (f64::NAN, 0.0),
+            (0.0, -0.1),
+            (0.0, 1e3),
+            (0.0, f64::NAN),
+        ] {
+            assert!(obs.set_voltage_errors(d, v).is_err());
+            assert_eq!(obs, before, "refused, nothing changed");
+        }
+        obs.set_voltage_errors(-0.5 * ts, 0.3).unwrap();
+        for k in 0..200 {
+            let th = 0.03 * k as f64;
+            let u = [th.cos(), th.sin()];
+            let i = [0.2 * th.sin(), -0.2 * th.cos()];
+            assert_eq!(obs.step(u, i), reference.step(u, i), "as if configured");
+        }
     }
 }

@@ -67,6 +67,7 @@ struct Settings {
     inverter_voltage_v: f64,
     feedforward: bool,
     saturating: bool,
+    input_calibration: bool,
 }
 
 /// The observer of `motor` in precision `T`: on constant parameters, or on the motor's flux
@@ -117,6 +118,14 @@ fn build<T: Float, O>(
             Some(AccelerationFeedforward::default_for(&cfg.motor, cfg.ts_s));
     }
     cfg.discretization = s.disc;
+    if s.input_calibration {
+        if flux_map.is_some() {
+            return Err(ConfigError::new_err(
+                "input_calibration is not available on a flux map: leave it False",
+            ));
+        }
+        cfg.input_calibration = true;
+    }
     cfg.covariance_update = s.update;
     match s.tracking {
         Tracking::Default => {}
@@ -167,7 +176,7 @@ impl Ekf {
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
         tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0,
-        acceleration_feedforward = false, saturating = false))]
+        acceleration_feedforward = false, saturating = false, input_calibration = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -184,6 +193,7 @@ impl Ekf {
         inverter_voltage_v: f64,
         acceleration_feedforward: bool,
         saturating: bool,
+        input_calibration: bool,
     ) -> PyResult<Self> {
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
@@ -229,6 +239,7 @@ impl Ekf {
             inverter_voltage_v,
             feedforward: acceleration_feedforward,
             saturating,
+            input_calibration,
         };
         let (observer, dtype) = match dtype {
             "float64" => (

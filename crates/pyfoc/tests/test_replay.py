@@ -241,3 +241,19 @@ def test_acceleration_feedforward_is_an_option(sim):
     assert score(on["theta"], log) < 1.0
     with pytest.raises(TypeError):
         pyfoc.Ekf(motor, TS, acceleration_feedforward="yes")
+
+
+def test_input_calibration_waits_for_its_samples_and_is_refused_on_a_map(sim):
+    """input_calibration=True: the drive observer alongside hands nothing over before 200 of
+    its rows have adapted (the short simulated run ends before), and until then the filter
+    is the default one bit for bit; a flux map refuses the option by name."""
+    _, log, _ = sim
+    on = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS, input_calibration=True)
+    a = on.run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"])
+    np.testing.assert_array_equal(a["theta"], run(log)["theta"])
+    i = np.linspace(-10.0, 10.0, 5)
+    psi_d = 0.1 + 0.005 * i[:, None] + 0.0 * i[None, :]
+    psi_q = 0.0 * i[:, None] + 0.008 * i[None, :]
+    m = pyfoc.Motor.from_flux_map(0.5, 4, i, i, psi_d, psi_q)
+    with pytest.raises(pyfoc.ConfigError, match="input_calibration"):
+        pyfoc.Ekf(m, TS, input_calibration=True)

@@ -66,6 +66,11 @@ pub struct ObserverConfig<T: Float> {
     /// online (module docs, "Acceleration feedforward"); `None` (the default): the speed is a
     /// random walk. Opt in with [`AccelerationFeedforward::default_for`].
     pub acceleration_feedforward: Option<AccelerationFeedforward<T>>,
+    /// Host builds: the voltage lead, the inverter's dead-time voltage and `Rs` learnt online
+    /// from the samples by a drive observer running alongside and handed to this filter
+    /// (module docs of [`crate::calibration`], "Online"); `false` keeps the configured ones.
+    #[cfg(feature = "std")]
+    pub input_calibration: bool,
 }
 
 impl<T: Float> ObserverConfig<T> {
@@ -93,6 +98,8 @@ impl<T: Float> ObserverConfig<T> {
             voltage_delay_s: T::zero(),
             inverter_voltage_v: T::zero(),
             acceleration_feedforward: None,
+            #[cfg(feature = "std")]
+            input_calibration: false,
         }
     }
 

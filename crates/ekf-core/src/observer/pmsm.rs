@@ -64,6 +64,9 @@ pub struct PmsmObserver<T: Float> {
     pub(super) rs_constants: (T, Discrete<T>),
     pub(super) events: Events,
     pub(super) counters: ObserverCounters,
+    /// The online input calibration (`ObserverConfig::input_calibration`; `None` when off).
+    #[cfg(feature = "std")]
+    pub(super) calibration: Option<std::boxed::Box<crate::calibration::OnlineCalibration<T>>>,
 }
 
 /// The online parameter tracking: the per-step part and the slow part (its constants and
@@ -172,6 +175,15 @@ impl<T: Float> PmsmObserver<T> {
             tracking,
             events: Events::default(),
             counters: ObserverCounters::default(),
+            #[cfg(feature = "std")]
+            calibration: if cfg.input_calibration {
+                let d = crate::DriveConfig::new(cfg.motor, cfg.ts_s);
+                Some(std::boxed::Box::new(
+                    crate::calibration::OnlineCalibration::new(&d)?,
+                ))
+            } else {
+                None
+            },
         };
         observer.refresh_emf_floor();
         Ok(observer)
@@ -315,6 +327,30 @@ impl<T: Float> PmsmObserver<T> {
         }
         let rs = self.rs_constants.0;
         self.rs_constants = (rs, self.model.discrete_at(self.nominal.0, rs));
+        Ok(())
+    }
+
+    /// Sets the voltage timing at run time: `voltage_delay_s` and `inverter_voltage_v` as in
+    /// [`ObserverConfig`](super::ObserverConfig) (e.g. from [`crate::calibration`]). Refused,
+    /// nothing changed, when the delay is not finite or beyond two sample times, or the
+    /// voltage not finite or outside `[0, 100]` V.
+    pub fn set_voltage_errors(
+        &mut self,
+        voltage_delay_s: T,
+        inverter_voltage_v: T,
+    ) -> Result<(), EkfError> {
+        let two_ts = self.model.ts() + self.model.ts();
+        if !(voltage_delay_s >= -two_ts
+            && voltage_delay_s <= two_ts
+            && inverter_voltage_v >= T::zero()
+            && inverter_voltage_v <= to_t(100.0))
+        {
+            return Err(EkfError::NonFiniteInput);
+        }
+        self.voltage_delay = voltage_delay_s;
+        self.inverter.0 = inverter_voltage_v;
+        self.timing = voltage_delay_s != T::zero() || inverter_voltage_v != T::zero();
+        self.extras = self.timing || self.adaptation.is_some();
         Ok(())
     }
 

@@ -36,6 +36,10 @@ impl<T: Float> PmsmObserver<T> {
     // tick 17 instructions and 50 kB of flash).
     #[cfg_attr(not(all(feature = "std", target_arch = "x86_64")), inline(never))]
     pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
+        #[cfg(feature = "std")]
+        if self.calibration.is_some() {
+            self.calibrate(u_prev, i, self.model.ts());
+        }
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
         if host::has_avx2_fma() {
             return host::step_avx2_fma(self, u_prev, i);
@@ -62,6 +66,10 @@ impl<T: Float> PmsmObserver<T> {
         if !(dt_s > T::zero() && dt_s <= ts * to_t(MAX_PERIOD_FACTOR)) {
             return Err(EkfError::InvalidPeriod);
         }
+        #[cfg(feature = "std")]
+        if self.calibration.is_some() {
+            self.calibrate(u_prev, i, dt_s);
+        }
         let model = self.model;
         let cached = self.rs_constants;
         self.model = model.with_period(dt_s);
@@ -75,6 +83,28 @@ impl<T: Float> PmsmObserver<T> {
             t.break_window();
         }
         out
+    }
+
+    /// The online input calibration's sample (`ObserverConfig::input_calibration`): its drive
+    /// observer steps on the same sample, and every hand-over sets the voltage lead, the
+    /// dead-time voltage and, when the calibrated `Rs` differs from the tracked one by more
+    /// than 5 %, the tracked `Rs` (the flux kept).
+    #[cfg(feature = "std")]
+    #[inline(never)]
+    fn calibrate(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) {
+        let Some(c) = self
+            .calibration
+            .as_mut()
+            .and_then(|c| c.step(u_prev, i, dt_s))
+        else {
+            return;
+        };
+        // Out of range values are refused by the setters, nothing changed.
+        let _ = self.set_voltage_errors(-c.voltage_lead_s, c.dead_time_v);
+        let (psi, rs) = self.parameters();
+        if self.tracking.is_some() && (c.rs_ohm - rs).abs() > rs * to_t(0.05) {
+            let _ = self.set_parameters(psi, c.rs_ohm);
+        }
     }
 
     /// [`step`](Self::step) in the portable build (the code every target runs).

@@ -206,6 +206,13 @@ class Ekf:
     motor is unchanged. The price on a motor that does not saturate: an angle bias of about
     (lq - ld) i_q / (2 psi_a) at steady state. Not available on a flux map (ConfigError): there
     the map is the model.
+    input_calibration: True for a recorded drive whose voltage timing, dead time or resistance
+    is not known: a drive observer (pyfoc.DriveObserver) runs on the same rows, and every 0.1 s,
+    once 200 of its rows have adapted, its averages (calibration()'s weighting, the lead held
+    to [0, 2 ts], the dead-time voltage >= 0) are handed to this filter as voltage_delay_s,
+    inverter_voltage_v and, when it differs by more than 5 %, the tracked rs. The rows before
+    the first hand-over run on the told values. False (the default, as ekf-core's
+    ObserverConfig::new): the told values throughout. Not available on a flux map (ConfigError).
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -254,6 +261,7 @@ class Ekf:
         inverter_voltage_v: float = 0.0,
         acceleration_feedforward: bool = False,
         saturating: bool = False,
+        input_calibration: bool = False,
     ) -> Ekf: ...
     def run(
         self,
