@@ -31,7 +31,7 @@
 //! that they sit at their priors: a zero lead would be averaged in), with the lead held to the
 //! physical range `[0, 2 Ts]` (the applied voltage leads the logged command by up to two
 //! periods; a lead the drive observer reads negative while it settles is not one) and the
-//! dead-time voltage at or above zero. Every 0.1 s, once 200 such samples are in, the averages
+//! dead-time voltage at or above zero. Every 20 ms, once 50 such samples are in, the averages
 //! are handed over: `voltage_delay_s = -tau` and `inverter_voltage_v = v_dt` always, `Rs`
 //! when it differs from the tracked one by more than 5 % (a hand-over restarts the tracking's
 //! settling, so small differences are left to the split filter). The filter's own states are
@@ -142,7 +142,7 @@ impl<T: Float> RecordCalibration<T> {
 /// The record's input errors learnt while the default observer runs (module docs, "Online"):
 /// a [`DriveObserver`](crate::DriveObserver) on the same samples, its estimates averaged as
 /// [`RecordCalibration`] does with the lead held to the physical range `[0, 2 Ts]`, handed
-/// over every `every` samples once `min_samples` tracked samples are in.
+/// over every [`EVERY_S`](Self::EVERY_S) once [`MIN_SAMPLES`](Self::MIN_SAMPLES) adapting samples are in.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OnlineCalibration<T: Float> {
     drive: crate::DriveObserver<T>,
@@ -154,10 +154,10 @@ pub struct OnlineCalibration<T: Float> {
 }
 
 impl<T: Float> OnlineCalibration<T> {
-    /// Samples between hand-overs, as a time: 0.1 s.
-    pub const EVERY_S: f64 = 0.1;
-    /// Tracked samples before the first hand-over.
-    pub const MIN_SAMPLES: u64 = 200;
+    /// Samples between hand-overs, as a time: 20 ms.
+    pub const EVERY_S: f64 = 0.02;
+    /// Adapting samples before the first hand-over.
+    pub const MIN_SAMPLES: u64 = 50;
 
     /// A drive observer on `cfg` (its defaults for the motor and `Ts`, [`crate::DriveConfig::new`]).
     pub fn new(cfg: &crate::DriveConfig<T>) -> Result<Self, crate::ConfigError> {
@@ -257,7 +257,7 @@ mod tests {
             assert_eq!(plain.step(u, i), cal.step(u, i));
         }
         let mut on = OnlineCalibration::new(&crate::DriveConfig::new(m, ts)).unwrap();
-        assert_eq!(on.every, 1000);
+        assert_eq!(on.every, 200);
         for _ in 0..3000 {
             assert_eq!(
                 on.step([0.0; 2], [0.0; 2], ts),

@@ -207,8 +207,8 @@ class Ekf:
     (lq - ld) i_q / (2 psi_a) at steady state. Not available on a flux map (ConfigError): there
     the map is the model.
     input_calibration: True for a recorded drive whose voltage timing, dead time or resistance
-    is not known: a drive observer (pyfoc.DriveObserver) runs on the same rows, and every 0.1 s,
-    once 200 of its rows have adapted, its averages (calibration()'s weighting, the lead held
+    is not known: a drive observer (pyfoc.DriveObserver) runs on the same rows, and every 20 ms,
+    once 50 of its rows have adapted, its averages (calibration()'s weighting, the lead held
     to [0, 2 ts], the dead-time voltage >= 0) are handed to this filter as voltage_delay_s,
     inverter_voltage_v and, when it differs by more than 5 %, the tracked rs. The rows before
     the first hand-over run on the told values. False (the default, as ekf-core's

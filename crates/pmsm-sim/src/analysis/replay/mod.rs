@@ -64,7 +64,11 @@
 //! feedforward, which runs over the record again ([`run_ekf_calibrated`]): the row "EKF +
 //! feedforward told the record's calibration". It is what a
 //! user does with a log of a drive whose timing and inverter are unknown: replay it once to
-//! find them, then set them (`voltage_delay_s`, `rs_ohm`, `inverter_voltage_v`).
+//! find them, then set them (`voltage_delay_s`, `rs_ohm`, `inverter_voltage_v`). The row
+//! "calibration online" does it in one pass ([`run_ekf_online`]): the drive observer runs
+//! alongside and its running calibration is handed to the EKF with the feedforward while it
+//! runs (module `ekf_core::calibration`, "Online"); the rows before the first hand-over run on
+//! the motor file's values.
 //!
 //! # Outputs of a replay ([`write_outputs`])
 //!
@@ -263,6 +267,21 @@ pub fn run_ekf_calibrated(
         ..default_config(motor)
     };
     run_ekf_config(log, &cal.apply(&cfg))
+}
+
+/// The default EKF with the acceleration feedforward and the online input calibration
+/// (`ObserverConfig::input_calibration`: the drive observer's lead, dead-time voltage and `Rs`
+/// handed over while it runs; one pass): its trace.
+pub fn run_ekf_online(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
+    let cfg = ObserverConfig {
+        acceleration_feedforward: Some(AccelerationFeedforward::default_for(
+            &motor.params,
+            motor.ts_s,
+        )),
+        input_calibration: true,
+        ..default_config(motor)
+    };
+    run_ekf_config(log, &cfg)
 }
 
 /// Steps a [`PmsmObserver`] built from `cfg` over `log`.
@@ -501,6 +520,9 @@ pub struct ReplayReport {
     /// The default EKF with the acceleration feedforward told that calibration (the second
     /// pass): its score.
     pub ekf_calibrated: Option<Score>,
+    /// The default EKF with the acceleration feedforward and the online input calibration
+    /// (one pass, [`run_ekf_online`]): its score.
+    pub ekf_online: Option<Score>,
     /// The flux + PLL baseline's score.
     pub flux: Option<Score>,
     /// The part of the default EKF's error periodic in the reference's mechanical angle
@@ -556,6 +578,8 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
     let ekf_score = score(log, ts, &ekf.theta, &ekf.status);
     let ff = run_ekf_with(log, motor, true)?;
     let ff_score = score(log, ts, &ff.theta, &ff.status);
+    let online = run_ekf_online(log, motor)?;
+    let online_score = score(log, ts, &online.theta, &online.status);
     let drive_score = score(log, ts, &drive.theta, &drive.status);
     let flux_score = score(log, ts, &flux.theta, &flux.status);
     if let Some(th_ref) = &log.theta_ref {
@@ -594,6 +618,7 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
             samples: c.samples,
         }),
         ekf_calibrated: calibrated_score,
+        ekf_online: online_score,
         flux: flux_score,
         ekf_reference_periodic: mechanical_component(
             log,
@@ -645,6 +670,10 @@ pub fn markdown(r: &ReplayReport) -> String {
         (
             "EKF + feedforward told the record's calibration (second pass)",
             &r.ekf_calibrated,
+        ),
+        (
+            "EKF + feedforward, calibration online (one pass)",
+            &r.ekf_online,
         ),
         ("flux + PLL", &r.flux),
     ] {
