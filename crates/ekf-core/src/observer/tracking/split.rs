@@ -183,9 +183,11 @@ impl<T: Float> Split<T> {
         if last_w == T::zero() || w2 <= last2 || !changed {
             return None;
         }
-        // Only where the window measures the flux: the resistive drop within 15 % of the
-        // back-EMF (at low speed under load, through a reversal, it measures `Rs` instead).
-        if !measures_flux(r, rs_used, psi) {
+        // Only where the resistive drop is within 30 % of the flux (module docs, "Tracking
+        // during transients": the lumped flux at the `Rs` in use is what the EKF's model needs
+        // along the ramp; at a larger drop, low speed under load, it would not hold once the
+        // speed has risen).
+        if (r * rs_used).abs() > to_t::<T>(START_UP_DROP_SHARE) * psi {
             return None;
         }
         let y = m - r * rs_used - psi;
@@ -337,6 +339,10 @@ impl<T: Float> Split<T> {
         self.c11 = c11 - k1 * ph1;
     }
 }
+
+/// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
+/// corrects the EKF's flux (module docs of the parent, "Tracking during transients").
+const START_UP_DROP_SHARE: f64 = 0.3;
 
 /// Whether a window of `r = n.i / |w|` measures the flux rather than `Rs` at the resistance
 /// `rs` and flux `psi` (module docs of the parent, "Resistance"): the resistive drop `|Rs r|`
