@@ -99,9 +99,15 @@ impl<T: Float> PmsmObserver<T> {
         else {
             return;
         };
+        // The drive observer runs on the told flux, and a flux error reads to it as a lead
+        // and a resistance: nothing is handed over while this filter's flux has left the
+        // told one by more than 3 % (module docs of `crate::calibration`, "Online").
+        let (psi, rs) = self.parameters();
+        if (psi - self.nominal.0).abs() > self.nominal.0 * to_t(0.03) {
+            return;
+        }
         // Out of range values are refused by the setters, nothing changed.
         let _ = self.set_voltage_errors(-c.voltage_lead_s, c.dead_time_v);
-        let (psi, rs) = self.parameters();
         if self.tracking.is_some() && (c.rs_ohm - rs).abs() > rs * to_t(0.05) {
             let _ = self.set_parameters(psi, c.rs_ohm);
         }

@@ -211,8 +211,10 @@ class Ekf:
     once 50 of its rows have adapted, its averages (calibration()'s weighting, the lead held
     to [0, 2 ts], the dead-time voltage >= 0) are handed to this filter as voltage_delay_s,
     inverter_voltage_v and, when it differs by more than 5 %, the tracked rs. The rows before
-    the first hand-over run on the told values. False (the default, as ekf-core's
-    ObserverConfig::new): the told values throughout. Not available on a flux map (ConfigError).
+    the first hand-over run on the told values; nothing is handed over while the tracked flux
+    is more than 3 % off the told one (the drive observer assumes the told flux). False (the
+    default, as ekf-core's ObserverConfig::new): the told values throughout. Not available on
+    a flux map (ConfigError).
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
