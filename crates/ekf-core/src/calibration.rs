@@ -146,7 +146,8 @@ impl<T: Float> RecordCalibration<T> {
 /// The record's input errors learnt while the default observer runs (module docs, "Online"):
 /// a [`DriveObserver`](crate::DriveObserver) on the same samples, its estimates averaged as
 /// [`RecordCalibration`] does with the lead held to the physical range `[0, 2 Ts]`, handed
-/// over every [`EVERY_S`](Self::EVERY_S) once [`MIN_SAMPLES`](Self::MIN_SAMPLES) adapting samples are in.
+/// over every [`EVERY_S`](Self::EVERY_S) once [`MIN_SAMPLES`](Self::MIN_SAMPLES) adapting
+/// samples are in.
 #[derive(Clone, Debug, PartialEq)]
 pub struct OnlineCalibration<T: Float> {
     drive: crate::DriveObserver<T>,
@@ -178,12 +179,13 @@ impl<T: Float> OnlineCalibration<T> {
     }
 
     /// One sample (the drive observer's [`step_dt`](crate::DriveObserver::step_dt)); a sample it
-    /// refuses is skipped. Returns the calibration to hand over on every `every`-th sample once
-    /// enough samples are in, else `None`.
+    /// refuses changes nothing and hands nothing over. Returns the calibration to hand over on
+    /// every `every`-th accepted sample once enough samples are in, else `None`.
     pub fn step(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) -> Option<Calibration<T>> {
-        if let Ok(mut e) = self.drive.step_dt(u_prev, i, dt_s)
-            && e.adapting
-        {
+        let Ok(mut e) = self.drive.step_dt(u_prev, i, dt_s) else {
+            return None;
+        };
+        if e.adapting {
             e.voltage_lead_s = e.voltage_lead_s.max(T::zero()).min(self.max_lead_s);
             e.dead_time_v = e.dead_time_v.max(T::zero());
             self.acc.push(&e);
@@ -269,8 +271,10 @@ mod tests {
                 "standstill: nothing adapts"
             );
         }
-        // A refused sample is skipped.
+        // A refused sample changes nothing.
+        let before = on.clone();
         assert_eq!(on.step([f64::NAN; 2], [0.0; 2], ts), None);
+        assert_eq!(on, before);
     }
 
     #[test]
