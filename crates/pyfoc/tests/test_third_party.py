@@ -64,8 +64,7 @@ def test_default_ekf_on_motulator_trace(noise_a, theta0):
 # Told the wrong motor (module docs of ekf_core::observer::tracking, "Tracking during
 # transients"): the scale factors of (psi_f, Rs) and the measured RMS from 0.25 s at speeds of
 # 5 Hz and up, with the limit asserted (the measured value plus about 30 %). The start-up
-# windows of the V/f ramp correct the flux at a resistive drop up to 30 % of it; at 15 % the
-# same cases were 1.93 / 0.17 / 4.38 / 3.75 deg.
+# windows of the V/f ramp (a resistive drop of 17-22 % of the flux) correct the flux.
 MISMATCH = {
     "psi_f -10 %": ((0.9, 1.0), 0.06, 0.10),
     "psi_f +10 %": ((1.1, 1.0), 0.08, 0.12),
