@@ -42,14 +42,12 @@
 //! untouched: the hand-over changes the model its next prediction uses. Before the first
 //! hand-over the filter is the plain one, bit for bit.
 //!
-//! Measured on the three real ESC records (`pyfoc.Ekf(..., input_calibration=True)`,
-//! `docs/accuracy.md`, "Recorded drives"): the first run's 180 deg flips at duty steps go (its
-//! `Rs` is handed over at 0.066 ohm, told 0.102), a 1 s record at constant speed loses its first
-//! half to the wait (the lead is found at 0.43 s).
-//!
 //! Measured on three real ESC records (4.5 kHz; `docs/accuracy.md`, "Recorded drives";
-//! `pmsm-sim replay LOG.csv --motor RUN.toml`): see the replay table's row "EKF told the
-//! record's calibration".
+//! `pmsm-sim replay LOG.csv --motor RUN.toml`): the replay table's rows "EKF told the
+//! record's calibration" (two passes) and "calibration online" (one pass). Online, the first
+//! run's 180 deg flips at duty steps go (its `Rs` is handed over at 0.067 ohm, told 0.102); a
+//! 1 s record at constant speed loses its first half to the wait (the lead is found at
+//! 0.43 s).
 
 use crate::drive::DriveEstimate;
 use crate::observer::ObserverConfig;
@@ -155,7 +153,6 @@ pub struct OnlineCalibration<T: Float> {
     max_lead_s: T,
     every: u32,
     count: u32,
-    min_samples: u64,
 }
 
 impl<T: Float> OnlineCalibration<T> {
@@ -174,7 +171,6 @@ impl<T: Float> OnlineCalibration<T> {
             max_lead_s: cfg.ts_s + cfg.ts_s,
             every: u32::try_from(every).unwrap_or(u32::MAX).max(1),
             count: 0,
-            min_samples: Self::MIN_SAMPLES,
         })
     }
 
@@ -195,7 +191,7 @@ impl<T: Float> OnlineCalibration<T> {
             return None;
         }
         self.count = 0;
-        self.acc.result().filter(|c| c.samples >= self.min_samples)
+        self.acc.result().filter(|c| c.samples >= Self::MIN_SAMPLES)
     }
 }
 

@@ -187,7 +187,7 @@ impl<T: Float> Split<T> {
         // during transients": the lumped flux at the `Rs` in use is what the EKF's model needs
         // along the ramp; at a larger drop, low speed under load, it would not hold once the
         // speed has risen).
-        if (r * rs_used).abs() > to_t::<T>(START_UP_DROP_SHARE) * psi {
+        if !drop_within(r, rs_used, psi, START_UP_DROP_SHARE) {
             return None;
         }
         let y = m - r * rs_used - psi;
@@ -348,5 +348,10 @@ const START_UP_DROP_SHARE: f64 = 0.3;
 /// `rs` and flux `psi` (module docs of the parent, "Resistance"): the resistive drop `|Rs r|`
 /// within 15 % of the flux.
 fn measures_flux<T: Float>(r: T, rs: T, psi: T) -> bool {
-    (r * rs).abs() <= to_t::<T>(0.15) * psi
+    drop_within(r, rs, psi, 0.15)
+}
+
+/// Whether the resistive drop `|Rs r|` of a window is within `share` of the flux `psi`.
+fn drop_within<T: Float>(r: T, rs: T, psi: T, share: f64) -> bool {
+    (r * rs).abs() <= to_t::<T>(share) * psi
 }

@@ -233,10 +233,10 @@ pub fn run_ekf_with(
     motor: &ReplayMotor,
     feedforward: bool,
 ) -> Result<ObserverTrace, ReplayError> {
-    let cfg = ObserverConfig {
-        acceleration_feedforward: feedforward
-            .then(|| AccelerationFeedforward::default_for(&motor.params, motor.ts_s)),
-        ..default_config(motor)
+    let cfg = if feedforward {
+        feedforward_config(motor)
+    } else {
+        default_config(motor)
     };
     run_ekf_config(log, &cfg)
 }
@@ -251,6 +251,18 @@ fn default_config(motor: &ReplayMotor) -> ObserverConfig<f64> {
     }
 }
 
+/// [`default_config`] with the acceleration feedforward
+/// ([`ekf_core::AccelerationFeedforward::default_for`]).
+fn feedforward_config(motor: &ReplayMotor) -> ObserverConfig<f64> {
+    ObserverConfig {
+        acceleration_feedforward: Some(AccelerationFeedforward::default_for(
+            &motor.params,
+            motor.ts_s,
+        )),
+        ..default_config(motor)
+    }
+}
+
 /// The default EKF with the acceleration feedforward, told the record's calibration (module
 /// `ekf_core::calibration`: the drive observer's input errors; the second of two passes):
 /// its trace.
@@ -259,14 +271,7 @@ pub fn run_ekf_calibrated(
     motor: &ReplayMotor,
     cal: &Calibration<f64>,
 ) -> Result<ObserverTrace, ReplayError> {
-    let cfg = ObserverConfig {
-        acceleration_feedforward: Some(AccelerationFeedforward::default_for(
-            &motor.params,
-            motor.ts_s,
-        )),
-        ..default_config(motor)
-    };
-    run_ekf_config(log, &cal.apply(&cfg))
+    run_ekf_config(log, &cal.apply(&feedforward_config(motor)))
 }
 
 /// The default EKF with the acceleration feedforward and the online input calibration
@@ -274,12 +279,8 @@ pub fn run_ekf_calibrated(
 /// handed over while it runs; one pass): its trace.
 pub fn run_ekf_online(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
     let cfg = ObserverConfig {
-        acceleration_feedforward: Some(AccelerationFeedforward::default_for(
-            &motor.params,
-            motor.ts_s,
-        )),
         input_calibration: true,
-        ..default_config(motor)
+        ..feedforward_config(motor)
     };
     run_ekf_config(log, &cfg)
 }
