@@ -40,7 +40,9 @@
 //! lead and a resistance (on motulator's trace of the 2.2 kW motor told 100 K cold it found
 //! `Rs` 1.62 ohm for a true 3.60, told 2.19). The filter's own states are
 //! untouched: the hand-over changes the model its next prediction uses. Before the first
-//! hand-over the filter is the plain one, bit for bit.
+//! hand-over the filter is the plain one, bit for bit. Off in [`ObserverConfig::new`] (the
+//! firmware knows its timing); `pyfoc.Ekf`, the observer for recorded drives, turns it on by
+//! default with the acceleration feedforward.
 //!
 //! Measured on three real ESC records (4.5 kHz; `docs/accuracy.md`, "Recorded drives";
 //! `pmsm-sim replay LOG.csv --motor RUN.toml`): the replay table's rows "EKF told the

@@ -25,7 +25,11 @@ use crate::replay;
 /// `ld != lq`; states `i_alpha, i_beta, omega_e, theta`).
 ///
 /// `Ekf(motor, ts, *, q=None, r=None, x0=None, p0=None, discretization="lag_free",
-/// dtype="float64", covariance_update="joseph")`.
+/// dtype="float64", covariance_update="joseph", tracking="default", voltage_delay_s=0.0,
+/// inverter_voltage_v=0.0, acceleration_feedforward=None, saturating=False,
+/// input_calibration=None)`. Unset, `acceleration_feedforward` and `input_calibration` are on
+/// for a constant-parameter motor (a recorded drive's defaults; the calibration off when the
+/// voltage timing is told), off on a flux map; both `False` is the filter foc runs.
 ///
 /// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
 /// calls on one `Ekf` from several threads are serialized (each completes, in some order)
@@ -39,6 +43,12 @@ pub(crate) struct Ekf {
     /// Precision of the filter, `"float64"` or `"float32"`.
     #[pyo3(get)]
     dtype: &'static str,
+    /// Whether the acceleration feedforward is on (as given, or the default).
+    #[pyo3(get)]
+    acceleration_feedforward: bool,
+    /// Whether the online input calibration is on (as given, or the default).
+    #[pyo3(get)]
+    input_calibration: bool,
 }
 
 impl Ekf {
@@ -111,7 +121,7 @@ fn build<T: Float, O>(
     if s.feedforward {
         if flux_map.is_some() {
             return Err(ConfigError::new_err(
-                "acceleration_feedforward is not available on a flux map: leave it False",
+                "acceleration_feedforward is not available on a flux map: leave it unset or False",
             ));
         }
         cfg.acceleration_feedforward =
@@ -121,7 +131,7 @@ fn build<T: Float, O>(
     if s.input_calibration {
         if flux_map.is_some() {
             return Err(ConfigError::new_err(
-                "input_calibration is not available on a flux map: leave it False",
+                "input_calibration is not available on a flux map: leave it unset or False",
             ));
         }
         cfg.input_calibration = true;
@@ -176,7 +186,7 @@ impl Ekf {
     #[pyo3(signature = (motor, ts, *, q = None, r = None, x0 = None, p0 = None,
         discretization = "lag_free", dtype = "float64", covariance_update = "joseph",
         tracking = "default", voltage_delay_s = 0.0, inverter_voltage_v = 0.0,
-        acceleration_feedforward = false, saturating = false, input_calibration = false))]
+        acceleration_feedforward = None, saturating = false, input_calibration = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         motor: &Motor,
@@ -191,9 +201,9 @@ impl Ekf {
         tracking: &str,
         voltage_delay_s: f64,
         inverter_voltage_v: f64,
-        acceleration_feedforward: bool,
+        acceleration_feedforward: Option<bool>,
         saturating: bool,
-        input_calibration: bool,
+        input_calibration: Option<bool>,
     ) -> PyResult<Self> {
         let disc = match discretization {
             "lag_free" => Discretization::LagFree,
@@ -227,6 +237,12 @@ impl Ekf {
         let r = r.map(|o| square::<2>(o, "r")).transpose()?;
         let p0 = p0.map(|o| square::<4>(o, "p0")).transpose()?;
         let x0 = x0.map(|o| fixed::<4>(o, "x0")).transpose()?;
+        // The defaults (unset): both on for a constant-parameter motor, the calibration off
+        // when the voltage timing was told; both off on a flux map.
+        let constant = motor.map.is_none();
+        let timing_told = voltage_delay_s != 0.0 || inverter_voltage_v != 0.0;
+        let feedforward = acceleration_feedforward.unwrap_or(constant);
+        let input_calibration = input_calibration.unwrap_or(constant && !timing_told);
         let settings = Settings {
             q,
             r,
@@ -237,7 +253,7 @@ impl Ekf {
             tracking,
             voltage_delay_s,
             inverter_voltage_v,
-            feedforward: acceleration_feedforward,
+            feedforward,
             saturating,
             input_calibration,
         };
@@ -263,6 +279,8 @@ impl Ekf {
             }),
             ts,
             dtype,
+            acceleration_feedforward: feedforward,
+            input_calibration,
         })
     }
 

@@ -6,6 +6,10 @@ import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[3]
 SEED_CSV = ROOT / "tests" / "data" / "seed_reference.csv"
+# `pyfoc.Ekf`'s options for the filter foc and the simulator run (ekf-core's
+# `ObserverConfig::new`): the defaults add the acceleration feedforward and the online input
+# calibration, which are for recorded drives.
+FIRMWARE = dict(acceleration_feedforward=False, input_calibration=False)
 
 
 @pytest.fixture(scope="session")

@@ -5,6 +5,8 @@ import pytest
 
 import pyfoc
 
+from conftest import FIRMWARE
+
 filterpy_kalman = pytest.importorskip("filterpy.kalman")
 
 
@@ -68,7 +70,8 @@ def test_seed_filter_matches_filterpy_to_1e_14(seed_record):
     rec = seed_record
     motor = pyfoc.Motor(rs=rec["rs"], ls=rec["ls"], psi_f=rec["psi_f"], pole_pairs=rec["pole_pairs"])
     ekf = pyfoc.Ekf(motor, ts=rec["ts"], q=rec["q"], r=rec["r"], x0=rec["x0"], p0=rec["p0"],
-                    discretization="forward_euler", covariance_update="joseph", tracking="off")
+                    discretization="forward_euler", covariance_update="joseph", tracking="off",
+                    **FIRMWARE)
     out = ekf.run(rec["u_ab"], rec["i_ab"])
     ref = run_filterpy(rec)
     assert len(ref) >= 2000

@@ -7,6 +7,8 @@ import pytest
 
 import pyfoc
 
+from conftest import FIRMWARE
+
 HEADER = "t_s,dt_s,u_alpha_v,u_beta_v,i_alpha_a,i_beta_a,theta_ref_rad,omega_ref_rad_s"
 SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
 TS = 100e-6
@@ -48,8 +50,8 @@ def score(theta, log, ts=TS):
     return float(np.sqrt(np.mean(np.degrees(wrap(err - off)) ** 2)))
 
 
-def run(log, **kw):
-    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS)
+def run(log, options=None, **kw):
+    ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS, **(options or {}))
     return ekf.run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"], **kw)
 
 
@@ -59,10 +61,11 @@ def test_mcap_log_reproduces_the_simulators_ekf(sim):
     assert log["u_ab"].shape == (len(log["t"]), 2)
     np.testing.assert_allclose(log["dt"], TS)
     np.testing.assert_array_equal(log["theta_ref"], res["theta"])
-    out = run(log)
+    # The simulator runs the firmware's filter: told the same options, the replay is it.
+    out = run(log, FIRMWARE)
     assert np.max(np.abs(wrap(out["theta"] - res["theta_est"]))) < 1e-9
     # Per-row periods equal to ts: the same filter.
-    out_dt = run(log, dt=log["dt"])
+    out_dt = run(log, FIRMWARE, dt=log["dt"])
     assert np.max(np.abs(wrap(out_dt["theta"] - out["theta"]))) < 1e-9
     assert out_dt["status"].dtype == np.int8
     assert score(out["theta"], log) < 1.0
@@ -225,19 +228,19 @@ def test_voltage_timing_and_inverter_voltage_settings(sim):
 
 
 def test_acceleration_feedforward_is_an_option(sim):
-    # Off by default (ekf-core's default observer); on, the speed prediction follows the q
+    # On by default for a constant-parameter motor; on, the speed prediction follows the q
     # current: on the default run (a start, speed steps, a load step) it tracks as well, and the
-    # result differs from the default's (the option is wired through).
+    # result differs from the firmware's filter (the option is wired through).
     _, log, _ = sim
     motor = pyfoc.Motor(**SERVO)
-    base = pyfoc.Ekf(motor, TS).run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"])
-    off = pyfoc.Ekf(motor, TS, acceleration_feedforward=False).run(
-        log["u_ab"], log["i_ab"], u_prev=log["u_prev"])
-    on = pyfoc.Ekf(motor, TS, acceleration_feedforward=True).run(
-        log["u_ab"], log["i_ab"], u_prev=log["u_prev"])
-    np.testing.assert_array_equal(off["theta"], base["theta"])
+    args = (log["u_ab"], log["i_ab"])
+    base = pyfoc.Ekf(motor, TS, input_calibration=False).run(*args, u_prev=log["u_prev"])
+    off = pyfoc.Ekf(motor, TS, **FIRMWARE).run(*args, u_prev=log["u_prev"])
+    on = pyfoc.Ekf(motor, TS, acceleration_feedforward=True, input_calibration=False).run(
+        *args, u_prev=log["u_prev"])
+    np.testing.assert_array_equal(on["theta"], base["theta"])
     assert np.all(np.isfinite(on["theta"]))
-    assert np.max(np.abs(wrap(on["theta"] - base["theta"]))) > 0.0
+    assert np.max(np.abs(wrap(on["theta"] - off["theta"]))) > 0.0
     assert score(on["theta"], log) < 1.0
     with pytest.raises(TypeError):
         pyfoc.Ekf(motor, TS, acceleration_feedforward="yes")
@@ -250,6 +253,7 @@ def test_input_calibration_waits_for_its_samples_and_is_refused_on_a_map(sim):
     _, log, _ = sim
     on = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS, input_calibration=True)
     a = on.run(log["u_ab"], log["i_ab"], u_prev=log["u_prev"])
+    np.testing.assert_array_equal(a["theta"], run(log, dict(input_calibration=False))["theta"])
     np.testing.assert_array_equal(a["theta"], run(log)["theta"])
     i = np.linspace(-10.0, 10.0, 5)
     psi_d = 0.1 + 0.005 * i[:, None] + 0.0 * i[None, :]
@@ -257,3 +261,20 @@ def test_input_calibration_waits_for_its_samples_and_is_refused_on_a_map(sim):
     m = pyfoc.Motor.from_flux_map(0.5, 4, i, i, psi_d, psi_q)
     with pytest.raises(pyfoc.ConfigError, match="input_calibration"):
         pyfoc.Ekf(m, TS, input_calibration=True)
+
+
+def test_defaults_for_recorded_drives():
+    """Unset, the feedforward and the calibration are on for a constant-parameter motor; the
+    calibration is off when the voltage timing is told (the user knows it), both are off on a
+    flux map (which refuses them); given, they are as given."""
+    servo = pyfoc.Motor(**SERVO)
+    on = lambda e: (e.acceleration_feedforward, e.input_calibration)  # noqa: E731
+    assert on(pyfoc.Ekf(servo, TS)) == (True, True)
+    assert on(pyfoc.Ekf(servo, TS, voltage_delay_s=-0.5 * TS)) == (True, False)
+    assert on(pyfoc.Ekf(servo, TS, inverter_voltage_v=0.2)) == (True, False)
+    assert on(pyfoc.Ekf(servo, TS, voltage_delay_s=-0.5 * TS, input_calibration=True)) == (True, True)
+    assert on(pyfoc.Ekf(servo, TS, **FIRMWARE)) == (False, False)
+    i = np.linspace(-10.0, 10.0, 5)
+    m = pyfoc.Motor.from_flux_map(0.5, 4, i, i, 0.1 + 0.005 * i[:, None] + 0.0 * i[None, :],
+                                  0.0 * i[:, None] + 0.008 * i[None, :])
+    assert on(pyfoc.Ekf(m, TS)) == (False, False)

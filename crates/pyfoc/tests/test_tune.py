@@ -10,7 +10,7 @@ import pytest
 
 import pyfoc
 
-from conftest import ROOT
+from conftest import FIRMWARE, ROOT
 
 SCENARIOS = ROOT / "crates" / "pmsm-sim" / "scenarios"
 SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
@@ -38,7 +38,8 @@ def test_seed_record_recovers_the_noise(seed_record):
     assert abs(rep["mean_nis_after"] - 2.0) < 0.15
     assert rep["after"]["log_likelihood"] > rep["before"]["log_likelihood"]
     # The tuned filter, run through pyfoc.Ekf with the proposed Q and R, gives the reported NIS.
-    out = pyfoc.Ekf(motor, rec["ts"], q=rep["q"], r=rep["r"], x0=rec["x0"]).run(rec["u_ab"], rec["i_ab"])
+    out = pyfoc.Ekf(motor, rec["ts"], q=rep["q"], r=rep["r"], x0=rec["x0"], **FIRMWARE).run(
+        rec["u_ab"], rec["i_ab"])
     np.testing.assert_allclose(out["nis"][300:].mean(), rep["mean_nis_after"], rtol=1e-9)
     assert "[observer_noise]" in rep["toml"]
 
@@ -70,10 +71,10 @@ def test_simulated_run_recovers_the_sensor_r(simulated):
     sim, _ = simulated
     ts = sim["metrics"]["ts_s"]
     motor = pyfoc.Motor(**SERVO)
-    # The ideal bridge applies what was commanded: the default filter on these arrays is the
-    # simulator's observer, which is given the voltage foc expects of its duties (f32): the
-    # two agree to that rounding (measured 3e-7 rad).
-    ref = pyfoc.Ekf(motor, ts).run(sim["u_ab"], sim["i_ab_meas"])
+    # The ideal bridge applies what was commanded: the firmware's filter on these arrays is
+    # the simulator's observer, which is given the voltage foc expects of its duties (f32):
+    # the two agree to that rounding (measured 3e-7 rad).
+    ref = pyfoc.Ekf(motor, ts, **FIRMWARE).run(sim["u_ab"], sim["i_ab_meas"])
     np.testing.assert_allclose(wrap(ref["theta"] - sim["theta_est"]), 0.0, atol=2e-6)
     rep = pyfoc.tune_qr(motor, ts, sim["u_ab"], sim["i_ab_meas"], theta_true=sim["theta"],
                         omega_true=sim["omega"], skip=500)

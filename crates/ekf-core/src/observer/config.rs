@@ -64,11 +64,13 @@ pub struct ObserverConfig<T: Float> {
     pub speed_noise_adaptation: Option<SpeedNoiseAdaptation<T>>,
     /// Acceleration feedforward: the speed prediction follows the q current with a gain learnt
     /// online (module docs, "Acceleration feedforward"); `None` (the default): the speed is a
-    /// random walk. Opt in with [`AccelerationFeedforward::default_for`].
+    /// random walk. Opt in with [`AccelerationFeedforward::default_for`] (`pyfoc.Ekf` does by
+    /// default, for recorded drives).
     pub acceleration_feedforward: Option<AccelerationFeedforward<T>>,
     /// Host builds: the voltage lead, the inverter's dead-time voltage and `Rs` learnt online
     /// from the samples by a drive observer running alongside and handed to this filter
-    /// (module docs of [`crate::calibration`], "Online"); `false` keeps the configured ones.
+    /// (module docs of [`crate::calibration`], "Online"); `false` (the default here; `pyfoc.Ekf`
+    /// turns it on unless told the voltage timing) keeps the configured ones.
     #[cfg(feature = "std")]
     pub input_calibration: bool,
 }

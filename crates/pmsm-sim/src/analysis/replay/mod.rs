@@ -665,7 +665,7 @@ pub fn markdown(r: &ReplayReport) -> String {
          |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for (name, sc) in [
-        ("EKF (default)", &r.ekf),
+        ("EKF (firmware's defaults)", &r.ekf),
         ("EKF + acceleration feedforward", &r.ekf_feedforward),
         ("drive observer", &r.drive),
         (
@@ -673,7 +673,7 @@ pub fn markdown(r: &ReplayReport) -> String {
             &r.ekf_calibrated,
         ),
         (
-            "EKF + feedforward, calibration online (one pass)",
+            "EKF + feedforward, calibration online (one pass; pyfoc's defaults)",
             &r.ekf_online,
         ),
         ("flux + PLL", &r.flux),
