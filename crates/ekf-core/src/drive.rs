@@ -243,6 +243,80 @@ pub struct DriveEstimate<T> {
     pub restarted: bool,
 }
 
+/// `Phi P Phi^T` for the drive model's transition ([`DriveObserver::transition`]): rows 0 and 1
+/// of `Phi` are dense (the currents), row 2 is the speed's `e2 + h e4`, row 3 the angle's
+/// `e3 + h e2 + h^2 / 2 e4`, the others the identity; a quarter of the dense product's
+/// multiplications.
+fn propagate<T: Float>(phi: &Mat8<T>, p: &Mat8<T>) -> Mat8<T> {
+    const N: usize = DRIVE_STATES;
+    let (f24, f32_, f34) = (phi[(2, 4)], phi[(3, 2)], phi[(3, 4)]);
+    // B = Phi P.
+    let mut b = *p;
+    for c in 0..N {
+        let (mut b0, mut b1) = (T::zero(), T::zero());
+        for k in 0..N {
+            b0 += phi[(0, k)] * p[(k, c)];
+            b1 += phi[(1, k)] * p[(k, c)];
+        }
+        b[(0, c)] = b0;
+        b[(1, c)] = b1;
+        b[(2, c)] = p[(2, c)] + f24 * p[(4, c)];
+        b[(3, c)] = p[(3, c)] + f32_ * p[(2, c)] + f34 * p[(4, c)];
+    }
+    // B Phi^T.
+    let mut out = b;
+    for r in 0..N {
+        let (mut c0, mut c1) = (T::zero(), T::zero());
+        for k in 0..N {
+            c0 += b[(r, k)] * phi[(0, k)];
+            c1 += b[(r, k)] * phi[(1, k)];
+        }
+        out[(r, 0)] = c0;
+        out[(r, 1)] = c1;
+        out[(r, 2)] = b[(r, 2)] + f24 * b[(r, 4)];
+        out[(r, 3)] = b[(r, 3)] + f32_ * b[(r, 2)] + f34 * b[(r, 4)];
+    }
+    out
+}
+
+/// The Joseph update `(I - K H) P- (I - K H)^T + r K K^T` with `H = [I_2 0]`, expanded:
+/// `P- - K P-[0:2, :] - P-[:, 0:2] K^T + K S K^T`, `S = P-[0:2, 0:2] + r I`; made symmetric.
+fn joseph<T: Float>(pm: &Mat8<T>, kg: &SMatrix<T, DRIVE_STATES, 2>, r: T) -> Mat8<T> {
+    const N: usize = DRIVE_STATES;
+    let (s00, s01, s10, s11) = (pm[(0, 0)] + r, pm[(0, 1)], pm[(1, 0)], pm[(1, 1)] + r);
+    let mut p = *pm;
+    for i in 0..N {
+        let (k0, k1) = (kg[(i, 0)], kg[(i, 1)]);
+        // Row i of K S.
+        let (ks0, ks1) = (k0 * s00 + k1 * s10, k0 * s01 + k1 * s11);
+        for j in 0..N {
+            p[(i, j)] += ks0 * kg[(j, 0)] + ks1 * kg[(j, 1)]
+                - (k0 * pm[(0, j)] + k1 * pm[(1, j)])
+                - (pm[(i, 0)] * kg[(j, 0)] + pm[(i, 1)] * kg[(j, 1)]);
+        }
+    }
+    let half = to_t::<T>(0.5);
+    for i in 0..N {
+        for j in (i + 1)..N {
+            let v = (p[(i, j)] + p[(j, i)]) * half;
+            p[(i, j)] = v;
+            p[(j, i)] = v;
+        }
+    }
+    p
+}
+
+/// A drive filter's step, computed and not yet committed.
+struct DriveStep<T: Float> {
+    x: Vec8<T>,
+    p: Mat8<T>,
+    consistency: ConsistencyState<T>,
+    good: u32,
+    settled: bool,
+    nis: T,
+    adapting: bool,
+}
+
 /// The drive observer (module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct DriveObserver<T: Float> {
@@ -391,10 +465,10 @@ impl<T: Float> DriveObserver<T> {
         if !(dt_s > T::zero() && dt_s <= ts * to_t(crate::observer::MAX_PERIOD_FACTOR)) {
             return Err(EkfError::InvalidPeriod);
         }
-        // The acquisition observer runs on every sample (its errors refuse the sample).
-        let mut acq = self.acq.clone();
-        let e = acq.step_dt(u_prev, i, dt_s)?;
+        // The acquisition observer runs on every sample (its errors refuse the sample; a
+        // refused sample leaves it as it was).
         if !self.engaged {
+            let e = self.acq.step_dt(u_prev, i, dt_s)?;
             // Hand-over once the acquisition has tracked for `settle_s`: the motion states
             // and their covariance from it, acceleration 0, the input errors kept.
             let good = if e.status == Status::Tracking {
@@ -402,34 +476,36 @@ impl<T: Float> DriveObserver<T> {
             } else {
                 0
             };
-            self.acq = acq;
             self.acq_est = Some(e);
             self.acq_good = good;
             self.restarted = false;
             self.adapting = false;
             self.nis = e.nis;
             if good >= self.restart_samples {
-                self.engage();
+                self.engage(*self.acq.state(), self.acq.covariance());
             }
             return Ok(self.estimate());
         }
-        let out = self.drive_step(u_prev, i, dt_s);
-        if out.is_ok() {
-            self.acq = acq;
-            self.acq_est = Some(e);
-            self.acq_good = if e.status == Status::Tracking {
-                self.acq_good.saturating_add(1)
-            } else {
-                0
-            };
-        }
-        out
+        // The drive filter's step is computed first and committed once the acquisition
+        // observer has taken the sample too: either one refusing it changes nothing.
+        let step = self.drive_step(u_prev, i, dt_s)?;
+        // A restart in this step hands over from the acquisition observer as it was before
+        // this sample.
+        let before = (*self.acq.state(), self.acq.covariance());
+        let e = self.acq.step_dt(u_prev, i, dt_s)?;
+        let out = self.commit(step, i, before);
+        self.acq_est = Some(e);
+        self.acq_good = if e.status == Status::Tracking {
+            self.acq_good.saturating_add(1)
+        } else {
+            0
+        };
+        Ok(out)
     }
 
-    /// Hands the estimate over from the acquisition observer to the drive filter.
-    fn engage(&mut self) {
-        let xa = *self.acq.state();
-        let pa = self.acq.covariance();
+    /// Hands the estimate over from the acquisition observer (its state `xa` and covariance
+    /// `pa`) to the drive filter.
+    fn engage(&mut self, xa: nalgebra::Vector4<T>, pa: nalgebra::Matrix4<T>) {
         for k in 0..4 {
             self.x[k] = xa[k];
         }
@@ -453,17 +529,12 @@ impl<T: Float> DriveObserver<T> {
         self.engaged = true;
     }
 
-    /// One step of the drive filter (engaged).
-    fn drive_step(
-        &mut self,
-        u_prev: [T; 2],
-        i: [T; 2],
-        dt_s: T,
-    ) -> Result<DriveEstimate<T>, EkfError> {
+    /// One step of the drive filter (engaged), computed, not committed ([`commit`](Self::commit)).
+    fn drive_step(&self, u_prev: [T; 2], i: [T; 2], dt_s: T) -> Result<DriveStep<T>, EkfError> {
         let ts = self.cfg.ts_s;
         let (xm, phi) = self.transition(&self.x, u_prev, dt_s);
         let scale = dt_s / ts;
-        let mut pm = phi * self.p * phi.transpose();
+        let mut pm = propagate(&phi, &self.p);
         for k in 0..DRIVE_STATES {
             pm[(k, k)] += self.q[k] * scale;
         }
@@ -514,34 +585,46 @@ impl<T: Float> DriveObserver<T> {
         }
         x[3] = wrap_angle(x[3]);
         self.clamp_inputs(&mut x);
-        // Joseph form: P = (I - K H) P- (I - K H)^T + K R K^T (valid for any gain).
-        let mut a = Mat8::<T>::identity();
-        for r in 0..DRIVE_STATES {
-            a[(r, 0)] -= kg[(r, 0)];
-            a[(r, 1)] -= kg[(r, 1)];
-        }
-        let mut p = a * pm * a.transpose() + kg * kg.transpose() * r;
-        p = (p + p.transpose()) * to_t::<T>(0.5);
+        let p = joseph(&pm, &kg, r);
         if !(x.iter().all(|v| v.is_finite()) && p.iter().all(|v| v.is_finite())) {
             return Err(EkfError::NonFiniteResult);
         }
-        self.x = x;
-        self.p = p;
-        self.consistency = consistency;
-        self.good = good;
-        self.settled = settled;
-        self.nis = nis;
-        self.adapting = adapting;
-        self.bad = if consistency.inconsistent {
+        Ok(DriveStep {
+            x,
+            p,
+            consistency,
+            good,
+            settled,
+            nis,
+            adapting,
+        })
+    }
+
+    /// Commits a drive filter's step (the measured currents `i` and the acquisition observer
+    /// `acq` = (state, covariance) for a restart); returns the estimate.
+    fn commit(
+        &mut self,
+        s: DriveStep<T>,
+        i: [T; 2],
+        acq: (nalgebra::Vector4<T>, nalgebra::Matrix4<T>),
+    ) -> DriveEstimate<T> {
+        self.x = s.x;
+        self.p = s.p;
+        self.consistency = s.consistency;
+        self.good = s.good;
+        self.settled = s.settled;
+        self.nis = s.nis;
+        self.adapting = s.adapting;
+        self.bad = if s.consistency.inconsistent {
             self.bad.saturating_add(1)
         } else {
             0
         };
         self.restarted = false;
         if self.bad >= self.restart_samples {
-            self.restart_motion(i);
+            self.restart_motion(i, acq);
         }
-        Ok(self.estimate())
+        self.estimate()
     }
 
     /// Restarts the drive filter's motion states (module docs): the drive filter has been
@@ -549,9 +632,9 @@ impl<T: Float> DriveObserver<T> {
     /// unknown (`P0` block: speed, angle and acceleration), with the measured currents. The
     /// input errors and their covariance are kept; their correlation with the motion is
     /// dropped.
-    fn restart_motion(&mut self, i: [T; 2]) {
+    fn restart_motion(&mut self, i: [T; 2], acq: (nalgebra::Vector4<T>, nalgebra::Matrix4<T>)) {
         if self.acq_est.is_some_and(|e| e.status == Status::Tracking) {
-            self.engage();
+            self.engage(acq.0, acq.1);
         } else {
             self.x[0] = i[0];
             self.x[1] = i[1];
@@ -719,6 +802,48 @@ impl<T: Float> DriveObserver<T> {
             inconsistent,
             adapting: self.adapting,
             restarted: self.restarted,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A symmetric positive definite 8 x 8 matrix of distinct entries.
+    fn spd() -> Mat8<f64> {
+        let a = Mat8::<f64>::from_fn(|r, c| {
+            ((r * 8 + c) as f64 * 0.37).sin() + if r == c { 2.0 } else { 0.0 }
+        });
+        a * a.transpose()
+    }
+
+    #[test]
+    fn structured_products_are_the_dense_ones() {
+        let m = MotorParams::<f64>::servo();
+        let ts = 1e-4;
+        let obs = DriveObserver::new(&DriveConfig::new(m, ts)).unwrap();
+        let x = Vec8::from([1.2, -0.7, 900.0, 0.4, 3e4, 0.3 * ts, 0.02, 0.15]);
+        for h in [ts, 2.5 * ts] {
+            let (_, phi) = obs.transition(&x, [3.0, -1.0], h);
+            let p = spd();
+            let dense = phi * p * phi.transpose();
+            let fast = propagate(&phi, &p);
+            let scale = dense.abs().max();
+            assert!((fast - dense).abs().max() <= 1e-13 * scale, "propagate");
+            let kg =
+                SMatrix::<f64, DRIVE_STATES, 2>::from_fn(|r, c| ((r + 3 * c) as f64).cos() * 0.1);
+            let r = 0.3;
+            let mut a = Mat8::<f64>::identity();
+            for k in 0..DRIVE_STATES {
+                a[(k, 0)] -= kg[(k, 0)];
+                a[(k, 1)] -= kg[(k, 1)];
+            }
+            let mut jd = a * dense * a.transpose() + kg * kg.transpose() * r;
+            jd = (jd + jd.transpose()) * 0.5;
+            let jf = joseph(&dense, &kg, r);
+            assert!((jf - jd).abs().max() <= 1e-12 * jd.abs().max(), "joseph");
+            assert_eq!(jf, jf.transpose());
         }
     }
 }

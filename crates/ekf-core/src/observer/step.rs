@@ -78,8 +78,11 @@ impl<T: Float> PmsmObserver<T> {
         let out = self.step_portable(u_prev, i);
         self.model = model;
         self.rs_constants = cached;
-        // The resistance tracking's window assumes periods of `Ts`: it restarts.
-        if let Some(Tracking { t, .. }) = &mut self.tracking {
+        // The resistance tracking's window assumes periods of `Ts`: it restarts (a refused
+        // sample leaves the observer as it was).
+        if out.is_ok()
+            && let Some(Tracking { t, .. }) = &mut self.tracking
+        {
             t.break_window();
         }
         out
