@@ -81,6 +81,9 @@ proptest! {
         joseph in any::<bool>(),
         seed in any::<u64>(),
     ) {
+        // Forward Euler's current pole must lie inside the unit circle: `Rs Ts < 2 Ls`, else the
+        // configuration is refused (`ConfigError::TooLargeForTs`), which is not this test's case.
+        prop_assume!(lag_free || rs * ts < 2.0 * ls);
         let motor = MotorParams { rs_ohm: rs, ld_h: ls, lq_h: ls, psi_f_wb: psi, pole_pairs };
         let disc = if lag_free { Discretization::LagFree } else { Discretization::ForwardEuler };
         let update = if joseph { CovarianceUpdate::Joseph } else { CovarianceUpdate::StandardSymmetrized };
