@@ -351,6 +351,7 @@ impl<T: Float> PmsmObserver<T> {
         self.inverter.0 = inverter_voltage_v;
         self.timing = voltage_delay_s != T::zero() || inverter_voltage_v != T::zero();
         self.extras = self.timing || self.adaptation.is_some();
+        self.refresh_emf_floor();
         Ok(())
     }
 

@@ -270,6 +270,9 @@ pub(crate) struct ConsistencyState<T> {
     /// its deviations): the back-EMF is observable at a block's end when `(w Ts)^2` is above
     /// it times `|i|^2` and above `9 P_ww Ts^2` (module docs, "Consistency").
     pub(crate) emf_floor: T,
+    /// `9 sigma_v^2 Ts^2 / psi_f^2` with `sigma_v` the told inverter voltage's uncertainty
+    /// (half of it; 0 untold): added to the floor above (module docs, "Consistency").
+    pub(crate) emf_floor_v: T,
     /// Blocks in a row, up to [`OBSERVED_BLOCKS`], whose ends found the back-EMF observable;
     /// `observed`: at least that many (the status may read `Tracking`).
     pub(crate) observed_blocks: u32,
@@ -325,6 +328,7 @@ impl<T: Float> ConsistencyState<T> {
             drifting: false,
             drift_calm: true,
             emf_floor: T::zero(),
+            emf_floor_v: T::zero(),
             observed_blocks: 0,
             observed: false,
             implausible: false,
@@ -395,8 +399,8 @@ impl<T: Float> ConsistencyState<T> {
             self.refresh();
         }
         let w2 = w_ts * w_ts;
-        let observable =
-            w2 >= to_t::<T>(25.0) * var_w_ts2 && w2 >= self.emf_floor * (i.0 * i.0 + i.1 * i.1);
+        let observable = w2 >= to_t::<T>(25.0) * var_w_ts2
+            && w2 >= self.emf_floor * (i.0 * i.0 + i.1 * i.1) + self.emf_floor_v;
         self.observed_blocks = if observable {
             (self.observed_blocks + 1).min(OBSERVED_BLOCKS)
         } else {

@@ -14,6 +14,10 @@ use super::tracking::TrackerStep;
 use crate::ekf::{EkfError, finite};
 use crate::{Float, to_t};
 
+/// The told inverter voltage's standard deviation as a share of it (the consistency check's
+/// EMF floor, module docs of [`observer`](crate::observer), "Consistency").
+pub(super) const INVERTER_VOLTAGE_SIGMA_SHARE: f64 = 0.5;
+
 /// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
 pub const MAX_PERIOD_FACTOR: f64 = 64.0;
 
@@ -568,14 +572,26 @@ impl<T: Float> PmsmObserver<T> {
     }
 
     /// The consistency check's EMF floor from the tracking's `Rs` deviation and flux (module
-    /// docs, "Consistency"): `9 (sigma_Rs Ts / psi_f)^2`.
+    /// docs, "Consistency"): `9 (sigma_Rs Ts / psi_f)^2`; and the told inverter voltage's,
+    /// `9 (sigma_v Ts / psi_f)^2` with `sigma_v` half that voltage.
     pub(super) fn refresh_emf_floor(&mut self) {
         let ts = self.model.ts();
+        let nine = to_t::<T>(9.0);
         if let (Some(c), Some(Tracking { t, .. })) = (&mut self.consistency, &self.tracking)
             && t.psi > T::zero()
         {
             let r = t.rs_sigma * ts / t.psi;
-            c.emf_floor = to_t::<T>(9.0) * r * r;
+            c.emf_floor = nine * r * r;
+        }
+        let psi = match &self.tracking {
+            Some(Tracking { t, .. }) => t.psi,
+            None => self.nominal.0,
+        };
+        if let Some(c) = &mut self.consistency
+            && psi > T::zero()
+        {
+            let v = self.inverter.0 * to_t(INVERTER_VOLTAGE_SIGMA_SHARE) * ts / psi;
+            c.emf_floor_v = nine * v * v;
         }
     }
 
