@@ -577,19 +577,18 @@ impl<T: Float> PmsmObserver<T> {
     pub(super) fn refresh_emf_floor(&mut self) {
         let ts = self.model.ts();
         let nine = to_t::<T>(9.0);
-        if let (Some(c), Some(Tracking { t, .. })) = (&mut self.consistency, &self.tracking)
-            && t.psi > T::zero()
-        {
-            let r = t.rs_sigma * ts / t.psi;
-            c.emf_floor = nine * r * r;
-        }
-        let psi = match &self.tracking {
-            Some(Tracking { t, .. }) => t.psi,
-            None => self.nominal.0,
+        // The tracked flux and `Rs` deviation, else the configured flux (no `Rs` term).
+        let (psi, rs_sigma) = match &self.tracking {
+            Some(Tracking { t, .. }) => (t.psi, Some(t.rs_sigma)),
+            None => (self.nominal.0, None),
         };
         if let Some(c) = &mut self.consistency
             && psi > T::zero()
         {
+            if let Some(sigma) = rs_sigma {
+                let r = sigma * ts / psi;
+                c.emf_floor = nine * r * r;
+            }
             let v = self.inverter.0 * to_t(INVERTER_VOLTAGE_SIGMA_SHARE) * ts / psi;
             c.emf_floor_v = nine * v * v;
         }
