@@ -26,14 +26,15 @@ import pyfoc  # noqa: E402
 from pyfoc._bench import time_steps  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from bench_run import SERVO, TS, make  # noqa: E402
+from bench_run import FIRMWARE, SERVO, TS, make  # noqa: E402
 
 CONFIGS = [
-    ("f64 default", {}, None),
+    ("f64 defaults", {}, None),
+    ("f64 firmware's", FIRMWARE, None),
     ("f64 seed", dict(discretization="forward_euler", covariance_update="standard",
-                      q=[0.01, 0.01, 10.0, 0.01], r=[0.1, 0.1]), None),
-    ("f32 default", dict(dtype="float32"), None),
-    ("f64 10 chunks out=", {}, 100_000),
+                      q=[0.01, 0.01, 10.0, 0.01], r=[0.1, 0.1], **FIRMWARE), None),
+    ("f32 firmware's", dict(dtype="float32", **FIRMWARE), None),
+    ("f64 firmware's, 10 chunks out=", FIRMWARE, 100_000),
 ]
 
 
