@@ -12,6 +12,22 @@ SEED_CSV = ROOT / "tests" / "data" / "seed_reference.csv"
 FIRMWARE = dict(acceleration_feedforward=False, input_calibration=False)
 
 
+def score_record(theta, theta_ref, omega_ref, dt, ts):
+    """A recorded drive's angle errors scored by the replay's rules (docs/accuracy.md,
+    "Recorded drives"): the samples with |omega_ref| >= 10 % of its maximum, leaving out 20 ms
+    after each period longer than 1.35 ts; the constant circular-mean offset removed. Returns
+    the scored samples' mask and their absolute errors in degrees (a non-finite estimate
+    counts as 180 deg)."""
+    scored = np.abs(omega_ref) >= 0.1 * np.abs(omega_ref).max()
+    for k in np.flatnonzero(dt > 1.35 * ts):
+        if k > 0:
+            scored[k:k + int(round(0.02 / ts))] = False
+    err = (theta - theta_ref + np.pi) % (2 * np.pi) - np.pi
+    err[~np.isfinite(err)] = np.pi
+    offset = np.angle(np.mean(np.exp(1j * err[scored])))
+    return scored, np.degrees(np.abs((err[scored] - offset + np.pi) % (2 * np.pi) - np.pi))
+
+
 @pytest.fixture(scope="session")
 def seed_record():
     meta = {}

@@ -12,7 +12,7 @@ import pytest
 
 import pyfoc
 
-from conftest import FIRMWARE, ROOT
+from conftest import FIRMWARE, ROOT, score_record
 
 DATA = ROOT.parent / "shared" / "realdata"
 # Measured RMS deg of the defaults and the firmware's filter (docs/accuracy.md); the share of
@@ -22,10 +22,6 @@ RUNS = {
     "mot_data": (9.18, 6.27),
     "enroute_steps_and_reversals_3": (7.33, 8.08),
 }
-
-
-def wrap(x):
-    return (x + np.pi) % (2 * np.pi) - np.pi
 
 
 def load(run):
@@ -40,15 +36,7 @@ def load(run):
 
 
 def score(d, out):
-    ts = d["ts"]
-    scored = np.abs(d["omega"]) >= 0.1 * np.abs(d["omega"]).max()
-    for k in np.flatnonzero(d["dt"] > 1.35 * ts):
-        if k > 0:
-            scored[k:k + int(round(0.02 / ts))] = False
-    err = wrap(out["theta"] - d["theta"])
-    err[~np.isfinite(err)] = np.pi
-    offset = np.angle(np.mean(np.exp(1j * err[scored])))
-    e = np.degrees(np.abs(wrap(err - offset)))[scored]
+    scored, e = score_record(out["theta"], d["theta"], d["omega"], d["dt"], d["ts"])
     lost = e > 45.0
     tracking = np.asarray(out["status"])[scored] == int(pyfoc.Status.TRACKING)
     return float(np.sqrt(np.mean(e**2))), 100.0 * lost.mean(), int(np.sum(lost & tracking))

@@ -7,7 +7,7 @@ import pytest
 
 import pyfoc
 
-from conftest import FIRMWARE
+from conftest import FIRMWARE, score_record
 
 HEADER = "t_s,dt_s,u_alpha_v,u_beta_v,i_alpha_a,i_beta_a,theta_ref_rad,omega_ref_rad_s"
 SERVO = dict(rs=2.875, ls=8.5e-3, psi_f=0.175, pole_pairs=4)
@@ -40,14 +40,8 @@ def write_csv(path, log, scale=1.0, drop=(), delay=0):
 
 
 def score(theta, log, ts=TS):
-    w = np.abs(log["omega_ref"])
-    msk = w >= 0.1 * w.max()
-    for k in np.flatnonzero(log["dt"] > 1.35 * ts):
-        if k > 0:
-            msk[k:k + int(round(0.02 / ts))] = False
-    err = wrap(theta - log["theta_ref"])[msk]
-    off = np.angle(np.mean(np.exp(1j * err)))
-    return float(np.sqrt(np.mean(np.degrees(wrap(err - off)) ** 2)))
+    _, e = score_record(theta, log["theta_ref"], log["omega_ref"], log["dt"], ts)
+    return float(np.sqrt(np.mean(e**2)))
 
 
 def run(log, options=None, **kw):
