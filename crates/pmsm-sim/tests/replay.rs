@@ -201,7 +201,9 @@ fn replay_of_simulated_logs() {
     assert!(back.i_ab == a.i_ab);
     let md = pmsm_sim::analysis::replay::markdown(&ra.report);
     assert!(md.contains("| EKF (firmware's defaults) |") && md.contains("| flux + PLL |"));
-    assert!(md.contains("| EKF + feedforward, calibration online (one pass; pyfoc's defaults) |"));
+    assert!(md.contains(
+        "| EKF + feedforward, calibration online, primed by the record (pyfoc's defaults) |"
+    ));
     assert!(md.contains("| drive observer |"));
     // Skipped cycles: the drive observer steps over the merged periods and stays finite.
     let dm = rm.report.drive.unwrap_or_else(|| panic!("drive scored"));

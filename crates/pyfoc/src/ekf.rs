@@ -14,7 +14,7 @@ use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::convert::{self, fixed, record_args, square, to_vec};
+use crate::convert::{self, RealArray, fixed, record_args, square, to_vec};
 use crate::engine;
 use crate::errors::{ConfigError, FilterError};
 use crate::motor::{MAP_POINTS, Motor};
@@ -29,7 +29,10 @@ use crate::replay;
 /// inverter_voltage_v=0.0, acceleration_feedforward=None, saturating=False,
 /// input_calibration=None)`. Unset, `acceleration_feedforward` and `input_calibration` are on
 /// for a constant-parameter motor (a recorded drive's defaults; the calibration off when the
-/// voltage timing is told), off on a flux map; both `False` is the filter foc runs.
+/// voltage timing is told), off on a flux map; both `False` is the filter foc runs. With the
+/// calibration on, the first `run` of a new filter primes it with its own rows (`prime`: the
+/// voltage delay a copy's calibration handed over last over the record is this filter's from
+/// row 0).
 ///
 /// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
 /// calls on one `Ekf` from several threads are serialized (each completes, in some order)
@@ -60,6 +63,39 @@ impl Ekf {
         f: impl FnOnce(&mut Filter) -> R + Send,
     ) -> R {
         Filter::with(&self.inner, py, f)
+    }
+
+    /// Primes the online input calibration with a record's rows ([`Observer::prime`]) when
+    /// the calibration is on and, with `only_fresh`, the filter has filtered no row yet;
+    /// either way a record with rows leaves the filter not fresh. Returns the voltage delay
+    /// set (s), `None` when nothing was set.
+    fn prime_rows(
+        &self,
+        py: Python<'_>,
+        (u, i, n): (&RealArray<'_>, &RealArray<'_>, usize),
+        u_prev: Option<[f64; 2]>,
+        dt: Option<&[f64]>,
+        only_fresh: bool,
+    ) -> PyResult<Option<f64>> {
+        if n == 0 {
+            return Ok(None);
+        }
+        let wanted = self.input_calibration && (!only_fresh || self.with(py, |f| f.fresh));
+        if !wanted {
+            self.with(py, |f| f.fresh = false);
+            return Ok(None);
+        }
+        convert::ensure_memory(n as u128 * 32, "the record")?;
+        let (u, i) = (to_vec(u, "u_ab")?, to_vec(i, "i_ab")?);
+        Ok(self.with(py, move |f| {
+            let primed = if !only_fresh || f.fresh {
+                f.observer.prime(u_prev.unwrap_or(f.u_last), &u, &i, dt)
+            } else {
+                None
+            };
+            f.fresh = false;
+            primed
+        }))
     }
 }
 
@@ -276,6 +312,7 @@ impl Ekf {
             inner: Mutex::new(Filter {
                 observer,
                 u_last: [0.0, 0.0],
+                fresh: true,
             }),
             ts,
             dtype,
@@ -301,6 +338,9 @@ impl Ekf {
     /// `dt`: an `(N,)` array of the period that ended at each row, s (each finite and > 0,
     /// else ValueError naming `dt`), for logs with irregular periods (skipped cycles); the
     /// rows then run in a plain loop. Without it every period is `ts`.
+    ///
+    /// The first run of a new filter with the input calibration on primes it with its rows
+    /// (`prime`).
     #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, dt = None, out = None))]
     fn run<'py>(
         &self,
@@ -312,13 +352,16 @@ impl Ekf {
         out: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (u, i, n, u_prev) = record_args(u_ab, i_ab, u_prev)?;
+        let dt = dt.map(|dt| replay::periods(dt, n)).transpose()?;
+        let given = out
+            .map(|d| engine::out_arrays(&d, n).map(|a| (a, d)))
+            .transpose()?;
+        // The first run of a new filter primes the online input calibration with its record
+        // (the class docs); any run with rows ends the filter's fresh state.
+        self.prime_rows(py, (&u, &i, n), u_prev, dt.as_deref(), true)?;
         if let Some(dt) = dt {
             // Per-row periods: a separate, plain loop (`replay::run_dt`); the optimized
             // path below is left as it is.
-            let dt = replay::periods(dt, n)?;
-            let given = out
-                .map(|d| engine::out_arrays(&d, n).map(|a| (a, d)))
-                .transpose()?;
             convert::ensure_memory(n as u128 * (40 + Columns::ROW_BYTES), "run")?;
             let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
             let rows = self.with(py, move |inner| {
@@ -329,10 +372,29 @@ impl Ekf {
             });
             return replay::rows_to_dict(py, &rows, given);
         }
-        let given = out
-            .map(|d| engine::out_arrays(&d, n).map(|a| (a, d)))
-            .transpose()?;
         engine::run(py, &self.inner, &u, &i, n, u_prev, given)
+    }
+
+    /// Primes the online input calibration with a whole record before filtering it in chunks:
+    /// a copy of the filter runs over the rows (`u_ab`, `i_ab`, `u_prev`, `dt` as `run` takes
+    /// them) and the voltage delay its calibration handed over last is set on this filter
+    /// (the class docs). The first `run` of a new filter does this with its own rows; after
+    /// `prime` (or any `run` or `step`) it does not, so `prime(u, i)` then `run` on chunks of
+    /// `u`, `i` gives what one `run(u, i)` gives. Returns the delay set as `voltage_delay_s`
+    /// (s; minus the lead of the applied voltage), or None when nothing was set (the
+    /// calibration off, a flux map, or no hand-over on the record).
+    #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, dt = None))]
+    fn prime<'py>(
+        &self,
+        py: Python<'py>,
+        u_ab: &Bound<'py, PyAny>,
+        i_ab: &Bound<'py, PyAny>,
+        u_prev: Option<&Bound<'py, PyAny>>,
+        dt: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Option<f64>> {
+        let (u, i, n, u_prev) = record_args(u_ab, i_ab, u_prev)?;
+        let dt = dt.map(|dt| replay::periods(dt, n)).transpose()?;
+        self.prime_rows(py, (&u, &i, n), u_prev, dt.as_deref(), false)
     }
 
     /// `omega_mech`, `i_alpha`, `i_beta`, `nis`, `psi_f`, `rs`, `winding_temperature`) and
@@ -348,7 +410,10 @@ impl Ekf {
     ) -> PyResult<Bound<'py, PyDict>> {
         let u = fixed::<2>(u_prev, "u_prev")?;
         let i = fixed::<2>(i, "i")?;
-        let r = self.with(py, |inner| inner.observer.step(u, i));
+        let r = self.with(py, |inner| {
+            inner.fresh = false;
+            inner.observer.step(u, i)
+        });
         let out = PyDict::new(py);
         for (name, v) in OUTPUTS.iter().zip(r.values) {
             out.set_item(name, v)?;

@@ -270,6 +270,9 @@ pub(crate) struct Filter {
     pub(crate) observer: Observer,
     /// Voltage used to predict the first row of the next `run`.
     pub(crate) u_last: [f64; 2],
+    /// No row has been filtered yet: the first `run` primes the online input calibration
+    /// with its record ([`Observer::prime`]).
+    pub(crate) fresh: bool,
 }
 
 impl Filter {

@@ -6,7 +6,7 @@
 use std::sync::{Mutex, PoisonError};
 
 use ekf_core::saturated::FluxMapObserver;
-use ekf_core::{EkfError, Float, FluxEstimate, FluxObserverConfig};
+use ekf_core::{EkfError, Float, FluxEstimate, FluxObserverConfig, PmsmObserver};
 use numpy::{PyArray1, PyArrayMethods};
 use pmsm_sim::replay::{ReplayError, Scaling};
 use pyo3::create_exception;
@@ -141,6 +141,44 @@ impl Observer {
             prev = [uk[0], uk[1]];
         }
         (rows, prev)
+    }
+
+    /// Primes the online input calibration with the record `run` is about to filter
+    /// (`PmsmObserver::prime_input_calibration`: a copy runs over the rows, its last handed-over
+    /// voltage timing is set here). Row `k` predicts with `u[k-1]` (`prev` for row 0), over
+    /// `dt[k]` or `ts`. Returns the delay set (s); nothing happens (`None`) on a flux map, with
+    /// the calibration off, or when the copy handed over no other delay.
+    pub(crate) fn prime(
+        &mut self,
+        prev: [f64; 2],
+        u: &[f64],
+        i: &[f64],
+        dt: Option<&[f64]>,
+    ) -> Option<f64> {
+        fn go<T: Float>(
+            o: &mut PmsmObserver<T>,
+            prev: [f64; 2],
+            u: &[f64],
+            i: &[f64],
+            dt: Option<&[f64]>,
+        ) -> Option<f64> {
+            let c = |v: f64| T::from_subset(&v);
+            let ts = o.model().ts();
+            let mut p = prev;
+            let rows = i.chunks_exact(2).enumerate().map(|(k, ik)| {
+                let u_prev = [c(p[0]), c(p[1])];
+                p = [u[2 * k], u[2 * k + 1]];
+                let d = dt.map_or(ts, |d| c(d[k]));
+                (u_prev, [c(ik[0]), c(ik[1])], d)
+            });
+            o.prime_input_calibration(rows)
+                .map(|d| d.to_subset().unwrap_or(f64::NAN))
+        }
+        match self {
+            Observer::F64(o) => go(o, prev, u, i, dt),
+            Observer::F32(o) => go(o, prev, u, i, dt),
+            Observer::MapF64(_) | Observer::MapF32(_) => None,
+        }
     }
 }
 

@@ -355,6 +355,42 @@ impl<T: Float> PmsmObserver<T> {
         Ok(())
     }
 
+    /// The voltage timing in use, `(voltage_delay_s, inverter_voltage_v)`: the configured one,
+    /// or the last set by [`Self::set_voltage_errors`] (the online input calibration's
+    /// hand-overs set it too).
+    pub fn voltage_errors(&self) -> (T, T) {
+        (self.voltage_delay, self.inverter.0)
+    }
+
+    /// Primes the online input calibration (`ObserverConfig::input_calibration`) with a whole
+    /// record, before the observer takes its first row (module docs of [`crate::calibration`],
+    /// "Primed by the record"): a copy of this observer runs over `rows` (each row's
+    /// `(u_prev, i, dt_s)`, as [`Self::step_dt`] takes them), and the voltage delay its
+    /// calibration handed over last is set here. The inverter voltage and `Rs`, which the
+    /// calibration hands over together, are left to this observer's own hand-overs, and
+    /// nothing else moves: its calibration starts afresh and hands over as it runs. Returns
+    /// the delay set, or `None` (nothing changed) when the calibration is off or the copy
+    /// handed over no other delay (e.g. a record whose filter flux leaves the told one: the
+    /// hand-over guard holds everything).
+    #[cfg(feature = "std")]
+    pub fn prime_input_calibration(
+        &mut self,
+        rows: impl IntoIterator<Item = ([T; 2], [T; 2], T)>,
+    ) -> Option<T> {
+        self.calibration.as_ref()?;
+        let mut copy = self.clone();
+        for (u_prev, i, dt_s) in rows {
+            // A refused row changes nothing in the copy, as in the run that follows.
+            let _ = copy.step_dt(u_prev, i, dt_s);
+        }
+        let delay = copy.voltage_delay;
+        if delay == self.voltage_delay {
+            return None;
+        }
+        self.set_voltage_errors(delay, self.inverter.0).ok()?;
+        Some(delay)
+    }
+
     /// The model's inductances `(L_d, L_q)`, H: the configured ones or the last set by
     /// [`Self::set_inductances`].
     pub fn inductances(&self) -> (T, T) {

@@ -214,13 +214,19 @@ class Ekf:
     to [0, 2 ts], the dead-time voltage >= 0) are handed to this filter as voltage_delay_s,
     inverter_voltage_v and, when it differs by more than 5 %, the tracked rs. The rows before
     the first hand-over run on the told values; nothing is handed over while the tracked flux
-    is more than 3 % off the told one (the drive observer assumes the told flux). False: the
+    is more than 3 % off the told one (the drive observer assumes the told flux). The first
+    run() of a new filter primes it with its own rows: a copy runs over the record first, and
+    the voltage delay the copy's calibration handed over last is this filter's from row 0 (the
+    lead is a constant of the logging firmware, and a lead found part-way leaves the record
+    with two angle offsets; the inverter voltage and rs, handed over together, are left to the
+    filter's own hand-overs). prime() does it for a record filtered in chunks. False: the
     told values throughout (ekf-core's ObserverConfig::new, the filter foc and the simulator
     run). None (the default): True for a constant-parameter motor told neither
     voltage_delay_s nor inverter_voltage_v, else False. Not available on a flux map
     (ConfigError). Both options with False reproduce the simulator's EKF on its own logs.
-    The defaults cost about six times the firmware filter's time per row (0.65 against 0.11
-    us on one core: the calibration runs two more filters).
+    The defaults cost about twelve times the firmware filter's time per row (1.3 against 0.11
+    us on one core: the calibration runs two more filters, and the first run passes over the
+    record twice).
 
     Inputs: any real array-like, converted to float64 by numpy (ndarrays of float, int,
     unsigned or bool dtype, with any strides, read-only and broadcast views included; nested
@@ -290,7 +296,22 @@ class Ekf:
         with u_prev if given, else u_last). Releases the GIL. ``out``: a dict of the ten output
         arrays (e.g. a previous result of the same length), written in place and returned.
         ``dt``: shape (N,), the period that ended at each row, s (finite, > 0; ValueError
-        naming ``dt`` otherwise); without it every period is ``ts``."""
+        naming ``dt`` otherwise); without it every period is ``ts``. The first run of a new
+        filter with the input calibration on primes it with its rows (see prime())."""
+    def prime(
+        self,
+        u_ab: npt.ArrayLike,
+        i_ab: npt.ArrayLike,
+        *,
+        u_prev: npt.ArrayLike | None = None,
+        dt: npt.ArrayLike | None = None,
+    ) -> float | None:
+        """Prime the input calibration with a whole record (arguments as run takes them)
+        before filtering it in chunks: a copy runs over it and the voltage delay its
+        calibration handed over last is set here; the filter's state does not move. After
+        prime(), run() or step() the next run does not prime, so prime(u, i) then run() on
+        chunks gives what one run(u, i) gives. Returns the delay set (voltage_delay_s, s), or
+        None (nothing set: the calibration off, a flux map, no hand-over on the record)."""
     def step(self, u_prev: npt.ArrayLike, i: npt.ArrayLike) -> StepOutput:
         """One sample: predict with u_prev, correct with i."""
     def reset(self, x: npt.ArrayLike, p: npt.ArrayLike) -> None:

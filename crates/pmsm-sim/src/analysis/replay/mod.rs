@@ -65,10 +65,11 @@
 //! feedforward told the record's calibration". It is what a
 //! user does with a log of a drive whose timing and inverter are unknown: replay it once to
 //! find them, then set them (`voltage_delay_s`, `rs_ohm`, `inverter_voltage_v`). The row
-//! "calibration online" does it in one pass ([`run_ekf_online`]): the drive observer runs
+//! "calibration online" does it while it runs ([`run_ekf_online`]): the drive observer runs
 //! alongside and its running calibration is handed to the EKF with the feedforward while it
 //! runs (module `ekf_core::calibration`, "Online"); the rows before the first hand-over run on
-//! the motor file's values.
+//! the voltage delay a first pass over the record handed over last (the same module, "Primed
+//! by the record") and the motor file's other values.
 //!
 //! # Outputs of a replay ([`write_outputs`])
 //!
@@ -276,20 +277,31 @@ pub fn run_ekf_calibrated(
 
 /// The default EKF with the acceleration feedforward and the online input calibration
 /// (`ObserverConfig::input_calibration`: the drive observer's lead, dead-time voltage and `Rs`
-/// handed over while it runs; one pass): its trace.
+/// handed over while it runs), primed by the record (the voltage delay a first pass handed over
+/// last, `PmsmObserver::prime_input_calibration`), as `pyfoc.Ekf`'s defaults run: its trace.
 pub fn run_ekf_online(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTrace, ReplayError> {
     let cfg = ObserverConfig {
         input_calibration: true,
         ..feedforward_config(motor)
     };
-    run_ekf_config(log, &cfg)
+    log.check()?;
+    let mut obs = PmsmObserver::new(&cfg)?;
+    obs.prime_input_calibration((0..log.len()).map(|k| {
+        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
+        (u_prev, log.i_ab[k], log.dt_s[k])
+    }));
+    Ok(run_ekf_observer(log, obs))
 }
 
 /// Steps a [`PmsmObserver`] built from `cfg` over `log`.
 fn run_ekf_config(log: &DriveLog, cfg: &ObserverConfig<f64>) -> Result<ObserverTrace, ReplayError> {
     log.check()?;
-    let mut obs = PmsmObserver::new(cfg)?;
-    Ok(trace(log, |u_prev, i, dt| {
+    Ok(run_ekf_observer(log, PmsmObserver::new(cfg)?))
+}
+
+/// Steps `obs` over `log` (checked).
+fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace {
+    trace(log, |u_prev, i, dt| {
         // The period that ended at this row (refused beyond 64 Ts: a rejected row).
         let (e, status) = match obs.step_dt(u_prev, i, dt) {
             Ok(e) => (
@@ -317,7 +329,7 @@ fn run_ekf_config(log: &DriveLog, cfg: &ObserverConfig<f64>) -> Result<ObserverT
             winding_temperature_c: e.winding_temperature_c,
         };
         (sample, status)
-    }))
+    })
 }
 
 /// Runs the flux + PLL baseline (`FluxObserverConfig::new(motor, ts)`) over `log`. It has a
@@ -521,8 +533,8 @@ pub struct ReplayReport {
     /// The default EKF with the acceleration feedforward told that calibration (the second
     /// pass): its score.
     pub ekf_calibrated: Option<Score>,
-    /// The default EKF with the acceleration feedforward and the online input calibration
-    /// (one pass, [`run_ekf_online`]): its score.
+    /// The default EKF with the acceleration feedforward and the online input calibration,
+    /// primed by the record ([`run_ekf_online`]): its score.
     pub ekf_online: Option<Score>,
     /// The flux + PLL baseline's score.
     pub flux: Option<Score>,
@@ -673,7 +685,7 @@ pub fn markdown(r: &ReplayReport) -> String {
             &r.ekf_calibrated,
         ),
         (
-            "EKF + feedforward, calibration online (one pass; pyfoc's defaults)",
+            "EKF + feedforward, calibration online, primed by the record (pyfoc's defaults)",
             &r.ekf_online,
         ),
         ("flux + PLL", &r.flux),
