@@ -235,6 +235,21 @@
 //! psi_f` rad. Tracking `psi_f` and `Rs` does not change that (the pm flux absorbs the small
 //! magnitude part); the cost on the reference motors is in `docs/accuracy.md`.
 //!
+//! Current transients do not separate it either, on a surface motor: in the stationary frame
+//! `u = Rs i + d/dt (L i + psi_f e^{j th})`, so told `L_t` the same voltages and currents fit
+//! the model exactly with the fictitious rotor flux `psi' = psi_f e^{j th} + (L - L_t) i`. The
+//! filter's angle is that of `psi'`, `atan((L - L_t) i_q / psi_f)` off the rotor's at every
+//! instant (with `i_d = 0`), through a current step as much as at steady state, and `|psi'|`
+//! changes by second order, which the flux tracking absorbs. What does separate them: a d
+//! current that varies in time (it moves `|psi'|` at a rate no magnet flux follows: foc's
+//! d-axis excitation, [`crate::excitation`], whose estimate
+//! [`PmsmObserver::set_inductances`](super::PmsmObserver::set_inductances) takes), or a
+//! mechanical model that knows what the q current does to the speed (the fictitious angle
+//! steps with `i_q`, the rotor's cannot). Measured (`cargo test --release -p ekf-core --test
+//! inductance_transients -- --nocapture`): the servo motor at 1500 rad/s el. with `i_q`
+//! stepping 0 / 3 A in 2 ms, the default observer told `Ls` +-20 %: 1.17 deg RMS off, and
+//! within 0.06 deg RMS of the fictitious flux's angle throughout.
+//!
 //! # Winding temperature
 //!
 //! `T = T_ref + (Rs_hat / Rs_ref - 1) / alpha_cu` with the configured `Rs` taken at `T_ref`
