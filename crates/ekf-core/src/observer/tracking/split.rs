@@ -85,9 +85,26 @@ impl<T: Float> Split<T> {
         self.update_with(m, r, r_m, k)
     }
 
+    /// Whether the EKF's speed state, its mean over the window, and the window's speed (the
+    /// estimated angle's advance, as [`measure`](Self::measure) reads it) are apart by more
+    /// than [`SPEED_CONFLICT`] of the latter (module docs of the parent, "Resistance while the
+    /// filter is in trouble"). Reads the window's start; changes nothing.
+    pub(super) fn speed_conflict(
+        &self,
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+    ) -> bool {
+        let n = to_t::<T>(f64::from(sums.n));
+        let advance = sums.w * k.ts;
+        let w = (advance + wrap_angle(x[3] - self.end_theta - advance)) / (n * k.ts);
+        (sums.w / n - w).abs() > to_t::<T>(SPEED_CONFLICT) * w.abs()
+    }
+
     /// The split filter's step on a window of a filter in trouble (module docs of the parent,
-    /// "Resistance while the filter is in trouble"): the EKF's tracking frozen and its
-    /// innovations out of line, after the filter has tracked once and anchored. Only a window
+    /// "Resistance while the filter is in trouble"): the EKF's tracking frozen, after the filter
+    /// has tracked once and anchored, and either its innovations out of line or its speed state
+    /// apart from its angle's advance ([`speed_conflict`](Self::speed_conflict)). Only a window
     /// that measures `Rs` (the resistive drop `|Rs r|` above 15 % of the flux) is used, with
     /// ten times the window's variance (its speed, the angle's advance, is biased while the
     /// angle pulls in). Returns the new `Rs` (bounded), `None` when the window is not used.
@@ -343,6 +360,11 @@ impl<T: Float> Split<T> {
 /// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
 /// corrects the EKF's flux (module docs of the parent, "Tracking during transients").
 const START_UP_DROP_SHARE: f64 = 0.3;
+
+/// Share of the window's speed (the estimated angle's advance) by which the speed state's
+/// mean must differ from it for a window of a frozen, consistent filter to correct `Rs`
+/// (module docs of the parent, "Resistance while the filter is in trouble").
+pub(super) const SPEED_CONFLICT: f64 = 0.12;
 
 /// Whether a window of `r = n.i / |w|` measures the flux rather than `Rs` at the resistance
 /// `rs` and flux `psi` (module docs of the parent, "Resistance"): the resistive drop `|Rs r|`
