@@ -128,6 +128,32 @@ def test_chunked_run_equals_one_run(dtype):
         np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), one[key])
 
 
+def test_prime_refuses_bad_records_and_skips_bad_rows():
+    """`Ekf.prime` checks its arrays as `run` does (wrong shapes, lengths, periods raise before
+    anything moves); rows the filter refuses (NaN) are skipped by the copy, as `run` skips them."""
+    u, i, _, u0 = led_record(4000)
+    motor, ts = pyfoc.Motor(**SERVO), 1e-4
+    ekf = pyfoc.Ekf(motor, ts)
+    before = (ekf.state.copy(), ekf.covariance.copy())
+    with pytest.raises(ValueError, match="same length"):
+        ekf.prime(u[:10], i[:9])
+    with pytest.raises(ValueError, match="u_ab"):
+        ekf.prime(u[:, :1], i)
+    with pytest.raises(ValueError, match="dt"):
+        ekf.prime(u, i, dt=np.full(len(u), -1.0))
+    with pytest.raises(ValueError, match="u_prev"):
+        ekf.prime(u, i, u_prev=[1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(ekf.state, before[0])
+    np.testing.assert_array_equal(ekf.covariance, before[1])
+    # Refused prime calls leave the filter fresh: its first run still primes.
+    np.testing.assert_array_equal(ekf.run(u, i, u_prev=u0)["theta"],
+                                  pyfoc.Ekf(motor, ts).run(u, i, u_prev=u0)["theta"])
+    bad = i.copy()
+    bad[100:110] = np.nan
+    delay = pyfoc.Ekf(motor, ts).prime(u, bad, u_prev=u0)
+    assert delay is None or math.isfinite(delay)
+
+
 def led_record(n=10000, lead=0.8, ts=1e-4, iq=2.0, noise=0.01, seed=0):
     """A servo motor under a deadbeat current drive (i_q = 2 A, i_d = 0 at every sample) whose
     speed swings between 1200 and 2800 rad/s el. at 2 Hz. Each period's voltage is held in the
