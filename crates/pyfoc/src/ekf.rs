@@ -31,8 +31,8 @@ use crate::replay;
 /// for a constant-parameter motor (a recorded drive's defaults; the calibration off when the
 /// voltage timing is told), off on a flux map; both `False` is the filter foc runs. With the
 /// calibration on, the first `run` of a new filter primes it with its own rows (`prime`: the
-/// voltage delay a copy's calibration handed over last over the record is this filter's from
-/// row 0).
+/// voltage delay a copy's calibration handed over last over the record, and the innovation
+/// level its status check learnt, are this filter's from row 0).
 ///
 /// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
 /// calls on one `Ekf` from several threads are serialized (each completes, in some order)
@@ -377,12 +377,13 @@ impl Ekf {
 
     /// Primes the online input calibration with a whole record before filtering it in chunks:
     /// a copy of the filter runs over the rows (`u_ab`, `i_ab`, `u_prev`, `dt` as `run` takes
-    /// them) and the voltage delay its calibration handed over last is set on this filter
-    /// (the class docs). The first `run` of a new filter does this with its own rows; after
-    /// `prime` (or any `run` or `step`) it does not, so `prime(u, i)` then `run` on chunks of
-    /// `u`, `i` gives what one `run(u, i)` gives. Returns the delay set as `voltage_delay_s`
-    /// (s; minus the lead of the applied voltage), or None when nothing was set (the
-    /// calibration off, a flux map, or no hand-over on the record).
+    /// them) and the voltage delay its calibration handed over last, with the innovation level
+    /// its status check learnt, is set on this filter (the class docs). The first `run` of a
+    /// new filter does this with its own rows; after `prime` (or any `run` or `step`) it does
+    /// not, so `prime(u, i)` then `run` on chunks of `u`, `i` gives what one `run(u, i)` gives.
+    /// Returns the delay set as `voltage_delay_s` (s; minus the lead of the applied voltage),
+    /// or None when no delay was set (the calibration off or a flux map: nothing set; no
+    /// hand-over on the record).
     #[pyo3(signature = (u_ab, i_ab, *, u_prev = None, dt = None))]
     fn prime<'py>(
         &self,

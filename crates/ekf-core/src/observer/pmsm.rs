@@ -35,7 +35,7 @@ pub struct PmsmObserver<T: Float> {
     pub(super) branch: Option<BranchState<T>>,
     pub(super) gate: Option<GateState<T>>,
     pub(super) health: Option<HealthState<T>>,
-    pub(super) consistency: Option<ConsistencyState<T>>,
+    pub(crate) consistency: Option<ConsistencyState<T>>,
     pub(super) adaptation: Option<AdaptationState<T>>,
     /// The acceleration feedforward's state (`None` when off).
     #[cfg(feature = "acceleration-feedforward")]
@@ -365,13 +365,14 @@ impl<T: Float> PmsmObserver<T> {
     /// Primes the online input calibration (`ObserverConfig::input_calibration`) with a whole
     /// record, before the observer takes its first row (module docs of [`crate::calibration`],
     /// "Primed by the record"): a copy of this observer runs over `rows` (each row's
-    /// `(u_prev, i, dt_s)`, as [`Self::step_dt`] takes them), and the voltage delay its
-    /// calibration handed over last is set here. The inverter voltage and `Rs`, which the
+    /// `(u_prev, i, dt_s)`, as [`Self::step_dt`] takes them); the voltage delay its
+    /// calibration handed over last and the innovation level its consistency check learnt
+    /// (the baseline of the status) are set here. The inverter voltage and `Rs`, which the
     /// calibration hands over together, are left to this observer's own hand-overs, and
     /// nothing else moves: its calibration starts afresh and hands over as it runs. Returns
-    /// the delay set, or `None` (nothing changed) when the calibration is off or the copy
-    /// handed over no other delay (e.g. a record whose filter flux leaves the told one: the
-    /// hand-over guard holds everything).
+    /// the delay set, or `None` when the copy handed over no other delay (e.g. a record whose
+    /// filter flux leaves the told one: the hand-over guard holds everything); nothing at all
+    /// changes when the calibration is off.
     #[cfg(feature = "std")]
     pub fn prime_input_calibration(
         &mut self,
@@ -382,6 +383,11 @@ impl<T: Float> PmsmObserver<T> {
         for (u_prev, i, dt_s) in rows {
             // A refused row changes nothing in the copy, as in the run that follows.
             let _ = copy.step_dt(u_prev, i, dt_s);
+        }
+        // The consistency check's innovation level, learnt over the whole record.
+        if let (Some(c), Some(mine)) = (&copy.consistency, &mut self.consistency) {
+            mine.baseline = c.baseline;
+            mine.refresh();
         }
         let delay = copy.voltage_delay;
         if delay == self.voltage_delay {

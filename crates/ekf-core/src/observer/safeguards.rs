@@ -345,7 +345,7 @@ impl<T: Float> ConsistencyState<T> {
     /// drifting or implausible, the fast mean's limit is -1 (always exceeded); not calm or
     /// implausible, its half limit is -1 (never calm). The step's test then needs no term of
     /// its own.
-    fn refresh(&mut self) {
+    pub(crate) fn refresh(&mut self) {
         self.limit = if self.drifting || self.implausible {
             -T::one()
         } else {

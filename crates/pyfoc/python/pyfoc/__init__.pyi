@@ -219,7 +219,9 @@ class Ekf:
     the voltage delay the copy's calibration handed over last is this filter's from row 0 (the
     lead is a constant of the logging firmware, and a lead found part-way leaves the record
     with two angle offsets; the inverter voltage and rs, handed over together, are left to the
-    filter's own hand-overs). prime() does it for a record filtered in chunks. False: the
+    filter's own hand-overs), as is the innovation level its status check learnt (else a short
+    record reads UNCERTAIN while it is learnt). prime() does it for a record filtered in
+    chunks. False: the
     told values throughout (ekf-core's ObserverConfig::new, the filter foc and the simulator
     run). None (the default): True for a constant-parameter motor told neither
     voltage_delay_s nor inverter_voltage_v, else False. Not available on a flux map
@@ -308,10 +310,12 @@ class Ekf:
     ) -> float | None:
         """Prime the input calibration with a whole record (arguments as run takes them)
         before filtering it in chunks: a copy runs over it and the voltage delay its
-        calibration handed over last is set here; the filter's state does not move. After
+        calibration handed over last (and the innovation level its status check learnt) is
+        set here; the filter's state does not move. After
         prime(), run() or step() the next run does not prime, so prime(u, i) then run() on
         chunks gives what one run(u, i) gives. Returns the delay set (voltage_delay_s, s), or
-        None (nothing set: the calibration off, a flux map, no hand-over on the record)."""
+        None when no delay was set (the calibration off or a flux map: nothing set; no
+        hand-over on the record)."""
     def step(self, u_prev: npt.ArrayLike, i: npt.ArrayLike) -> StepOutput:
         """One sample: predict with u_prev, correct with i."""
     def reset(self, x: npt.ArrayLike, p: npt.ArrayLike) -> None:
