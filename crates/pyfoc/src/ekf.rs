@@ -356,13 +356,20 @@ impl Ekf {
         let given = out
             .map(|d| engine::out_arrays(&d, n).map(|a| (a, d)))
             .transpose()?;
+        // The run's memory (the per-row loop's, or the block engine's as it probes it),
+        // checked before the priming moves anything.
+        let row_bytes = match (&dt, &given) {
+            (Some(_), _) => 40 + Columns::ROW_BYTES,
+            (None, Some(_)) => 32,
+            (None, None) => 32 + Columns::ROW_BYTES,
+        };
+        convert::ensure_memory(n as u128 * row_bytes, "run")?;
         // The first run of a new filter primes the online input calibration with its record
         // (the class docs); any run with rows ends the filter's fresh state.
         self.prime_rows(py, (&u, &i, n), u_prev, dt.as_deref(), true)?;
         if let Some(dt) = dt {
             // Per-row periods: a separate, plain loop (`replay::run_dt`); the optimized
             // path below is left as it is.
-            convert::ensure_memory(n as u128 * (40 + Columns::ROW_BYTES), "run")?;
             let (u, i) = (to_vec(&u, "u_ab")?, to_vec(&i, "i_ab")?);
             let rows = self.with(py, move |inner| {
                 let prev = u_prev.unwrap_or(inner.u_last);
