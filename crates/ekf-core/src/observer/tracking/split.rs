@@ -96,8 +96,7 @@ impl<T: Float> Split<T> {
         k: &TrackerConstants<T>,
     ) -> bool {
         let n = to_t::<T>(f64::from(sums.n));
-        let advance = sums.w * k.ts;
-        let w = (advance + wrap_angle(x[3] - self.end_theta - advance)) / (n * k.ts);
+        let w = window_speed(self.end_theta, sums, x, k);
         (sums.w / n - w).abs() > to_t::<T>(SPEED_CONFLICT) * w.abs()
     }
 
@@ -255,11 +254,7 @@ impl<T: Float> Split<T> {
         let n = to_t::<T>(f64::from(sums.n));
         let inv_n = T::one() / n;
         let span = n * k.ts;
-        // Rotation rate of the estimated angle: the speed estimate's advance, corrected by
-        // the angle's own advance modulo a turn (the speed estimate is off by far less than
-        // half a turn per window).
-        let advance = sums.w * k.ts;
-        let w = (advance + wrap_angle(x[3] - theta0 - advance)) / span;
+        let w = window_speed(theta0, sums, x, k);
         // Enough back-EMF to read the flux from: at least twice the tracking's minimum speed.
         if w * w < to_t::<T>(4.0) * k.min_speed2 {
             return None;
@@ -360,6 +355,20 @@ impl<T: Float> Split<T> {
 /// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
 /// corrects the EKF's flux (module docs of the parent, "Tracking during transients").
 const START_UP_DROP_SHARE: f64 = 0.3;
+
+/// The window's speed: the rotation rate of the estimated angle from `theta0` at the window's
+/// start to `x`'s at its end, the speed estimate's advance corrected by the angle's own advance
+/// modulo a turn (the speed estimate is off by far less than half a turn per window).
+fn window_speed<T: Float>(
+    theta0: T,
+    sums: &Window<T>,
+    x: &Vector4<T>,
+    k: &TrackerConstants<T>,
+) -> T {
+    let n = to_t::<T>(f64::from(sums.n));
+    let advance = sums.w * k.ts;
+    (advance + wrap_angle(x[3] - theta0 - advance)) / (n * k.ts)
+}
 
 /// Share of the window's speed (the estimated angle's advance) by which the speed state's
 /// mean must differ from it for a window of a frozen, consistent filter to correct `Rs`
