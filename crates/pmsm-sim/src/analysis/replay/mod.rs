@@ -196,6 +196,15 @@ pub struct ObserverTrace {
     pub samples: Vec<ObserverSample>,
 }
 
+/// The rows of `log` as an observer steps on them: `(u_prev, i, dt)`, row `k` predicted with
+/// the voltage of row `k - 1` (`log.u_prev` for row 0) over its own period.
+fn rows(log: &DriveLog) -> impl Iterator<Item = ([f64; 2], [f64; 2], f64)> + '_ {
+    (0..log.len()).map(|k| {
+        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
+        (u_prev, log.i_ab[k], log.dt_s[k])
+    })
+}
+
 /// Steps an observer over `log` (row `k` predicts with the voltage of the period before it,
 /// over the period that ended at it, and corrects with its currents): `step(u_prev, i, dt)`
 /// gives the row's sample (angle error not filled) and status.
@@ -210,9 +219,8 @@ fn trace(
         status: Vec::with_capacity(n),
         samples: Vec::with_capacity(n),
     };
-    for k in 0..n {
-        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
-        let (sample, status) = step(u_prev, log.i_ab[k], log.dt_s[k]);
+    for (u_prev, i, dt) in rows(log) {
+        let (sample, status) = step(u_prev, i, dt);
         tr.theta.push(sample.theta_e_rad);
         tr.omega.push(sample.omega_e_rad_s);
         tr.status.push(status);
@@ -286,10 +294,7 @@ pub fn run_ekf_online(log: &DriveLog, motor: &ReplayMotor) -> Result<ObserverTra
     };
     log.check()?;
     let mut obs = PmsmObserver::new(&cfg)?;
-    obs.prime_input_calibration((0..log.len()).map(|k| {
-        let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
-        (u_prev, log.i_ab[k], log.dt_s[k])
-    }));
+    obs.prime_input_calibration(rows(log));
     Ok(run_ekf_observer(log, obs))
 }
 
