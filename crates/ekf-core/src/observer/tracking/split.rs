@@ -46,6 +46,10 @@ pub(in crate::observer) struct Split<T> {
     /// Whether a window of a braking has been read for the start-up flux (the start-up is
     /// over: no window corrects the EKF's flux any more).
     pub braked: bool,
+    /// Consecutive start-up windows that agree with the EKF's converged flux (module docs of
+    /// the parent, "Resistance while the speed is never steady"); at
+    /// [`AGREEING_WINDOWS`] the filter anchors there.
+    pub agreeing: u8,
 }
 
 impl<T: Float> Split<T> {
@@ -81,8 +85,8 @@ impl<T: Float> Split<T> {
             }
             return None;
         }
-        let (m, r, r_m, _) = self.measure(ends, sums, x, k, false)?;
-        self.update_with(m, r, r_m, k)
+        let (m, r, r_m, _) = self.measure(ends, sums, x, k, Reading::Active)?;
+        self.update_with(m, r, r_m, k, true)
     }
 
     /// Whether the EKF's speed state, its mean over the window, and the window's speed (the
@@ -115,17 +119,43 @@ impl<T: Float> Split<T> {
         k: &TrackerConstants<T>,
     ) -> Option<T> {
         let ends = self.take_ends(x);
-        let (m, r, r_m, _) = self.measure(ends, sums, x, k, false)?;
+        let (m, r, r_m, _) = self.measure(ends, sums, x, k, Reading::Active)?;
         if measures_flux(r, self.rs, psi) {
             return None;
         }
-        self.update_with(m, r, r_m * to_t::<T>(10.0), k)
+        self.update_with(m, r, r_m * to_t::<T>(10.0), k, true)
+    }
+
+    /// The split filter's step on a window with the EKF's tracking frozen, once the filter has
+    /// anchored at the end of the start-up without the EKF's tracking ever having run (module
+    /// docs of the parent, "Resistance while the speed is never steady"): the window's own mean
+    /// `i_d` (the current swings within it) and a current step up to half the current, then
+    /// the update of an active window without the thermal link (the anchor is the lumped flux
+    /// of the `Rs` in use, not a pair at one temperature). Returns `(Rs, psi_f)` (bounded) for the EKF to take,
+    /// `None` when the window is not used.
+    pub(super) fn update_unsteady(
+        &mut self,
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+    ) -> Option<(T, T)> {
+        let ends = self.take_ends(x);
+        let (m, r, r_m, _) = self.measure(ends, sums, x, k, Reading::Unsteady)?;
+        let rs = self.update_with(m, r, r_m, k, false)?;
+        Some((rs, self.psi))
     }
 
     /// The update with a window's measurement `m = psi_f + Rs r` of variance `r_m`: random
-    /// walk, the scalar update (unless beyond 5 standard deviations), the thermal link, the
-    /// bounds. Returns the new `Rs`, `None` when the window is not used.
-    fn update_with(&mut self, m: T, r: T, r_m: T, k: &TrackerConstants<T>) -> Option<T> {
+    /// walk, the scalar update (unless beyond 5 standard deviations), the thermal link (with
+    /// `link`), the bounds. Returns the new `Rs`, `None` when the window is not used.
+    fn update_with(
+        &mut self,
+        m: T,
+        r: T,
+        r_m: T,
+        k: &TrackerConstants<T>,
+        link: bool,
+    ) -> Option<T> {
         // Random walk: the temperature moves both along (psi beta, Rs alpha_cu) per kelvin;
         // the magnets' flux drifts besides.
         let (g0, g1) = (self.psi * self.beta, self.rs * self.alpha);
@@ -145,7 +175,7 @@ impl<T: Float> Split<T> {
         // the back-EMF): the temperatures read from psi and from Rs agree (K). Where the drop
         // is larger the window measures Rs itself, and the link is left out: applied on
         // every window it would outweigh that measurement.
-        if measures_flux(r, self.rs, self.psi) {
+        if link && measures_flux(r, self.rs, self.psi) {
             let h_psi = T::one() / (self.psi_a * self.beta);
             let h_rs = -T::one() / (self.rs_a * self.alpha);
             let h = h_psi * (self.psi - self.psi_a) + h_rs * (self.rs - self.rs_a);
@@ -175,7 +205,21 @@ impl<T: Float> Split<T> {
         if self.tracked {
             return None;
         }
-        let window = self.measure(ends, sums, x, k, true);
+        let window = self.measure(ends, sums, x, k, Reading::StartUp);
+        // Agreement with the EKF's flux once that has converged (to 1.5 %), at a speed where
+        // the window's variance is not widened (module docs of the parent, "Resistance while
+        // the speed is never steady").
+        let agrees = window.is_some_and(|(m, r, r_m, w)| {
+            let y = m - r * rs_used - psi;
+            w * w >= to_t::<T>(100.0) * k.min_speed2
+                && c_pp <= to_t::<T>(2.25e-4) * k.psi0 * k.psi0
+                && y * y <= to_t::<T>(4.0) * (c_pp + r_m)
+        });
+        self.agreeing = if agrees {
+            self.agreeing.saturating_add(1)
+        } else {
+            0
+        };
         // Only through an acceleration: the window's speed (the angle's advance) above the
         // previous window's by more than 2 % (a start-up). The first window after a gap, a
         // steady speed, a braking and the angle's pull-in after a lock at speed leave the
@@ -246,7 +290,7 @@ impl<T: Float> Split<T> {
         sums: &Window<T>,
         x: &Vector4<T>,
         k: &TrackerConstants<T>,
-        low_current: bool,
+        reading: Reading,
     ) -> Option<(T, T, T, T)> {
         if !sums.contiguous {
             return None;
@@ -272,23 +316,30 @@ impl<T: Float> Split<T> {
         let (ud0, uq0) = (sums.ud * inv_n, sums.uq * inv_n);
         let ud = (ud0 * ch + uq0 * sh) * sinc;
         let uq = (uq0 * ch - ud0 * sh) * sinc;
-        // The window's mean i_d: the start-up flux's windows (`low_current`, host builds)
+        // The window's mean i_d: the start-up flux's and the unsteady windows (host builds)
         // take its own mean (module docs, "Tracking during transients": a ramp may end
-        // within the window); the split filter's the mean of the window's ends (a window
-        // with a current step is left out below).
+        // within the window, and the current swings when the speed is never steady); the
+        // active split filter's the mean of the window's ends (a window with a current step
+        // is left out below).
         let iq = sums.iq * inv_n;
-        let id = if low_current {
-            sums.id * inv_n
-        } else {
+        let id = if reading == Reading::Active {
             (id0 + id_end) * to_t(0.5)
+        } else {
+            sums.id * inv_n
         };
         // Windows with little current (the inverter's voltage error is least known there,
-        // its compensation hinges on the current's sign) or a current step (the window's
-        // speed and angle are in transit) are left out.
+        // its compensation hinges on the current's sign; the start-up flux aside) or a
+        // current step (the window's speed and angle are in transit: above a fifth of the
+        // current, for the unsteady windows half of it) are left out.
         let i2 = id * id + iq * iq;
         let i_min = to_t::<T>(0.02) * k.psi0 / k.ld;
         let diq = iq_end - iq0;
-        if (i2 < i_min * i_min && !low_current) || diq * diq > to_t::<T>(0.04) * i2 {
+        let step_share2 = to_t::<T>(if reading == Reading::Unsteady {
+            0.25
+        } else {
+            0.04
+        });
+        if (i2 < i_min * i_min && reading != Reading::StartUp) || diq * diq > step_share2 * i2 {
             return None;
         }
         // The back-EMF vector of the window at the filter's `Rs` (module docs, "Resistance"):
@@ -351,6 +402,21 @@ impl<T: Float> Split<T> {
         self.c11 = c11 - k1 * ph1;
     }
 }
+
+/// How a window is read ([`Split::measure`]): the active split filter's, the start-up flux's
+/// (no current minimum, the window's own mean `i_d`), or an unsteady window's (the window's
+/// own mean `i_d`, a current step up to half the current).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reading {
+    Active,
+    StartUp,
+    Unsteady,
+}
+
+/// Consecutive start-up windows agreeing with the EKF's converged flux after which the split
+/// filter anchors without the EKF's tracking (module docs of the parent, "Resistance while the
+/// speed is never steady").
+pub(super) const AGREEING_WINDOWS: u8 = 4;
 
 /// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
 /// corrects the EKF's flux (module docs of the parent, "Tracking during transients").
