@@ -292,7 +292,11 @@
 //! `python -m pytest crates/pyfoc/tests/test_third_party.py -s`; in brackets without these
 //! windows): 100 K hot 1.18 (1.86), 100 K cold 1.26 (1.70), `Rs` +30 % 0.99 (1.43), `Rs` -30 %
 //! 0.60 (1.32), `Ls` +-20 % 2.20 / 2.42 (2.85 / 3.11); the exact motor 0.05 (0.04), the flux
-//! +-10 % 0.070 / 0.067 (0.068 / 0.045). What is left is the start-up: before the first swing
+//! +-10 % 0.070 / 0.067 (0.068 / 0.045). The firmware's filter in a host build (the
+//! feedforward and the calibration off) gains as much in the thermal and `Rs` cases and loses
+//! told a wrong `Ls`, 3.61 / 3.56 (2.86 / 3.02): in the V/f swings `i_d` moves with `r` (high
+//! `i_q` with `i_d` near -3 A), so the window's `w dL i_d` along the back-EMF reads as a
+//! resistance (`docs/accuracy.md`). What is left is the start-up: before the first swing
 //! the told `Rs` holds, and the V/f start's d current (2.4 A at 0.25 s) puts the angle
 //! `dRs i_d / (w psi_f)` off (1.2-1.4 deg RMS over 0.25-0.4 s told 100 K hot or cold); after
 //! it `Rs` converges over the swings at the rate the spread of `r` allows (by the trace's end,
