@@ -14,7 +14,7 @@
 //! (`i_x` > 0 flows into the motor): a positive phase current loses `t_dead / Ts` of its duty,
 //! a negative one gains it. On a 300 V bus at 10 kHz, 0.5 us is 1.5 V per leg, up to 2 V on
 //! the stator vector, always against the current. This is the model of `pmsm-sim`'s inverter
-//! (`crates/pmsm-sim/src/inverter.rs`, as in `motulator`), which takes `sgn` from the true
+//! (`crates/pmsm-sim/src/plant/inverter.rs`, as in `motulator`), which takes `sgn` from the true
 //! current at the start of the application interval, with `sgn(0) = 0`.
 //!
 //! # The compensation
@@ -34,9 +34,9 @@
 //! fades out near zero current (the current ripple reverses within the period, over about
 //! half the peak-to-peak ripple: set the band there if it is known); against the
 //! simulator's hard sign the linear part leaves a small error over `|i| < band`. Measured in
-//! `pmsm-sim`'s default scenario (0.5 us, 4.5 A limit): observer angle error after the
-//! hand-over 0.076 / 0.078 / 0.155 deg RMS with a band of 1 / 2 / 5 % (0.066 with no dead
-//! time).
+//! `pmsm-sim`'s default scenario (0.5 us, 4.5 A limit; `dead_time_band_a` in
+//! `[controller.foc]`): observer angle error after the hand-over 0.068 / 0.071 / 0.114 deg RMS
+//! with a band of 1 / 2 / 5 % (0.060 with no dead time; 0.114 at 1.5 us with the default band).
 //!
 //! # Which current
 //!
