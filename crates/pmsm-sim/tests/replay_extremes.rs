@@ -41,7 +41,7 @@ fn dir(name: &str) -> PathBuf {
 fn value(rng: &mut Rng, scales: &[f64]) -> f64 {
     let s = rng.pick(scales);
     let v = s * (2.0 * rng.unit() - 1.0);
-    if rng.next() % 8 == 0 { 0.0 } else { v }
+    if rng.next().is_multiple_of(8) { 0.0 } else { v }
 }
 
 #[test]
@@ -68,13 +68,13 @@ fn extreme_logs_and_motors_give_a_report_or_an_error() {
         };
         let rows = rng.pick(&[1usize, 2, 3, 50, 400, 3000]);
         let ts = rng.pick(&[1e-4, 1e-9, 1e-3, 0.05]);
-        let with_reference = rng.next() % 2 == 0;
+        let with_reference = rng.next().is_multiple_of(2);
         let mut csv = String::from("t_s,dt_s,u_alpha_v,u_beta_v,i_alpha_a,i_beta_a");
         if with_reference {
             csv.push_str(",theta_ref_rad,omega_ref_rad_s");
         }
         csv.push('\n');
-        let constant = rng.next() % 6 == 0;
+        let constant = rng.next().is_multiple_of(6);
         let (mut t, mut row) = (0.0, [0.0; 4]);
         for k in 0..rows {
             if k == 0 || !constant {
