@@ -156,6 +156,14 @@ fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
     let good = text(&run(&["show"], &dir).stdout);
     let catalog = "catalog = \"servo\"  # ekf_core::catalog; keys given here override it";
     assert!(good.contains(catalog), "{good}");
+    // The line of the bad value, counted in the file (the preset's comments move it).
+    let bad_pole_pairs = good.replace(catalog, "catalog = \"servo\"\npole_pairs = \"abc\"");
+    let line = 1 + bad_pole_pairs
+        .lines()
+        .position(|l| l == "pole_pairs = \"abc\"")
+        .unwrap_or(usize::MAX - 1);
+    let pole_pairs_problem =
+        format!("expected a whole number >= 0, got the string \"abc\" (line {line}, column 14)");
     let cases = [
         (
             good.replace(catalog, "catalog = \"servo\"\npsi_f_wb = -0.175"),
@@ -183,9 +191,9 @@ fn bad_scenario_files_are_refused_naming_file_field_and_problem() {
             "expected a whole number >= 0, got the number 12.5 (line",
         ),
         (
-            good.replace(catalog, "catalog = \"servo\"\npole_pairs = \"abc\""),
+            bad_pole_pairs.clone(),
             "motor.pole_pairs",
-            "expected a whole number >= 0, got the string \"abc\" (line 42, column 14)",
+            &pole_pairs_problem,
         ),
         (
             good.replace("[controller]", "[controler]"),
