@@ -407,6 +407,8 @@ pub use estimate::{Estimate, ObserverCounters, Status};
 pub use feedforward::AccelerationFeedforward;
 pub use model::{Discretization, PmsmModel};
 pub use pmsm::PmsmObserver;
+#[cfg(feature = "std")]
+pub use pmsm::RETELL_SHARE;
 pub(crate) use safeguards::ConsistencyState;
 pub use safeguards::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS,

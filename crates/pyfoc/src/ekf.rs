@@ -32,7 +32,8 @@ use crate::replay;
 /// voltage timing is told), off on a flux map; both `False` is the filter foc runs. With the
 /// calibration on, the first `run` of a new filter primes it with its own rows (`prime`: the
 /// voltage delay a copy's calibration handed over last over the record, and the innovation
-/// level its status check learnt, are this filter's from row 0).
+/// level its status check learnt, are this filter's from row 0; told the `Rs` the copy ended
+/// with where that matters).
 ///
 /// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
 /// calls on one `Ekf` from several threads are serialized (each completes, in some order)
@@ -385,7 +386,9 @@ impl Ekf {
     /// Primes the online input calibration with a whole record before filtering it in chunks:
     /// a copy of the filter runs over the rows (`u_ab`, `i_ab`, `u_prev`, `dt` as `run` takes
     /// them) and the voltage delay its calibration handed over last, with the innovation level
-    /// its status check learnt, is set on this filter (the class docs). The first `run` of a
+    /// its status check learnt, is set on this filter (the class docs); where the copy ends with
+    /// an `Rs` that matters for the record, the filter is first built again told that `Rs`
+    /// (`ekf_core::calibration`, "Told by the record"). The first `run` of a
     /// new filter does this with its own rows; after `prime` (or any `run` or `step`) it does
     /// not, so `prime(u, i)` then `run` on chunks of `u`, `i` gives what one `run(u, i)` gives.
     /// Returns the delay set as `voltage_delay_s` (s; minus the lead of the applied voltage),

@@ -164,12 +164,14 @@ impl Observer {
         ) -> Option<f64> {
             let c = |v: f64| T::from_subset(&v);
             let ts = o.model().ts();
-            let mut p = prev;
             let rows = i.chunks_exact(2).enumerate().map(|(k, ik)| {
-                let u_prev = [c(p[0]), c(p[1])];
-                p = [u[2 * k], u[2 * k + 1]];
+                let p = if k == 0 {
+                    prev
+                } else {
+                    [u[2 * k - 2], u[2 * k - 1]]
+                };
                 let d = dt.map_or(ts, |d| c(d[k]));
-                (u_prev, [c(ik[0]), c(ik[1])], d)
+                ([c(p[0]), c(p[1])], [c(ik[0]), c(ik[1])], d)
             });
             o.prime_input_calibration(rows)
                 .map(|d| d.to_subset().unwrap_or(f64::NAN))

@@ -80,12 +80,12 @@ def test_default_ekf_on_motulator_trace(noise_a, theta0, options):
 # 17-22 % of the flux) correct the flux; once they agree with it, the split filter's windows
 # through the load's speed swings correct Rs and the flux.
 MISMATCH = {
-    "psi_f -10 %": ((0.9, 1.0), 0.067, 0.10),
-    "psi_f +10 %": ((1.1, 1.0), 0.070, 0.12),
-    "100 K hot": ((0.88, 1.393), 1.18, 1.55),
-    "100 K cold": ((1.12, 0.607), 1.26, 1.65),
-    "Rs +30 %": ((1.0, 1.3), 0.99, 1.3),
-    "Rs -30 %": ((1.0, 0.7), 0.60, 0.8),
+    "psi_f -10 %": ((0.9, 1.0), 0.070, 0.10),
+    "psi_f +10 %": ((1.1, 1.0), 0.070, 0.10),
+    "100 K hot": ((0.88, 1.393), 0.76, 0.99),
+    "100 K cold": ((1.12, 0.607), 0.73, 0.95),
+    "Rs +30 %": ((1.0, 1.3), 0.62, 0.81),
+    "Rs -30 %": ((1.0, 0.7), 0.46, 0.60),
 }
 
 
@@ -106,19 +106,57 @@ def test_default_ekf_told_the_wrong_motor_on_motulator_trace(case):
     assert rms < limit
 
 
+def _unprimed(motor, ts, u_ab, i_ab, **kw):
+    """The filter over the trace without the priming of a first run: one `step`, then `run`
+    on the rest (a filter that has stepped is not fresh)."""
+    ekf = pyfoc.Ekf(motor, ts, **kw)
+    first = ekf.step([0.0, 0.0], i_ab[0])
+    rest = ekf.run(u_ab[1:], i_ab[1:], u_prev=u_ab[0])
+    return {k: np.concatenate([[first[k]], rest[k]]) for k in ("theta", "rs", "psi_f")}
+
+
 @pytest.mark.parametrize("case", ["psi_f -10 %", "psi_f +10 %", "100 K hot"])
 def test_input_calibration_hands_nothing_over_when_the_told_flux_is_off(case):
-    """input_calibration=True: the drive observer alongside runs on the told flux, and a flux
-    error reads to it as a lead and a resistance; while the EKF's flux has left the told one by
-    more than 3 % nothing is handed over, and the filter is the default one bit for bit (here
-    the start-up windows take the flux 4-10 % from the told value before the first hand-over)."""
+    """input_calibration=True without the priming: the drive observer alongside runs on the
+    told flux, and a flux error reads to it as a lead and a resistance; while the EKF's flux
+    has left the told one by more than 3 % nothing is handed over, and the filter is the one
+    without the calibration bit for bit (here the start-up windows take the flux 4-10 % from
+    the told value before the first hand-over)."""
     (fp, fr), _, _ = MISMATCH[case]
     d = load()
     ts = d["t_s"][1] - d["t_s"][0]
     i_ab = np.column_stack([d["i_alpha_a"], d["i_beta_a"]])
     u_ab = np.column_stack([d["u_alpha_v"], d["u_beta_v"]])
     motor = pyfoc.Motor(rs=3.6 * fr, ls=0.036, psi_f=0.545 * fp, pole_pairs=3)
-    plain = pyfoc.Ekf(motor, ts, input_calibration=False).run(u_ab, i_ab)
-    cal = pyfoc.Ekf(motor, ts, input_calibration=True).run(u_ab, i_ab)
+    plain = _unprimed(motor, ts, u_ab, i_ab, input_calibration=False)
+    cal = _unprimed(motor, ts, u_ab, i_ab, input_calibration=True)
     np.testing.assert_array_equal(cal["theta"], plain["theta"])
     np.testing.assert_array_equal(cal["rs"], plain["rs"])
+
+
+@pytest.mark.parametrize("case", ["100 K hot", "100 K cold", "Rs +30 %", "Rs -30 %"])
+def test_the_first_run_is_told_what_its_record_tracks(case):
+    """The first run of a new filter with the calibration on is told by its record (module docs
+    of ekf_core::calibration, "Told by the record"): a first pass's tracked Rs, when its change
+    moves the back-EMF per unit speed by more than 2 % of the flux at the record's mean
+    |i| / |w|, becomes the told value; the winding temperature keeps the told Rs as its
+    reference. Closer to the rotor than the filter told the wrong motor without the
+    priming (measured: 0.76 / 1.44, 0.73 / 1.46, 0.62 / 1.17, 0.46 / 0.93 deg RMS)."""
+    (fp, fr), _, _ = MISMATCH[case]
+    d = load()
+    ts = d["t_s"][1] - d["t_s"][0]
+    i_ab = np.column_stack([d["i_alpha_a"], d["i_beta_a"]])
+    u_ab = np.column_stack([d["u_alpha_v"], d["u_beta_v"]])
+    motor = pyfoc.Motor(rs=3.6 * fr, ls=0.036, psi_f=0.545 * fp, pole_pairs=3)
+    told = pyfoc.Ekf(motor, ts).run(u_ab, i_ab)
+    unprimed = _unprimed(motor, ts, u_ab, i_ab)
+    window = (d["t_s"] >= 0.25) & (np.abs(3 * d["omega_mech_rad_s"]) >= 2 * np.pi * 5.0)
+    rms = {
+        k: float(np.sqrt(np.mean(angle_errors_deg(o["theta"], d["theta_e_rad"])[window] ** 2)))
+        for k, o in (("retold", told), ("unprimed", unprimed))
+    }
+    print(case, rms)
+    assert rms["retold"] < 0.8 * rms["unprimed"]
+    # The reported temperature stays referenced to the told Rs at 20 deg C (copper).
+    t_told = 20.0 + (told["rs"] / motor.rs - 1.0) / 0.00393
+    np.testing.assert_allclose(told["winding_temperature"], t_told, atol=1e-6)

@@ -67,6 +67,10 @@ pub struct PmsmObserver<T: Float> {
     /// The online input calibration (`ObserverConfig::input_calibration`; `None` when off).
     #[cfg(feature = "std")]
     pub(super) calibration: Option<std::boxed::Box<crate::calibration::OnlineCalibration<T>>>,
+    /// The configuration it was built from (host builds: the priming's second pass is built
+    /// from it, [`Self::prime_input_calibration`]).
+    #[cfg(feature = "std")]
+    pub(crate) config: std::boxed::Box<ObserverConfig<T>>,
 }
 
 /// The online parameter tracking: the per-step part and the slow part (its constants and
@@ -76,6 +80,13 @@ pub(super) struct Tracking<T> {
     pub(super) t: Tracker<T>,
     pub(super) slow: TrackerSlow<T>,
 }
+
+/// The share of the told flux by which a priming copy's change of `Rs`, times the record's mean
+/// `|i| / |w|`, must move the back-EMF per unit speed for the observer to be built again told
+/// that `Rs` ([`PmsmObserver::prime_input_calibration`]; module docs of
+/// [`crate::calibration`], "Told by the record").
+#[cfg(feature = "std")]
+pub const RETELL_SHARE: f64 = 0.02;
 
 pub(super) fn zero_correction<T: Float>() -> Correction<T, 2> {
     Correction {
@@ -184,6 +195,8 @@ impl<T: Float> PmsmObserver<T> {
             } else {
                 None
             },
+            #[cfg(feature = "std")]
+            config: std::boxed::Box::new(*cfg),
         };
         observer.refresh_emf_floor();
         Ok(observer)
@@ -364,25 +377,32 @@ impl<T: Float> PmsmObserver<T> {
 
     /// Primes the online input calibration (`ObserverConfig::input_calibration`) with a whole
     /// record, before the observer takes its first row (module docs of [`crate::calibration`],
-    /// "Primed by the record"): a copy of this observer runs over `rows` (each row's
-    /// `(u_prev, i, dt_s)`, as [`Self::step_dt`] takes them); the voltage delay its
-    /// calibration handed over last and the innovation level its consistency check learnt
-    /// (the baseline of the status) are set here. The inverter voltage and `Rs`, which the
-    /// calibration hands over together, are left to this observer's own hand-overs, and
-    /// nothing else moves: its calibration starts afresh and hands over as it runs. Returns
+    /// "Primed by the record" and "Told by the record"): a copy of this observer runs over
+    /// `rows` (each row's `(u_prev, i, dt_s)`, as [`Self::step_dt`] takes them). With parameter
+    /// tracking on, when the copy ends with a tracked `Rs` far enough from the told one (its
+    /// change times the record's mean `|i| / |w|` above [`RETELL_SHARE`] of the flux), this
+    /// observer is built again told that `Rs` (the reported winding temperature keeps the told
+    /// `Rs` as its reference) and a copy of the new one runs over the rows once more. The
+    /// voltage delay the (last) copy's calibration handed over last and the innovation level its
+    /// consistency check learnt (the baseline of the status) are set here. The inverter voltage,
+    /// which the calibration hands over with `Rs`, is left to this observer's own hand-overs,
+    /// and nothing else moves: its calibration starts afresh and hands over as it runs. Returns
     /// the delay set, or `None` when the copy handed over no other delay (e.g. a record whose
     /// filter flux leaves the told one: the hand-over guard holds everything); nothing at all
-    /// changes when the calibration is off.
+    /// changes when the calibration is off. Call it on a fresh observer (one built again starts
+    /// from its initial state).
     #[cfg(feature = "std")]
-    pub fn prime_input_calibration(
-        &mut self,
-        rows: impl IntoIterator<Item = ([T; 2], [T; 2], T)>,
-    ) -> Option<T> {
+    pub fn prime_input_calibration<I>(&mut self, rows: I) -> Option<T>
+    where
+        I: IntoIterator<Item = ([T; 2], [T; 2], T)> + Clone,
+    {
         self.calibration.as_ref()?;
-        let mut copy = self.clone();
-        for (u_prev, i, dt_s) in rows {
-            // A refused row changes nothing in the copy, as in the run that follows.
-            let _ = copy.step_dt(u_prev, i, dt_s);
+        let (mut copy, r) = self.primed_copy(rows.clone());
+        if let Some(cfg) = copy.retold_config(r)
+            && let Ok(retold) = Self::new(&cfg)
+        {
+            *self = retold;
+            copy = self.primed_copy(rows).0;
         }
         // The consistency check's innovation level, learnt over the whole record.
         if let (Some(c), Some(mine)) = (&copy.consistency, &mut self.consistency) {
@@ -395,6 +415,58 @@ impl<T: Float> PmsmObserver<T> {
         }
         self.set_voltage_errors(delay, self.inverter.0).ok()?;
         Some(delay)
+    }
+
+    /// A copy of this observer after `rows` (a refused row changes nothing in the copy, as in
+    /// the run that follows), and the record's mean `|i| / |w|` over the rows the copy tracks
+    /// above the tracking's minimum speed (0 when none): the ratio a resistance error is read
+    /// against the flux with.
+    #[cfg(feature = "std")]
+    fn primed_copy(&self, rows: impl IntoIterator<Item = ([T; 2], [T; 2], T)>) -> (Self, T) {
+        let mut copy = self.clone();
+        let min_speed2 = self
+            .tracking
+            .as_ref()
+            .map_or(T::zero(), |k| k.slow.k.min_speed2);
+        let (mut sum, mut n) = (T::zero(), 0_u32);
+        for (u_prev, i, dt_s) in rows {
+            if let Ok(e) = copy.step_dt(u_prev, i, dt_s) {
+                let w = e.omega_e_rad_s;
+                if e.status == crate::Status::Tracking && w * w >= min_speed2 && w != T::zero() {
+                    sum += (i[0] * i[0] + i[1] * i[1]).sqrt() / w.abs();
+                    n += 1;
+                }
+            }
+        }
+        let r = if n > 0 {
+            sum / to_t(f64::from(n))
+        } else {
+            T::zero()
+        };
+        (copy, r)
+    }
+
+    /// The configuration told this observer's tracked `Rs` (module docs of
+    /// [`crate::calibration`], "Told by the record"), when its change times the record's mean
+    /// `|i| / |w|` (`r`, the change of the back-EMF per unit speed it makes) is more than
+    /// [`RETELL_SHARE`] of the told flux; `None` otherwise or with tracking off. The tracking's
+    /// reference temperature becomes the winding temperature now, and its copper coefficient
+    /// `alpha rs0 / rs1`, so that the reported winding temperature keeps the told `Rs` as its
+    /// reference (`T = T_ref + (Rs - rs0) / (alpha rs0)`, linear in `Rs`).
+    #[cfg(feature = "std")]
+    fn retold_config(&self, r: T) -> Option<ObserverConfig<T>> {
+        let tracking = self.tracking.as_ref()?;
+        let k = &tracking.slow.k;
+        let rs = tracking.t.rs;
+        if (rs - k.rs0).abs() * r <= to_t::<T>(RETELL_SHARE) * k.psi0 {
+            return None;
+        }
+        let mut cfg = *self.config;
+        let t = cfg.parameter_tracking.as_mut()?;
+        t.reference_temperature_c = tracking.t.winding_temperature_c(k);
+        t.rs_temperature_coefficient_per_k *= k.rs0 / rs;
+        cfg.motor.rs_ohm = rs;
+        Some(cfg)
     }
 
     /// The model's inductances `(L_d, L_q)`, H: the configured ones or the last set by

@@ -311,7 +311,9 @@ class Ekf:
         """Prime the input calibration with a whole record (arguments as run takes them)
         before filtering it in chunks: a copy runs over it and the voltage delay its
         calibration handed over last (and the innovation level its status check learnt) is
-        set here; the filter's state does not move. After
+        set here; where the copy ends with an Rs that matters for the record, the filter is
+        first built again told that Rs (its winding temperature keeps the told Rs as its
+        reference). The filter's state does not move. After
         prime(), run() or step() the next run does not prime, so prime(u, i) then run() on
         chunks gives what one run(u, i) gives. Returns the delay set (voltage_delay_s, s), or
         None when no delay was set (the calibration off or a flux map: nothing set; no

@@ -46,10 +46,24 @@ pub(in crate::observer) struct Split<T> {
     /// Whether a window of a braking has been read for the start-up flux (the start-up is
     /// over: no window corrects the EKF's flux any more).
     pub braked: bool,
-    /// Consecutive start-up windows that agree with the EKF's converged flux (module docs of
-    /// the parent, "Resistance while the speed is never steady"); at
-    /// [`AGREEING_WINDOWS`] the filter anchors there.
-    pub agreeing: u8,
+    /// The windows of a drive whose speed never settles (host builds; module docs of the
+    /// parent, "Resistance while the speed is never steady").
+    #[cfg(feature = "std")]
+    pub unsteady: Unsteady,
+}
+
+/// The state of the split filter's windows while the EKF's own tracking has not run (module
+/// docs of the parent, "Resistance while the speed is never steady"; host builds).
+#[cfg(feature = "std")]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(in crate::observer) struct Unsteady {
+    /// Before the anchor: start-up windows in a row that agree with the EKF's converged flux
+    /// (at [`AGREEING_WINDOWS`] the filter anchors there); after it: windows since (the
+    /// windows update from [`AGREEING_WINDOWS`] + [`GRACE_WINDOWS`] on).
+    pub count: u8,
+    /// The anchor came from that agreement: the first window of the EKF's own tracking
+    /// drops it (the filter anchors again where the EKF's flux converges, as without it).
+    pub provisional: bool,
 }
 
 impl<T: Float> Split<T> {
@@ -76,6 +90,11 @@ impl<T: Float> Split<T> {
     ) -> Option<T> {
         let ends = self.take_ends(x);
         self.tracked = true;
+        #[cfg(feature = "std")]
+        if self.unsteady.provisional {
+            self.unsteady.provisional = false;
+            self.anchored = false;
+        }
         if !self.anchored {
             // The link's reference: the first window after the EKF's flux has converged
             // (standard deviation within 0.5 % of the configured flux).
@@ -145,6 +164,63 @@ impl<T: Float> Split<T> {
         Some((rs, self.psi))
     }
 
+    /// Counts a start-up window for the unsteady windows (module docs of the parent,
+    /// "Resistance while the speed is never steady"): before the anchor, whether it agrees with
+    /// the EKF's flux once that has converged (to 1.5 %), at a speed where the window's variance
+    /// is not widened (its lumped flux `m - Rs r` within two standard deviations); after it,
+    /// one more window since.
+    #[cfg(feature = "std")]
+    fn count_unsteady(
+        &mut self,
+        window: Option<(T, T, T, T)>,
+        rs_used: T,
+        psi: T,
+        c_pp: T,
+        k: &TrackerConstants<T>,
+    ) {
+        let u = &mut self.unsteady;
+        if u.provisional {
+            u.count = u.count.saturating_add(1);
+            return;
+        }
+        let agrees = window.is_some_and(|(m, r, r_m, w)| {
+            let y = m - r * rs_used - psi;
+            w * w >= to_t::<T>(100.0) * k.min_speed2
+                && c_pp <= to_t::<T>(2.25e-4) * k.psi0 * k.psi0
+                && y * y <= to_t::<T>(4.0) * (c_pp + r_m)
+        });
+        u.count = if agrees { u.count + 1 } else { 0 };
+    }
+
+    /// After the start-up windows agreed, whether the filter anchors there now (it has not
+    /// anchored and the EKF's tracking has not run), and whether the unsteady windows update it
+    /// (anchored by that agreement [`GRACE_WINDOWS`] windows ago, the EKF's tracking still not
+    /// run: a drive whose speed never settles). Host builds; `(false, false)` without.
+    pub(super) fn unsteady_state(&self) -> (bool, bool) {
+        #[cfg(feature = "std")]
+        {
+            let u = &self.unsteady;
+            let fresh = !self.tracked && !self.anchored && u.count >= AGREEING_WINDOWS;
+            let ready = !self.tracked
+                && u.provisional
+                && u.count >= AGREEING_WINDOWS.saturating_add(GRACE_WINDOWS);
+            (fresh, ready)
+        }
+        #[cfg(not(feature = "std"))]
+        (false, false)
+    }
+
+    /// Anchors at the start-up's agreement (module docs of the parent, "Resistance while the
+    /// speed is never steady"): as [`anchor`](Self::anchor), marked provisional, the windows
+    /// since counted from there.
+    pub(super) fn anchor_unsteady(&mut self, psi: T, rs: T, c_pp: T, k: &TrackerConstants<T>) {
+        self.anchor(psi, rs, c_pp, k);
+        #[cfg(feature = "std")]
+        {
+            self.unsteady.provisional = true;
+        }
+    }
+
     /// The update with a window's measurement `m = psi_f + Rs r` of variance `r_m`: random
     /// walk, the scalar update (unless beyond 5 standard deviations), the thermal link (with
     /// `link`), the bounds. Returns the new `Rs`, `None` when the window is not used.
@@ -206,20 +282,8 @@ impl<T: Float> Split<T> {
             return None;
         }
         let window = self.measure(ends, sums, x, k, Reading::StartUp);
-        // Agreement with the EKF's flux once that has converged (to 1.5 %), at a speed where
-        // the window's variance is not widened (module docs of the parent, "Resistance while
-        // the speed is never steady").
-        let agrees = window.is_some_and(|(m, r, r_m, w)| {
-            let y = m - r * rs_used - psi;
-            w * w >= to_t::<T>(100.0) * k.min_speed2
-                && c_pp <= to_t::<T>(2.25e-4) * k.psi0 * k.psi0
-                && y * y <= to_t::<T>(4.0) * (c_pp + r_m)
-        });
-        self.agreeing = if agrees {
-            self.agreeing.saturating_add(1)
-        } else {
-            0
-        };
+        #[cfg(feature = "std")]
+        self.count_unsteady(window, rs_used, psi, c_pp, k);
         // Only through an acceleration: the window's speed (the angle's advance) above the
         // previous window's by more than 2 % (a start-up). The first window after a gap, a
         // steady speed, a braking and the angle's pull-in after a lock at speed leave the
@@ -380,6 +444,10 @@ impl<T: Float> Split<T> {
         self.psi_a = psi;
         self.rs_a = rs;
         self.anchored = true;
+        #[cfg(feature = "std")]
+        {
+            self.unsteady.provisional = false;
+        }
     }
 
     /// Kalman update of `(psi, Rs)` with a scalar measurement of gradient `(h0, h1)`,
@@ -417,6 +485,12 @@ enum Reading {
 /// filter anchors without the EKF's tracking (module docs of the parent, "Resistance while the
 /// speed is never steady").
 pub(super) const AGREEING_WINDOWS: u8 = 4;
+
+/// Windows after that anchor before the unsteady windows update the filter (module docs of the
+/// parent, "Resistance while the speed is never steady"): twice the default settling time of
+/// the EKF's own tracking (500 samples, windows of 100), so that a drive whose speed settles
+/// starts its own tracking first and runs as without these windows.
+pub(super) const GRACE_WINDOWS: u8 = 10;
 
 /// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
 /// corrects the EKF's flux (module docs of the parent, "Tracking during transients").

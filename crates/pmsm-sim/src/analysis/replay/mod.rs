@@ -198,7 +198,7 @@ pub struct ObserverTrace {
 
 /// The rows of `log` as an observer steps on them: `(u_prev, i, dt)`, row `k` predicted with
 /// the voltage of row `k - 1` (`log.u_prev` for row 0) over its own period.
-fn rows(log: &DriveLog) -> impl Iterator<Item = ([f64; 2], [f64; 2], f64)> + '_ {
+fn rows(log: &DriveLog) -> impl Iterator<Item = ([f64; 2], [f64; 2], f64)> + Clone + '_ {
     (0..log.len()).map(|k| {
         let u_prev = if k == 0 { log.u_prev } else { log.u_ab[k - 1] };
         (u_prev, log.i_ab[k], log.dt_s[k])
