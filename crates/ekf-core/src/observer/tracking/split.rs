@@ -484,12 +484,14 @@ enum Reading {
 /// Consecutive start-up windows agreeing with the EKF's converged flux after which the split
 /// filter anchors without the EKF's tracking (module docs of the parent, "Resistance while the
 /// speed is never steady").
+#[cfg(feature = "std")]
 pub(super) const AGREEING_WINDOWS: u8 = 4;
 
 /// Windows after that anchor before the unsteady windows update the filter (module docs of the
 /// parent, "Resistance while the speed is never steady"): twice the default settling time of
 /// the EKF's own tracking (500 samples, windows of 100), so that a drive whose speed settles
 /// starts its own tracking first and runs as without these windows.
+#[cfg(feature = "std")]
 pub(super) const GRACE_WINDOWS: u8 = 10;
 
 /// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
