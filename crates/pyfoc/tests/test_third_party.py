@@ -89,19 +89,28 @@ MISMATCH = {
 }
 
 
-@pytest.mark.parametrize("case", list(MISMATCH))
-def test_default_ekf_told_the_wrong_motor_on_motulator_trace(case):
-    (fp, fr), measured, limit = MISMATCH[case]
+def _told(case):
+    """The trace, its period, its voltages and currents, and the motor told as in `case`."""
+    (fp, fr), _, _ = MISMATCH[case]
     d = load()
     ts = d["t_s"][1] - d["t_s"][0]
     i_ab = np.column_stack([d["i_alpha_a"], d["i_beta_a"]])
     u_ab = np.column_stack([d["u_alpha_v"], d["u_beta_v"]])
-    omega = 3 * d["omega_mech_rad_s"]
-    motor = pyfoc.Motor(rs=3.6 * fr, ls=0.036, psi_f=0.545 * fp, pole_pairs=3)
-    out = pyfoc.Ekf(motor, ts).run(u_ab, i_ab)
+    return d, ts, u_ab, i_ab, pyfoc.Motor(rs=3.6 * fr, ls=0.036, psi_f=0.545 * fp, pole_pairs=3)
+
+
+def _rms_from_025(d, out):
+    """RMS angle error (deg) of `out` from 0.25 s at 5 Hz and up."""
+    window = (d["t_s"] >= 0.25) & (np.abs(3 * d["omega_mech_rad_s"]) >= 2 * np.pi * 5.0)
     err = angle_errors_deg(out["theta"], d["theta_e_rad"])
-    window = (d["t_s"] >= 0.25) & (np.abs(omega) >= 2 * np.pi * 5.0)
-    rms = float(np.sqrt(np.mean(err[window] ** 2)))
+    return float(np.sqrt(np.mean(err[window] ** 2)))
+
+
+@pytest.mark.parametrize("case", list(MISMATCH))
+def test_default_ekf_told_the_wrong_motor_on_motulator_trace(case):
+    _, measured, limit = MISMATCH[case]
+    d, ts, u_ab, i_ab, motor = _told(case)
+    rms = _rms_from_025(d, pyfoc.Ekf(motor, ts).run(u_ab, i_ab))
     print(f"{case}: rms {rms:.3f} deg (measured {measured})")
     assert rms < limit
 
@@ -122,12 +131,7 @@ def test_input_calibration_hands_nothing_over_when_the_told_flux_is_off(case):
     has left the told one by more than 3 % nothing is handed over, and the filter is the one
     without the calibration bit for bit (here the start-up windows take the flux 4-10 % from
     the told value before the first hand-over)."""
-    (fp, fr), _, _ = MISMATCH[case]
-    d = load()
-    ts = d["t_s"][1] - d["t_s"][0]
-    i_ab = np.column_stack([d["i_alpha_a"], d["i_beta_a"]])
-    u_ab = np.column_stack([d["u_alpha_v"], d["u_beta_v"]])
-    motor = pyfoc.Motor(rs=3.6 * fr, ls=0.036, psi_f=0.545 * fp, pole_pairs=3)
+    d, ts, u_ab, i_ab, motor = _told(case)
     plain = _unprimed(motor, ts, u_ab, i_ab, input_calibration=False)
     cal = _unprimed(motor, ts, u_ab, i_ab, input_calibration=True)
     np.testing.assert_array_equal(cal["theta"], plain["theta"])
@@ -142,19 +146,10 @@ def test_the_first_run_is_told_what_its_record_tracks(case):
     |i| / |w|, becomes the told value; the winding temperature keeps the told Rs as its
     reference. Closer to the rotor than the filter told the wrong motor without the
     priming (measured: 0.76 / 1.44, 0.73 / 1.46, 0.62 / 1.17, 0.46 / 0.93 deg RMS)."""
-    (fp, fr), _, _ = MISMATCH[case]
-    d = load()
-    ts = d["t_s"][1] - d["t_s"][0]
-    i_ab = np.column_stack([d["i_alpha_a"], d["i_beta_a"]])
-    u_ab = np.column_stack([d["u_alpha_v"], d["u_beta_v"]])
-    motor = pyfoc.Motor(rs=3.6 * fr, ls=0.036, psi_f=0.545 * fp, pole_pairs=3)
+    d, ts, u_ab, i_ab, motor = _told(case)
     told = pyfoc.Ekf(motor, ts).run(u_ab, i_ab)
     unprimed = _unprimed(motor, ts, u_ab, i_ab)
-    window = (d["t_s"] >= 0.25) & (np.abs(3 * d["omega_mech_rad_s"]) >= 2 * np.pi * 5.0)
-    rms = {
-        k: float(np.sqrt(np.mean(angle_errors_deg(o["theta"], d["theta_e_rad"])[window] ** 2)))
-        for k, o in (("retold", told), ("unprimed", unprimed))
-    }
+    rms = {"retold": _rms_from_025(d, told), "unprimed": _rms_from_025(d, unprimed)}
     print(case, rms)
     assert rms["retold"] < 0.8 * rms["unprimed"]
     # The reported temperature stays referenced to the told Rs at 20 deg C (copper).

@@ -879,7 +879,7 @@ impl<T: Float> Tracker<T> {
                         Some(_) => *s = before,
                         None => {}
                     }
-                } else if TRANSIENT && k.transient && s.unsteady_state().1 {
+                } else if TRANSIENT && k.transient && s.unsteady_ready() {
                     // Anchored at the start-up's end while the EKF's tracking has never run
                     // (module docs, "Resistance while the speed is never steady"): the window
                     // corrects `Rs` and the flux, which the EKF takes.
@@ -902,7 +902,7 @@ impl<T: Float> Tracker<T> {
                     }
                     // The start-up's flux agrees with the windows: the split filter anchors
                     // there, at the `Rs` in use.
-                    if s.unsteady_state().0 {
+                    if s.unsteady_anchor_due() {
                         s.anchor_unsteady(self.psi, self.rs, self.s.c_pp, k);
                     }
                 }

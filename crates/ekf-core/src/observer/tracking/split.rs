@@ -150,8 +150,8 @@ impl<T: Float> Split<T> {
     /// docs of the parent, "Resistance while the speed is never steady"): the window's own mean
     /// `i_d` (the current swings within it) and a current step up to half the current, then
     /// the update of an active window without the thermal link (the anchor is the lumped flux
-    /// of the `Rs` in use, not a pair at one temperature). Returns `(Rs, psi_f)` (bounded) for the EKF to take,
-    /// `None` when the window is not used.
+    /// of the `Rs` in use, not a pair at one temperature). Returns `(Rs, psi_f)` (bounded) for
+    /// the EKF to take, `None` when the window is not used.
     pub(super) fn update_unsteady(
         &mut self,
         sums: &Window<T>,
@@ -192,22 +192,27 @@ impl<T: Float> Split<T> {
         u.count = if agrees { u.count + 1 } else { 0 };
     }
 
-    /// After the start-up windows agreed, whether the filter anchors there now (it has not
-    /// anchored and the EKF's tracking has not run), and whether the unsteady windows update it
-    /// (anchored by that agreement [`GRACE_WINDOWS`] windows ago, the EKF's tracking still not
-    /// run: a drive whose speed never settles). Host builds; `(false, false)` without.
-    pub(super) fn unsteady_state(&self) -> (bool, bool) {
+    /// Whether the filter anchors at the start-up's agreement now (module docs of the parent,
+    /// "Resistance while the speed is never steady"): it has not anchored, the EKF's tracking
+    /// has not run, and [`AGREEING_WINDOWS`] windows in a row agreed. Host builds; never
+    /// without.
+    pub(super) fn unsteady_anchor_due(&self) -> bool {
         #[cfg(feature = "std")]
-        {
-            let u = &self.unsteady;
-            let fresh = !self.tracked && !self.anchored && u.count >= AGREEING_WINDOWS;
-            let ready = !self.tracked
-                && u.provisional
-                && u.count >= AGREEING_WINDOWS.saturating_add(GRACE_WINDOWS);
-            (fresh, ready)
-        }
+        return !self.tracked && !self.anchored && self.unsteady.count >= AGREEING_WINDOWS;
         #[cfg(not(feature = "std"))]
-        (false, false)
+        false
+    }
+
+    /// Whether the unsteady windows update the filter: anchored by that agreement
+    /// [`GRACE_WINDOWS`] windows ago and the EKF's tracking still not run (a drive whose speed
+    /// never settles). Host builds; never without.
+    pub(super) fn unsteady_ready(&self) -> bool {
+        #[cfg(feature = "std")]
+        return !self.tracked
+            && self.unsteady.provisional
+            && self.unsteady.count >= AGREEING_WINDOWS.saturating_add(GRACE_WINDOWS);
+        #[cfg(not(feature = "std"))]
+        false
     }
 
     /// Anchors at the start-up's agreement (module docs of the parent, "Resistance while the
