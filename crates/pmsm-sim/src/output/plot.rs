@@ -412,8 +412,14 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     if !(lo.is_finite() && hi.is_finite()) {
         return (-1.0, 1.0);
     }
-    let pad = ((hi - lo) * 0.05).max(1e-3);
-    (lo - pad, hi + pad)
+    // Half-spans: `hi - lo` itself may overflow near f64::MAX.
+    let pad = (hi * 0.05 - lo * 0.05).max(1e-3);
+    let (a, b) = (lo - pad, hi + pad);
+    if a.is_finite() && b.is_finite() {
+        (a, b)
+    } else {
+        (lo, hi.max(lo + 1e-3))
+    }
 }
 
 fn chart<'a, 'b>(
@@ -444,7 +450,18 @@ fn line<S: Into<ShapeStyle> + Copy + 'static>(
     label: &str,
 ) -> Result<usize, Box<dyn std::error::Error>> {
     let st: ShapeStyle = (*style).into();
-    let finite: Vec<(f64, f64)> = points.filter(|p| p.1.is_finite()).collect();
+    // Points far outside the axes are drawn at a span beyond them (clipped by the chart):
+    // plotters turns a coordinate into an i32 pixel, which a value beyond about 2^31 times
+    // the axis's span would overflow.
+    let (xr, yr) = (c.x_range(), c.y_range());
+    let near = |v: f64, r: &core::ops::Range<f64>| {
+        let span = r.end * 0.5 - r.start * 0.5;
+        v.max(r.start - span).min(r.end + span)
+    };
+    let finite: Vec<(f64, f64)> = points
+        .filter(|p| p.0.is_finite() && p.1.is_finite())
+        .map(|(x, y)| (near(x, &xr), near(y, &yr)))
+        .collect();
     if finite.is_empty() {
         // Nothing to draw: no line, no legend entry.
         return Ok(0);
