@@ -86,7 +86,12 @@ pub(super) struct Tracking<T> {
 /// that `Rs` ([`PmsmObserver::prime_input_calibration`]; module docs of
 /// [`crate::calibration`], "Told by the record").
 #[cfg(feature = "std")]
-pub const RETELL_SHARE: f64 = 0.02;
+pub const RETELL_SHARE: f64 = 0.0025;
+
+/// The most times [`PmsmObserver::prime_input_calibration`] builds the observer again told a
+/// priming copy's `Rs` (each time one more pass over the record).
+#[cfg(feature = "std")]
+pub const MAX_RETELLS: usize = 6;
 
 pub(super) fn zero_correction<T: Float>() -> Correction<T, 2> {
     Correction {
@@ -382,7 +387,9 @@ impl<T: Float> PmsmObserver<T> {
     /// tracking on, when the copy ends with a tracked `Rs` far enough from the told one (its
     /// change times the record's mean `|i| / |w|` above [`RETELL_SHARE`] of the flux), this
     /// observer is built again told that `Rs` (the reported winding temperature keeps the told
-    /// `Rs` as its reference) and a copy of the new one runs over the rows once more. The
+    /// `Rs` as its reference, the tracked `Rs` its bounds in ohms) and a copy of the new one
+    /// runs over the rows once more; this repeats, at most [`MAX_RETELLS`] times, while each
+    /// change is above the share, in the previous one's direction and smaller than it. The
     /// voltage delay the (last) copy's calibration handed over last and the innovation level its
     /// consistency check learnt (the baseline of the status) are set here. The inverter voltage,
     /// which the calibration hands over with `Rs`, is left to this observer's own hand-overs,
@@ -398,11 +405,24 @@ impl<T: Float> PmsmObserver<T> {
     {
         self.calibration.as_ref()?;
         let (mut copy, r) = self.primed_copy(rows.clone());
-        if let Some(cfg) = copy.retold_config(r)
-            && let Ok(retold) = Self::new(&cfg)
-        {
+        // Each retelling starts the copy nearer the record's `Rs`, which its tracking then
+        // moves by less: a fixed-point iteration, stopped when a change turns back or does not
+        // shrink (a record whose `Rs` is not identified moves around a value, not towards it).
+        let mut last: Option<T> = None;
+        for _ in 0..MAX_RETELLS {
+            let Some(cfg) = copy.retold_config(r) else {
+                break;
+            };
+            let change = cfg.motor.rs_ohm - self.config.motor.rs_ohm;
+            if last.is_some_and(|prev| change * prev <= T::zero() || change.abs() >= prev.abs()) {
+                break;
+            }
+            let Ok(retold) = Self::new(&cfg) else {
+                break;
+            };
             *self = retold;
-            copy = self.primed_copy(rows).0;
+            copy = self.primed_copy(rows.clone()).0;
+            last = Some(change);
         }
         // The consistency check's innovation level, learnt over the whole record.
         if let (Some(c), Some(mine)) = (&copy.consistency, &mut self.consistency) {
@@ -465,6 +485,12 @@ impl<T: Float> PmsmObserver<T> {
         let t = cfg.parameter_tracking.as_mut()?;
         t.reference_temperature_c = tracking.t.winding_temperature_c(k);
         t.rs_temperature_coefficient_per_k *= k.rs0 / rs;
+        // The tracked `Rs` keeps its bounds in ohms (they are fractions of the told value).
+        let [lo, hi] = t.rs_range;
+        t.rs_range = [
+            (lo * k.rs0 / rs).min(T::one()),
+            (hi * k.rs0 / rs).max(T::one()),
+        ];
         cfg.motor.rs_ohm = rs;
         Some(cfg)
     }
@@ -475,5 +501,43 @@ impl<T: Float> PmsmObserver<T> {
         let d = self.model.discrete();
         let lq = T::one() / d.inv_ls;
         (lq / (T::one() + d.saliency), lq)
+    }
+}
+
+#[cfg(all(test, feature = "std"))]
+mod retell_tests {
+    use super::*;
+
+    #[test]
+    fn a_retold_observer_keeps_the_told_bounds_and_temperature_scale() {
+        let m = crate::MotorParams::<f64>::servo();
+        let told = ObserverConfig::new(m, 1e-4);
+        let mut obs = PmsmObserver::new(&told).unwrap();
+        let rs0 = m.rs_ohm;
+        let range = told.parameter_tracking.unwrap().rs_range;
+        // A copy whose tracking ended 40 % above the told `Rs`.
+        obs.tracking.as_mut().unwrap().t.rs = 1.4 * rs0;
+        let k = obs.tracking.as_ref().unwrap().slow.k;
+        let t_hot = obs.tracking.as_ref().unwrap().t.winding_temperature_c(&k);
+        // A change below the share of the flux at this `|i| / |w|` is not retold.
+        let small_r = 0.9 * RETELL_SHARE * m.psi_f_wb / (0.4 * rs0);
+        assert!(obs.retold_config(small_r).is_none());
+        let cfg = obs.retold_config(1.0).expect("retold");
+        assert_eq!(cfg.motor.rs_ohm, 1.4 * rs0);
+        let t = cfg.parameter_tracking.unwrap();
+        // The bounds in ohms are the told ones; the temperature is read against the told `Rs`.
+        for (new, old) in t.rs_range.iter().zip(range) {
+            assert!((new * 1.4 * rs0 - old * rs0).abs() < 1e-12 * rs0);
+        }
+        let retold = PmsmObserver::new(&cfg).unwrap();
+        let k2 = retold.tracking.as_ref().unwrap().slow.k;
+        let t2 = retold
+            .tracking
+            .as_ref()
+            .unwrap()
+            .t
+            .winding_temperature_c(&k2);
+        assert!((t2 - t_hot).abs() < 1e-9, "{t2} vs {t_hot}");
+        assert!((k2.rs_max - range[1] * rs0).abs() < 1e-12);
     }
 }

@@ -304,7 +304,7 @@
 //! converges over the swings at the rate the spread of `r` allows (told 100 K hot, 5.01 ohm at
 //! 0.5 s, 4.46 at 0.8 s, 4.27 at the end; told 100 K cold, 2.19, 2.68, 2.88; the motor's is
 //! 3.6). `pyfoc.Ekf`'s defaults retell a whole record's `Rs` before they run it (module docs of
-//! [`crate::calibration`], "Told by the record"): 0.76 / 0.73 / 0.62 / 0.46 deg on those four,
+//! [`crate::calibration`], "Told by the record"): 0.07 / 0.09 / 0.40 / 0.46 deg on those four,
 //! `Ls` +-20 % 2.27 / 2.47. The suite (`pmsm-sim suite`, seeds 1-3), whose observers lock at a
 //! steady speed, moves in one row only, the small fast motor with 1 % of its periods skipped at
 //! rated load (foc's observer 2.88 deg on seed 1, 3.07 without; 3.01 and 3.06 on seed 2); the
