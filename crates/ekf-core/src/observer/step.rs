@@ -99,10 +99,12 @@ impl<T: Float> PmsmObserver<T> {
     #[cfg(feature = "std")]
     #[inline(never)]
     fn calibrate(&mut self, u_prev: [T; 2], i: [T; 2], dt_s: T) {
+        // The filter's predicted angle for this sample (its state is the last sample's).
+        let th = self.x[3] + self.x[2] * dt_s;
         let Some(c) = self
             .calibration
             .as_mut()
-            .and_then(|c| c.step(u_prev, i, dt_s))
+            .and_then(|c| c.step(u_prev, i, dt_s, th))
         else {
             return;
         };
