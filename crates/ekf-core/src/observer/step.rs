@@ -117,7 +117,18 @@ impl<T: Float> PmsmObserver<T> {
         }
         // Out of range values are refused by the setters, nothing changed.
         let _ = self.set_voltage_errors(-c.voltage_lead_s, c.dead_time_v);
-        if self.tracking.is_some() && (c.rs_ohm - rs).abs() > rs * to_t(0.05) {
+        // Once the EKF's own tracking has ended a window it learns `Rs` itself, and a
+        // calibration whose `Rs` has not left the told value (its drive observer learnt none)
+        // would only reset it there.
+        let told = self.nominal.1;
+        let informed = (c.rs_ohm - told).abs() > told * to_t(0.05);
+        let own = self
+            .tracking
+            .as_ref()
+            .and_then(|k| k.slow.split.as_ref())
+            .is_some_and(|s| s.tracked);
+        if self.tracking.is_some() && (c.rs_ohm - rs).abs() > rs * to_t(0.05) && (informed || !own)
+        {
             let _ = self.set_parameters(psi, c.rs_ohm);
         }
     }
