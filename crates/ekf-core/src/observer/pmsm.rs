@@ -414,14 +414,6 @@ impl<T: Float> PmsmObserver<T> {
                 break;
             };
             let change = cfg.motor.rs_ohm - self.config.motor.rs_ohm;
-            if std::env::var("RETELL_DBG").is_ok() {
-                std::eprintln!(
-                    "retell {:?} -> {:?} (r {:?})",
-                    self.config.motor.rs_ohm,
-                    cfg.motor.rs_ohm,
-                    r
-                );
-            }
             if last.is_some_and(|prev| change * prev <= T::zero() || change.abs() >= prev.abs()) {
                 break;
             }
