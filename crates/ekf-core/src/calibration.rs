@@ -121,9 +121,11 @@
 //! minimum speed), the observer is built again told that `Rs`, and a copy of the new one
 //! primes it as above. That copy starts nearer the record's `Rs` and its tracking moves it
 //! less: the retelling repeats (a fixed-point iteration, at most
-//! [`MAX_RETELLS`](crate::observer::MAX_RETELLS) = 6 times) while the change is above the
-//! share, has the previous change's sign and is smaller than it; a record on which `Rs` is not
-//! identified moves it around a value, and the iteration stops there. The tracked `Rs` keeps
+//! [`MAX_RETELLS`](crate::observer::MAX_RETELLS) = 6 times) while the copy's change is above
+//! the share. A change against the previous one's direction is taken by half: the copies then
+//! bracket the record's `Rs` (where a record does not identify `Rs` closer than that, its
+//! copies alternate between two values and the half step lands between them, below the
+//! share). The tracked `Rs` keeps
 //! its bounds in ohms (`rs_range` is rescaled). The flux is not retold: the start-up windows and
 //! the EKF's own tracking find it within the record, and on a recorded drive its tracked value
 //! also lumps what the model leaves out (the first ESC run through `pmsm-sim replay`: the copy's
@@ -141,17 +143,22 @@
 //! 4.14 and 3.93), `Rs` -30 % 0.46 (0.93; once, 3.25: the calibration's `Rs` hand-over
 //! anchors the split filter, and the next copy moves `Rs` by less than the share); told the
 //! right motor, the flux +-10 % or `Ls` +-20 % nothing is retold. Retold once only, at a share
-//! of 2 %: 0.76 / 0.73 / 0.62 / 0.46. The first ESC run 4.98 deg RMS, none more than 45 deg
-//! off (retold 0.067 and 0.064 ohm for the told 0.102; the next copy's change, -0.0033 ohm, is
-//! larger than the one before, -0.0030, and the iteration stops: told 0.061 the run is 5.60
-//! deg with 0.004 % of its samples more than 45 deg off; retold once, 5.35; primed without the
-//! retelling, 7.24); the other two runs retell nothing (5.73 / 7.33). On a record whose model
-//! error the tracking lumps into `Rs` (a saturated interior motor told its small-signal
-//! constants, `pyfoc`'s `test_flux_map.py`), the iteration follows it: `Rs` 2.2 x the motor's,
-//! 13.9 deg RMS with `saturating=True` (13.6 retold once). The cost: one more pass over the
-//! record for each retelling (`pyfoc.Ekf.run` on the 4000 rows of motulator's trace, one
-//! core, best of three: 1.15 us per row told the right motor, 3.92 told 100 K hot, 3.47 told
-//! 100 K cold).
+//! of 2 %: 0.76 / 0.73 / 0.62 / 0.46. The first ESC run 5.01 deg RMS, none more than 45 deg
+//! off (retold 0.067, 0.064 and 0.061 ohm for the told 0.102; the copy told 0.061 ends at
+//! 0.064, and half that step, 0.063, is the last told; told 0.064 the run is 4.98 deg, told
+//! 0.061 5.60 with 0.004 % of its samples more than 45 deg off; retold once, 5.35; primed
+//! without the retelling, 7.24); the other two runs retell nothing (5.73 / 7.33). On a record
+//! whose model error the tracking lumps into `Rs` (a saturated interior motor told its
+//! small-signal constants, `pyfoc`'s `test_flux_map.py`), the iteration follows it: `Rs` 2.2 x
+//! the motor's,
+//! 13.9 deg RMS with `saturating=True` (13.6 retold once). Through a reversal under rated load
+//! at 12 % speed on motulator's model of the 2.2 kW motor (`test_third_party_reversal.py`) told
+//! 100 K hot (`Rs` 5.01 ohm, true 3.60), the copies end at 4.54, 3.15, 3.73 (half the step
+//! told: 3.44), 3.65, 3.59 (3.62 told) and 3.60 ohm, and the run told 3.60 is 0.09 deg RMS
+//! (stopping at the first turn back, 5.4 deg); told 100 K cold 0.24 deg (0.28). The cost: one
+//! more pass over the record for each retelling (`pyfoc.Ekf.run` on the 4000 rows of
+//! motulator's trace, one core, best of three: 1.15 us per row told the right motor, 3.92 told
+//! 100 K hot, 3.47 told 100 K cold).
 
 use crate::drive::DriveEstimate;
 use crate::observer::ObserverConfig;

@@ -5,8 +5,8 @@ rated load torque (10 N m) from 0.3 s, the speed reversed to -12 % between 0.6 a
 drive generates after the zero crossing at 0.74 s), 1.5 s (fixture and its generator in
 tests/data/motulator/). Scored from 0.25 s on the samples at |w| >= 5 % of rated speed, no
 offset removed. Every told case keeps the lock (no sample more than 45 deg off), the status
-is honest, and the RMS is as measured (docs/accuracy.md, "Told the wrong motor on a
-third-party trace")."""
+is honest, the RMS is as measured (docs/accuracy.md, "A reversal under load on a third-party
+plant"), and the defaults are within 1 deg told the flux, Rs or temperature wrong."""
 import numpy as np
 import pytest
 
@@ -39,8 +39,8 @@ CASES = {
     "the right motor": ((1.0, 1.0, 1.0), 0.014, 0.005),
     "psi_f +10 %": ((1.1, 1.0, 1.0), 0.18, 0.18),
     "psi_f -10 %": ((0.9, 1.0, 1.0), 0.085, 0.086),
-    "100 K hot": ((0.88, 1.393, 1.0), 5.38, 10.1),
-    "100 K cold": ((1.12, 0.607, 1.0), 0.28, 6.3),
+    "100 K hot": ((0.88, 1.393, 1.0), 0.094, 10.1),
+    "100 K cold": ((1.12, 0.607, 1.0), 0.24, 6.3),
     "Rs +30 %": ((1.0, 1.3, 1.0), 0.089, 6.4),
     "Rs -30 %": ((1.0, 0.7, 1.0), 0.082, 4.9),
     "Ls +20 %": ((1.0, 1.0, 1.2), 2.95, 2.94),
@@ -61,3 +61,7 @@ def test_told_the_wrong_motor_through_a_reversal_under_load(trace, case):
         assert lost == 0.0
         assert dishonest == 0
         assert rms < 1.3 * measured + 0.02
+        if name == "defaults" and fl == 1.0:
+            # Issue 28's goal through a reversal under load at 10 % speed: 1 deg (a wrong Ls
+            # reads as an angle on a surface motor: docs/accuracy.md).
+            assert rms <= 1.0

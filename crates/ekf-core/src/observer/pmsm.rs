@@ -388,8 +388,9 @@ impl<T: Float> PmsmObserver<T> {
     /// change times the record's mean `|i| / |w|` above [`RETELL_SHARE`] of the flux), this
     /// observer is built again told that `Rs` (the reported winding temperature keeps the told
     /// `Rs` as its reference, the tracked `Rs` its bounds in ohms) and a copy of the new one
-    /// runs over the rows once more; this repeats, at most [`MAX_RETELLS`] times, while each
-    /// change is above the share, in the previous one's direction and smaller than it. The
+    /// runs over the rows once more; this repeats, at most [`MAX_RETELLS`] times, while the
+    /// copy's change is above the share (a change against the previous one's direction is
+    /// taken by half). The
     /// voltage delay the (last) copy's calibration handed over last and the innovation level its
     /// consistency check learnt (the baseline of the status) are set here. The inverter voltage,
     /// which the calibration hands over with `Rs`, is left to this observer's own hand-overs,
@@ -406,23 +407,32 @@ impl<T: Float> PmsmObserver<T> {
         self.calibration.as_ref()?;
         let (mut copy, r) = self.primed_copy(rows.clone());
         // Each retelling starts the copy nearer the record's `Rs`, which its tracking then
-        // moves by less: a fixed-point iteration, stopped when a change turns back or does not
-        // shrink (a record whose `Rs` is not identified moves around a value, not towards it).
+        // moves by less: a fixed-point iteration. A change that turns back is taken by half (the
+        // copies then bracket the record's `Rs`); the iteration ends when a change is within
+        // the share or after `MAX_RETELLS`.
         let mut last: Option<T> = None;
         for _ in 0..MAX_RETELLS {
-            let Some(cfg) = copy.retold_config(r) else {
+            let Some(mut cfg) = copy.retold_config(r) else {
                 break;
             };
             let change = cfg.motor.rs_ohm - self.config.motor.rs_ohm;
-            if last.is_some_and(|prev| change * prev <= T::zero() || change.abs() >= prev.abs()) {
-                break;
+            let step = if last.is_some_and(|prev| change * prev < T::zero()) {
+                change * to_t(0.5)
+            } else {
+                change
+            };
+            if step != change {
+                let Some(c) = copy.retold_config_at(r, self.config.motor.rs_ohm + step) else {
+                    break;
+                };
+                cfg = c;
             }
             let Ok(retold) = Self::new(&cfg) else {
                 break;
             };
             *self = retold;
             copy = self.primed_copy(rows.clone()).0;
-            last = Some(change);
+            last = Some(step);
         }
         // The consistency check's innovation level, learnt over the whole record.
         if let (Some(c), Some(mine)) = (&copy.consistency, &mut self.consistency) {
@@ -475,15 +485,21 @@ impl<T: Float> PmsmObserver<T> {
     /// reference (`T = T_ref + (Rs - rs0) / (alpha rs0)`, linear in `Rs`).
     #[cfg(feature = "std")]
     fn retold_config(&self, r: T) -> Option<ObserverConfig<T>> {
+        let rs = self.tracking.as_ref()?.t.rs;
+        self.retold_config_at(r, rs)
+    }
+
+    /// [`Self::retold_config`] told `rs` instead of the tracked `Rs`.
+    #[cfg(feature = "std")]
+    fn retold_config_at(&self, r: T, rs: T) -> Option<ObserverConfig<T>> {
         let tracking = self.tracking.as_ref()?;
         let k = &tracking.slow.k;
-        let rs = tracking.t.rs;
         if (rs - k.rs0).abs() * r <= to_t::<T>(RETELL_SHARE) * k.psi0 {
             return None;
         }
         let mut cfg = *self.config;
         let t = cfg.parameter_tracking.as_mut()?;
-        t.reference_temperature_c = tracking.t.winding_temperature_c(k);
+        t.reference_temperature_c = k.t_ref + (rs - k.rs0) * k.kelvin_per_ohm;
         t.rs_temperature_coefficient_per_k *= k.rs0 / rs;
         // The tracked `Rs` keeps its bounds in ohms (they are fractions of the told value).
         let [lo, hi] = t.rs_range;
