@@ -41,31 +41,30 @@
 //! tracking has ended a window (it learns `Rs` itself from then on), only when it has left the
 //! told `Rs` by more than 5 % (a drive observer that learnt no resistance would reset the
 //! tracking's to the told value every 20 ms: on motulator's start-up with a load step of the
-//! 2.2 kW motor under its vector control (made outside the repository), told `Rs` -30 %, 0.73
-//! deg RMS against the firmware's filter's 0.40; with the rule 0.37, told +30 % 0.58 -> 0.12,
-//! and told 100 K hot through the reversal below 12.9 -> 5.4; the ESC records and motulator's
-//! V/f trace, whose EKF tracking never ends a window, are unchanged). Nothing is handed over
-//! while the filter's flux (tracked, or corrected by the start-up windows) has left the told
-//! one by more than 3 %: the drive observer runs on the told flux, and a flux error reads to it as a
-//! lead and a resistance (on motulator's trace of the 2.2 kW motor told 100 K cold it found
-//! `Rs` 1.62 ohm for a true 3.60, told 2.19). The filter's own states are
-//! untouched: the hand-over changes the model its next prediction uses. Before the first
-//! hand-over the filter is the plain one, bit for bit. Off in [`ObserverConfig::new`] (the
-//! firmware knows its timing); `pyfoc.Ekf`, the observer for recorded drives, turns it on by
-//! default with the acceleration feedforward.
+//! 2.2 kW motor under its vector control (`test_third_party_closed_loop.py`), told `Rs` -30 %,
+//! 0.73 deg RMS against the firmware's filter's 0.40; with the rule 0.37, told +30 % 0.58 ->
+//! 0.12, and told 100 K hot through the reversal below 12.9 -> 5.4, 0.094 with the half steps
+//! of "Told by the record"; the ESC records and motulator's V/f trace, whose EKF tracking never
+//! ends a window, are unchanged). Nothing is handed over while the filter's flux (tracked, or
+//! corrected by the start-up windows) has left the told one by more than 3 %: the drive
+//! observer runs on the told flux, and a flux error reads to it as a lead and a resistance (on
+//! motulator's trace of the 2.2 kW motor told 100 K cold it found `Rs` 1.62 ohm for a true
+//! 3.60, told 2.19). The filter's own states are untouched: the hand-over changes the model its
+//! next prediction uses. Before the first hand-over the filter is the plain one, bit for bit.
+//! Off in [`ObserverConfig::new`] (the firmware knows its timing); `pyfoc.Ekf`, the observer
+//! for recorded drives, turns it on by default with the acceleration feedforward.
 //!
 //! Why the agreement: on motulator's simulation of the 2.2 kW motor reversing under rated load
-//! at 12 % of rated speed (its sensored vector control; a trace made outside the repository),
+//! at 12 % of rated speed (its sensored vector control; `test_third_party_closed_loop.py`),
 //! `pyfoc.Ekf` told the motor 100 K hot lost the angle after the load step; its drive observer,
 //! lost too (up to 180 deg from the filter, its speed +100 rad/s el. where the filter's was
 //! -127 and the rotor's -57), went on adapting, its `Rs` average climbed from 5.0 to 14.3 ohm
-//! (true 3.6), and the record's retelling started the filter from 14.3: 78 deg RMS, 29 % of
-//! the samples more than 45 deg off. Counting only the samples within 45 deg of the filter:
-//! 12.9 deg RMS, none more than 45 deg off (the firmware's filter 10.1; with the rule on
-//! `Rs` above, 5.4). On the three ESC
-//! records, motulator's V/f trace (every told case) and the same simulation's other cases
-//! the results are unchanged to 0.01 deg (the ESC records' hand-overs: 89-99 % of them within
-//! 15 deg).
+//! (true 3.6), and the record's retelling started the filter from 14.3: 78 deg RMS, 29 % of the
+//! samples more than 45 deg off. Counting only the samples within 45 deg of the filter: 12.9
+//! deg RMS, none more than 45 deg off (the firmware's filter 10.1; with the rule on `Rs` above,
+//! 5.4; with the half steps of "Told by the record", 0.094). On the three ESC records,
+//! motulator's V/f trace (every told case) and the same simulation's other cases the results
+//! are unchanged to 0.01 deg (the ESC records' hand-overs: 89-99 % of them within 15 deg).
 //!
 //! # Primed by the record
 //!
@@ -152,7 +151,7 @@
 //! small-signal constants, `pyfoc`'s `test_flux_map.py`), the iteration follows it: `Rs` 2.2 x
 //! the motor's,
 //! 13.9 deg RMS with `saturating=True` (13.6 retold once). Through a reversal under rated load
-//! at 12 % speed on motulator's model of the 2.2 kW motor (`test_third_party_reversal.py`) told
+//! at 12 % speed on motulator's model of the 2.2 kW motor (`test_third_party_closed_loop.py`) told
 //! 100 K hot (`Rs` 5.01 ohm, true 3.60), the copies end at 4.54, 3.15, 3.73 (half the step
 //! told: 3.44), 3.65, 3.59 (3.62 told) and 3.60 ohm, and the run told 3.60 is 0.09 deg RMS
 //! (stopping at the first turn back, 5.4 deg); told 100 K cold 0.24 deg (0.28). The cost: one

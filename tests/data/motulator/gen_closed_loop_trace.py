@@ -1,14 +1,16 @@
-"""motulator's 2.2 kW surface PMSM reversing under rated load at 12 % of rated speed, under
-motulator's own sensored vector control: the fixture `reversal_trace.npz` for
-`crates/pyfoc/tests/test_third_party_reversal.py`.
+"""Closed-loop runs of surface PMSMs under motulator's own sensored vector control: the fixtures
+`startup_trace.npz`, `reversal_trace.npz` and `small_fast_trace.npz` for
+`crates/pyfoc/tests/test_third_party_closed_loop.py`.
 
 Plant: motulator.drive.model.SynchronousMachine (Ld = Lq) + MechanicalSystem(J, B_L),
 VoltageSourceConverter on a constant DC bus, no PWM (zero-order hold of the duty-ratio-averaged
 voltage, no dead time), one sampling period of computational delay (motulator's default).
 Control: motulator's VectorControlSystem with a sensored CurrentVectorController (i_d = 0 for
-Ld = Lq) and its 2DOF PI SpeedController. Run: +12 % of rated speed in 0.15 s, the rated load
-torque (10 N m) from 0.3 s, the speed reference ramped to -12 % between 0.6 and 0.8 s (the
-drive generates after the zero crossing), 1.5 s at 10 kHz.
+Ld = Lq) and its 2DOF PI SpeedController, 10 kHz. Runs (`spec`): `startup`, the 2.2 kW motor
+to 50 % of rated speed with the rated load (10 N m) from 0.6 s; `reversal`, the same motor at
++12 % of rated speed, the rated load from 0.3 s, the speed reference ramped to -12 % between
+0.6 and 0.8 s (the drive generates after the zero crossing), 1.5 s; `small_fast`, the small
+fast motor to 50 % of rated speed with its rated load (0.4 N m) from 0.6 s.
 
 A wrapper around the control system is called at every sampling instant t_k = k Ts before the
 new switching state is set: it records the machine at t_k (currents, electrical angle,
@@ -17,7 +19,7 @@ applied over [t_{k-1}, t_k). Row k holds the voltage applied over [t_k, t_k+1) a
 at t_k, as in `motulator_trace.csv`. Stored as float32.
 
 Usage (Python >= 3.12 with the versions of requirements.txt):
-    python gen_closed_loop_trace.py [--out reversal_trace.npz]
+    python gen_closed_loop_trace.py {startup,reversal,small_fast} [--out FILE]
 """
 
 import argparse
@@ -67,15 +69,33 @@ def ramp(t, t0, t1, y0, y1):
     return y0 + (y1 - y0) * (t - t0) / (t1 - t0)
 
 
-def spec() -> Spec:
-    """The run: the 2.2 kW motor of docs/design.md (surface variant), +-12 % of rated speed."""
-    w_r = 1500 * 2 * math.pi / 60
-    return Spec("B", n_p=3, R_s=3.6, L_s=0.036, psi_f=0.545, J=0.015, B=1e-3, u_dc=540.0,
-                rpm_rated=1500.0, tau_rated=10.0, ts=1e-4, t_stop=1.5,
-                alpha_s=2 * math.pi * 4, alpha_c=2 * math.pi * 200,
-                speed_ref=lambda t: ramp(t, 0.0, 0.15, 0.0, 0.12 * w_r) if t < 0.6
-                else ramp(t, 0.6, 0.8, 0.12 * w_r, -0.12 * w_r),
-                load=lambda t: 10.0 if t >= 0.3 - 1e-9 else 0.0)
+def spec(name: str) -> Spec:
+    """The runs: `startup` and `reversal` on the 2.2 kW motor of docs/design.md (surface
+    variant), `small_fast` on the small fast (drone class) motor."""
+    if name in ("startup", "reversal"):
+        w_r = 1500 * 2 * math.pi / 60
+        base = dict(n_p=3, R_s=3.6, L_s=0.036, psi_f=0.545, J=0.015, B=1e-3, u_dc=540.0,
+                    rpm_rated=1500.0, tau_rated=10.0, ts=1e-4,
+                    alpha_s=2 * math.pi * 4, alpha_c=2 * math.pi * 200)
+        if name == "startup":
+            # To 50 % of rated speed in 0.3 s, the rated load from 0.6 s, 1 s.
+            return Spec(name, **base, t_stop=1.0,
+                        speed_ref=lambda t: ramp(t, 0.0, 0.3, 0.0, 0.5 * w_r),
+                        load=lambda t: 10.0 if t >= 0.6 - 1e-9 else 0.0)
+        # +12 % in 0.15 s, the rated load from 0.3 s, reversed to -12 % between 0.6 and 0.8 s.
+        return Spec(name, **base, t_stop=1.5,
+                    speed_ref=lambda t: ramp(t, 0.0, 0.15, 0.0, 0.12 * w_r) if t < 0.6
+                    else ramp(t, 0.6, 0.8, 0.12 * w_r, -0.12 * w_r),
+                    load=lambda t: 10.0 if t >= 0.3 - 1e-9 else 0.0)
+    if name == "small_fast":
+        # To 50 % of rated speed in 0.3 s, the rated load from 0.6 s, 1 s.
+        w_r = 3429 * 2 * math.pi / 60
+        return Spec(name, n_p=7, R_s=0.12, L_s=0.15e-3, psi_f=6e-3, J=2e-5, B=1e-6, u_dc=48.0,
+                    rpm_rated=3429.0, tau_rated=0.4, ts=1e-4, t_stop=1.0,
+                    alpha_s=2 * math.pi * 40, alpha_c=2 * math.pi * 400,
+                    speed_ref=lambda t: ramp(t, 0.0, 0.3, 0.0, 0.5 * w_r),
+                    load=lambda t: 0.4 if t >= 0.6 - 1e-9 else 0.0)
+    raise ValueError(name)
 
 
 class Recorder:
@@ -141,13 +161,16 @@ def simulate(sp: Spec):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--out", default="reversal_trace.npz")
+    ap.add_argument("trace", nargs="?", default="reversal",
+                    choices=["startup", "reversal", "small_fast"])
+    ap.add_argument("--out", default=None)
     a = ap.parse_args()
-    sp = spec()
+    sp = spec(a.trace)
+    out = a.out or f"{a.trace}_trace.npz"
     rows, u, info = simulate(sp)
     f32 = np.float32
     np.savez_compressed(
-        a.out,
+        out,
         t_s=rows[:, 1].astype(f32),
         u_ab=np.column_stack([u.real, u.imag]).astype(f32),
         i_ab=rows[:, 3:5].astype(f32),
@@ -157,7 +180,7 @@ def main():
         versions=np.array(f"motulator {version('motulator')}, scipy {version('scipy')}, "
                           f"numpy {np.__version__}, Python {sys.version.split()[0]}"),
     )
-    print(f"{len(rows)} samples -> {a.out} (sim {info['sim_s']:.1f} s, "
+    print(f"{len(rows)} samples -> {out} (sim {info['sim_s']:.1f} s, "
           f"|u_logged - u_from_duties| max {info['u_dc_check']:.2e} V)")
 
 
