@@ -43,16 +43,15 @@
 //! tracking's to the told value every 20 ms: on motulator's start-up with a load step of the
 //! 2.2 kW motor under its vector control (`test_third_party_closed_loop.py`), told `Rs` -30 %,
 //! 0.73 deg RMS against the firmware's filter's 0.40; with the rule 0.37, told +30 % 0.58 ->
-//! 0.12, and told 100 K hot through the reversal below 12.9 -> 5.4, 0.094 with the half steps
-//! of "Told by the record"; the ESC records and motulator's V/f trace, whose EKF tracking never
-//! ends a window, are unchanged). Nothing is handed over while the filter's flux (tracked, or
-//! corrected by the start-up windows) has left the told one by more than 3 %: the drive
-//! observer runs on the told flux, and a flux error reads to it as a lead and a resistance (on
-//! motulator's trace of the 2.2 kW motor told 100 K cold it found `Rs` 1.62 ohm for a true
-//! 3.60, told 2.19). The filter's own states are untouched: the hand-over changes the model its
-//! next prediction uses. Before the first hand-over the filter is the plain one, bit for bit.
-//! Off in [`ObserverConfig::new`] (the firmware knows its timing); `pyfoc.Ekf`, the observer
-//! for recorded drives, turns it on by default with the acceleration feedforward.
+//! 0.12; the ESC records and motulator's V/f trace, whose EKF tracking never ends a window, are
+//! unchanged). Nothing is handed over while the filter's flux (tracked, or corrected by the
+//! start-up windows) has left the told one by more than 3 %: the drive observer runs on the
+//! told flux, and a flux error reads to it as a lead and a resistance (on motulator's trace of
+//! the 2.2 kW motor told 100 K cold it found `Rs` 1.62 ohm for a true 3.60, told 2.19). The
+//! filter's own states are untouched: the hand-over changes the model its next prediction uses.
+//! Before the first hand-over the filter is the plain one, bit for bit. Off in
+//! [`ObserverConfig::new`] (the firmware knows its timing); `pyfoc.Ekf`, the observer for
+//! recorded drives, turns it on by default with the acceleration feedforward.
 //!
 //! Why the agreement: on motulator's simulation of the 2.2 kW motor reversing under rated load
 //! at 12 % of rated speed (its sensored vector control; `test_third_party_closed_loop.py`),
@@ -60,11 +59,11 @@
 //! lost too (up to 180 deg from the filter, its speed +100 rad/s el. where the filter's was
 //! -127 and the rotor's -57), went on adapting, its `Rs` average climbed from 5.0 to 14.3 ohm
 //! (true 3.6), and the record's retelling started the filter from 14.3: 78 deg RMS, 29 % of the
-//! samples more than 45 deg off. Counting only the samples within 45 deg of the filter: 12.9
-//! deg RMS, none more than 45 deg off (the firmware's filter 10.1; with the rule on `Rs` above,
-//! 5.4; with the half steps of "Told by the record", 0.094). On the three ESC records,
-//! motulator's V/f trace (every told case) and the same simulation's other cases the results
-//! are unchanged to 0.01 deg (the ESC records' hand-overs: 89-99 % of them within 15 deg).
+//! samples more than 45 deg off. Counting only the samples within 45 deg of the filter, none is
+//! more than 45 deg off (with this module's rules the case is 0.094 deg RMS; the firmware's
+//! filter 10.1). On the three ESC records, motulator's V/f trace (every told case) and the same
+//! simulation's other cases the results are unchanged to 0.01 deg (the ESC records' hand-overs:
+//! 89-99 % of them within 15 deg).
 //!
 //! # Primed by the record
 //!
@@ -110,54 +109,51 @@
 //!
 //! What the tracking learns of `Rs` it learns slowly: a window measures `Rs` only where the
 //! ratio `r = i_q / w` moves (module docs of [`observer::tracking`](crate::observer), a load
-//! step, a speed swing, a reversal), and until it has, the filter runs at the told `Rs` and
-//! its angle is off by about `dRs i_d / (w psi_f)` wherever the current has a d part (a V/f
-//! start's magnetizing current) and by the lumped flux's error wherever `r` differs from where
-//! the flux was learnt. On a whole record the priming copy has seen all of it: when the `Rs`
-//! it ends with moves the back-EMF per unit speed by more than
-//! [`RETELL_SHARE`](crate::observer::RETELL_SHARE) (0.25 %) of the
-//! told flux at the record's mean `|i| / |w|` (the rows the copy tracks above the tracking's
-//! minimum speed), the observer is built again told that `Rs`, and a copy of the new one
-//! primes it as above. That copy starts nearer the record's `Rs` and its tracking moves it
-//! less: the retelling repeats (a fixed-point iteration, at most
-//! [`MAX_RETELLS`](crate::observer::MAX_RETELLS) = 6 times) while the copy's change is above
-//! the share. A change against the previous one's direction is taken by half: the copies then
-//! bracket the record's `Rs` (where a record does not identify `Rs` closer than that, its
-//! copies alternate between two values and the half step lands between them, below the
-//! share). The tracked `Rs` keeps
-//! its bounds in ohms (`rs_range` is rescaled). The flux is not retold: the start-up windows and
-//! the EKF's own tracking find it within the record, and on a recorded drive its tracked value
-//! also lumps what the model leaves out (the first ESC run through `pmsm-sim replay`: the copy's
-//! flux +3.5 %, and retelling it too gave 9.82 deg RMS with 0.35 % of the samples more than 45
-//! deg off, against 5.37 and none). The reported winding temperature keeps the told `Rs` as
-//! its reference: the tracking's reference temperature becomes the copy's winding temperature
-//! and its copper coefficient `alpha rs0 / rs1` (`T = T_ref + (Rs - rs0) / (alpha rs0)` either
-//! way).
+//! step, a speed swing, a reversal), and until it has, the filter runs at the told `Rs` and its
+//! angle is off by about `dRs i_d / (w psi_f)` wherever the current has a d part (a V/f start's
+//! magnetizing current) and by the lumped flux's error wherever `r` differs from where the flux
+//! was learnt. On a whole record the priming copy has seen all of it: when the `Rs` it ends
+//! with moves the back-EMF per unit speed by more than
+//! [`RETELL_SHARE`](crate::observer::RETELL_SHARE) (0.25 %) of the told flux at the record's
+//! mean `|i| / |w|` (the rows the copy tracks above the tracking's minimum speed), the observer
+//! is built again told that `Rs`, and a copy of the new one primes it as above. That copy
+//! starts nearer the record's `Rs` and its tracking moves it less: the retelling repeats (a
+//! fixed-point iteration, at most [`MAX_RETELLS`](crate::observer::MAX_RETELLS) = 6 times)
+//! while the copy's change is above the share. A change against the previous one's direction is
+//! taken by half: the copies then bracket the record's `Rs` (where a record does not identify
+//! `Rs` closer than that, its copies alternate between two values and the half step lands
+//! between them, below the share). The tracked `Rs` keeps its bounds in ohms (`rs_range` is
+//! rescaled). The flux is not retold: the start-up windows and the EKF's own tracking find it
+//! within the record, and on a recorded drive its tracked value also lumps what the model
+//! leaves out (the first ESC run through `pmsm-sim replay`: the copy's flux +3.5 %, and
+//! retelling it too gave 9.82 deg RMS with 0.35 % of the samples more than 45 deg off, against
+//! 5.37 and none). The reported winding temperature keeps the told `Rs` as its reference: the
+//! tracking's reference temperature becomes the copy's winding temperature and its copper
+//! coefficient `alpha rs0 / rs1` (`T = T_ref + (Rs - rs0) / (alpha rs0)` either way).
 //!
 //! Measured (`pyfoc.Ekf` defaults; `python -m pytest crates/pyfoc/tests/test_third_party.py
 //! crates/pyfoc/tests/test_recorded_drives.py -s`): motulator's V/f trace of the 2.2 kW motor
-//! (RMS deg from 0.25 s) told 100 K hot 0.07 (1.44 without the priming; retold five times,
-//! `Rs` 4.27, 3.93, 3.78, 3.69, 3.61 ohm for the motor's 3.60, told 5.01), 100 K cold 0.09
-//! (1.46; four times, 2.88, 3.21, 3.40, 3.51 for the told 2.19), `Rs` +30 % 0.40 (1.17; twice,
-//! 4.14 and 3.93), `Rs` -30 % 0.46 (0.93; once, 3.25: the calibration's `Rs` hand-over
-//! anchors the split filter, and the next copy moves `Rs` by less than the share); told the
-//! right motor, the flux +-10 % or `Ls` +-20 % nothing is retold. Retold once only, at a share
-//! of 2 %: 0.76 / 0.73 / 0.62 / 0.46. The first ESC run 5.01 deg RMS, none more than 45 deg
-//! off (retold 0.067, 0.064 and 0.061 ohm for the told 0.102; the copy told 0.061 ends at
-//! 0.064, and half that step, 0.063, is the last told; told 0.064 the run is 4.98 deg, told
-//! 0.061 5.60 with 0.004 % of its samples more than 45 deg off; retold once, 5.35; primed
-//! without the retelling, 7.24); the other two runs retell nothing (5.73 / 7.33). On a record
-//! whose model error the tracking lumps into `Rs` (a saturated interior motor told its
-//! small-signal constants, `pyfoc`'s `test_flux_map.py`), the iteration follows it: `Rs` 2.2 x
-//! the motor's,
+//! (RMS deg from 0.25 s) told 100 K hot 0.07 (1.44 without the priming; retold five times, `Rs`
+//! 4.27, 3.93, 3.78, 3.69, 3.61 ohm for the motor's 3.60, told 5.01), 100 K cold 0.09 (1.46;
+//! four times, 2.88, 3.21, 3.40, 3.51 for the told 2.19), `Rs` +30 % 0.40 (1.17; twice, 4.14
+//! and 3.93), `Rs` -30 % 0.46 (0.93; once, 3.25: the calibration's `Rs` hand-over anchors the
+//! split filter, and the next copy moves `Rs` by less than the share); told the right motor,
+//! the flux +-10 % or `Ls` +-20 % nothing is retold. Retold once only, at a share of 2 %: 0.76
+//! / 0.73 / 0.62 / 0.46. The first ESC run 5.01 deg RMS, none more than 45 deg off (retold
+//! 0.067, 0.064 and 0.061 ohm for the told 0.102; the copy told 0.061 ends at 0.064, and half
+//! that step, 0.063, is the last told; told 0.064 the run is 4.98 deg, told 0.061 5.60 with
+//! 0.004 % of its samples more than 45 deg off; retold once, 5.35; primed without the
+//! retelling, 7.24); the other two runs retell nothing (5.73 / 7.33). On a record whose model
+//! error the tracking lumps into `Rs` (a saturated interior motor told its small-signal
+//! constants, `pyfoc`'s `test_flux_map.py`), the iteration follows it: `Rs` 2.2 x the motor's,
 //! 13.9 deg RMS with `saturating=True` (13.6 retold once). Through a reversal under rated load
-//! at 12 % speed on motulator's model of the 2.2 kW motor (`test_third_party_closed_loop.py`) told
-//! 100 K hot (`Rs` 5.01 ohm, true 3.60), the copies end at 4.54, 3.15, 3.73 (half the step
-//! told: 3.44), 3.65, 3.59 (3.62 told) and 3.60 ohm, and the run told 3.60 is 0.09 deg RMS
-//! (stopping at the first turn back, 5.4 deg); told 100 K cold 0.24 deg (0.28). The cost: one
-//! more pass over the record for each retelling (`pyfoc.Ekf.run` on the 4000 rows of
-//! motulator's trace, one core, best of three: 1.15 us per row told the right motor, 3.92 told
-//! 100 K hot, 3.47 told 100 K cold).
+//! at 12 % speed on motulator's model of the 2.2 kW motor (`test_third_party_closed_loop.py`)
+//! told 100 K hot (`Rs` 5.01 ohm, true 3.60), the copies end at 4.54, 3.15, 3.73 (half the step
+//! told: 3.44), 3.65, 3.59 (3.62 told) and 3.60 ohm, and the run told 3.60 is 0.09 deg RMS (5.4
+//! deg when the iteration stops at the first change that turns back); told 100 K cold 0.24 deg.
+//! The cost: one more pass over the record for each retelling (`pyfoc.Ekf.run` on the 4000 rows
+//! of motulator's trace, one core, best of three: 1.15 us per row told the right motor, 3.92
+//! told 100 K hot, 3.47 told 100 K cold).
 
 use crate::drive::DriveEstimate;
 use crate::observer::ObserverConfig;

@@ -153,10 +153,7 @@ def simulate(sp: Spec):
     # (one-period delay) give the voltage applied over [t_k, t_k+1).
     d = np.array(res.ctrl.ref.d_abc)
     u_d = np.concatenate([[0j], sp.u_dc * np.array([complex(abc2complex(x)) for x in d[:n - 1]])])
-    w_ref = np.array([sp.speed_ref(t) for t in rows[:, 1]])
-    return rows, u, dict(sim_s=dt, u_dc_check=float(np.max(np.abs(u - u_d))), w_ref=w_ref,
-                         tau_ref=np.array(res.ctrl.ref.tau_M)[:n])
-
+    return rows, u, dict(sim_s=dt, u_dc_check=float(np.max(np.abs(u - u_d))))
 
 
 def main():

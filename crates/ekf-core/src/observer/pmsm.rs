@@ -390,15 +390,14 @@ impl<T: Float> PmsmObserver<T> {
     /// `Rs` as its reference, the tracked `Rs` its bounds in ohms) and a copy of the new one
     /// runs over the rows once more; this repeats, at most [`MAX_RETELLS`] times, while the
     /// copy's change is above the share (a change against the previous one's direction is
-    /// taken by half). The
-    /// voltage delay the (last) copy's calibration handed over last and the innovation level its
-    /// consistency check learnt (the baseline of the status) are set here. The inverter voltage,
-    /// which the calibration hands over with `Rs`, is left to this observer's own hand-overs,
-    /// and nothing else moves: its calibration starts afresh and hands over as it runs. Returns
-    /// the delay set, or `None` when the copy handed over no other delay (e.g. a record whose
-    /// filter flux leaves the told one: the hand-over guard holds everything); nothing at all
-    /// changes when the calibration is off. Call it on a fresh observer (one built again starts
-    /// from its initial state).
+    /// taken by half). The voltage delay the (last) copy's calibration handed over last and the
+    /// innovation level its consistency check learnt (the baseline of the status) are set here.
+    /// The inverter voltage, which the calibration hands over with `Rs`, is left to this
+    /// observer's own hand-overs, and nothing else moves: its calibration starts afresh and
+    /// hands over as it runs. Returns the delay set, or `None` when the copy handed over no
+    /// other delay (e.g. a record whose filter flux leaves the told one: the hand-over guard
+    /// holds everything); nothing at all changes when the calibration is off. Call it on a
+    /// fresh observer (one built again starts from its initial state).
     #[cfg(feature = "std")]
     pub fn prime_input_calibration<I>(&mut self, rows: I) -> Option<T>
     where
@@ -412,21 +411,20 @@ impl<T: Float> PmsmObserver<T> {
         // the share or after `MAX_RETELLS`.
         let mut last: Option<T> = None;
         for _ in 0..MAX_RETELLS {
-            let Some(mut cfg) = copy.retold_config(r) else {
+            let Some(rs) = copy.tracking.as_ref().map(|k| k.t.rs) else {
                 break;
             };
-            let change = cfg.motor.rs_ohm - self.config.motor.rs_ohm;
-            let step = if last.is_some_and(|prev| change * prev < T::zero()) {
-                change * to_t(0.5)
+            let told = self.config.motor.rs_ohm;
+            let change = rs - told;
+            let (step, next) = if last.is_some_and(|prev| change * prev < T::zero()) {
+                let half = change * to_t(0.5);
+                (half, told + half)
             } else {
-                change
+                (change, rs)
             };
-            if step != change {
-                let Some(c) = copy.retold_config_at(r, self.config.motor.rs_ohm + step) else {
-                    break;
-                };
-                cfg = c;
-            }
+            let Some(cfg) = copy.retold_config(r, next) else {
+                break;
+            };
             let Ok(retold) = Self::new(&cfg) else {
                 break;
             };
@@ -476,22 +474,15 @@ impl<T: Float> PmsmObserver<T> {
         (copy, r)
     }
 
-    /// The configuration told this observer's tracked `Rs` (module docs of
-    /// [`crate::calibration`], "Told by the record"), when its change times the record's mean
-    /// `|i| / |w|` (`r`, the change of the back-EMF per unit speed it makes) is more than
-    /// [`RETELL_SHARE`] of the told flux; `None` otherwise or with tracking off. The tracking's
-    /// reference temperature becomes the winding temperature now, and its copper coefficient
-    /// `alpha rs0 / rs1`, so that the reported winding temperature keeps the told `Rs` as its
-    /// reference (`T = T_ref + (Rs - rs0) / (alpha rs0)`, linear in `Rs`).
+    /// The configuration told `rs` (module docs of [`crate::calibration`], "Told by the
+    /// record"), when its change from the told `Rs` times the record's mean `|i| / |w|` (`r`,
+    /// the change of the back-EMF per unit speed it makes) is more than [`RETELL_SHARE`] of the
+    /// told flux; `None` otherwise or with tracking off. The tracking's reference temperature
+    /// becomes the winding temperature at `rs`, and its copper coefficient `alpha rs0 / rs`, so
+    /// that the reported winding temperature keeps the told `Rs` as its reference
+    /// (`T = T_ref + (Rs - rs0) / (alpha rs0)`, linear in `Rs`).
     #[cfg(feature = "std")]
-    fn retold_config(&self, r: T) -> Option<ObserverConfig<T>> {
-        let rs = self.tracking.as_ref()?.t.rs;
-        self.retold_config_at(r, rs)
-    }
-
-    /// [`Self::retold_config`] told `rs` instead of the tracked `Rs`.
-    #[cfg(feature = "std")]
-    fn retold_config_at(&self, r: T, rs: T) -> Option<ObserverConfig<T>> {
+    fn retold_config(&self, r: T, rs: T) -> Option<ObserverConfig<T>> {
         let tracking = self.tracking.as_ref()?;
         let k = &tracking.slow.k;
         if (rs - k.rs0).abs() * r <= to_t::<T>(RETELL_SHARE) * k.psi0 {
@@ -537,8 +528,8 @@ mod retell_tests {
         let t_hot = obs.tracking.as_ref().unwrap().t.winding_temperature_c(&k);
         // A change below the share of the flux at this `|i| / |w|` is not retold.
         let small_r = 0.9 * RETELL_SHARE * m.psi_f_wb / (0.4 * rs0);
-        assert!(obs.retold_config(small_r).is_none());
-        let cfg = obs.retold_config(1.0).expect("retold");
+        assert!(obs.retold_config(small_r, 1.4 * rs0).is_none());
+        let cfg = obs.retold_config(1.0, 1.4 * rs0).expect("retold");
         assert_eq!(cfg.motor.rs_ohm, 1.4 * rs0);
         let t = cfg.parameter_tracking.unwrap();
         // The bounds in ohms are the told ones; the temperature is read against the told `Rs`.
