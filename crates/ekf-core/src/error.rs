@@ -159,6 +159,9 @@ pub enum ConfigError {
     /// [`ParameterTracking::transient_flux`](crate::observer::ParameterTracking::transient_flux)
     /// was asked of an observer built without the cargo feature `std`.
     TransientFluxNotCompiled,
+    /// [`ParameterTracking::link_follows_data`](crate::observer::ParameterTracking::link_follows_data)
+    /// was asked of an observer built without the cargo feature `std`.
+    LinkFollowsDataNotCompiled,
 }
 
 impl fmt::Display for Param {
@@ -271,6 +274,10 @@ impl fmt::Display for ConfigError {
             ConfigError::TransientFluxNotCompiled => f.write_str(
                 "parameter_tracking.transient_flux needs ekf-core's cargo feature `std`: \
                  enable it or set transient_flux to false",
+            ),
+            ConfigError::LinkFollowsDataNotCompiled => f.write_str(
+                "parameter_tracking.link_follows_data needs ekf-core's cargo feature `std`: \
+                 enable it or set link_follows_data to false",
             ),
             ConfigError::ZeroInitialCovarianceTrace => f.write_str(
                 "covariance_health needs trace(P0) > 0 (its bound is a multiple of trace(P0))",

@@ -172,6 +172,10 @@ fn build<T: Float, O>(
             ));
         }
         cfg.input_calibration = true;
+        // A recorded drive's defaults: the thermal link's reference follows the windows.
+        if let Some(t) = &mut cfg.parameter_tracking {
+            t.link_follows_data = true;
+        }
     }
     cfg.covariance_update = s.update;
     match s.tracking {

@@ -113,6 +113,10 @@ impl<T: Float> PmsmObserver<T> {
         if cfg.parameter_tracking.is_some_and(|t| t.transient_flux) {
             return Err(ConfigError::TransientFluxNotCompiled);
         }
+        #[cfg(not(feature = "std"))]
+        if cfg.parameter_tracking.is_some_and(|t| t.link_follows_data) {
+            return Err(ConfigError::LinkFollowsDataNotCompiled);
+        }
         let mut x0 = cfg.x0;
         x0[3] = wrap_angle(x0[3]);
         let ts = cfg.ts_s;

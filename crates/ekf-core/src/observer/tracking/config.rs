@@ -72,6 +72,15 @@ pub struct ParameterTracking<T> {
     /// `ekf_core::observer::tracking`, "Tracking during transients"). Needs the cargo feature
     /// `std` ([`ConfigError::TransientFluxNotCompiled`](crate::ConfigError) without).
     pub transient_flux: bool,
+    /// The thermal link's reference `(psi_f, Rs)` follows the split filter's windows wherever
+    /// they have told `Rs` by themselves (the windows-only deviation of `Rs` within the link's
+    /// own, `link_sigma_k alpha_cu Rs`): after a load step or through a speed ramp the link
+    /// no longer pulls `Rs` back to the told value (module docs of
+    /// `ekf_core::observer::tracking`, "The link's reference"). Off by default (the firmware's
+    /// filter); `pyfoc.Ekf`'s defaults for a recorded drive turn it on with the input
+    /// calibration. Needs the cargo feature `std`
+    /// ([`ConfigError::LinkFollowsDataNotCompiled`](crate::ConfigError) without).
+    pub link_follows_data: bool,
 }
 
 impl<T: Float> ParameterTracking<T> {
@@ -104,6 +113,7 @@ impl<T: Float> ParameterTracking<T> {
                 measurement_sigma: to_t(0.01),
             },
             transient_flux: cfg!(feature = "std"),
+            link_follows_data: false,
         }
     }
 

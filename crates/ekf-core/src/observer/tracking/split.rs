@@ -50,6 +50,25 @@ pub(in crate::observer) struct Split<T> {
     /// parent, "Resistance while the speed is never steady").
     #[cfg(feature = "std")]
     pub unsteady: Unsteady,
+    /// The windows-only covariance behind
+    /// [`ParameterTracking::link_follows_data`](super::ParameterTracking::link_follows_data)
+    /// (host builds).
+    #[cfg(feature = "std")]
+    pub follow: Follow<T>,
+}
+
+/// The covariance of `(psi_f, Rs)` the windows alone leave: the split filter without the
+/// thermal link, from an anchor that read the lumped flux `psi_f + Rs r` at its operating
+/// point's `r` (module docs of the parent, "The link's reference"; host builds).
+#[cfg(feature = "std")]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(in crate::observer) struct Follow<T> {
+    pub d00: T,
+    pub d01: T,
+    pub d11: T,
+    /// The `r` of the last window read for the start-up flux (0 when left out): the
+    /// operating point of an anchor at the start-up's agreement.
+    pub last_r: T,
 }
 
 /// The state of the split filter's windows while the EKF's own tracking has not run (module
@@ -101,6 +120,11 @@ impl<T: Float> Split<T> {
             let converged = c_pp <= k.psi0 * k.psi0 * to_t(2.5e-5);
             if converged {
                 self.anchor(psi, rs_used, c_pp, k);
+                // The operating point's `r = i_q / w` at the window's end.
+                #[cfg(feature = "std")]
+                if x[2] != T::zero() {
+                    self.follow_from(ends.4 / x[2], k);
+                }
             }
             return None;
         }
@@ -223,6 +247,7 @@ impl<T: Float> Split<T> {
         #[cfg(feature = "std")]
         {
             self.unsteady.provisional = true;
+            self.follow_from(self.follow.last_r, k);
         }
     }
 
@@ -243,6 +268,13 @@ impl<T: Float> Split<T> {
         self.c00 += self.q_t * g0 * g0 + self.q_psi;
         self.c01 += self.q_t * g0 * g1;
         self.c11 += self.q_t * g1 * g1;
+        #[cfg(feature = "std")]
+        if k.follows {
+            let f = &mut self.follow;
+            f.d00 += self.q_t * g0 * g0 + self.q_psi;
+            f.d01 += self.q_t * g0 * g1;
+            f.d11 += self.q_t * g1 * g1;
+        }
         // A window the filter's own uncertainty cannot explain (beyond 5 standard deviations:
         // a model that does not fit, e.g. inductances far off on a saturating motor) is left
         // out rather than read as a resistance.
@@ -252,11 +284,26 @@ impl<T: Float> Split<T> {
             return None;
         }
         self.scalar_update(T::one(), r, y, r_m);
+        #[cfg(feature = "std")]
+        if k.follows {
+            self.follow_window(r, r_m);
+        }
         // Thermal link, where the window measures the flux (the resistive drop below 15 % of
         // the back-EMF): the temperatures read from psi and from Rs agree (K). Where the drop
         // is larger the window measures Rs itself, and the link is left out: applied on
         // every window it would outweigh that measurement.
         if link && measures_flux(r, self.rs, self.psi) {
+            // The link's reference follows the windows where they have told `Rs` by
+            // themselves better than the link would (module docs of the parent, "The link's
+            // reference"; host builds).
+            #[cfg(feature = "std")]
+            if k.follows {
+                let link_rs = self.r_link.sqrt() * self.alpha * self.rs;
+                if self.follow.d11 <= link_rs * link_rs {
+                    self.psi_a = self.psi;
+                    self.rs_a = self.rs;
+                }
+            }
             let h_psi = T::one() / (self.psi_a * self.beta);
             let h_rs = -T::one() / (self.rs_a * self.alpha);
             let h = h_psi * (self.psi - self.psi_a) + h_rs * (self.rs - self.rs_a);
@@ -295,6 +342,10 @@ impl<T: Float> Split<T> {
         // EKF's flux alone: its own tracking takes over after the settling time.
         let last_w = self.last_w;
         self.last_w = window.map_or(T::zero(), |w| w.3);
+        #[cfg(feature = "std")]
+        {
+            self.follow.last_r = window.map_or(T::zero(), |w| w.1);
+        }
         if self.braked {
             return None;
         }
@@ -452,6 +503,35 @@ impl<T: Float> Split<T> {
         #[cfg(feature = "std")]
         {
             self.unsteady.provisional = false;
+            self.follow_from(T::zero(), k);
+        }
+    }
+
+    /// The windows-only covariance at an anchor whose flux is the lumped `psi_f + Rs r` of
+    /// the operating point `r`: that combination known to the flux's variance, `Rs` to its
+    /// initial one (host builds).
+    #[cfg(feature = "std")]
+    fn follow_from(&mut self, r: T, k: &TrackerConstants<T>) {
+        let f = &mut self.follow;
+        f.d00 = self.c00 + r * r * k.var0_rs;
+        f.d01 = -r * k.var0_rs;
+        f.d11 = k.var0_rs;
+    }
+
+    /// The windows-only covariance's update with a window's measurement of gradient `(1, r)`
+    /// and variance `r_m` (host builds).
+    #[cfg(feature = "std")]
+    fn follow_window(&mut self, r: T, r_m: T) {
+        let f = &mut self.follow;
+        let (d00, d01, d11) = (f.d00, f.d01, f.d11);
+        let ph0 = d00 + d01 * r;
+        let ph1 = d01 + d11 * r;
+        let s = ph0 + r * ph1 + r_m;
+        if s > T::zero() {
+            let inv_s = T::one() / s;
+            f.d00 = d00 - ph0 * ph0 * inv_s;
+            f.d01 = d01 - ph0 * ph1 * inv_s;
+            f.d11 = d11 - ph1 * ph1 * inv_s;
         }
     }
 
