@@ -33,7 +33,9 @@ use crate::replay;
 /// calibration on, the first `run` of a new filter primes it with its own rows (`prime`: the
 /// voltage delay a copy's calibration handed over last over the record, and the innovation
 /// level its status check learnt, are this filter's from row 0; told the `Rs` the copy ended
-/// with where that matters).
+/// with where that matters), and the thermal link of its `Rs` tracking takes the windows'
+/// `(psi_f, Rs)` as its reference once they have told `Rs` by themselves (ekf-core's
+/// `ParameterTracking::link_follows_data`).
 ///
 /// Thread safety: the filter sits behind a lock that is taken with the GIL released, so
 /// calls on one `Ekf` from several threads are serialized (each completes, in some order)
