@@ -408,7 +408,7 @@ pub use feedforward::AccelerationFeedforward;
 pub use model::{Discretization, PmsmModel};
 pub use pmsm::PmsmObserver;
 #[cfg(feature = "std")]
-pub use pmsm::{MAX_RETELLS, RETELL_SHARE};
+pub use pmsm::{MAX_RETELLS, RETELL_MIN_TRACKING, RETELL_SHARE};
 pub(crate) use safeguards::ConsistencyState;
 pub use safeguards::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS,

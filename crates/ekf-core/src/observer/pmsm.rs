@@ -93,6 +93,12 @@ pub const RETELL_SHARE: f64 = 0.0025;
 #[cfg(feature = "std")]
 pub const MAX_RETELLS: usize = 6;
 
+/// The least share of a record's rows a priming copy must read `Tracking` on for its `Rs` to
+/// be told ([`PmsmObserver::prime_input_calibration`]; module docs of [`crate::calibration`],
+/// "Told by the record"): a copy that was mostly uncertain has no resistance to tell.
+#[cfg(feature = "std")]
+pub const RETELL_MIN_TRACKING: f64 = 0.25;
+
 pub(super) fn zero_correction<T: Float>() -> Correction<T, 2> {
     Correction {
         innovation: Vector2::zeros(),
@@ -408,13 +414,18 @@ impl<T: Float> PmsmObserver<T> {
         I: IntoIterator<Item = ([T; 2], [T; 2], T)> + Clone,
     {
         self.calibration.as_ref()?;
-        let (mut copy, r) = self.primed_copy(rows.clone());
+        let (mut copy, r, share) = self.primed_copy(rows.clone());
         // Each retelling starts the copy nearer the record's `Rs`, which its tracking then
         // moves by less: a fixed-point iteration. A change that turns back is taken by half (the
         // copies then bracket the record's `Rs`); the iteration ends when a change is within
         // the share or after `MAX_RETELLS`.
         let mut last: Option<T> = None;
-        for _ in 0..MAX_RETELLS {
+        let retells = if share >= to_t(RETELL_MIN_TRACKING) {
+            MAX_RETELLS
+        } else {
+            0
+        };
+        for _ in 0..retells {
             let Some(rs) = copy.tracking.as_ref().map(|k| k.t.rs) else {
                 break;
             };
@@ -450,20 +461,24 @@ impl<T: Float> PmsmObserver<T> {
     }
 
     /// A copy of this observer after `rows` (a refused row changes nothing in the copy, as in
-    /// the run that follows), and the record's mean `|i| / |w|` over the rows the copy tracks
+    /// the run that follows), the record's mean `|i| / |w|` over the rows the copy tracks
     /// above the tracking's minimum speed (0 when none): the ratio a resistance error is read
-    /// against the flux with.
+    /// against the flux with, and the share of the rows the copy read `Tracking` on.
     #[cfg(feature = "std")]
-    fn primed_copy(&self, rows: impl IntoIterator<Item = ([T; 2], [T; 2], T)>) -> (Self, T) {
+    fn primed_copy(&self, rows: impl IntoIterator<Item = ([T; 2], [T; 2], T)>) -> (Self, T, T) {
         let mut copy = self.clone();
         let min_speed2 = self
             .tracking
             .as_ref()
             .map_or(T::zero(), |k| k.slow.k.min_speed2);
-        let (mut sum, mut n) = (T::zero(), 0_u32);
+        let (mut sum, mut n, mut tracked, mut total) = (T::zero(), 0_u32, 0_u32, 0_u32);
         for (u_prev, i, dt_s) in rows {
+            total = total.saturating_add(1);
             if let Ok(e) = copy.step_dt(u_prev, i, dt_s) {
                 let w = e.omega_e_rad_s;
+                if e.status == crate::Status::Tracking {
+                    tracked = tracked.saturating_add(1);
+                }
                 if e.status == crate::Status::Tracking && w * w >= min_speed2 && w != T::zero() {
                     sum += (i[0] * i[0] + i[1] * i[1]).sqrt() / w.abs();
                     n += 1;
@@ -475,7 +490,8 @@ impl<T: Float> PmsmObserver<T> {
         } else {
             T::zero()
         };
-        (copy, r)
+        let share = to_t::<T>(f64::from(tracked)) / to_t(f64::from(total.max(1)));
+        (copy, r, share)
     }
 
     /// The configuration told `rs` (module docs of [`crate::calibration`], "Told by the
