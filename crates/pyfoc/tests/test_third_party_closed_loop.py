@@ -59,9 +59,9 @@ def traces():
     return out
 
 
-@pytest.mark.parametrize("told", list(TOLD))
-@pytest.mark.parametrize("run", list(RUNS))
-def test_told_the_wrong_motor_on_closed_loop_runs(traces, run, told):
+def told_run(traces, run, told):
+    """The motor told `told` on `run`, the record's `u_ab`, `i_ab` (float64), the trace and the
+    mask of the scored samples."""
     d = traces[run]
     (rs, ls, psi, p), w_rated = RUNS[run]
     fp, fr, fl = TOLD[told]
@@ -69,8 +69,14 @@ def test_told_the_wrong_motor_on_closed_loop_runs(traces, run, told):
     t = d["t_s"].astype(np.float64)
     w = p * d["omega_mech_rad_s"].astype(np.float64)
     scored = (t >= 0.25) & (np.abs(w) >= 0.05 * w_rated)
-    u = d["u_ab"].astype(np.float64)
-    i = d["i_ab"].astype(np.float64)
+    return motor, d["u_ab"].astype(np.float64), d["i_ab"].astype(np.float64), d, scored
+
+
+@pytest.mark.parametrize("told", list(TOLD))
+@pytest.mark.parametrize("run", list(RUNS))
+def test_told_the_wrong_motor_on_closed_loop_runs(traces, run, told):
+    motor, u, i, d, scored = told_run(traces, run, told)
+    fl = TOLD[told][2]
     defaults, firmware = MEASURED[run][list(TOLD).index(told)]
     for name, kw, measured in (("defaults", {}, defaults), ("firmware", FIRMWARE, firmware)):
         out = pyfoc.Ekf(motor, 1e-4, **kw).run(u, i)
@@ -95,22 +101,14 @@ def test_a_record_whose_copy_mostly_lost_the_rotor_is_not_retold(traces):
     of the rows: ekf-core's `RETELL_MIN_TRACKING`). Told it, the run lost the rotor (66 deg RMS,
     38 % of the samples more than 45 deg off, some of them `Tracking`); as told, 12.8 deg RMS,
     none more than 45 deg off."""
-    d = traces["reversal"]
-    (rs, ls, psi, p), w_rated = RUNS["reversal"]
-    fp, fr, fl = TOLD["100 K hot"]
-    motor = pyfoc.Motor(rs=rs * fr, ls=ls * fl, psi_f=psi * fp, pole_pairs=p)
-    t = d["t_s"].astype(np.float64)
-    w = p * d["omega_mech_rad_s"].astype(np.float64)
-    scored = (t >= 0.25) & (np.abs(w) >= 0.05 * w_rated)
-    u = d["u_ab"].astype(np.float64)
-    i = d["i_ab"].astype(np.float64)
+    motor, u, i, d, scored = told_run(traces, "reversal", "100 K hot")
     i = i + 0.015 * np.abs(i).max() * np.random.default_rng(3).standard_normal(i.shape)
     out = pyfoc.Ekf(motor, 1e-4).run(u, i)
     e = np.degrees(np.angle(np.exp(1j * (out["theta"] - d["theta_e_rad"]))))[scored]
     tracking = np.asarray(out["status"])[scored] == int(pyfoc.Status.TRACKING)
     rms = float(np.sqrt(np.mean(e**2)))
     print(f"noisy reversal told 100 K hot: rms {rms:.2f} deg, Rs told {out['rs'][0]:.3f} ohm")
-    assert out["rs"][0] == pytest.approx(rs * fr)
+    assert out["rs"][0] == pytest.approx(RUNS["reversal"][0][0] * TOLD["100 K hot"][1])
     assert not (np.abs(e) > 45.0).any()
     assert not ((np.abs(e) > 45.0) & tracking).any()
     assert rms < 1.3 * 12.8
