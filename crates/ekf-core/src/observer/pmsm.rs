@@ -478,10 +478,10 @@ impl<T: Float> PmsmObserver<T> {
                 let w = e.omega_e_rad_s;
                 if e.status == crate::Status::Tracking {
                     tracked = tracked.saturating_add(1);
-                }
-                if e.status == crate::Status::Tracking && w * w >= min_speed2 && w != T::zero() {
-                    sum += (i[0] * i[0] + i[1] * i[1]).sqrt() / w.abs();
-                    n += 1;
+                    if w * w >= min_speed2 && w != T::zero() {
+                        sum += (i[0] * i[0] + i[1] * i[1]).sqrt() / w.abs();
+                        n += 1;
+                    }
                 }
             }
         }

@@ -265,15 +265,20 @@ impl<T: Float> Split<T> {
         // Random walk: the temperature moves both along (psi beta, Rs alpha_cu) per kelvin;
         // the magnets' flux drifts besides.
         let (g0, g1) = (self.psi * self.beta, self.rs * self.alpha);
-        self.c00 += self.q_t * g0 * g0 + self.q_psi;
-        self.c01 += self.q_t * g0 * g1;
-        self.c11 += self.q_t * g1 * g1;
+        let walk = (
+            self.q_t * g0 * g0 + self.q_psi,
+            self.q_t * g0 * g1,
+            self.q_t * g1 * g1,
+        );
+        self.c00 += walk.0;
+        self.c01 += walk.1;
+        self.c11 += walk.2;
         #[cfg(feature = "std")]
         if k.follows {
             let f = &mut self.follow;
-            f.d00 += self.q_t * g0 * g0 + self.q_psi;
-            f.d01 += self.q_t * g0 * g1;
-            f.d11 += self.q_t * g1 * g1;
+            f.d00 += walk.0;
+            f.d01 += walk.1;
+            f.d11 += walk.2;
         }
         // A window the filter's own uncertainty cannot explain (beyond 5 standard deviations:
         // a model that does not fit, e.g. inductances far off on a saturating motor) is left
