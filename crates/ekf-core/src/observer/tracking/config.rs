@@ -75,7 +75,7 @@ pub struct ParameterTracking<T> {
     /// The thermal link's reference `(psi_f, Rs)` follows the split filter's windows wherever
     /// they have told `Rs` by themselves (the windows-only deviation of `Rs` within the link's
     /// own, `link_sigma_k alpha_cu Rs`): after a load step or through a speed ramp the link
-    /// no longer pulls `Rs` back to the told value (module docs of
+    /// does not pull `Rs` back to the told value (module docs of
     /// `ekf_core::observer::tracking`, "The link's reference"). Off by default (the firmware's
     /// filter); `pyfoc.Ekf`'s defaults for a recorded drive turn it on with the input
     /// calibration. Needs the cargo feature `std`
