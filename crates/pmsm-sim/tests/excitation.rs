@@ -1,6 +1,7 @@
 //! The d-axis excitation rows of the suite (short run, seed 1): told `Ls` +-20 %, the default
-//! EKF handed the excitation estimator's `Ls` meets the goals (the reversal under load but on the 2.2 kW motor) (module
-//! `pmsm_sim::analysis::suite::excitation`).
+//! EKF handed the excitation estimator's `Ls` meets every goal, the reversal under load on the
+//! 2.2 kW motor included (module `pmsm_sim::analysis::suite::excitation`; that row misses on
+//! some other noise seeds of the full run, a known limit: docs/accuracy.md).
 
 use pmsm_sim::analysis::suite::excitation::excitation_rows;
 use pmsm_sim::analysis::suite::{SuiteMotor, SuiteOptions};
@@ -16,12 +17,8 @@ fn excitation_rows_meet_their_goals() {
     // 3 motors x 3 cases x (4 main windows + the reversal).
     assert_eq!(report.rows.len(), 3 * 3 * 5);
     assert_eq!(report.cost.len(), 3 * 4);
-    // Every check passes but the reversal on the 2.2 kW motor (a known limit, named).
+    // Every check passes.
     for c in &report.checks {
-        let known = c.motor == SuiteMotor::Industrial2k2 && c.row.contains("reversal");
-        assert!(c.pass || (known && c.known_limit.is_some()), "{c:?}");
-        if known {
-            assert!(c.value <= 4.0, "{c:?}");
-        }
+        assert!(c.pass, "{c:?}");
     }
 }

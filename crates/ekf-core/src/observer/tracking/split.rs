@@ -3,7 +3,7 @@
 
 use nalgebra::Vector4;
 
-use super::{TrackerConstants, Window, clamp};
+use super::{TRANSIENT, TrackerConstants, Window, clamp};
 use crate::angle::wrap_angle;
 use crate::trig::sin_cos_small;
 use crate::{Float, to_t};
@@ -444,11 +444,22 @@ impl<T: Float> Split<T> {
         // The window's mean i_d: the start-up flux's and the unsteady windows (host builds)
         // take its own mean (module docs, "Tracking during transients": a ramp may end
         // within the window, and the current swings when the speed is never steady); the
-        // active split filter's the mean of the window's ends (a window with a current step
-        // is left out below).
+        // active split filter's the mean of the window's ends (the firmware's reading: a
+        // window with a current step is left out below), in host builds its own mean where
+        // the two differ by more than 5 % of the current (module docs, "The window's d
+        // current": a d current that moves within the window, such as foc's excitation).
         let iq = sums.iq * inv_n;
         let id = if reading == Reading::Active {
-            (id0 + id_end) * to_t(0.5)
+            let ends = (id0 + id_end) * to_t(0.5);
+            let own = sums.id * inv_n;
+            let gap = own - ends;
+            let floor = to_t::<T>(0.1) * k.psi0 / k.ld;
+            let scale2 = (own * own + iq * iq).max(floor * floor);
+            if TRANSIENT && gap * gap > to_t::<T>(D_MEAN_GAP2) * scale2 {
+                own
+            } else {
+                ends
+            }
         } else {
             sums.id * inv_n
         };
@@ -583,6 +594,11 @@ pub(super) const AGREEING_WINDOWS: u8 = 4;
 /// starts its own tracking first and runs as without these windows.
 #[cfg(feature = "std")]
 pub(super) const GRACE_WINDOWS: u8 = 10;
+
+/// Square of the share of the window's current by which its own mean `i_d` must differ from
+/// the mean of its ends for an active window to take its own (module docs of the parent,
+/// "The window's d current"; host builds): 5 %.
+const D_MEAN_GAP2: f64 = 0.0025;
 
 /// The largest resistive drop `|Rs r|`, as a share of the flux, of a start-up window that
 /// corrects the EKF's flux (module docs of the parent, "Tracking during transients").
