@@ -185,7 +185,7 @@ fn saturating_ipm_plug_and_spin_on_the_identified_map() {
 #[ignore]
 fn where_the_gap_comes_from() {
     use ekf_core::FluxMap;
-    use pmsm_sim::analysis::plug_map::{MAP_POINTS, run_scored, true_map};
+    use pmsm_sim::analysis::plug_map::{MAP_POINTS, run_scored, told_the_plant, true_map};
     let m = &SATURATED_IPM;
     let cases = [
         "identified map",
@@ -203,14 +203,7 @@ fn where_the_gap_comes_from() {
             plug_and_spin_map(&sc, 1.7 * i_rated).unwrap_or_else(|e| panic!("{seed}: {e}"));
         let rs = report.identified.as_ref().map_or(f64::NAN, |v| v.rs_ohm);
         // The plug-and-spin scenario told the plant's values (as `compare` does).
-        let mut truth = plug.clone();
-        truth.observer.rs_ohm = Some(sc.motor.rs_ohm);
-        truth.observer.ld_h = Some(sc.motor.ld_h);
-        truth.observer.lq_h = Some(sc.motor.lq_h);
-        truth.observer.psi_f_wb = Some(sc.motor.psi_f_wb);
-        if let Some(f) = truth.controller.foc.as_mut() {
-            f.inertia_kg_m2 = Some(sc.motor.j_kg_m2);
-        }
+        let truth = told_the_plant(&sc, &plug);
         let plant = |id: f64, iq: f64| {
             m.model
                 .flux(id, iq, (m.reference.psi_f_wb, 0.0))

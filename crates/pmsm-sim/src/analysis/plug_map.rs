@@ -393,6 +393,20 @@ impl MapComparison {
     }
 }
 
+/// The plug-and-spin scenario `sc` told the original `scenario`'s plant: its `Rs`, `Ld`,
+/// `Lq`, `psi_f` (observer) and inertia (foc).
+pub fn told_the_plant(scenario: &Scenario, sc: &Scenario) -> Scenario {
+    let mut told = sc.clone();
+    told.observer.rs_ohm = Some(scenario.motor.rs_ohm);
+    told.observer.ld_h = Some(scenario.motor.ld_h);
+    told.observer.lq_h = Some(scenario.motor.lq_h);
+    told.observer.psi_f_wb = Some(scenario.motor.psi_f_wb);
+    if let Some(f) = told.controller.foc.as_mut() {
+        f.inertia_kg_m2 = Some(scenario.motor.j_kg_m2);
+    }
+    told
+}
+
 /// Runs the plug-and-spin scenario `sc` told the identified `map` and `rs` (ohm), and the
 /// same told the original `scenario`'s plant (its map, `Rs`, constants and inertia), both
 /// scored from `t0_s` on.
@@ -406,14 +420,7 @@ pub fn compare(
     let identified = run_scored(sc, map, rs, t0_s)?;
     let i = 0.5 * scenario.controller.current_limit_a;
     let tm = true_map(&scenario.motor, i).map_err(|e| scenario_err(scenario, "motor", e))?;
-    let mut told_truth = sc.clone();
-    told_truth.observer.rs_ohm = Some(scenario.motor.rs_ohm);
-    told_truth.observer.ld_h = Some(scenario.motor.ld_h);
-    told_truth.observer.lq_h = Some(scenario.motor.lq_h);
-    told_truth.observer.psi_f_wb = Some(scenario.motor.psi_f_wb);
-    if let Some(f) = told_truth.controller.foc.as_mut() {
-        f.inertia_kg_m2 = Some(scenario.motor.j_kg_m2);
-    }
+    let told_truth = told_the_plant(scenario, sc);
     let truth = run_scored(&told_truth, &tm, scenario.motor.rs_ohm, t0_s)?;
     Ok(MapComparison { identified, truth })
 }
