@@ -293,6 +293,20 @@ impl<T: Float, const N: usize> FluxMap<T, N> {
         &self.i_q[..self.n_q]
     }
 
+    /// Adds `delta_wb` to `psi_d` everywhere: the node values move, their slopes do not, and
+    /// the bicubic Hermite interpolation (whose value basis sums to one) moves by
+    /// `delta_wb` at every current; the inductances are unchanged (to rounding). A magnet whose flux
+    /// changes (temperature) shifts `psi_d` so, to first order. No check: the caller keeps
+    /// `delta_wb` finite ([`MapObserver::shift_psi_d`](crate::saturated::MapObserver::shift_psi_d)
+    /// does).
+    pub fn shift_psi_d(&mut self, delta_wb: T) {
+        for row in self.psi_d.iter_mut().take(self.n_d) {
+            for node in row.iter_mut().take(self.n_q) {
+                node[0] += delta_wb;
+            }
+        }
+    }
+
     /// Fluxes and incremental inductances at `(i_d, i_q)` (module docs: bicubic Hermite,
     /// linear continuation outside the grid). A non-finite current gives non-finite output.
     pub fn eval(&self, i_d: T, i_q: T) -> FluxPoint<T> {
@@ -627,6 +641,31 @@ mod tests {
             l = l.max((p.l_qq - l_qq).abs() / l_qq);
         }
         (flux, l)
+    }
+
+    #[test]
+    fn a_shift_moves_psi_d_alone_everywhere() {
+        let (i_d, i_q, pd, pq) = grid(11, 13);
+        let map = FluxMap::<f64, 16>::new(&i_d, &i_q, &pd, &pq).unwrap();
+        let mut shifted = map.clone();
+        shifted.shift_psi_d(0.0123);
+        for k in 0..500 {
+            // Inside the grid and beyond it (the linear continuation).
+            let d = -30.0 + 45.0 * (k as f64 * 0.618_034).fract();
+            let q = -35.0 + 70.0 * (k as f64 * 0.377_123).fract();
+            let (a, b) = (map.eval(d, q), shifted.eval(d, q));
+            assert!((b.psi_d - a.psi_d - 0.0123).abs() < 1e-12, "{d} {q}");
+            // The inductances to rounding (the value basis's derivative sums to zero).
+            assert_eq!(b.psi_q, a.psi_q);
+            for (x, y) in [
+                (b.l_dd, a.l_dd),
+                (b.l_dq, a.l_dq),
+                (b.l_qd, a.l_qd),
+                (b.l_qq, a.l_qq),
+            ] {
+                assert!((x - y).abs() < 1e-12, "{d} {q}");
+            }
+        }
     }
 
     #[test]

@@ -293,6 +293,19 @@ impl<T: Float, const N: usize> MapObserver<T, N> {
         self.observer.estimate()
     }
 
+    /// Adds `delta_wb` to the map's `psi_d` everywhere ([`FluxMap::shift_psi_d`]): the
+    /// prediction's flux moves with it from the next step on, the state and covariance are
+    /// kept. For a flux offset learnt online (the magnet's temperature, or an identified
+    /// map's error at the operating point). A non-finite `delta_wb` is refused
+    /// ([`ConfigError::NonFinite`]) and nothing changes.
+    pub fn shift_psi_d(&mut self, delta_wb: T) -> Result<(), ConfigError> {
+        if !delta_wb.is_finite() {
+            return Err(ConfigError::NonFinite(Param::PsiF));
+        }
+        self.map.shift_psi_d(delta_wb);
+        Ok(())
+    }
+
     /// The underlying observer (state, covariance, last correction, counters). Its own
     /// `step` and `predict` use the constant small-signal model: step through `self`.
     pub fn observer(&self) -> &PmsmObserver<T> {

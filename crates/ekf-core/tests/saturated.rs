@@ -355,3 +355,23 @@ fn saturating_mode_models_the_midpoint_inductance() {
         );
     }
 }
+
+/// `MapObserver::shift_psi_d` moves the map's `psi_d` (and so the prediction) by the offset,
+/// keeps the state, and refuses a non-finite offset without changing anything.
+#[test]
+fn a_psi_d_shift_moves_the_map_and_a_bad_one_is_refused() {
+    let map = sampled_map();
+    let cfg = MapObserver::default_config(&map, RS, P, TS);
+    let mut obs = MapObserver::new(&cfg, map).unwrap();
+    let before = obs.map().eval(-3.0, 7.0);
+    let x = *obs.observer().state();
+    obs.shift_psi_d(0.004).unwrap();
+    let after = obs.map().eval(-3.0, 7.0);
+    assert!((after.psi_d - before.psi_d - 0.004).abs() < 1e-12);
+    assert_eq!(after.psi_q, before.psi_q);
+    assert_eq!(*obs.observer().state(), x);
+    for bad in [f64::NAN, f64::INFINITY] {
+        assert!(obs.shift_psi_d(bad).is_err());
+        assert_eq!(obs.map().eval(-3.0, 7.0), after);
+    }
+}
