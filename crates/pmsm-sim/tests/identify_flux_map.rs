@@ -160,6 +160,13 @@ fn check_plug(m: &SaturatedMotor) {
     );
     let tpa = c.torque_per_ampere_ratio();
     assert!((tpa - 1.0).abs() <= 0.005, "{name}: {tpa:.4}");
+    // Told the plant's own map, the online psi_d offset stays within 1 mWb (0.2 % of the
+    // flux): it corrects a map's error, it does not wander on a right one.
+    assert!(
+        c.truth.psi_d_offset_wb.abs() <= 1e-3,
+        "{name}: {:?}",
+        c.truth
+    );
     println!(
         "{name}: goal angle RMS <= 1.5 x the true-map run's: {:.2} x ({})",
         c.rms_ratio(),

@@ -363,6 +363,9 @@ pub struct MapRunScore {
     pub lost_pct: f64,
     /// `sum |T| / sum |i|` over the scored samples, N m / A.
     pub torque_per_ampere_nm_a: f64,
+    /// The `psi_d` offset the map EKF learnt by the run's end, Wb (module docs, "The flux
+    /// offset").
+    pub psi_d_offset_wb: f64,
     /// How the run ended.
     pub end: String,
     /// foc's fault, if any.
@@ -440,6 +443,7 @@ pub fn run_scored(
         angle_max_deg: score.max,
         lost_pct: 100.0 * score.lost as f64 / n,
         torque_per_ampere_nm_a: score.torque / score.current.max(f64::MIN_POSITIVE),
+        psi_d_offset_wb: drive.psi_d_offset_wb(),
         end: out.end.describe(),
         fault: out.metrics.drive.fault.clone(),
     })
@@ -497,7 +501,7 @@ impl MapComparison {
         use std::fmt::Write;
         let mut s = String::from(
             "| told | angle RMS (deg) | angle max (deg) | > 45 deg (%) | torque per ampere \
-             (N m/A) | end |\n|---|---|---|---|---|---|\n",
+             (N m/A) | psi_d offset learnt (mWb) | end |\n|---|---|---|---|---|---|---|\n",
         );
         for (name, r) in [
             ("identified map", &self.identified),
@@ -505,11 +509,12 @@ impl MapComparison {
         ] {
             let _ = writeln!(
                 s,
-                "| {name} | {:.3} | {:.2} | {:.2} | {:.4} | {}{} |",
+                "| {name} | {:.3} | {:.2} | {:.2} | {:.4} | {:+.2} | {}{} |",
                 r.angle_rms_deg,
                 r.angle_max_deg,
                 r.lost_pct,
                 r.torque_per_ampere_nm_a,
+                1e3 * r.psi_d_offset_wb,
                 r.end,
                 r.fault
                     .as_deref()
