@@ -228,9 +228,8 @@ impl PsiDTracker {
                 // The next window starts here, on the shifted map.
                 self.th0 = th;
                 self.travel = 0.0;
-                let (c, sn) = (c0, s0);
                 let pd = f.psi_d + shift.unwrap_or(0.0);
-                self.psi_int = [c * pd - sn * f.psi_q, sn * pd + c * f.psi_q];
+                self.psi_int = [c0 * pd - s0 * f.psi_q, s0 * pd + c0 * f.psi_q];
             }
         }
         self.th_prev = th;
