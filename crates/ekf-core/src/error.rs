@@ -104,6 +104,18 @@ pub enum Param {
     TrackingWindowSigma,
     /// `RsTracking::Split::window_samples` (at least 1).
     TrackingWindow,
+    /// `FluxOffsetTracking::gain` (in `(0, 1]`).
+    FluxOffsetGain,
+    /// `FluxOffsetTracking::window_rad` (in `(0, pi]`).
+    FluxOffsetWindow,
+    /// `FluxOffsetTracking::min_speed_rad_s` (finite, at least 0).
+    FluxOffsetMinSpeed,
+    /// `FluxOffsetTracking::max_drop_ratio` (above 0).
+    FluxOffsetDropRatio,
+    /// `FluxOffsetTracking::max_window_s` (above 0).
+    FluxOffsetWindowTime,
+    /// `FluxOffsetTracking::max_offset_fraction` (above 0).
+    FluxOffsetRange,
 }
 
 /// A matrix named in a [`ConfigError`].
@@ -215,6 +227,12 @@ impl fmt::Display for Param {
             Param::TrackingLinkSigma => "parameter_tracking.rs.link_sigma_k",
             Param::TrackingWindowSigma => "parameter_tracking.rs.measurement_sigma",
             Param::TrackingWindow => "parameter_tracking.rs.window_samples",
+            Param::FluxOffsetGain => "flux_offset.gain",
+            Param::FluxOffsetWindow => "flux_offset.window_rad",
+            Param::FluxOffsetMinSpeed => "flux_offset.min_speed_rad_s",
+            Param::FluxOffsetDropRatio => "flux_offset.max_drop_ratio",
+            Param::FluxOffsetWindowTime => "flux_offset.max_window_s",
+            Param::FluxOffsetRange => "flux_offset.max_offset_fraction",
             Param::TrackingTemperatureCoefficient => {
                 "parameter_tracking.rs_temperature_coefficient_per_k"
             }

@@ -22,7 +22,7 @@
 
 #![allow(clippy::needless_range_loop)] // index-aligned traces
 
-use ekf_core::saturated::{FluxMapObserver, MapObserver};
+use ekf_core::saturated::{FluxMapObserver, FluxOffsetTracking, MapObserver};
 use ekf_core::saturation::PM_SYRM_5K6;
 use ekf_core::testing::Rng;
 use ekf_core::{FluxObserver, FluxObserverConfig};
@@ -374,4 +374,108 @@ fn a_psi_d_shift_moves_the_map_and_a_bad_one_is_refused() {
         assert!(obs.shift_psi_d(bad).is_err());
         assert_eq!(obs.map().eval(-3.0, 7.0), after);
     }
+}
+
+/// The map observer on `map` with the flux-offset tracking on or off: its angles and the
+/// offset it learnt.
+fn run_map_tracking(tr: &Trace, map: ekf_core::FluxMap<f64, 16>, on: bool) -> (Vec<f64>, f64) {
+    let cfg = MapObserver::default_config(&map, RS, P, TS);
+    let mut obs = MapObserver::new(&cfg, map).unwrap();
+    if on {
+        obs.set_flux_offset_tracking(Some(FluxOffsetTracking::new()))
+            .unwrap();
+    }
+    let x0 = ekf_core::nalgebra::Vector4::new(0.0, 0.0, 0.0, tr.th[START] + 30f64.to_radians());
+    obs.reset(x0, cfg.p0).unwrap();
+    let mut out = vec![0.0; tr.th.len()];
+    for k in START..tr.th.len() {
+        out[k] = obs.step(tr.u[k], tr.i[k]).unwrap().theta_rad;
+    }
+    (out, obs.flux_offset_wb())
+}
+
+/// Told a map whose `psi_d` is 8 % of `psi_f` high (the magnets warmer than when it was
+/// measured), the flux-offset tracking learns the offset and removes most of the angle bias
+/// it causes; told the right map, it costs (almost) nothing (module docs of
+/// `ekf_core::saturated`, "The flux offset").
+#[test]
+fn the_map_observer_learns_a_psi_d_offset() {
+    let tr = simulate(1.6, 1);
+    let psi0 = sampled_map().eval(0.0, 0.0).psi_d;
+    let offset = 0.08 * psi0;
+    let mut told = sampled_map();
+    told.shift_psi_d(offset);
+    let (off_th, _) = run_map_tracking(&tr, told.clone(), false);
+    let (on_th, learnt) = run_map_tracking(&tr, told, true);
+    let (right_off, _) = run_map_tracking(&tr, sampled_map(), false);
+    let (right_on, right_learnt) = run_map_tracking(&tr, sampled_map(), true);
+    let (s_off, s_on) = (score(&tr, &off_th), score(&tr, &on_th));
+    let (r_off, r_on) = (score(&tr, &right_off), score(&tr, &right_on));
+    println!(
+        "map psi_d +{:.1} mWb (8 % of psi_f): angle RMS {:.2} deg (max {:.2}) without the \
+         tracking, {:.2} (max {:.2}) with it; learnt {:+.2} mWb ({:.1} % of the offset)\n\
+         the right map: {:.3} deg without, {:.3} with; learnt {:+.2} mWb",
+        offset * 1e3,
+        s_off.0,
+        s_off.1,
+        s_on.0,
+        s_on.1,
+        learnt * 1e3,
+        100.0 * (-learnt / offset),
+        r_off.0,
+        r_on.0,
+        right_learnt * 1e3
+    );
+    assert!(s_on.0 < 0.5 * s_off.0, "{s_on:?} vs {s_off:?}");
+    assert!(
+        (learnt + offset).abs() < 0.1 * offset,
+        "learnt {learnt}, offset {offset}"
+    );
+    assert!(r_on.0 < 1.1 * r_off.0, "{r_on:?} vs {r_off:?}");
+    assert!(right_learnt.abs() < 0.01 * psi0, "{right_learnt}");
+}
+
+/// A flux-offset setting out of range is refused, naming the field, and leaves the observer
+/// as it was; non-finite inputs to a tracking observer are refused without moving the map.
+#[test]
+fn a_bad_flux_offset_setting_or_input_is_refused() {
+    let map = sampled_map();
+    let cfg = MapObserver::default_config(&map, RS, P, TS);
+    let mut obs = MapObserver::new(&cfg, map).unwrap();
+    let fine = FluxOffsetTracking::<f64>::new();
+    for bad in [
+        FluxOffsetTracking { gain: 0.0, ..fine },
+        FluxOffsetTracking { gain: 1.5, ..fine },
+        FluxOffsetTracking {
+            window_rad: 4.0,
+            ..fine
+        },
+        FluxOffsetTracking {
+            min_speed_rad_s: -1.0,
+            ..fine
+        },
+        FluxOffsetTracking {
+            max_drop_ratio: f64::NAN,
+            ..fine
+        },
+        FluxOffsetTracking {
+            max_window_s: 0.0,
+            ..fine
+        },
+        FluxOffsetTracking {
+            max_offset_fraction: f64::INFINITY,
+            ..fine
+        },
+    ] {
+        let e = obs.set_flux_offset_tracking(Some(bad)).unwrap_err();
+        assert!(e.to_string().contains("flux_offset."), "{e}");
+        assert_eq!(obs.flux_offset_wb(), 0.0);
+    }
+    obs.set_flux_offset_tracking(Some(fine)).unwrap();
+    let before = obs.map().eval(1.0, 2.0);
+    let x = *obs.observer().state();
+    assert!(obs.step([f64::NAN, 0.0], [0.0, 0.0]).is_err());
+    assert!(obs.step([0.0, 0.0], [f64::INFINITY, 0.0]).is_err());
+    assert_eq!(*obs.observer().state(), x);
+    assert_eq!(obs.map().eval(1.0, 2.0), before);
 }

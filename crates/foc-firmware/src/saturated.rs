@@ -7,7 +7,9 @@
 //!   configuration: the constant-parameter observer's safeguards, no parameter tracking) on
 //!   the servo run, told the servo itself as a 9 x 11 map (`psi_d = psi_f + Ld i_d`,
 //!   `psi_q = Lq i_q`), so that its angle is checked as the other observers' are (within 1 deg
-//!   over the run's last samples). The evaluation's cost does not depend on the values.
+//!   over the run's last samples). The evaluation's cost does not depend on the values;
+//! - `map_observer_step_offset`: the same with the flux-offset tracking on
+//!   (`FluxOffsetTracking::new`).
 
 use core::hint::black_box;
 
@@ -15,7 +17,7 @@ use cortex_m_semihosting::hprintln;
 use ekf_core::EkfError;
 use ekf_core::catalog::SERVO;
 use ekf_core::fluxmap::FluxMap;
-use ekf_core::saturated::MapObserver;
+use ekf_core::saturated::{FluxOffsetTracking, MapObserver};
 
 use crate::meter::{Clock, Tally};
 use crate::synth::TS_S;
@@ -67,9 +69,25 @@ pub fn run(clock: &Clock, data: &[Sample; SAMPLES]) -> Result<(), &'static str> 
     }
     eval.report("fluxmap_eval");
 
+    observer_run(clock, data, false, "map_observer_step")?;
+    observer_run(clock, data, true, "map_observer_step_offset")
+}
+
+/// Counts the map observer's step over the run under `name`, with the flux-offset tracking
+/// (`FluxOffsetTracking::new`) when `offset`; an error when it misses the angle.
+fn observer_run(
+    clock: &Clock,
+    data: &[Sample; SAMPLES],
+    offset: bool,
+    name: &str,
+) -> Result<(), &'static str> {
     let linear = map(false)?;
     let cfg = MapObserver::default_config(&linear, SERVO.rs_ohm as f32, SERVO.pole_pairs, TS_S);
     let mut obs = MapObserver::new(&cfg, linear).map_err(|_| "map observer refused")?;
+    if offset {
+        obs.set_flux_offset_tracking(Some(FluxOffsetTracking::new()))
+            .map_err(|_| "flux-offset tracking refused")?;
+    }
     let mut step = Tally::new();
     let mut u_prev = [0.0f32; 2];
     let mut max_err = 0.0f32;
@@ -82,15 +100,15 @@ pub fn run(clock: &Clock, data: &[Sample; SAMPLES]) -> Result<(), &'static str> 
             max_err = max_err.max(angle_err_deg(e.theta_rad, s.theta_rad).abs());
         }
     }
-    step.report("map_observer_step");
+    step.report(name);
     hprintln!(
-        "    map_observer_step: max |angle error| {} deg over the last {} samples",
+        "    {}: max |angle error| {} deg over the last {} samples",
+        name,
         max_err,
         CHECK_WINDOW
     );
     if max_err > 1.0 {
         return Err("map observer: angle error above 1 deg");
     }
-
     Ok(())
 }

@@ -5,7 +5,7 @@
 use std::sync::Mutex;
 
 use ekf_core::nalgebra::{Matrix2, Matrix4, Vector4};
-use ekf_core::saturated::MapObserver;
+use ekf_core::saturated::{FluxOffsetTracking, MapObserver};
 use ekf_core::{
     AccelerationFeedforward, CovarianceUpdate, Discretization, EkfError, Float, ObserverConfig,
     PmsmObserver, RsTracking,
@@ -145,12 +145,6 @@ fn build<T: Float, O>(
             ));
         }
         Some(m) => {
-            if matches!(s.tracking, Tracking::Flux) {
-                return Err(ConfigError::new_err(
-                    "tracking='flux' is not available on a flux map (the map is the model): \
-                     use 'default' or 'off'",
-                ));
-            }
             let p = motor.params::<T>();
             MapObserver::default_config(m, p.rs_ohm, p.pole_pairs, conv(ts))
         }
@@ -205,9 +199,12 @@ fn build<T: Float, O>(
         None => PmsmObserver::new(&cfg).map(plain).map_err(cfg_err),
         Some(m) => {
             cfg.parameter_tracking = None;
-            MapObserver::new(&cfg, m)
-                .map(|o| map(Box::new(o)))
-                .map_err(cfg_err)
+            let mut o = MapObserver::new(&cfg, m).map_err(cfg_err)?;
+            if matches!(s.tracking, Tracking::Flux) {
+                o.set_flux_offset_tracking(Some(FluxOffsetTracking::new()))
+                    .map_err(cfg_err)?;
+            }
+            Ok(map(Box::new(o)))
         }
     }
 }
@@ -215,9 +212,11 @@ fn build<T: Float, O>(
 /// Online parameter tracking of an [`Ekf`] (`tracking=` argument).
 #[derive(Clone, Copy)]
 enum Tracking {
-    /// `"default"`: the flux tracked, `Rs` by the split filter with the thermal link.
+    /// `"default"`: the flux tracked, `Rs` by the split filter with the thermal link; on a
+    /// flux map, the map as it is.
     Default,
-    /// `"flux"`: the flux tracked, `Rs` fixed.
+    /// `"flux"`: the flux tracked, `Rs` fixed; on a flux map, the map's `psi_d` offset learnt
+    /// online (`FluxOffsetTracking::new`).
     Flux,
     /// `"off"`: the configured parameters as they are.
     Off,

@@ -13,9 +13,20 @@ use crate::fluxmap::FluxMap;
 use crate::trig::sin_cos_small;
 use crate::{Float, to_t, wrap_angle};
 
+/// What a step on the map hands to the map observer's flux-offset tracking
+/// ([`MapObserver`](crate::saturated::MapObserver)): the voltage the prediction used (after
+/// the voltage timing and the inverter voltage) and the map's stator flux at the prediction's
+/// start (the previous posterior), turned to the stationary frame.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MapStepInputs<T> {
+    pub(crate) u: [T; 2],
+    pub(crate) psi_ab0: [T; 2],
+}
+
 /// The map's flux-consistent step from the posterior `x` over a period `ts` with the stator
 /// voltage `u` held, and its Jacobian (the incremental inductances held over the step) in the
-/// form the structured covariance schedule takes: `(x-, terms)`.
+/// form the structured covariance schedule takes: `(x-, terms, the map's stator flux at x in
+/// the stationary frame)`.
 #[inline(always)]
 pub(crate) fn map_transition<T: Float, const N: usize>(
     map: &FluxMap<T, N>,
@@ -23,7 +34,7 @@ pub(crate) fn map_transition<T: Float, const N: usize>(
     ts: T,
     x: &Vector4<T>,
     u: [T; 2],
-) -> (Vector4<T>, TransitionTerms<T>) {
+) -> (Vector4<T>, TransitionTerms<T>, [T; 2]) {
     let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
     let (s0, c0) = th.sin_cos_angle();
     // Rotation over the period by its half angle: sin, and cos - 1 without cancellation.
@@ -102,7 +113,12 @@ pub(crate) fn map_transition<T: Float, const N: usize>(
         sin_th: s0,
         cos_th: c0,
     };
-    (Vector4::new(ia1, ib1, w, wrap_angle(th + ts * w)), t)
+    let psi_ab0 = [c0 * p.psi_d - s0 * p.psi_q, s0 * p.psi_d + c0 * p.psi_q];
+    (
+        Vector4::new(ia1, ib1, w, wrap_angle(th + ts * w)),
+        t,
+        psi_ab0,
+    )
 }
 
 impl<T: Float> PmsmObserver<T> {
@@ -115,7 +131,7 @@ impl<T: Float> PmsmObserver<T> {
         map: &FluxMap<T, N>,
         u_prev: [T; 2],
         dt_s: T,
-    ) -> (Vector4<T>, Sym4<T>) {
+    ) -> (Vector4<T>, Sym4<T>, MapStepInputs<T>) {
         let ts = self.model.ts();
         let q_owned: Matrix4<T>;
         let mut q = self.model.q_sym();
@@ -136,8 +152,13 @@ impl<T: Float> PmsmObserver<T> {
             scaled = q * (dt_s / ts);
             q = &scaled;
         }
-        let (xm, t) = map_transition(map, self.nominal.1, dt_s, &self.x, u);
-        (xm, structured::predict_cov_salient(&t, dt_s, q, &self.p))
+        let (xm, t, psi_ab0) = map_transition(map, self.nominal.1, dt_s, &self.x, u);
+        let inputs = MapStepInputs { u, psi_ab0 };
+        (
+            xm,
+            structured::predict_cov_salient(&t, dt_s, q, &self.p),
+            inputs,
+        )
     }
 
     /// Marks the observer as the map observer's (its prediction runs on the map): the model
@@ -165,8 +186,28 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&i) {
             return Err(EkfError::NonFiniteMeasurement);
         }
-        let (xm, pm) = self.map_prior(map, u_prev, dt_s);
+        let (xm, pm, _) = self.map_prior(map, u_prev, dt_s);
         self.correct_prior::<false, true>(xm, pm, None, i)
+    }
+
+    /// [`map_step`](Self::map_step), also handing out what the flux-offset tracking takes
+    /// ([`MapStepInputs`]).
+    pub(crate) fn map_step_inputs<const N: usize>(
+        &mut self,
+        map: &FluxMap<T, N>,
+        u_prev: [T; 2],
+        i: [T; 2],
+        dt_s: T,
+    ) -> Result<(Estimate<T>, MapStepInputs<T>), EkfError> {
+        if !finite(&u_prev) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        if !finite(&i) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        let (xm, pm, inputs) = self.map_prior(map, u_prev, dt_s);
+        self.correct_prior::<false, true>(xm, pm, None, i)
+            .map(|e| (e, inputs))
     }
 
     /// Prediction only on the map (the body of
@@ -179,7 +220,7 @@ impl<T: Float> PmsmObserver<T> {
         if !finite(&u_prev) {
             return Err(EkfError::NonFiniteInput);
         }
-        let (x, p) = self.map_prior(map, u_prev, self.model.ts());
+        let (x, p, _) = self.map_prior(map, u_prev, self.model.ts());
         self.commit_prediction(x, p, None)
     }
 }
@@ -212,7 +253,12 @@ mod tests {
                 3.0 * (0.71 * f).sin(),
             );
             let u = [300.0 * (0.5 * f).cos(), 250.0 * (0.29 * f).sin()];
-            let (xs, t) = map_transition(&map, rs, ts, &x, u);
+            let (xs, t, psi0) = map_transition(&map, rs, ts, &x, u);
+            // The start flux handed out is the map's at the start currents and angle.
+            let (s0, c0) = x[3].sin_cos();
+            let f = map.eval(c0 * x[0] + s0 * x[1], c0 * x[1] - s0 * x[0]);
+            assert!((psi0[0] - (c0 * f.psi_d - s0 * f.psi_q)).abs() < 1e-12);
+            assert!((psi0[1] - (s0 * f.psi_d + c0 * f.psi_q)).abs() < 1e-12);
             let (xm, phi) = model.transition(&x, &Vector2::new(u[0], u[1]));
             let scalar = [
                 [t.a00, t.a01, t.ea_w, t.ea_th],

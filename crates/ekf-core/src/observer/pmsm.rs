@@ -27,7 +27,7 @@ pub struct PmsmObserver<T: Float> {
     pub(super) last: Correction<T, 2>,
     pub(super) inv_pole_pairs: T,
     /// Configured `(psi_f, Rs, reference temperature)`, reported when tracking is off.
-    pub(super) nominal: (T, T, T),
+    pub(crate) nominal: (T, T, T),
     pub(super) angle_var_limit: T,
     /// Salient motors: the filter has locked (angle tracked with settled innovations) and
     /// keeps the angle tracked since; the d-axis transient correction applies (module docs).

@@ -21,28 +21,13 @@
 //!
 //! # The flux offset
 //!
-//! The map EKF takes a map's flux at face value, and a `psi_d` error at the operating point
-//! (a flux-magnitude error: the drive runs near `i_d = 0`, the zero-d row of the identified
-//! map, whose nodes the probe measures least well, docs/identify.md) turns into an angle
-//! bias through the terms of the voltage equation that do not scale with the speed (the
-//! bias flips sign with the direction of rotation). The drive learns a `psi_d` offset
-//! online and shifts the map by it (`MapObserver::shift_psi_d`):
-//!
-//! - a window opens wherever the EKF reads `Tracking` at 10 % of rated speed or more, with
-//!   the voltage model's stator flux set to the map's at the EKF's currents and angle,
-//!   `psi_s = R(th) psi(i_dq)` (stationary frame);
-//! - each period adds `Ts (u - Rs i)` (the voltage held over it, the EKF's currents' mean);
-//! - once the angle has travelled a quarter turn `D`, the voltage model and the map differ
-//!   by `R(th0) (I - R(D)) err` with `err` the map's error in the rotor frame (constant over
-//!   the window); solved for `err`, its d part `err_d` measures the map's `psi_d` error
-//!   there, free of the EKF's angle error (which the rotation carries into `err_q`) and of
-//!   the map's own rotation;
-//! - the map moves by `-PSI_D_GAIN err_d`, and the next window starts.
-//!
-//! The windows need the resistance (`Rs i` integrated over a quarter turn) and see the
-//! inverter's voltage error as the EKF does. Measured on the saturated suite row's drive of
-//! `saturating_ipm` over six sensor seeds (`cargo test --release -p pmsm-sim --test
-//! identify_flux_map -- --ignored --nocapture`): docs/identify.md.
+//! The map EKF learns the map's `psi_d` offset online (`MapObserver::set_flux_offset_tracking`;
+//! the method in the module docs of `ekf_core::saturated`, "The flux offset"): the identified
+//! map's flux is least well measured in its `i_d = 0` row, where the drive runs. The drive's
+//! setting is the default with a gain of [`PSI_D_GAIN`] and windows from 10 % of rated speed.
+//! Measured on the saturated suite row's drive of `saturating_ipm` over six sensor seeds
+//! (`cargo test --release -p pmsm-sim --test identify_flux_map -- --ignored --nocapture`):
+//! docs/identify.md.
 //!
 //! The run starts in closed loop on the map EKF's estimate from zero angle and speed: the
 //! map EKF needs the back-EMF, so the rotor must turn (the scenario's initial speed, a flying
@@ -54,7 +39,7 @@
 //! ([`MapRunScore`]): angle error from a given time on where the speed is at least 10 % of
 //! rated, and torque per ampere (`sum |T| / sum |i|` over the same samples).
 
-use ekf_core::saturated::MapObserver;
+use ekf_core::saturated::{FluxOffsetTracking, MapObserver};
 use ekf_core::{FluxMap, NoiseCovariances, ObserverConfig};
 use serde::Serialize;
 
@@ -157,85 +142,6 @@ pub struct MapDrive {
     last: ObserverEstimate,
     /// Failed observer steps (the last estimate is kept).
     pub observer_failures: usize,
-    psi_d_tracker: PsiDTracker,
-}
-
-/// The map observer's `psi_d` offset learnt from the voltage model (module docs, "The flux
-/// offset"): windows of a quarter electrical turn.
-struct PsiDTracker {
-    rs: f64,
-    ts: f64,
-    /// Share of a window's measured offset taken into the map.
-    gain: f64,
-    /// Speed (electrical, rad/s) below which the windows restart.
-    w_min: f64,
-    /// Whether a window is open; its start angle, the angle travelled and the last angle.
-    open: bool,
-    th0: f64,
-    travel: f64,
-    th_prev: f64,
-    /// The voltage model's stator flux (stationary frame) since the window's start, Wb.
-    psi_int: [f64; 2],
-    /// The observer's currents at the last tick (stationary frame), A.
-    i_prev: [f64; 2],
-    /// The offset taken into the map so far, Wb.
-    offset: f64,
-}
-
-impl PsiDTracker {
-    /// One tick after the observer's step: `u_prev` held over the period that ended, the
-    /// observer's estimate `e`. Returns the shift to apply to the map now, if a window closed.
-    fn tick(
-        &mut self,
-        obs: &MapObserver<f64, MAP_POINTS>,
-        u_prev: [f64; 2],
-        e: &ObserverEstimate,
-    ) -> Option<f64> {
-        let x = *obs.observer().state();
-        let i = [x[0], x[1]];
-        let th = e.theta_e_rad;
-        let (s0, c0) = th.sin_cos();
-        let f = obs
-            .map()
-            .eval(c0 * i[0] + s0 * i[1], -s0 * i[0] + c0 * i[1]);
-        // The map's stator flux at this tick, turned to the stationary frame.
-        let model = [c0 * f.psi_d - s0 * f.psi_q, s0 * f.psi_d + c0 * f.psi_q];
-        let mut shift = None;
-        if !e.tracking || e.omega_e_rad_s.abs() < self.w_min || !self.open {
-            self.open = e.tracking && e.omega_e_rad_s.abs() >= self.w_min;
-            self.th0 = th;
-            self.travel = 0.0;
-            self.psi_int = model;
-        } else {
-            let im = [0.5 * (i[0] + self.i_prev[0]), 0.5 * (i[1] + self.i_prev[1])];
-            self.psi_int[0] += self.ts * (u_prev[0] - self.rs * im[0]);
-            self.psi_int[1] += self.ts * (u_prev[1] - self.rs * im[1]);
-            self.travel += ekf_core::wrap_angle(th - self.th_prev);
-            if self.travel.abs() >= std::f64::consts::FRAC_PI_2 {
-                // psi_int - model = R(th0) (I - R(D)) err, err the map's error in the rotor
-                // frame, D the angle travelled: err = (I - R(D))^-1 R(-th0) (psi_int - model).
-                let d = [self.psi_int[0] - model[0], self.psi_int[1] - model[1]];
-                let (s1, c1) = self.th0.sin_cos();
-                let r = [c1 * d[0] + s1 * d[1], -s1 * d[0] + c1 * d[1]];
-                let (sd, cd) = self.travel.sin_cos();
-                let (a, b) = (1.0 - cd, sd);
-                let err_d = (a * r[0] - b * r[1]) / (a * a + b * b);
-                let step = -self.gain * err_d;
-                if step.is_finite() {
-                    self.offset += step;
-                    shift = Some(step);
-                }
-                // The next window starts here, on the shifted map.
-                self.th0 = th;
-                self.travel = 0.0;
-                let pd = f.psi_d + shift.unwrap_or(0.0);
-                self.psi_int = [c0 * pd - s0 * f.psi_q, s0 * pd + c0 * f.psi_q];
-            }
-        }
-        self.th_prev = th;
-        self.i_prev = i;
-        shift
-    }
 }
 
 impl MapDrive {
@@ -268,29 +174,21 @@ impl MapDrive {
             noise: NoiseCovariances::from_sensing(&small, ts, sc.sensors.current_noise_std_a, lsb),
             ..MapObserver::default_config(map, rs_ohm, sc.motor.pole_pairs, ts)
         };
-        let obs = MapObserver::new(&ocfg, map.clone())
+        let mut obs = MapObserver::new(&ocfg, map.clone())
             .map_err(|e| scenario_err(sc, "observer (flux map)", e.to_string()))?;
+        obs.set_flux_offset_tracking(Some(FluxOffsetTracking {
+            gain: PSI_D_GAIN,
+            min_speed_rad_s: 0.1 * sc.rated_speed_e_rad_s(),
+            ..FluxOffsetTracking::new()
+        }))
+        .map_err(|e| scenario_err(sc, "observer (flux offset)", e.to_string()))?;
         let x = obs.estimate();
         let last = ObserverEstimate {
             theta_e_rad: x.theta_rad,
             omega_e_rad_s: x.omega_e_rad_s,
             ..ObserverEstimate::default()
         };
-        let psi_d_tracker = PsiDTracker {
-            rs: rs_ohm,
-            ts,
-            gain: PSI_D_GAIN,
-            w_min: 0.1 * sc.rated_speed_e_rad_s(),
-            open: false,
-            th0: 0.0,
-            travel: 0.0,
-            th_prev: 0.0,
-            psi_int: [0.0; 2],
-            i_prev: [0.0; 2],
-            offset: 0.0,
-        };
         Ok(Self {
-            psi_d_tracker,
             foc,
             obs,
             pole_pairs: f64::from(sc.motor.pole_pairs),
@@ -309,7 +207,7 @@ impl MapDrive {
     /// The `psi_d` offset the drive has taken into the map so far, Wb (module docs, "The flux
     /// offset").
     pub fn psi_d_offset_wb(&self) -> f64 {
-        self.psi_d_tracker.offset
+        self.obs.flux_offset_wb()
     }
 }
 
@@ -324,10 +222,6 @@ impl DriveController for MapDrive {
         match Observer::step(&mut self.obs, u_prev, input.i_ab_a) {
             Ok(e) => self.last = e,
             Err(_) => self.observer_failures += 1,
-        }
-        if let Some(shift) = self.psi_d_tracker.tick(&self.obs, u_prev, &self.last) {
-            // Finite by construction; a refusal would leave the map as it was.
-            let _ = self.obs.shift_psi_d(shift);
         }
         let e = self.last;
         let fed = ControllerInput {

@@ -139,8 +139,10 @@ class Motor:
         most 32 points per axis. ConfigError naming the problem for wrong shapes, non-finite
         values, unordered axes, non-monotonic fluxes or a singular inductance. ld, lq, psi_f
         read back the small-signal values at zero current. Ekf runs on the map (tracking
-        'default' means none; 'flux' is refused), FluxObserver on the map's active flux;
-        Drive and tune use the small-signal constants."""
+        'default' and 'off' take the map as given; 'flux' learns the map's psi_d offset
+        online, ekf-core's FluxOffsetTracking, for magnets warmer or colder than when the map
+        was measured, and reports psi_f as the map's psi_d(0, 0) plus it), FluxObserver on
+        the map's active flux; Drive and tune use the small-signal constants."""
     @property
     def has_flux_map(self) -> bool:
         """Whether the motor is given by a flux map (from_flux_map)."""
