@@ -40,9 +40,11 @@ fn check(m: &SaturatedMotor) {
     println!("{name}: {}", f.table());
     assert!(f.ok, "{name}: {:?}", f.error);
     let (ed, eq) = f.max_error_rated_pct.unwrap();
+    let (md, mq) = f.max_error_rated_map_pct.unwrap();
     println!(
         "{name}: total {:.3} s (flux-map step {:.3} s), peak {:.2} A (limit {:.2} A), \
-         rated-range error psi_d {ed:.2} %, psi_q {eq:.2} %",
+         rated-range error psi_d {ed:.2} %, psi_q {eq:.2} % (nodes as measured), \
+         {md:.2} % / {mq:.2} % (the map as used)",
         r.total_time_s,
         f.time_s(),
         r.peak_current_a,
@@ -50,8 +52,9 @@ fn check(m: &SaturatedMotor) {
     );
     assert!(r.total_time_s <= 5.0, "{name}: {} s", r.total_time_s);
     assert!(f.time_s() > 0.0 && f.probe_s > 0.0);
-    // The goal is 2 %: met on 5 of the 6 sensor seeds of `across_sensor_seeds`; on this one
-    // a single psi_q node of the probe's q pulses is 2.11 % off.
+    // The goal, 2 % within the rated current, on the map as used (each node averaged with
+    // its mirror in i_q). As measured, one psi_q node of this seed is 2.11 % off.
+    assert!(md <= 2.0 && mq <= 2.0, "{name}: {md:.2} / {mq:.2} %");
     assert!(ed <= 2.0 && eq <= 2.2, "{name}: {ed:.2} / {eq:.2} %");
     let anchor = anchor_error_pct(f);
     println!("{name}: psi_d(0, 0) (the coast's anchor) {anchor:+.2} % off");
@@ -102,9 +105,9 @@ fn the_anchor_does_not_follow_the_dead_time() {
 fn across_sensor_seeds() {
     let m = &SATURATED_IPM;
     println!(
-        "| seed | psi_d(0, 0) | psi_d / psi_q within the rated current | angle RMS identified / true map (deg) | ratio |"
+        "| seed | psi_d(0, 0) | psi_d / psi_q within the rated current, nodes as measured | the map as used | angle RMS identified / true map (deg) | ratio |"
     );
-    println!("|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|");
     let mut ratios = Vec::new();
     for seed in 1..=6u64 {
         let (sc, i_rated) = saturated_scenario(m, seed);
@@ -115,18 +118,20 @@ fn across_sensor_seeds() {
         let r = identify(&sc, &opts).unwrap_or_else(|e| panic!("{seed}: {e}"));
         let f = r.flux_map.as_ref().expect("flux-map report");
         let (ed, eq) = f.max_error_rated_pct.expect("errors");
+        let (md, mq) = f.max_error_rated_map_pct.expect("errors of the map");
         let anchor = anchor_error_pct(f);
         let (plug, report, map) =
             plug_and_spin_map(&sc, 1.7 * i_rated).unwrap_or_else(|e| panic!("{seed}: {e}"));
         let rs = report.identified.as_ref().map_or(f64::NAN, |v| v.rs_ohm);
         let c = compare(&sc, &plug, &map, rs, 0.5).unwrap_or_else(|e| panic!("{seed}: {e}"));
         println!(
-            "| {seed} | {anchor:+.2} % | {ed:.2} / {eq:.2} % | {:.3} / {:.3} | {:.2} x |",
+            "| {seed} | {anchor:+.2} % | {ed:.2} / {eq:.2} % | {md:.2} / {mq:.2} % | {:.3} / {:.3} | {:.2} x |",
             c.identified.angle_rms_deg,
             c.truth.angle_rms_deg,
             c.rms_ratio()
         );
         assert!(anchor.abs() <= 0.5, "{seed}: {anchor:.2} %");
+        assert!(md <= 2.0 && mq <= 2.0, "{seed}: {md:.2} / {mq:.2} %");
         ratios.push(c.rms_ratio());
     }
     ratios.sort_by(f64::total_cmp);

@@ -74,9 +74,9 @@ fn scenario_err(sc: &Scenario, field: &str, problem: String) -> SimError {
 
 /// The flux-map step's measured map as an interpolating map (module docs); errors when the
 /// step did not measure it. On a grid symmetric in `i_q` (the probe's) the map is made
-/// symmetric as a motor's is, `psi_d` even and `psi_q` odd in `i_q`, by averaging each node
-/// with its mirror: the measurement noise of the two halves would otherwise give opposite
-/// torques that differ (foc's map tables refuse more than 1 %).
+/// symmetric as a motor's is (`FluxMapReport::symmetric_nodes`): the measurement errors of
+/// the two halves would otherwise give opposite torques that differ (foc's map tables refuse
+/// more than 1 %).
 pub fn identified_map(f: &FluxMapReport) -> Result<FluxMap<f64, MAP_POINTS>, String> {
     if !f.ok {
         return Err(format!(
@@ -84,22 +84,11 @@ pub fn identified_map(f: &FluxMapReport) -> Result<FluxMap<f64, MAP_POINTS>, Str
             f.error.as_deref().unwrap_or("no map")
         ));
     }
-    let nq = f.i_q_a.len();
-    let tol = 1e-3 * f.i_q_a.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    let symmetric = (0..nq).all(|k| (f.i_q_a[k] + f.i_q_a[nq - 1 - k]).abs() <= tol);
-    let (mut pd, mut pq) = (Vec::new(), Vec::new());
-    for (rd, rq) in f.psi_d_wb.iter().zip(&f.psi_q_wb) {
-        for k in 0..nq {
-            let m = nq - 1 - k;
-            if symmetric {
-                pd.push(0.5 * (rd[k] + rd[m]));
-                pq.push(0.5 * (rq[k] - rq[m]));
-            } else {
-                pd.push(rd[k]);
-                pq.push(rq[k]);
-            }
-        }
-    }
+    let (rows_d, rows_q) = f
+        .symmetric_nodes()
+        .unwrap_or_else(|| (f.psi_d_wb.clone(), f.psi_q_wb.clone()));
+    let pd: Vec<f64> = rows_d.concat();
+    let pq: Vec<f64> = rows_q.concat();
     FluxMap::new(&f.i_d_a, &f.i_q_a, &pd, &pq).map_err(|e| format!("the identified flux map: {e}"))
 }
 
@@ -557,6 +546,8 @@ mod tests {
             true_psi_q_wb: Vec::new(),
             max_error_rated_pct: None,
             max_error_grid_pct: None,
+            max_error_rated_map_pct: None,
+            max_error_grid_map_pct: None,
             stop_s: 0.0,
             realign_s: 0.0,
             probe_s: 0.0,
