@@ -61,6 +61,15 @@ pub enum EkfError {
     /// The period given for an irregular step is not finite, not above zero, or longer than
     /// [`MAX_PERIOD_FACTOR`](crate::observer::MAX_PERIOD_FACTOR) sample times.
     InvalidPeriod,
+    /// The input voltage is finite but beyond anything a drive applies: held over one sample
+    /// time it would move the stator flux by more than
+    /// [`MAX_INPUT_FLUX_RATIO`](crate::observer::MAX_INPUT_FLUX_RATIO) times the magnet's
+    /// flux (a corrupted sample in a log or on a bus).
+    ImplausibleInput,
+    /// The measured current is finite but beyond anything a motor carries:
+    /// [`MAX_CURRENT_RATIO`](crate::observer::MAX_CURRENT_RATIO) times its characteristic
+    /// current `psi_f / L` (a corrupted sample).
+    ImplausibleMeasurement,
 }
 
 impl fmt::Display for EkfError {
@@ -76,6 +85,14 @@ impl fmt::Display for EkfError {
             EkfError::NonFiniteResult => "the update produced a non-finite state or covariance",
             EkfError::InvalidPeriod => {
                 "the period is not finite, not above zero, or too long; step rejected"
+            }
+            EkfError::ImplausibleMeasurement => {
+                "the measured current is beyond anything a motor carries (a corrupted sample); \
+                 step rejected"
+            }
+            EkfError::ImplausibleInput => {
+                "the input voltage is beyond anything a drive applies (a corrupted sample); \
+                 step rejected"
             }
         })
     }

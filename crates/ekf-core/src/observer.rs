@@ -102,6 +102,22 @@
 //! **Tracking.** The tracked parameter is the magnet flux `psi_f`; `psi_a` follows from it and
 //! `i_d` each step (`d psi_a / d psi_f = 1`: the flux's Jacobian column is the surface one).
 //!
+//! # Implausible input (always on)
+//!
+//! Before anything else a step refuses, state kept, a voltage that is not finite or that would
+//! move the stator flux by more than [`MAX_INPUT_FLUX_RATIO`] (20) magnet fluxes over one
+//! sample time (`|u| Ts > 20 psi_f`: [`EkfError::ImplausibleInput`](crate::EkfError)), and a
+//! measured current that is not finite or above [`MAX_CURRENT_RATIO`] (100) characteristic
+//! currents `psi_f / L_d` ([`EkfError::ImplausibleMeasurement`](crate::EkfError)). Neither
+//! occurs on a drive: at full bus voltage a motor whose base speed turns `w Ts <= 1.3` rad per
+//! period (the fastest recorded drive here) applies at most a few `psi_f` per period, and its
+//! currents stay within a few `psi_f / L_d`. They are corrupted samples: one voltage of
+//! 670 kV and one current of 1.4e17 A in a real ESC log, where taking them ruined the
+//! estimate for the rest of the record (the feedforward's load estimate took the first, the
+//! covariance health's reset from the measured currents the second). A caller with
+//! per-sample periods treats a refused sample as a skipped cycle (`pyfoc` adds its period to
+//! the next row's). The test is one comparison of each squared magnitude on the common path.
+//!
 //! # Safeguards (on in [`ObserverConfig::new`], off in [`ObserverConfig::seed`])
 //!
 //! After the correction of every step, in this order; each is an `Option` field of
@@ -413,5 +429,5 @@ pub(crate) use safeguards::ConsistencyState;
 pub use safeguards::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS,
 };
-pub use step::MAX_PERIOD_FACTOR;
+pub use step::{MAX_CURRENT_RATIO, MAX_INPUT_FLUX_RATIO, MAX_PERIOD_FACTOR};
 pub use tracking::{ParameterTracking, RsTracking};

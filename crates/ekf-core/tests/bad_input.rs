@@ -169,7 +169,15 @@ fn absurd_finite_samples_never_leave_a_non_finite_state() {
         match obs.step(u, i) {
             Ok(e) => assert!(e.theta_rad.is_finite() && e.omega_e_rad_s.is_finite()),
             Err(err) => {
-                assert_eq!(err, EkfError::NonFiniteResult, "u {u:?} i {i:?}");
+                assert!(
+                    matches!(
+                        err,
+                        EkfError::NonFiniteResult
+                            | EkfError::ImplausibleInput
+                            | EkfError::ImplausibleMeasurement
+                    ),
+                    "u {u:?} i {i:?}: {err:?}"
+                );
                 // Estimate, covariance and diagnostics unchanged; only the health check's
                 // count of refusals in a row moved (it resets the filter at the third).
                 assert_eq!(obs.state(), before.state());
@@ -322,4 +330,43 @@ fn absurd_sample_time_and_covariances_are_refused() {
     // The check a caller applies before a reset.
     assert!(ekf_core::observer::check_covariance(&(-Matrix4::<f64>::identity())).is_err());
     assert!(ekf_core::observer::check_covariance(&Matrix4::<f64>::identity()).is_ok());
+}
+
+/// A corrupted sample (module docs of `ekf_core::observer`, "Implausible input"): a voltage
+/// beyond `MAX_INPUT_FLUX_RATIO` magnet fluxes per sample time, or a current beyond
+/// `MAX_CURRENT_RATIO` characteristic currents, is refused with its own error and leaves the
+/// observer exactly as it was; one just inside the bounds is filtered.
+#[test]
+fn implausible_samples_are_refused_and_plausible_large_ones_filtered() {
+    let obs0 = spun_up();
+    let m = MotorParams::<f64>::servo();
+    let (u_max, i_max) = (
+        ekf_core::observer::MAX_INPUT_FLUX_RATIO * m.psi_f_wb / 1e-4,
+        ekf_core::observer::MAX_CURRENT_RATIO * m.characteristic_current_a(),
+    );
+    for (u, i, err) in [
+        ([1.01 * u_max, 0.0], [0.1, 0.2], EkfError::ImplausibleInput),
+        ([0.0, -1.01 * u_max], [0.1, 0.2], EkfError::ImplausibleInput),
+        (
+            [1.0, 1.0],
+            [1.01 * i_max, 0.0],
+            EkfError::ImplausibleMeasurement,
+        ),
+        ([1.0, 1.0], [0.0, 1.4e17], EkfError::ImplausibleMeasurement),
+        ([6.7e5, 7.6], [0.1, 0.2], EkfError::ImplausibleInput),
+    ] {
+        let mut obs = obs0.clone();
+        assert_eq!(obs.step(u, i).err(), Some(err), "u {u:?} i {i:?}");
+        assert_eq!(obs, obs0, "unchanged");
+        if err == EkfError::ImplausibleInput {
+            assert_eq!(obs.predict(u), Err(err));
+        } else {
+            assert_eq!(obs.correct(i).err(), Some(err));
+        }
+        assert_eq!(obs, obs0, "unchanged");
+    }
+    let mut obs = obs0.clone();
+    assert!(obs.step([0.99 * u_max, 0.0], [0.1, 0.2]).is_ok());
+    let mut obs = obs0.clone();
+    assert!(obs.step([1.0, 1.0], [0.0, 0.99 * i_max]).is_ok());
 }

@@ -476,6 +476,15 @@ fn a_bad_flux_offset_setting_or_input_is_refused() {
     let x = *obs.observer().state();
     assert!(obs.step([f64::NAN, 0.0], [0.0, 0.0]).is_err());
     assert!(obs.step([0.0, 0.0], [f64::INFINITY, 0.0]).is_err());
+    // Corrupted samples (module docs of `ekf_core::observer`, "Implausible input").
+    assert_eq!(
+        obs.step([6.7e5 * 1e3, 0.0], [0.0, 0.0]).err(),
+        Some(ekf_core::EkfError::ImplausibleInput)
+    );
+    assert_eq!(
+        obs.step([0.0, 0.0], [1.4e17, 0.0]).err(),
+        Some(ekf_core::EkfError::ImplausibleMeasurement)
+    );
     assert_eq!(*obs.observer().state(), x);
     assert_eq!(obs.map().eval(1.0, 2.0), before);
 }

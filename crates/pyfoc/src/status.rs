@@ -14,7 +14,8 @@ pub(crate) enum RowStatus {
     Tracking = 0,
     /// The filter ran but the angle is not trustworthy (not converged, standstill).
     Uncertain = 1,
-    /// The sample was rejected (non-finite voltage or current); the state was kept.
+    /// The sample was rejected (a non-finite voltage or current, or an implausible voltage:
+    /// ekf-core's `EkfError::ImplausibleInput`); the state was kept.
     Rejected = 2,
 }
 

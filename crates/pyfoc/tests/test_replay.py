@@ -302,3 +302,32 @@ def test_defaults_learn_a_late_voltage_column(sim2, tmp_path):
         # The calibration's share (measured 0.93 x), and both options against the firmware's.
         assert rms[delay, "defaults"] < 0.96 * rms[delay, "ff"]
         assert rms[delay, "defaults"] < 0.95 * rms[delay, "firmware"]
+
+
+def test_corrupted_samples_are_skipped_cycles(sim):
+    """A log with a corrupted voltage and a corrupted current (a real ESC record holds a
+    670 kV voltage and a 1.4e17 A current): with the periods given, each refused row is a
+    skipped cycle (its period joins the next row's) and outputs the estimate advanced to its
+    time; the filter goes on as on the clean log (defaults and the firmware's filter)."""
+    _, log, _ = sim
+    n = len(log["t"])
+    k_u, k_i = n // 2, n // 2 + 200
+    u, i = log["u_ab"].copy(), log["i_ab"].copy()
+    u[k_u - 1] = [6.7e5, 7.6]  # row k_u predicts with it
+    i[k_i] = [1.4e17, -2.0]
+    for options in ({}, FIRMWARE):
+        ekf = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS, **options)
+        clean = pyfoc.Ekf(pyfoc.Motor(**SERVO), TS, **options).run(
+            log["u_ab"], log["i_ab"], u_prev=log["u_prev"], dt=log["dt"])
+        out = ekf.run(u, i, u_prev=log["u_prev"], dt=log["dt"])
+        rejected = np.flatnonzero(out["status"] == pyfoc.Status.REJECTED).tolist()
+        assert rejected == [k_u, k_i]
+        for k in rejected:
+            # The angle advanced over the row's period from the row before.
+            expected = wrap(out["theta"][k - 1] + out["omega"][k - 1] * log["dt"][k])
+            assert abs(wrap(out["theta"][k] - expected)) < 1e-9
+        after = slice(k_i + 50, n)
+        e_out = np.abs(wrap(out["theta"][after] - log["theta_ref"][after]))
+        e_clean = np.abs(wrap(clean["theta"][after] - log["theta_ref"][after]))
+        assert np.all(np.isfinite(out["theta"]))
+        assert np.degrees(e_out.max()) < np.degrees(e_clean.max()) + 1.0

@@ -204,13 +204,28 @@ def test_a_finite_sample_that_overflows_the_step_is_rejected_and_the_state_kept(
     assert np.all(np.isfinite(f.state)) and np.all(np.isfinite(f.covariance))
 
 
-@pytest.mark.parametrize("u_prev, i", [([1e4, 0.0], [0.0, 0.0]), ([0.0, 0.0], [0.0, 1e20])])
-def test_a_large_sample_the_filter_can_compute_with_is_filtered(u_prev, i):
+@pytest.mark.parametrize("u_prev, i", [([1e4, 0.0], [0.0, 0.0]), ([0.0, 0.0], [0.0, 1e3])])
+def test_a_large_plausible_sample_is_filtered(u_prev, i):
+    # Within the bounds of ekf-core's "Implausible input" (this servo: |u| up to
+    # 20 psi_f / ts = 35 kV, |i| up to 100 psi_f / L = 2059 A).
     f = ekf()
     f.run(*good(50))
     est = f.step(u_prev, i)
     assert est["status"] is not pyfoc.Status.REJECTED
     assert np.all(np.isfinite(f.state)) and np.all(np.isfinite(f.covariance))
+
+
+@pytest.mark.parametrize("u_prev, i", [([4e4, 0.0], [0.0, 0.0]), ([0.0, 0.0], [0.0, 2.1e3]),
+                                       ([0.0, 0.0], [0.0, 1e20])])
+def test_an_implausible_sample_is_refused_and_the_state_kept(u_prev, i):
+    # A corrupted sample of a log (a real ESC record holds a 670 kV voltage and a 1.4e17 A
+    # current): refused, nothing changed, and the record's next rows filtered as before.
+    f = ekf()
+    f.run(*good(50))
+    x, p = f.state, f.covariance
+    assert f.step(u_prev, i)["status"] is pyfoc.Status.REJECTED
+    np.testing.assert_array_equal(f.state, x)
+    np.testing.assert_array_equal(f.covariance, p)
 
 
 def test_all_nan_record():

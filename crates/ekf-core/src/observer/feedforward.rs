@@ -168,7 +168,20 @@ impl<T: Float> FeedforwardState<T> {
         // the last step (it has no meaning before the first sample or across a restart).
         if self.primed {
             let a = self.k * self.iq_prev - (w - self.w_prev) * self.inv_ts;
-            self.load += (a - self.load) * self.k_load;
+            // Held within the largest acceleration the model makes (`max_gain` times the
+            // characteristic current): a step the filter did not follow (a reset, a refused
+            // sample's neighbour) must not leave a load no motor has.
+            let bound = self.max_gain / self.inv_ic;
+            let load = self.load + (a - self.load) * self.k_load;
+            self.load = if load > bound {
+                bound
+            } else if load < -bound {
+                -bound
+            } else if load.is_finite() {
+                load
+            } else {
+                self.load
+            };
         }
         self.iq_prev = iq;
         self.w_prev = w;

@@ -8,7 +8,7 @@ use nalgebra::{Matrix4, Vector4};
 use super::model::TransitionTerms;
 use super::structured::{self, Sym4};
 use super::{Estimate, PmsmObserver};
-use crate::ekf::{EkfError, finite};
+use crate::ekf::EkfError;
 use crate::fluxmap::FluxMap;
 use crate::trig::sin_cos_small;
 use crate::{Float, to_t, wrap_angle};
@@ -180,12 +180,7 @@ impl<T: Float> PmsmObserver<T> {
         i: [T; 2],
         dt_s: T,
     ) -> Result<Estimate<T>, EkfError> {
-        if !finite(&u_prev) {
-            return Err(EkfError::NonFiniteInput);
-        }
-        if !finite(&i) {
-            return Err(EkfError::NonFiniteMeasurement);
-        }
+        self.check_sample(u_prev, i)?;
         let (xm, pm, _) = self.map_prior(map, u_prev, dt_s);
         self.correct_prior::<false, true>(xm, pm, None, i)
     }
@@ -199,12 +194,7 @@ impl<T: Float> PmsmObserver<T> {
         i: [T; 2],
         dt_s: T,
     ) -> Result<(Estimate<T>, MapStepInputs<T>), EkfError> {
-        if !finite(&u_prev) {
-            return Err(EkfError::NonFiniteInput);
-        }
-        if !finite(&i) {
-            return Err(EkfError::NonFiniteMeasurement);
-        }
+        self.check_sample(u_prev, i)?;
         let (xm, pm, inputs) = self.map_prior(map, u_prev, dt_s);
         self.correct_prior::<false, true>(xm, pm, None, i)
             .map(|e| (e, inputs))
@@ -217,8 +207,8 @@ impl<T: Float> PmsmObserver<T> {
         map: &FluxMap<T, N>,
         u_prev: [T; 2],
     ) -> Result<(), EkfError> {
-        if !finite(&u_prev) {
-            return Err(EkfError::NonFiniteInput);
+        if !super::step::within(u_prev[0] * u_prev[0] + u_prev[1] * u_prev[1], self.u_max2) {
+            self.check_input(u_prev)?;
         }
         let (x, p, _) = self.map_prior(map, u_prev, self.model.ts());
         self.commit_prediction(x, p, None)

@@ -28,6 +28,11 @@ pub struct PmsmObserver<T: Float> {
     pub(super) inv_pole_pairs: T,
     /// Configured `(psi_f, Rs, reference temperature)`, reported when tracking is off.
     pub(crate) nominal: (T, T, T),
+    /// Largest plausible `|u|^2` of an input voltage, V^2 (module docs, "Implausible
+    /// input").
+    pub(crate) u_max2: T,
+    /// Largest plausible `|i|^2` of a measured current, A^2 (the same section).
+    pub(crate) i_max2: T,
     pub(super) angle_var_limit: T,
     /// Salient motors: the filter has locked (angle tracked with settled innovations) and
     /// keeps the angle tracked since; the d-axis transient correction applies (module docs).
@@ -150,6 +155,14 @@ impl<T: Float> PmsmObserver<T> {
                 cfg.parameter_tracking
                     .map_or(to_t(20.0), |t| t.reference_temperature_c),
             ),
+            u_max2: {
+                let u = to_t::<T>(super::MAX_INPUT_FLUX_RATIO) * cfg.motor.psi_f_wb / ts;
+                u * u
+            },
+            i_max2: {
+                let i = to_t::<T>(super::MAX_CURRENT_RATIO) * cfg.motor.characteristic_current_a();
+                i * i
+            },
             angle_var_limit: cfg.angle_sigma_limit_rad * cfg.angle_sigma_limit_rad,
             locked: false,
             branch: cfg.branch_check.map(|b| BranchState {

@@ -18,8 +18,26 @@ use crate::{Float, to_t};
 /// EMF floor, module docs of [`observer`](crate::observer), "Consistency").
 pub(super) const INVERTER_VOLTAGE_SIGMA_SHARE: f64 = 0.5;
 
+/// `v <= max`, false for a NaN `v`.
+#[inline(always)]
+pub(crate) fn within<T: Float>(v: T, max: T) -> bool {
+    v <= max
+}
+
 /// The longest period [`PmsmObserver::step_dt`] accepts, in sample times `Ts`.
 pub const MAX_PERIOD_FACTOR: f64 = 64.0;
+
+/// The largest stator-flux change an input voltage may make over one sample time, in magnet
+/// fluxes: `|u| Ts <= MAX_INPUT_FLUX_RATIO psi_f` (module docs of
+/// [`observer`](crate::observer), "Implausible input"); beyond it a step is refused with
+/// [`EkfError::ImplausibleInput`].
+pub const MAX_INPUT_FLUX_RATIO: f64 = 20.0;
+
+/// The largest measured current a step takes, in characteristic currents `psi_f / L_d`
+/// (module docs of [`observer`](crate::observer), "Implausible input"); beyond it a step is
+/// refused with [`EkfError::ImplausibleMeasurement`]. The covariance health check's default
+/// bound on the state's currents is the same.
+pub const MAX_CURRENT_RATIO: f64 = 100.0;
 
 impl<T: Float> PmsmObserver<T> {
     /// One sample: predict with `u_prev = [u_a, u_b]` (V, held over the previous period), then
@@ -42,6 +60,8 @@ impl<T: Float> PmsmObserver<T> {
     pub fn step(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
         #[cfg(feature = "std")]
         if self.calibration.is_some() {
+            self.check_input(u_prev)?;
+            self.check_measurement(i)?;
             self.calibrate(u_prev, i, self.model.ts());
         }
         #[cfg(all(feature = "std", target_arch = "x86_64"))]
@@ -72,6 +92,8 @@ impl<T: Float> PmsmObserver<T> {
         }
         #[cfg(feature = "std")]
         if self.calibration.is_some() {
+            self.check_input(u_prev)?;
+            self.check_measurement(i)?;
             self.calibrate(u_prev, i, dt_s);
         }
         let model = self.model;
@@ -138,14 +160,11 @@ impl<T: Float> PmsmObserver<T> {
     #[inline(always)]
     pub fn step_portable(&mut self, u_prev: [T; 2], i: [T; 2]) -> Result<Estimate<T>, EkfError> {
         // One test on the common path; which argument was bad is sorted out only on failure.
-        if !(u_prev[0] + u_prev[1] + i[0] + i[1]).is_finite() {
-            if !finite(&u_prev) {
-                return Err(EkfError::NonFiniteInput);
-            }
-            if !finite(&i) {
-                return Err(EkfError::NonFiniteMeasurement);
-            }
-            // All four finite but their sum overflows: absurd, yet valid input; go on.
+        let u2 = u_prev[0] * u_prev[0] + u_prev[1] * u_prev[1];
+        let i2 = i[0] * i[0] + i[1] * i[1];
+        if !(u2 <= self.u_max2 && i2 <= self.i_max2) {
+            self.check_input(u_prev)?;
+            self.check_measurement(i)?;
         }
         // Four monomorphic paths: the one without tracking carries none of its code, the
         // surface ones none of the salient model's.
@@ -343,12 +362,55 @@ impl<T: Float> PmsmObserver<T> {
         self.locked = tracked && (self.locked || settled);
     }
 
+    /// The refusals of [`check_input`](Self::check_input) and
+    /// [`check_measurement`](Self::check_measurement) with one comparison of each squared
+    /// magnitude on the common path (a NaN fails it); which one failed is sorted out only then.
+    #[inline(always)]
+    pub(crate) fn check_sample(&self, u: [T; 2], i: [T; 2]) -> Result<(), EkfError> {
+        let u2 = u[0] * u[0] + u[1] * u[1];
+        let i2 = i[0] * i[0] + i[1] * i[1];
+        if !(u2 <= self.u_max2 && i2 <= self.i_max2) {
+            self.check_input(u)?;
+            self.check_measurement(i)?;
+        }
+        Ok(())
+    }
+
+    /// Refuses an input voltage that is not finite ([`EkfError::NonFiniteInput`]) or beyond
+    /// [`MAX_INPUT_FLUX_RATIO`] magnet fluxes per sample time ([`EkfError::ImplausibleInput`]).
+    #[cold]
+    #[inline(never)]
+    pub(crate) fn check_input(&self, u: [T; 2]) -> Result<(), EkfError> {
+        if !finite(&u) {
+            return Err(EkfError::NonFiniteInput);
+        }
+        if u[0] * u[0] + u[1] * u[1] > self.u_max2 {
+            return Err(EkfError::ImplausibleInput);
+        }
+        Ok(())
+    }
+
+    /// Refuses measured currents that are not finite ([`EkfError::NonFiniteMeasurement`]) or
+    /// beyond [`MAX_CURRENT_RATIO`] characteristic currents
+    /// ([`EkfError::ImplausibleMeasurement`]).
+    #[cold]
+    #[inline(never)]
+    pub(crate) fn check_measurement(&self, i: [T; 2]) -> Result<(), EkfError> {
+        if !finite(&i) {
+            return Err(EkfError::NonFiniteMeasurement);
+        }
+        if i[0] * i[0] + i[1] * i[1] > self.i_max2 {
+            return Err(EkfError::ImplausibleMeasurement);
+        }
+        Ok(())
+    }
+
     /// Prediction only (e.g. to coast over a missing current sample), with the voltage held
     /// over the period just ended. Refused, state kept, for a non-finite input or result. The
     /// covariance health check (when on) runs after it; on a reset the currents are kept.
     pub fn predict(&mut self, u_prev: [T; 2]) -> Result<(), EkfError> {
-        if !finite(&u_prev) {
-            return Err(EkfError::NonFiniteInput);
+        if !within(u_prev[0] * u_prev[0] + u_prev[1] * u_prev[1], self.u_max2) {
+            self.check_input(u_prev)?;
         }
         let (x, p, tm) = match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => self.prior::<true, false>(u_prev),
@@ -406,8 +468,8 @@ impl<T: Float> PmsmObserver<T> {
     /// Correction only, with the currents sampled now, then the safeguards. Refused, state
     /// kept, for a non-finite measurement; other errors as for [`step`](Self::step).
     pub fn correct(&mut self, i: [T; 2]) -> Result<Estimate<T>, EkfError> {
-        if !finite(&i) {
-            return Err(EkfError::NonFiniteMeasurement);
+        if !within(i[0] * i[0] + i[1] * i[1], self.i_max2) {
+            self.check_measurement(i)?;
         }
         match (self.tracking.is_some(), self.model.discrete().salient) {
             (true, false) => {
