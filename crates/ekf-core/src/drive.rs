@@ -447,20 +447,19 @@ impl<T: Float> DriveObserver<T> {
     /// One sample: predict over the period `dt_s` that ended now with the logged voltage
     /// `u_prev` of that period, correct with the currents `i` sampled now (project timing).
     /// Refused, nothing changed: non-finite input ([`EkfError::NonFiniteInput`]) or
-    /// measurement, a period not in `(0, 64 Ts]` ([`EkfError::InvalidPeriod`]), or a
-    /// non-finite result.
+    /// measurement, an implausible one ([`EkfError::ImplausibleInput`],
+    /// [`EkfError::ImplausibleMeasurement`]), a period not in `(0, 64 Ts]`
+    /// ([`EkfError::InvalidPeriod`]), or a non-finite result.
     pub fn step_dt(
         &mut self,
         u_prev: [T; 2],
         i: [T; 2],
         dt_s: T,
     ) -> Result<DriveEstimate<T>, EkfError> {
-        if !(u_prev[0].is_finite() && u_prev[1].is_finite()) {
-            return Err(EkfError::NonFiniteInput);
-        }
-        if !(i[0].is_finite() && i[1].is_finite()) {
-            return Err(EkfError::NonFiniteMeasurement);
-        }
+        // Non-finite or implausible samples, as the EKF refuses them (module docs of
+        // `observer`, "Implausible input").
+        self.acq.check_input(u_prev)?;
+        self.acq.check_measurement(i)?;
         let ts = self.cfg.ts_s;
         if !(dt_s > T::zero() && dt_s <= ts * to_t(crate::observer::MAX_PERIOD_FACTOR)) {
             return Err(EkfError::InvalidPeriod);

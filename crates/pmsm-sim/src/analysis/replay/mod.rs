@@ -31,6 +31,10 @@
 //! [`DriveLog`] holds `u_ab[k] = u_csv[k+1]` (the last row repeated), `u_prev = u_csv[0]` (the
 //! voltage before row 0) and `dt_s[k] = dt_csv[k]`, the period that ended at row `k`.
 //!
+//! A row the EKF refuses (a non-finite sample, or a corrupted one: module docs of
+//! `ekf_core::observer`, "Implausible input") is a skipped cycle: its period joins the next
+//! row's, and it reports the estimate with the angle advanced to its time (status REJECTED).
+//!
 //! # Scaling
 //!
 //! [`Scaling::Amplitude`] (default): the amplitude-invariant Clarke transform of the project.
@@ -306,9 +310,12 @@ fn run_ekf_config(log: &DriveLog, cfg: &ObserverConfig<f64>) -> Result<ObserverT
 
 /// Steps `obs` over `log` (checked).
 fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace {
+    let mut skipped = SkippedCycles::default();
     trace(log, |u_prev, i, dt| {
-        // The period that ended at this row (refused beyond 64 Ts: a rejected row).
-        let (e, status) = match obs.step_dt(u_prev, i, dt) {
+        // The period that ended at this row (refused beyond 64 Ts: a rejected row); a refused
+        // row is a skipped cycle ([`SkippedCycles`]).
+        let r = skipped.step(dt, |d| obs.step_dt(u_prev, i, d));
+        let (e, status) = match r {
             Ok(e) => (
                 e,
                 match e.status {
@@ -316,7 +323,7 @@ fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace
                     Status::Uncertain => ReplayStatus::Uncertain,
                 },
             ),
-            Err(_) => (obs.estimate(), ReplayStatus::Rejected),
+            Err(_) => (skipped.advanced(obs.estimate()), ReplayStatus::Rejected),
         };
         let p = obs.covariance();
         let sample = ObserverSample {
@@ -335,6 +342,34 @@ fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace
         };
         (sample, status)
     })
+}
+
+/// A refused row of a log is a skipped cycle: its period joins the next row's, which predicts
+/// over both with its own voltage (when the joined period is refused too, e.g. longer than
+/// 64 `Ts`, over its own), and the refused row reports the estimate with its angle advanced
+/// to the row's time (pyfoc's `Ekf.run` with periods does the same).
+#[derive(Default)]
+struct SkippedCycles {
+    /// Periods of the refused rows since the last accepted one, s.
+    carried: f64,
+}
+
+impl SkippedCycles {
+    /// The row's step over `dt` plus the carried periods, through `step`.
+    fn step<E, R>(&mut self, dt: f64, mut step: impl FnMut(f64) -> Result<R, E>) -> Result<R, E> {
+        let mut r = step(dt + self.carried);
+        if r.is_err() && self.carried > 0.0 {
+            r = step(dt);
+        }
+        self.carried = if r.is_err() { self.carried + dt } else { 0.0 };
+        r
+    }
+
+    /// `e` as a refused row reports it: the angle advanced over the carried periods.
+    fn advanced(&self, mut e: ekf_core::Estimate<f64>) -> ekf_core::Estimate<f64> {
+        e.theta_rad = ekf_core::wrap_angle(e.theta_rad + e.omega_e_rad_s * self.carried);
+        e
+    }
 }
 
 /// Runs the flux + PLL baseline (`FluxObserverConfig::new(motor, ts)`) over `log`. It has a
