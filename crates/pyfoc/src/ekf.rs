@@ -415,8 +415,8 @@ impl Ekf {
 
     /// `omega_mech`, `i_alpha`, `i_beta`, `nis`, `psi_f`, `rs`, `winding_temperature`) and
     /// `status`, a `pyfoc.Status`
-    /// (`REJECTED` for a refused sample: not finite, or so large that the step overflows,
-    /// e.g. 1e300; the state is then unchanged).
+    /// (`REJECTED` for a refused sample: not finite, implausible (a corrupted sample), or so
+    /// large that the step overflows; the state is then unchanged).
     /// Does not change the voltage `run` uses for its next first row.
     fn step<'py>(
         &self,

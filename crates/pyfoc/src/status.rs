@@ -56,9 +56,9 @@ impl RowStatus {
              and the `status` of `Ekf.step`. TRACKING: the angle's standard deviation is below \
              its limit; UNCERTAIN: the filter ran but the angle is not trustworthy yet (not \
              converged, or near standstill); REJECTED: the step was refused and the state kept (a \
-             voltage or current that is not finite, or so large that the step's arithmetic \
-             overflows, e.g. 1e300; a singular innovation covariance; with dt, a period not in \
-             (0, 64 ts]).",
+             voltage or current that is not finite, beyond anything a drive applies or a motor \
+             carries (a corrupted sample), or so large that the step's arithmetic overflows; a \
+             singular innovation covariance; with dt, a period not in (0, 64 ts]).",
         )?;
         Ok(cls)
     }

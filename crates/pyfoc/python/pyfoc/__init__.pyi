@@ -54,10 +54,11 @@ class Status(enum.IntEnum):
     innovations far out of line (the model no longer explains the currents: a lost filter)."""
     REJECTED = 2
     """The step was refused and the state kept: a voltage or current that is not finite (NaN,
-    +-inf); one so large, though finite, that the step's arithmetic overflows (the predicted
-    state or covariance would not be finite, e.g. 1e300 V or A); a singular innovation
-    covariance; with ``dt``, a period not in (0, 64 ts]. Finite samples the filter can
-    compute with are filtered, however implausible (they show as large innovations, NIS, and
+    +-inf); a finite one beyond anything a drive applies or a motor carries (a voltage moving
+    the flux by more than 20 psi_f in one period, a current above 100 psi_f / L: a corrupted
+    sample) or so large that the step's arithmetic overflows; a singular innovation
+    covariance; with ``dt``, a period not in (0, 64 ts]. Other finite samples are filtered,
+    however unusual (they show as large innovations, NIS, and
     UNCERTAIN). A refused row is data, not an error: one corrupt sample costs its row, not
     the call."""
 
@@ -237,8 +238,9 @@ class Ekf:
     sequences of numbers); None, str, and ndarrays of complex, object, string, datetime or
     structured dtype raise TypeError, wrong shapes ValueError (naming the argument), records
     too large for the machine's memory MemoryError (before anything is allocated).
-    Samples the filter refuses are rejected rows (Status.REJECTED: non-finite, or so large
-    that the step overflows), not errors.
+    Samples the filter refuses are rejected rows (Status.REJECTED: non-finite, implausible
+    or so large that the step overflows), not errors; with dt, a rejected row is a skipped
+    cycle (its period joins the next row's).
 
     Properties are read-only; ``state``, ``covariance`` and ``u_last`` return copies.
 
