@@ -671,14 +671,11 @@ impl<T: Float> FluxOffsetState<T> {
         let (sd, cd) = self.travel.sin_cos_angle();
         let (a, b) = (T::one() - cd, sd);
         let err_d = (a * r[0] - b * r[1]) / (a * a + b * b);
-        let target = self.offset - self.cfg.gain * err_d;
-        let target = if target > self.bound {
-            self.bound
-        } else if target < -self.bound {
-            -self.bound
-        } else {
-            target
-        };
+        let target = crate::observer::tracking::clamp(
+            self.offset - self.cfg.gain * err_d,
+            -self.bound,
+            self.bound,
+        );
         let step = target - self.offset;
         let (s, c) = th.sin_cos_angle();
         let step = if step.is_finite() { step } else { T::zero() };

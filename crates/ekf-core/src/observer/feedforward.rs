@@ -173,15 +173,10 @@ impl<T: Float> FeedforwardState<T> {
             // sample's neighbour) must not leave a load no motor has.
             let bound = self.max_gain / self.inv_ic;
             let load = self.load + (a - self.load) * self.k_load;
-            self.load = if load > bound {
-                bound
-            } else if load < -bound {
-                -bound
-            } else if load.is_finite() {
-                load
-            } else {
-                self.load
-            };
+            let load = super::tracking::clamp(load, -bound, bound);
+            if load.is_finite() {
+                self.load = load;
+            }
         }
         self.iq_prev = iq;
         self.w_prev = w;

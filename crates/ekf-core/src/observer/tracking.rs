@@ -1049,7 +1049,7 @@ impl<T: Float> Tracker<T> {
 
 /// `v` limited to `[lo, hi]` by plain comparisons (`min`/`max` are libm calls on the MCU).
 #[inline(always)]
-fn clamp<T: Float>(v: T, lo: T, hi: T) -> T {
+pub(crate) fn clamp<T: Float>(v: T, lo: T, hi: T) -> T {
     if v < lo {
         lo
     } else if v > hi {
