@@ -429,5 +429,5 @@ pub(crate) use safeguards::ConsistencyState;
 pub use safeguards::{
     BranchCheck, ConsistencyCheck, CovarianceHealth, InnovationGate, MAX_REFUSALS,
 };
-pub use step::{MAX_CURRENT_RATIO, MAX_INPUT_FLUX_RATIO, MAX_PERIOD_FACTOR};
+pub use step::{MAX_CURRENT_RATIO, MAX_INPUT_FLUX_RATIO, MAX_PERIOD_FACTOR, SkippedCycles};
 pub use tracking::{ParameterTracking, RsTracking};

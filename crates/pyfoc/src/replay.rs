@@ -5,6 +5,7 @@
 
 use std::sync::{Mutex, PoisonError};
 
+use ekf_core::observer::SkippedCycles;
 use ekf_core::saturated::FluxMapObserver;
 use ekf_core::{EkfError, Float, FluxEstimate, FluxObserverConfig, PmsmObserver};
 use numpy::{PyArray1, PyArrayMethods};
@@ -127,10 +128,9 @@ fn step_row_dt<T: Float + Into<f64>, O: Steps<T>>(
 impl Observer {
     /// `run` with per-row periods: a plain loop (row `k` predicts with `u[k-1]`, `prev` for
     /// row 0, over `dt[k]`); returns the rows and the last row's voltage. A refused row (a
-    /// voltage or current the filter refuses: not finite, or an implausible voltage) is a
-    /// skipped cycle: its period is added to the next row's, which predicts over both with
-    /// its own voltage (up to the filter's longest period, `MAX_PERIOD_FACTOR` sample times),
-    /// and its outputs are the estimate with the angle advanced to its time.
+    /// voltage or current the filter refuses: not finite, or implausible) is a skipped cycle
+    /// (`ekf_core::observer::SkippedCycles`): its period joins the next row's, and its outputs
+    /// are the estimate with the angle advanced to its time.
     pub(crate) fn run_dt(
         &mut self,
         mut prev: [f64; 2],
@@ -139,24 +139,21 @@ impl Observer {
         dt: &[f64],
     ) -> (Vec<Row>, [f64; 2]) {
         let mut rows = Vec::with_capacity(dt.len());
-        let mut carried = 0.0;
+        let mut skipped = SkippedCycles::default();
         for ((uk, ik), &d) in u.chunks_exact(2).zip(i.chunks_exact(2)).zip(dt) {
             let ik = [ik[0], ik[1]];
-            let mut row = each_observer!(&mut *self, o => step_row_dt(o, prev, ik, d + carried));
-            if carried > 0.0 && row.status == RowStatus::Rejected {
-                // The joined period refused (e.g. too long): this row's own, as given.
-                row = each_observer!(&mut *self, o => step_row_dt(o, prev, ik, d));
-            }
-            carried = if row.status == RowStatus::Rejected {
-                // Its outputs: the estimate advanced to the row's time (the angle by the
-                // speed times the periods since the last accepted row).
-                let (th, w) = (row.values[0], row.values[1]);
-                row.values[0] = ekf_core::wrap_angle(th + w * (carried + d));
-                carried + d
-            } else {
-                0.0
-            };
-            rows.push(row);
+            let row = skipped.step(d, |d| {
+                let row = each_observer!(&mut *self, o => step_row_dt(o, prev, ik, d));
+                if row.status == RowStatus::Rejected {
+                    Err(row)
+                } else {
+                    Ok(row)
+                }
+            });
+            rows.push(row.unwrap_or_else(|mut row| {
+                row.values[0] = skipped.advance(row.values[0], row.values[1]);
+                row
+            }));
             prev = [uk[0], uk[1]];
         }
         (rows, prev)

@@ -186,7 +186,8 @@ impl<T: Float> PmsmObserver<T> {
     }
 
     /// [`map_step`](Self::map_step), also handing out what the flux-offset tracking takes
-    /// ([`MapStepInputs`]).
+    /// ([`MapStepInputs`]). A separate body: the plain step built on this one cost the
+    /// Cortex-M4F map step 40 instructions (1378 against 1338).
     pub(crate) fn map_step_inputs<const N: usize>(
         &mut self,
         map: &FluxMap<T, N>,

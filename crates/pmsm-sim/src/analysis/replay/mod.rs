@@ -310,10 +310,10 @@ fn run_ekf_config(log: &DriveLog, cfg: &ObserverConfig<f64>) -> Result<ObserverT
 
 /// Steps `obs` over `log` (checked).
 fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace {
-    let mut skipped = SkippedCycles::default();
+    let mut skipped = ekf_core::observer::SkippedCycles::default();
     trace(log, |u_prev, i, dt| {
         // The period that ended at this row (refused beyond 64 Ts: a rejected row); a refused
-        // row is a skipped cycle ([`SkippedCycles`]).
+        // row is a skipped cycle (`ekf_core::observer::SkippedCycles`).
         let r = skipped.step(dt, |d| obs.step_dt(u_prev, i, d));
         let (e, status) = match r {
             Ok(e) => (
@@ -323,7 +323,11 @@ fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace
                     Status::Uncertain => ReplayStatus::Uncertain,
                 },
             ),
-            Err(_) => (skipped.advanced(obs.estimate()), ReplayStatus::Rejected),
+            Err(_) => {
+                let mut e = obs.estimate();
+                e.theta_rad = skipped.advance(e.theta_rad, e.omega_e_rad_s);
+                (e, ReplayStatus::Rejected)
+            }
         };
         let p = obs.covariance();
         let sample = ObserverSample {
@@ -342,34 +346,6 @@ fn run_ekf_observer(log: &DriveLog, mut obs: PmsmObserver<f64>) -> ObserverTrace
         };
         (sample, status)
     })
-}
-
-/// A refused row of a log is a skipped cycle: its period joins the next row's, which predicts
-/// over both with its own voltage (when the joined period is refused too, e.g. longer than
-/// 64 `Ts`, over its own), and the refused row reports the estimate with its angle advanced
-/// to the row's time (pyfoc's `Ekf.run` with periods does the same).
-#[derive(Default)]
-struct SkippedCycles {
-    /// Periods of the refused rows since the last accepted one, s.
-    carried: f64,
-}
-
-impl SkippedCycles {
-    /// The row's step over `dt` plus the carried periods, through `step`.
-    fn step<E, R>(&mut self, dt: f64, mut step: impl FnMut(f64) -> Result<R, E>) -> Result<R, E> {
-        let mut r = step(dt + self.carried);
-        if r.is_err() && self.carried > 0.0 {
-            r = step(dt);
-        }
-        self.carried = if r.is_err() { self.carried + dt } else { 0.0 };
-        r
-    }
-
-    /// `e` as a refused row reports it: the angle advanced over the carried periods.
-    fn advanced(&self, mut e: ekf_core::Estimate<f64>) -> ekf_core::Estimate<f64> {
-        e.theta_rad = ekf_core::wrap_angle(e.theta_rad + e.omega_e_rad_s * self.carried);
-        e
-    }
 }
 
 /// Runs the flux + PLL baseline (`FluxObserverConfig::new(motor, ts)`) over `log`. It has a
