@@ -37,6 +37,35 @@
 //! the same prediction in matrix form for the generic [`Ekf`](crate::Ekf) (a reference: the
 //! scalar step equals it to rounding, tested).
 //!
+//! # Before the lock
+//!
+//! Until the filter has locked, the Newton step's inverse inductance `L^-1` is `I / L_qq`: the
+//! voltage drives the currents through the q axis's incremental inductance along both axes, as
+//! the constant-parameter observer's active-flux model does before its d-axis correction
+//! applies. It locks at the first step whose status reads `Tracking` (the innovations
+//! consistent with their learnt level and the back-EMF observable) or, as the
+//! constant-parameter salient observer does, once the angle is tracked with the innovations
+//! settled (running NIS at most the gate's settled level); it stays locked while the angle
+//! stays tracked, and a branch flip or a reset unlocks it. (The settled rule alone is not
+//! enough here: the isotropic model's own error at no load kept the NIS above the settled
+//! level on the PM-SyRM test trace below, the filter unlocked into its rated current step, and
+//! lost the rotor there.) The map's anisotropy makes the
+//! current's response to the applied voltage depend on the angle with period `pi` (the
+//! saliency an injection-based estimator reads), and an EKF started with the angle unknown
+//! takes that as a strong angle measurement from the first samples: its angle variance
+//! collapsed onto `th` or `th + pi` alike, whichever the first linearization pointed to, and
+//! only the back-EMF's slow rotation could then tell the two apart. On the PM-SyRM (`L_d` 30
+//! mH, `L_q` 150 mH at zero current: 5 to 1) at 50 % speed and no load, started 115 deg away,
+//! the filter settled on `(-w, th + pi)` on 16 of 24 sensor-noise seeds; the branch check's
+//! flips put it back on `th + pi` at positive speed, and it was still lost 0.5 s later (up to
+//! 8 % of the run's samples more than 45 deg off, `pmsm-sim suite --seed 5`). With the
+//! isotropic response before the lock, the first angle information is the back-EMF's, whose
+//! rotation fixes the branch: every seed converges within the convergence phase and the
+//! scored rows are those of the seeds that converged before (0.42-0.49 deg RMS, `pmsm-sim
+//! suite --seed S` for S in 0..23; `saturated_rows_converge_on_every_seed` in pmsm-sim's
+//! tests). Once locked the map's full `L^-1` applies: the scored steady state and transients
+//! are unchanged.
+//!
 //! # The flux offset
 //!
 //! The map EKF takes a map's flux at face value. A `psi_d` error at the operating point (the
@@ -89,9 +118,9 @@
 //! `pmsm_sim::analysis::plug_map`): docs/identify.md.
 //!
 //! Cost on the Cortex-M4F (`f32`, 9 x 11 map; `bash scripts/qemu-firmware.sh`): the
-//! [`MapObserver`] step is 1338 instructions (median; max 1620), the constant-parameter salient
-//! step 1180 (`ekf_step_salient`, with tracking); the map's evaluation is 505 of them
-//! (`fluxmap_eval`). With the flux-offset tracking on, 1525 (median; max 2288 at a window's
+//! [`MapObserver`] step is 1340 instructions (median; max 1618), the constant-parameter salient
+//! step 1181 (`ekf_step_salient`, with tracking); the map's evaluation is 505 of them
+//! (`fluxmap_eval`). With the flux-offset tracking on, 1523 (median; max 2287 at a window's
 //! end; `map_observer_step_offset`).
 //!
 //! The noise covariances are those of the constant-parameter observer

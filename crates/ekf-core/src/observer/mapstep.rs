@@ -8,6 +8,7 @@ use nalgebra::{Matrix4, Vector4};
 use super::model::TransitionTerms;
 use super::structured::{self, Sym4};
 use super::{Estimate, PmsmObserver};
+use crate::Status;
 use crate::ekf::EkfError;
 use crate::fluxmap::FluxMap;
 use crate::trig::sin_cos_small;
@@ -26,7 +27,8 @@ pub(crate) struct MapStepInputs<T> {
 /// The map's flux-consistent step from the posterior `x` over a period `ts` with the stator
 /// voltage `u` held, and its Jacobian (the incremental inductances held over the step) in the
 /// form the structured covariance schedule takes: `(x-, terms, the map's stator flux at x in
-/// the stationary frame)`.
+/// the stationary frame)`. Until the filter has `locked`, the Newton step's inverse inductance
+/// is `I / L_qq` (module docs of [`saturated`](crate::saturated), "Before the lock").
 #[inline(always)]
 pub(crate) fn map_transition<T: Float, const N: usize>(
     map: &FluxMap<T, N>,
@@ -34,6 +36,7 @@ pub(crate) fn map_transition<T: Float, const N: usize>(
     ts: T,
     x: &Vector4<T>,
     u: [T; 2],
+    locked: bool,
 ) -> (Vector4<T>, TransitionTerms<T>, [T; 2]) {
     let (ia, ib, w, th) = (x[0], x[1], x[2], x[3]);
     let (s0, c0) = th.sin_cos_angle();
@@ -48,13 +51,20 @@ pub(crate) fn map_transition<T: Float, const N: usize>(
     let id = c0 * ia + s0 * ib;
     let iq = c0 * ib - s0 * ia;
     let p = map.eval(id, iq);
-    let inv_det = T::one() / (p.l_dd * p.l_qq - p.l_dq * p.l_qd);
-    let (g00, g01, g10, g11) = (
-        p.l_qq * inv_det,
-        -p.l_dq * inv_det,
-        -p.l_qd * inv_det,
-        p.l_dd * inv_det,
-    );
+    let (g00, g01, g10, g11) = if locked {
+        let inv_det = T::one() / (p.l_dd * p.l_qq - p.l_dq * p.l_qd);
+        (
+            p.l_qq * inv_det,
+            -p.l_dq * inv_det,
+            -p.l_qd * inv_det,
+            p.l_dd * inv_det,
+        )
+    } else {
+        // Not locked: the response through the q axis's inductance on both axes (module docs
+        // of `saturated`, "Before the lock").
+        let g = T::one() / p.l_qq;
+        (g, T::zero(), T::zero(), g)
+    };
     // Voltage less the resistive drop, in the end-of-period rotor frame.
     let (va, vb) = (u[0] - rs * ia, u[1] - rs * ib);
     let vd1 = c1 * va + s1 * vb;
@@ -152,13 +162,26 @@ impl<T: Float> PmsmObserver<T> {
             scaled = q * (dt_s / ts);
             q = &scaled;
         }
-        let (xm, t, psi_ab0) = map_transition(map, self.nominal.1, dt_s, &self.x, u);
+        let (xm, t, psi_ab0) = map_transition(map, self.nominal.1, dt_s, &self.x, u, self.locked);
         let inputs = MapStepInputs { u, psi_ab0 };
         (
             xm,
             structured::predict_cov_salient(&t, dt_s, q, &self.p),
             inputs,
         )
+    }
+
+    /// The map observer's lock (module docs of [`saturated`](crate::saturated), "Before the
+    /// lock"): besides the constant-parameter rule (angle tracked with the innovations
+    /// settled, [`update_lock`](Self::update_lock) in the correction), a step whose status
+    /// reads `Tracking` locks the filter; it stays locked while the angle stays tracked.
+    #[inline(always)]
+    fn map_lock(&mut self, r: &Result<Estimate<T>, EkfError>) {
+        if let Ok(e) = r
+            && e.status == Status::Tracking
+        {
+            self.locked = true;
+        }
     }
 
     /// Marks the observer as the map observer's (its prediction runs on the map): the model
@@ -182,7 +205,9 @@ impl<T: Float> PmsmObserver<T> {
     ) -> Result<Estimate<T>, EkfError> {
         self.check_sample(u_prev, i)?;
         let (xm, pm, _) = self.map_prior(map, u_prev, dt_s);
-        self.correct_prior::<false, true>(xm, pm, None, i)
+        let r = self.correct_prior::<false, true>(xm, pm, None, i);
+        self.map_lock(&r);
+        r
     }
 
     /// [`map_step`](Self::map_step), also handing out what the flux-offset tracking takes
@@ -197,8 +222,9 @@ impl<T: Float> PmsmObserver<T> {
     ) -> Result<(Estimate<T>, MapStepInputs<T>), EkfError> {
         self.check_sample(u_prev, i)?;
         let (xm, pm, inputs) = self.map_prior(map, u_prev, dt_s);
-        self.correct_prior::<false, true>(xm, pm, None, i)
-            .map(|e| (e, inputs))
+        let r = self.correct_prior::<false, true>(xm, pm, None, i);
+        self.map_lock(&r);
+        r.map(|e| (e, inputs))
     }
 
     /// Prediction only on the map (the body of
@@ -244,7 +270,7 @@ mod tests {
                 3.0 * (0.71 * f).sin(),
             );
             let u = [300.0 * (0.5 * f).cos(), 250.0 * (0.29 * f).sin()];
-            let (xs, t, psi0) = map_transition(&map, rs, ts, &x, u);
+            let (xs, t, psi0) = map_transition(&map, rs, ts, &x, u, true);
             // The start flux handed out is the map's at the start currents and angle.
             let (s0, c0) = x[3].sin_cos();
             let f = map.eval(c0 * x[0] + s0 * x[1], c0 * x[1] - s0 * x[0]);
