@@ -778,6 +778,14 @@ fn replay_command(
         let r = replay(&l, &m, &log.display().to_string())?;
         let written = write_outputs(out, &l, &m, &r, log_options)?;
         print!("{}", markdown(&r.report));
+        if let Some(f) = r.report.flux_check.filter(|f| f.off()) {
+            eprintln!(
+                "pmsm-sim: warning: the record's back-EMF per unit speed is {:.3} times the motor \
+                 file's psi_f ({:.5} against {:.5} Wb): check the file and the log's scaling \
+                 (--scaling)",
+                f.ratio, f.flux_wb, f.told_wb
+            );
+        }
         println!("\noutputs in {}:", out.display());
         for p in written {
             println!("  {}", p.display());

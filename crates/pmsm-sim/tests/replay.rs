@@ -154,6 +154,20 @@ fn replay_of_simulated_logs() {
     let wrong =
         parse_csv(csv.as_bytes(), "p.csv", Scaling::Amplitude).unwrap_or_else(|e| panic!("{e}"));
     assert!(close(wrong.i_ab[100][0], exact.i_ab[100][0] * k, 1e-12));
+    // The record's back-EMF per unit speed: the told flux on the log read right, sqrt(3/2)
+    // times it (reported as off) on the log read with the wrong scaling.
+    let f0 = r0.report.flux_check.unwrap_or_else(|| panic!("flux check"));
+    let fp = rp.report.flux_check.unwrap_or_else(|| panic!("flux check"));
+    let rw = replay(&wrong, &motor, "wrong").unwrap_or_else(|e| panic!("{e}"));
+    let fw = rw.report.flux_check.unwrap_or_else(|| panic!("flux check"));
+    println!("flux check: {f0:?} / read power-invariant {fp:?} / read as amplitude {fw:?}");
+    assert!(
+        f0.blocks >= 10 && (f0.ratio - 1.0).abs() < 0.02 && !f0.off(),
+        "{f0:?}"
+    );
+    assert!((fp.ratio - 1.0).abs() < 0.02 && !fp.off(), "{fp:?}");
+    assert!((fw.ratio - k).abs() < 0.03 && fw.off(), "{fw:?}");
+    assert!(pmsm_sim::analysis::replay::markdown(&rw.report).contains("More than 10 % off"));
 
     // Skipped cycles: rows merged; their periods add up, the window after is not scored.
     let drop = [1000, 2000, 2001];

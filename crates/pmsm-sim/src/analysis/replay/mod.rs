@@ -118,6 +118,8 @@ mod input;
 pub use input::*;
 mod reference;
 pub use reference::{MechanicalComponent, mechanical_component};
+mod flux_check;
+pub use flux_check::{FLUX_WARN_SHARE, FluxCheck, flux_check};
 
 /// Why a log or motor file could not be read, or a replay not run.
 #[derive(Debug, Error)]
@@ -559,6 +561,9 @@ pub struct ReplayReport {
     pub ekf_reference_periodic: Option<MechanicalComponent>,
     /// Samples refused by the EKF (non-finite result).
     pub ekf_rejected: usize,
+    /// The record's back-EMF per unit speed against the told flux (module `flux_check`);
+    /// `None` when no block of the record qualifies.
+    pub flux_check: Option<FluxCheck>,
     /// Samples refused by the drive observer.
     pub drive_rejected: usize,
 }
@@ -658,6 +663,7 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
         ),
         ekf_rejected: rejected(&ekf),
         drive_rejected: rejected(&drive),
+        flux_check: flux_check(log, motor, &ekf),
     };
     Ok(Replay {
         report,
@@ -675,6 +681,30 @@ fn rejected(tr: &ObserverTrace) -> usize {
         .count()
 }
 
+/// The report's sentence on the record's flux (module `flux_check`), with a blank line after;
+/// empty when no block qualified.
+pub fn flux_check_line(r: &ReplayReport) -> String {
+    let Some(f) = &r.flux_check else {
+        return String::new();
+    };
+    let mut s = format!(
+        "The record's back-EMF per unit speed (light-load blocks where the EKF tracks: {}): \
+         {:.5} Wb, {:.3} times the told psi_f ({:.5} Wb).",
+        f.blocks, f.flux_wb, f.ratio, f.told_wb
+    );
+    if f.off() {
+        s.push_str(&format!(
+            " **More than {:.0} % off**: the motor file does not fit this record, or the log's \
+             scaling does not (a power-invariant log read as amplitude-invariant reads sqrt(3/2) \
+             = 1.22 times the flux: `--scaling power`). The observers were told the file's \
+             value.",
+            100.0 * FLUX_WARN_SHARE
+        ));
+    }
+    s.push_str("\n\n");
+    s
+}
+
 /// The report as a Markdown table.
 pub fn markdown(r: &ReplayReport) -> String {
     let mut s = format!(
@@ -684,6 +714,7 @@ pub fn markdown(r: &ReplayReport) -> String {
         r.ts_s * 1e6,
         r.long_periods
     );
+    s.push_str(&flux_check_line(r));
     if !r.has_reference {
         s.push_str("no reference angle in the log: nothing scored\n");
         return s;
