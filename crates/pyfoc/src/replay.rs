@@ -353,3 +353,93 @@ impl FluxObserver {
         format!("FluxObserver(ts={})", self.ts)
     }
 }
+
+/// The record's back-EMF per unit speed against the motor's flux linkage, from a run's own
+/// angle and status (`pmsm_sim::replay::flux_check`, whose module docs give the method):
+/// `u_ab`, `i_ab` (N, 2) in `Ekf.run`'s convention (row k predicts with `u_ab[k-1]`), `theta`
+/// and `status` (N,) as `Ekf.run` returns them, `dt` (N,) the period that ended at each row
+/// (default `ts`). Returns a dict (`blocks`, `flux_wb`, `told_wb`, `ratio`, `off`: more than
+/// 10 % from the told flux), or `None` when no block of light load, steady speed and status
+/// `TRACKING` is found. ValueError naming the argument for a wrong shape or value.
+#[pyfunction]
+#[pyo3(signature = (motor, ts, u_ab, i_ab, theta, status, *, dt = None))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn flux_check<'py>(
+    py: Python<'py>,
+    motor: &Motor,
+    ts: f64,
+    u_ab: &Bound<'py, PyAny>,
+    i_ab: &Bound<'py, PyAny>,
+    theta: &Bound<'py, PyAny>,
+    status: &Bound<'py, PyAny>,
+    dt: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    use pmsm_sim::replay::{DriveLog, ObserverTrace, ReplayMotor, ReplayStatus};
+    if !(ts.is_finite() && ts > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "ts = {ts}: must be finite and > 0 s"
+        )));
+    }
+    let (u, i, n, _) = record_args(u_ab, i_ab, None)?;
+    let pairs = |a: &crate::convert::RealArray<'_>, name: &str| -> PyResult<Vec<[f64; 2]>> {
+        let flat = to_vec(a, name)?;
+        Ok(flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect())
+    };
+    let u_ab = pairs(&u, "u_ab")?;
+    let i_ab = pairs(&i, "i_ab")?;
+    let theta = to_vec(&vector(theta, "theta", Some(n))?, "theta")?;
+    let codes = to_vec(&vector(status, "status", Some(n))?, "status")?;
+    let status = codes
+        .iter()
+        .enumerate()
+        .map(|(k, &c)| match c {
+            0.0 => Ok(ReplayStatus::Tracking),
+            1.0 => Ok(ReplayStatus::Uncertain),
+            2.0 => Ok(ReplayStatus::Rejected),
+            _ => Err(PyValueError::new_err(format!(
+                "status[{k}] = {c}: expected a pyfoc.Status code (0, 1 or 2)"
+            ))),
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    let dt_s = match dt {
+        Some(d) => periods(d, n)?,
+        None => vec![ts; n],
+    };
+    let log = DriveLog {
+        t_s: dt_s
+            .iter()
+            .scan(0.0, |t, d| {
+                let now = *t;
+                *t += d;
+                Some(now)
+            })
+            .collect(),
+        dt_s,
+        u_ab,
+        i_ab,
+        u_prev: [0.0; 2],
+        theta_ref: None,
+        omega_ref: None,
+    };
+    let trace = ObserverTrace {
+        theta,
+        status,
+        ..ObserverTrace::default()
+    };
+    let m = ReplayMotor {
+        params: motor.params(),
+        ts_s: ts,
+        voltage_delay_s: 0.0,
+        inverter_voltage_v: 0.0,
+    };
+    let Some(f) = py.detach(|| pmsm_sim::replay::flux_check(&log, &m, &trace)) else {
+        return Ok(None);
+    };
+    let d = PyDict::new(py);
+    d.set_item("blocks", f.blocks)?;
+    d.set_item("flux_wb", f.flux_wb)?;
+    d.set_item("told_wb", f.told_wb)?;
+    d.set_item("ratio", f.ratio)?;
+    d.set_item("off", f.off())?;
+    Ok(Some(d))
+}

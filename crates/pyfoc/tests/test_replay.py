@@ -331,3 +331,31 @@ def test_corrupted_samples_are_skipped_cycles(sim):
         e_clean = np.abs(wrap(clean["theta"][after] - log["theta_ref"][after]))
         assert np.all(np.isfinite(out["theta"]))
         assert np.degrees(e_out.max()) < np.degrees(e_clean.max()) + 1.0
+
+
+def test_flux_check_reads_the_records_flux_and_flags_a_wrong_scaling(sim, tmp_path):
+    _, log, _ = sim
+    motor = pyfoc.Motor(**SERVO)
+    out = run(log)
+    ok = pyfoc.flux_check(motor, TS, log["u_ab"], log["i_ab"], out["theta"], out["status"], dt=log["dt"])
+    # The same log written power-invariant and read as amplitude-invariant: sqrt(3/2) too large.
+    p = tmp_path / "power.csv"
+    write_csv(p, log, scale=np.sqrt(1.5))
+    wrong = pyfoc.read_log(p)
+    out_w = run(wrong, dt=wrong["dt"])
+    bad = pyfoc.flux_check(motor, TS, wrong["u_ab"], wrong["i_ab"], out_w["theta"], out_w["status"],
+                           dt=wrong["dt"])
+    print(ok, bad)
+    assert ok is not None and bad is not None
+    assert ok["blocks"] >= 10 and abs(ok["ratio"] - 1.0) < 0.02 and not ok["off"]
+    assert ok["told_wb"] == SERVO["psi_f"]
+    assert abs(bad["ratio"] - np.sqrt(1.5)) < 0.03 and bad["off"]
+    # No TRACKING row: no block. Wrong shapes and codes are refused by name.
+    assert pyfoc.flux_check(motor, TS, log["u_ab"], log["i_ab"], out["theta"],
+                            np.ones(len(out["theta"]))) is None
+    with pytest.raises(ValueError, match="theta"):
+        pyfoc.flux_check(motor, TS, log["u_ab"], log["i_ab"], out["theta"][:-1], out["status"])
+    with pytest.raises(ValueError, match="status"):
+        pyfoc.flux_check(motor, TS, log["u_ab"], log["i_ab"], out["theta"], np.full(len(out["theta"]), 7))
+    with pytest.raises(ValueError, match="ts"):
+        pyfoc.flux_check(motor, float("nan"), log["u_ab"], log["i_ab"], out["theta"], out["status"])

@@ -24,6 +24,7 @@ __all__ = [
     "suite",
     "clear_buffer_pool",
     "read_log",
+    "flux_check",
     "replay_many",
     "to_frame",
     "FluxObserver",

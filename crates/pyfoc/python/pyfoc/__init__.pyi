@@ -27,6 +27,7 @@ __all__ = [
     "suite",
     "clear_buffer_pool",
     "read_log",
+    "flux_check",
     "replay_many",
     "to_frame",
     "FluxObserver",
@@ -426,6 +427,22 @@ def read_log(
     """Read a drive log (CSV: t_s, dt_s, u_alpha_v, u_beta_v, i_alpha_a, i_beta_a, optional
     theta_ref_rad, omega_ref_rad_s; or a pmsm-sim MCAP log) in pyfoc's timing; LogError
     naming file, line and column."""
+
+def flux_check(
+    motor: Motor,
+    ts: float,
+    u_ab: npt.ArrayLike,
+    i_ab: npt.ArrayLike,
+    theta: npt.ArrayLike,
+    status: npt.ArrayLike,
+    *,
+    dt: npt.ArrayLike | None = None,
+) -> dict[str, Any] | None:
+    """The record's back-EMF per unit speed against the motor's psi_f, from a run's own theta
+    and status (Ekf.run's convention: row k predicts with u_ab[k-1]; dt the period that ended
+    at each row, default ts): light-load, steady blocks where the status is TRACKING. A dict
+    (blocks, flux_wb, told_wb, ratio, off: more than 10 % from the told flux) or None when no
+    block qualifies."""
 
 def simulate(
     scenario: str | os.PathLike[str] | dict[str, Any] | None = None,
