@@ -381,6 +381,8 @@ pub(crate) fn flux_check<'py>(
         )));
     }
     let (u, i, n, _) = record_args(u_ab, i_ab, None)?;
+    // The copies below: u_ab, i_ab twice (flat, then as pairs), theta, status, dt, t.
+    crate::convert::ensure_memory(n as u128 * 104, "flux_check")?;
     let pairs = |a: &crate::convert::RealArray<'_>, name: &str| -> PyResult<Vec<[f64; 2]>> {
         let flat = to_vec(a, name)?;
         Ok(flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect())

@@ -293,4 +293,61 @@ mod tests {
         }
         assert!(worst < 1e-9, "largest relative difference {worst:e}");
     }
+
+    /// Before the lock (the isotropic response): the Jacobian is the derivative of the
+    /// prediction to the map's second derivatives, which it leaves out as the locked step does
+    /// (central differences),
+    /// and the voltage's effect on the currents does not depend on the angle.
+    #[test]
+    fn unlocked_step_jacobian_is_its_derivative() {
+        let i_d: [f64; 12] = core::array::from_fn(|k| -20.0 + 30.0 * k as f64 / 11.0);
+        let i_q: [f64; 16] = core::array::from_fn(|k| -30.0 + 60.0 * k as f64 / 15.0);
+        let map = PM_SYRM_5K6.flux_map::<f64, 16>(&i_d, &i_q).unwrap();
+        let (rs, ts) = (0.63, 1e-4);
+        let mut worst = 0.0f64;
+        for k in 0..50 {
+            let f = k as f64;
+            // Near zero current (where the unlocked step runs: acquisition), so that the
+            // incremental inductances held over the step are the ones differentiated.
+            let x = Vector4::new(
+                0.05 * (0.37 * f).sin(),
+                0.05 * (0.91 * f + 1.0).cos(),
+                300.0 * (0.13 * f).sin(),
+                3.0 * (0.71 * f).sin(),
+            );
+            let u = [150.0 * (0.5 * f).cos(), 120.0 * (0.29 * f).sin()];
+            let (_, t, _) = map_transition(&map, rs, ts, &x, u, false);
+            let jac = [
+                [t.a00, t.a01, t.ea_w, t.ea_th],
+                [t.a10, t.a11, t.eb_w, t.eb_th],
+            ];
+            let steps = [1e-6, 1e-6, 1e-4, 1e-7];
+            for c in 0..4 {
+                let (mut xp, mut xm) = (x, x);
+                xp[c] += steps[c];
+                xm[c] -= steps[c];
+                let (fp, _, _) = map_transition(&map, rs, ts, &xp, u, false);
+                let (fm, _, _) = map_transition(&map, rs, ts, &xm, u, false);
+                for r in 0..2 {
+                    let num = (fp[r] - fm[r]) / (2.0 * steps[c]);
+                    worst = worst.max((num - jac[r][c]).abs() / (1.0 + num.abs()));
+                }
+            }
+            // At zero current, the same speed at another angle: the voltage's share of the
+            // current change is the same in the stationary frame (`Ts u / L_qq`).
+            let x = Vector4::new(0.0, 0.0, x[2], x[3]);
+            let turned = Vector4::new(0.0, 0.0, x[2], x[3] + 1.3);
+            let du = |x: &Vector4<f64>| {
+                let (a, _, _) = map_transition(&map, rs, ts, x, u, false);
+                let (b, _, _) = map_transition(&map, rs, ts, x, [0.0, 0.0], false);
+                [a[0] - b[0], a[1] - b[1]]
+            };
+            let (a, b) = (du(&x), du(&turned));
+            assert!((a[0] - b[0]).abs() < 1e-9 && (a[1] - b[1]).abs() < 1e-9);
+        }
+        // What is left is the map's second derivatives, which the Jacobian leaves out locked
+        // or not (here `1 / L_qq` held over the step: 1.8e-3; the locked step's `L^-1` held,
+        // at these states, 9.8e-3).
+        assert!(worst < 5e-3, "largest relative difference {worst:e}");
+    }
 }
