@@ -56,9 +56,10 @@
 //! collapsed onto `th` or `th + pi` alike, whichever the first linearization pointed to, and
 //! only the back-EMF's slow rotation could then tell the two apart. On the PM-SyRM (`L_d` 30
 //! mH, `L_q` 150 mH at zero current: 5 to 1) at 50 % speed and no load, started 115 deg away,
-//! the filter settled on `(-w, th + pi)` on 16 of 24 sensor-noise seeds; the branch check's
-//! flips put it back on `th + pi` at positive speed, and it was still lost 0.5 s later (up to
-//! 8 % of the run's samples more than 45 deg off, `pmsm-sim suite --seed 5`). With the
+//! the filter was still lost after the 0.5 s convergence phase on 16 of 24 sensor-noise seeds
+//! (up to 8 % of the run's samples more than 45 deg off, `pmsm-sim suite --seed 5`): on the
+//! seeds traced it had settled on `(-w, th + pi)` within 1 ms, and the branch check's flips
+//! put it back on `th + pi` at positive speed. With the
 //! isotropic response before the lock, the first angle information is the back-EMF's, whose
 //! rotation fixes the branch: every seed converges within the convergence phase and the
 //! scored rows are those of the seeds that converged before (0.42-0.49 deg RMS, `pmsm-sim
