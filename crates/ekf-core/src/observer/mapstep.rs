@@ -250,15 +250,28 @@ mod tests {
     use crate::saturation::PM_SYRM_5K6;
     use nalgebra::Vector2;
 
+    /// The PM-SyRM's map on a 12 x 16 grid, its `Rs` (ohm) and `Ts` (s).
+    fn pm_syrm() -> (FluxMap<f64, 16>, f64, f64) {
+        let i_d: [f64; 12] = core::array::from_fn(|k| -20.0 + 30.0 * k as f64 / 11.0);
+        let i_q: [f64; 16] = core::array::from_fn(|k| -30.0 + 60.0 * k as f64 / 15.0);
+        let map = PM_SYRM_5K6.flux_map::<f64, 16>(&i_d, &i_q).unwrap();
+        (map, 0.63, 1e-4)
+    }
+
+    /// The currents' rows of the transition Jacobian, columns `(i_a, i_b, w, th)`.
+    fn current_rows(t: &TransitionTerms<f64>) -> [[f64; 4]; 2] {
+        [
+            [t.a00, t.a01, t.ea_w, t.ea_th],
+            [t.a10, t.a11, t.eb_w, t.eb_th],
+        ]
+    }
+
     /// The scalar step and its Jacobian are the generic model's ([`MapModel`], matrix form)
     /// to rounding, over operating points across the map, both speed signs and both
     /// directions of the voltage.
     #[test]
     fn scalar_step_is_the_matrix_models() {
-        let i_d: [f64; 12] = core::array::from_fn(|k| -20.0 + 30.0 * k as f64 / 11.0);
-        let i_q: [f64; 16] = core::array::from_fn(|k| -30.0 + 60.0 * k as f64 / 15.0);
-        let map = PM_SYRM_5K6.flux_map::<f64, 16>(&i_d, &i_q).unwrap();
-        let (rs, ts) = (0.63, 1e-4);
+        let (map, rs, ts) = pm_syrm();
         let model = MapModel::new(map.clone(), rs, 2, ts).unwrap();
         let mut worst = 0.0f64;
         for k in 0..200 {
@@ -277,10 +290,7 @@ mod tests {
             assert!((psi0[0] - (c0 * f.psi_d - s0 * f.psi_q)).abs() < 1e-12);
             assert!((psi0[1] - (s0 * f.psi_d + c0 * f.psi_q)).abs() < 1e-12);
             let (xm, phi) = model.transition(&x, &Vector2::new(u[0], u[1]));
-            let scalar = [
-                [t.a00, t.a01, t.ea_w, t.ea_th],
-                [t.a10, t.a11, t.eb_w, t.eb_th],
-            ];
+            let scalar = current_rows(&t);
             for r in 0..2 {
                 worst = worst.max((xs[r] - xm[r]).abs() / (1.0 + xm[r].abs()));
                 for c in 0..4 {
@@ -295,15 +305,12 @@ mod tests {
     }
 
     /// Before the lock (the isotropic response): the Jacobian is the derivative of the
-    /// prediction to the map's second derivatives, which it leaves out as the locked step does
-    /// (central differences),
-    /// and the voltage's effect on the currents does not depend on the angle.
+    /// prediction (central differences) but for the map's second derivatives, which it leaves
+    /// out as the locked step does; and the voltage's effect on the currents does not depend on
+    /// the angle.
     #[test]
     fn unlocked_step_jacobian_is_its_derivative() {
-        let i_d: [f64; 12] = core::array::from_fn(|k| -20.0 + 30.0 * k as f64 / 11.0);
-        let i_q: [f64; 16] = core::array::from_fn(|k| -30.0 + 60.0 * k as f64 / 15.0);
-        let map = PM_SYRM_5K6.flux_map::<f64, 16>(&i_d, &i_q).unwrap();
-        let (rs, ts) = (0.63, 1e-4);
+        let (map, rs, ts) = pm_syrm();
         let mut worst = 0.0f64;
         for k in 0..50 {
             let f = k as f64;
@@ -317,10 +324,7 @@ mod tests {
             );
             let u = [150.0 * (0.5 * f).cos(), 120.0 * (0.29 * f).sin()];
             let (_, t, _) = map_transition(&map, rs, ts, &x, u, false);
-            let jac = [
-                [t.a00, t.a01, t.ea_w, t.ea_th],
-                [t.a10, t.a11, t.eb_w, t.eb_th],
-            ];
+            let jac = current_rows(&t);
             let steps = [1e-6, 1e-6, 1e-4, 1e-7];
             for c in 0..4 {
                 let (mut xp, mut xm) = (x, x);
