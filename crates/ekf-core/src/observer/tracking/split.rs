@@ -46,6 +46,11 @@ pub(in crate::observer) struct Split<T> {
     /// Whether a window of a braking has been read for the start-up flux (the start-up is
     /// over: no window corrects the EKF's flux any more).
     pub braked: bool,
+    /// The speed of the last window read by [`update_braking`](Self::update_braking) (the
+    /// angle's advance), rad/s; 0 when the last window was not one of those or was left out
+    /// (host builds).
+    #[cfg(feature = "std")]
+    pub brake_w: T,
     /// The windows of a drive whose speed never settles (host builds; module docs of the
     /// parent, "Resistance while the speed is never steady").
     #[cfg(feature = "std")]
@@ -167,6 +172,42 @@ impl<T: Float> Split<T> {
             return None;
         }
         self.update_with(m, r, r_m * to_t::<T>(10.0), k, true)
+    }
+
+    /// The split filter's step on a window of a consistent filter whose tracking is frozen
+    /// (a speed change), after it has tracked once and anchored (module docs of the parent,
+    /// "Resistance on a braking ramp"; host builds): only a window of a braking ramp is used,
+    /// its speed (the angle's advance) below the previous such window's by more than 2 %, the
+    /// drive generating (`r < 0`: the current against the back-EMF), and the resistive drop
+    /// `|Rs r|` above 15 % of the flux (the window measures `Rs`); then the update of an active
+    /// window. Returns the new `Rs` (bounded), `None` when the window is not used.
+    pub(super) fn update_braking(
+        &mut self,
+        psi: T,
+        sums: &Window<T>,
+        x: &Vector4<T>,
+        k: &TrackerConstants<T>,
+    ) -> Option<T> {
+        let ends = self.take_ends(x);
+        let window = self.measure(ends, sums, x, k, Reading::Active);
+        #[cfg(feature = "std")]
+        {
+            let last = self.brake_w;
+            self.brake_w = window.map_or(T::zero(), |w| w.3);
+            let (m, r, r_m, w) = window?;
+            let slowing = last != T::zero()
+                && w.abs() < last.abs()
+                && last.abs() - w.abs() > to_t::<T>(BRAKING_SHARE) * w.abs();
+            if !slowing || r >= T::zero() || measures_flux(r, self.rs, psi) {
+                return None;
+            }
+            self.update_with(m, r, r_m, k, true)
+        }
+        #[cfg(not(feature = "std"))]
+        {
+            let _ = (window, psi);
+            None
+        }
     }
 
     /// The split filter's step on a window with the EKF's tracking frozen, once the filter has
@@ -622,6 +663,12 @@ fn window_speed<T: Float>(
 /// mean must differ from it for a window of a frozen, consistent filter to correct `Rs`
 /// (module docs of the parent, "Resistance while the filter is in trouble").
 pub(super) const SPEED_CONFLICT: f64 = 0.12;
+
+/// The least fall of a braking window's speed below the previous braking window's, as a share
+/// of its speed (module docs of the parent, "Resistance on a braking ramp"): 2 %, the start-up
+/// flux's rule for a speed change.
+#[cfg(feature = "std")]
+const BRAKING_SHARE: f64 = 0.02;
 
 /// Whether a window of `r = n.i / |w|` measures the flux rather than `Rs` at the resistance
 /// `rs` and flux `psi` (module docs of the parent, "Resistance"): the resistive drop `|Rs r|`
