@@ -1254,6 +1254,49 @@ mod tests {
         (sums, Vector4::new(-iq * s, iq * c, w, *theta))
     }
 
+    /// The split filter on the windows of a braking ramp (module docs, "Resistance on a
+    /// braking ramp"): anchored at a wrong `Rs`, windows of a rotor slowing at a steady
+    /// braking current take `Rs` to the motor's; the first window (no speed to compare with), a
+    /// steady speed, an acceleration, a motoring current and a drop below 15 % of the flux are
+    /// left out.
+    #[cfg(feature = "std")]
+    #[test]
+    fn braking_ramp_windows_find_rs() {
+        let ts = 1e-4_f64;
+        let (psi_true, rs_true) = (0.01, 0.5);
+        let rs_told = 0.65;
+        let cfg = ParameterTracking::<f64>::default_for(ts);
+        let (_, slow) = Tracker::new(&cfg, psi_true, rs_told, (1e-3, 1e-3), ts);
+        let k = slow.k;
+        let mut split = slow.split.expect("split filter configured");
+        split.anchor(psi_true, rs_told, 1e-4 * psi_true * psi_true, &k);
+        let n = 100_u32;
+        let mut theta = 0.0_f64;
+        let mut window = |split: &mut Split<f64>, w: f64, iq: f64| {
+            let (sums, x) = steady_window(n, ts, &mut theta, (w, iq, 0.0), (psi_true, rs_true));
+            split.update_braking(psi_true, &sums, &x, &k)
+        };
+        // The drop `|Rs r|` at -2.5 A: 20 % of the flux at 800 rad/s, 67 % at 240.
+        assert_eq!(window(&mut split, 800.0, -2.5), None, "first window");
+        assert_eq!(window(&mut split, 800.0, -2.5), None, "steady speed");
+        assert_eq!(window(&mut split, 840.0, -2.5), None, "accelerating");
+        assert_eq!(window(&mut split, 800.0, 2.5), None, "motoring");
+        assert_eq!(
+            window(&mut split, 760.0, -0.5),
+            None,
+            "drop 4 % of the flux"
+        );
+        let mut w = 760.0;
+        let mut rs = rs_told;
+        for _ in 0..40 {
+            w *= 0.97;
+            if let Some(v) = window(&mut split, w, -2.5) {
+                rs = v;
+            }
+        }
+        assert!((rs - rs_true).abs() < 0.03 * rs_true, "Rs {rs}");
+    }
+
     /// The split filter on unsteady windows (module docs, "Resistance while the speed is never
     /// steady"): start-up windows count as agreeing only once the EKF's flux has converged and
     /// while their lumped flux fits it, a window that does not fit starts the count again; once
