@@ -227,13 +227,14 @@
 //! goes from about 5 % of the flux at 50 % speed to about 24 % at 10 %. The EKF's own
 //! tracking is frozen there (the speed is not steady), but the window's measurement holds
 //! through a ramp ("Tracking during transients": the speed enters the mean q voltage
-//! linearly, and the window's speed is the estimated angle's advance). So in host builds (with [`ParameterTracking::transient_flux`]),
-//! once the filter has tracked and anchored, a window that ends with the EKF's tracking frozen
-//! and the filter consistent (not one of a filter in trouble, above) updates the split
-//! filter's `Rs` as an active window would when it is one of a braking ramp: its speed below
-//! the previous such window's by more than 2 % (two consecutive windows of a slowing rotor),
-//! the drive generating (`r < 0`), and the resistive drop `|Rs r|` above 15 % of the flux
-//! (the window measures `Rs`; the thermal link is then left out, as on any such window).
+//! linearly, and the window's speed is the estimated angle's advance). So in host builds
+//! (with [`ParameterTracking::transient_flux`]), once the filter has tracked and anchored, a
+//! window that ends with the EKF's tracking frozen and the filter consistent (not one of a
+//! filter in trouble, above) updates the split filter's `Rs` as an active window would when
+//! it is one of a braking ramp: its speed below the previous such window's by more than 2 %
+//! (two consecutive windows of a slowing rotor), the drive generating (`r < 0`), and the
+//! resistive drop `|Rs r|` above 15 % of the flux (the window measures `Rs`; the thermal link
+//! is then left out, as on any such window).
 //!
 //! Why braking only: a window of a frozen, consistent filter is otherwise mostly one of an
 //! angle's pull-in after a load step or through a reversal under load, where the window's
