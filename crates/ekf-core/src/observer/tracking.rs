@@ -1174,10 +1174,7 @@ mod tests {
     fn start_up_flux_only_while_accelerating() {
         let ts = 1e-4_f64;
         let psi0 = 0.01;
-        let cfg = ParameterTracking::<f64>::default_for(ts);
-        let (_, slow) = Tracker::new(&cfg, psi0, 0.5, (1e-3, 1e-3), ts);
-        let k = slow.k;
-        let mut split = slow.split.expect("split filter configured");
+        let (mut split, k) = split_told(ts, psi0, 0.5);
         let n = 100_u32;
         // A window at speed w (rad/s) whose voltage reads the flux psi_m (no current).
         let mut theta = 0.0_f64;
@@ -1258,6 +1255,15 @@ mod tests {
         (sums, Vector4::new(-iq * s, iq * c, w, *theta))
     }
 
+    /// The default tracking's split filter at the period `ts` for a motor of flux `psi` told
+    /// the resistance `rs_told` (inductances 1 mH), and the tracking's constants.
+    #[cfg(feature = "std")]
+    fn split_told(ts: f64, psi: f64, rs_told: f64) -> (Split<f64>, TrackerConstants<f64>) {
+        let cfg = ParameterTracking::<f64>::default_for(ts);
+        let (_, slow) = Tracker::new(&cfg, psi, rs_told, (1e-3, 1e-3), ts);
+        (slow.split.expect("split filter configured"), slow.k)
+    }
+
     /// The split filter on the windows of a braking ramp (module docs, "Resistance on a
     /// braking ramp"): anchored at a wrong `Rs`, windows of a rotor slowing at a steady
     /// braking current take `Rs` to the motor's; the first window (no speed to compare with), a
@@ -1269,10 +1275,7 @@ mod tests {
         let ts = 1e-4_f64;
         let (psi_true, rs_true) = (0.01, 0.5);
         let rs_told = 0.65;
-        let cfg = ParameterTracking::<f64>::default_for(ts);
-        let (_, slow) = Tracker::new(&cfg, psi_true, rs_told, (1e-3, 1e-3), ts);
-        let k = slow.k;
-        let mut split = slow.split.expect("split filter configured");
+        let (mut split, k) = split_told(ts, psi_true, rs_told);
         split.anchor(psi_true, rs_told, 1e-4 * psi_true * psi_true, &k);
         let n = 100_u32;
         let mut theta = 0.0_f64;
@@ -1312,10 +1315,7 @@ mod tests {
         let ts = 1e-4_f64;
         let (psi_true, rs_true) = (0.01, 0.5);
         let rs_told = 0.65;
-        let cfg = ParameterTracking::<f64>::default_for(ts);
-        let (_, slow) = Tracker::new(&cfg, psi_true, rs_told, (1e-3, 1e-3), ts);
-        let k = slow.k;
-        let mut split = slow.split.expect("split filter configured");
+        let (mut split, k) = split_told(ts, psi_true, rs_told);
         let n = 100_u32;
         let mut theta = 0.0_f64;
         // The lumped flux of the told `Rs` at the start-up's `r = 2.5 / 800`.
