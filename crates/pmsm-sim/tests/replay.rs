@@ -119,6 +119,17 @@ fn replay_of_simulated_logs() {
     assert!(d0.tracking_share > 0.5, "{d0:?}");
     let json = serde_json::to_value(&r0.report).unwrap_or_else(|e| panic!("{e}"));
     assert!(json["drive"]["rms_deg"].is_number() && json["drive_rejected"] == 0);
+    // The error by speed band: this run turns one way only, so bands and no fit.
+    let bands = r0.report.ekf_speed_bands.as_ref().expect("bands");
+    assert!(!bands.bands.is_empty() && bands.bands.iter().all(|b| b.forward));
+    assert!(bands.fit.is_none() && json["ekf_speed_bands"]["fit"].is_null());
+    let scored: usize = bands.bands.iter().map(|b| b.samples).sum();
+    assert!(
+        scored <= s0.samples && scored + 100 > s0.samples,
+        "{scored} {}",
+        s0.samples
+    );
+    assert!(pmsm_sim::analysis::replay::markdown(&r0.report).contains("| band | direction |"));
 
     // Exact CSV (amplitude-invariant): the same arrays, the same score.
     let csv = to_csv(&exact, 1.0, &[], 0);

@@ -120,6 +120,8 @@ mod reference;
 pub use reference::{MechanicalComponent, mechanical_component};
 mod flux_check;
 pub use flux_check::{FLUX_WARN_SHARE, FluxCheck, flux_check};
+mod speed_bands;
+pub use speed_bands::{BAND_EDGES, SpeedBand, SpeedBands, speed_bands};
 
 /// Why a log or motor file could not be read, or a replay not run.
 #[derive(Debug, Error)]
@@ -559,6 +561,9 @@ pub struct ReplayReport {
     /// The part of the default EKF's error periodic in the reference's mechanical angle
     /// (module `reference`: the reference's own error; `null` without a reference).
     pub ekf_reference_periodic: Option<MechanicalComponent>,
+    /// The default EKF's error by speed band and direction, and its fit to a d-axis voltage
+    /// and a timing (module `speed_bands`; `null` without a reference).
+    pub ekf_speed_bands: Option<SpeedBands>,
     /// Samples refused by the EKF (non-finite result).
     pub ekf_rejected: usize,
     /// The record's back-EMF per unit speed against the told flux (module `flux_check`);
@@ -660,6 +665,13 @@ pub fn replay(log: &DriveLog, motor: &ReplayMotor, name: &str) -> Result<Replay,
             &ekf.theta,
             ekf_score.map_or(0.0, |s| s.offset_deg.to_radians()),
             motor.params.pole_pairs,
+        ),
+        ekf_speed_bands: speed_bands(
+            log,
+            ts,
+            &ekf.theta,
+            ekf_score.map_or(0.0, |s| s.offset_deg.to_radians()),
+            motor.params.psi_f_wb,
         ),
         ekf_rejected: rejected(&ekf),
         drive_rejected: rejected(&drive),
@@ -772,6 +784,51 @@ pub fn markdown(r: &ReplayReport) -> String {
              sees): {:.2} deg at once and {:.2} deg at twice the mechanical frequency, {:.2} deg \
              RMS; the EKF's RMS without it {:.2} deg.\n",
             m.first_deg, m.second_deg, m.rms_deg, m.rms_without_deg
+        ));
+    }
+    if let Some(b) = &r.ekf_speed_bands {
+        s.push_str(&speed_bands_markdown(b));
+    }
+    s
+}
+
+/// The EKF's error by speed band and direction (module `speed_bands`) as a paragraph and a
+/// table.
+fn speed_bands_markdown(b: &SpeedBands) -> String {
+    let mut s = String::from(
+        "\nThe EKF's error by speed (a share of the run's largest |omega_ref|) and direction, over \
+         the scored samples no more than 45 deg off (module docs of \
+         `pmsm_sim::analysis::replay::speed_bands`).",
+    );
+    match &b.fit {
+        Some(f) => s.push_str(&format!(
+            " Fitted as c + a / w + b w: c {:.2} deg; a d-axis voltage the model lacks, dU_d = a \
+             psi_f = {:.4} V (an error in 1 / w that flips with the direction); a timing b = {:.1} \
+             us (an error in w: the reference's delay behind the rotor, or the applied voltage's \
+             lead over the logged one); {:.2} deg RMS left.\n\n",
+            f.constant_deg,
+            f.d_voltage_v,
+            f.delay_s * 1e6,
+            f.residual_rms_deg
+        )),
+        None => {
+            s.push_str(" Not fitted: the run turns one way only, or its speeds are too alike.\n\n")
+        }
+    }
+    s.push_str(
+        "| band | direction | samples | mean abs(w) rad/s | mean deg | RMS deg |\n\
+         |---|---|---:|---:|---:|---:|\n",
+    );
+    for x in &b.bands {
+        s.push_str(&format!(
+            "| {:.0}-{:.0} % | {} | {} | {:.0} | {:+.2} | {:.2} |\n",
+            100.0 * x.from_share,
+            100.0 * x.to_share,
+            if x.forward { "forward" } else { "backward" },
+            x.samples,
+            x.speed_rad_s,
+            x.mean_deg,
+            x.rms_deg
         ));
     }
     s
