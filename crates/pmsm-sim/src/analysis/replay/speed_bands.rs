@@ -99,7 +99,8 @@ pub fn speed_bands(
     let w_ref = log.omega_ref.as_ref()?;
     let mask = score_mask(log, ts_s)?;
     let w_max = w_ref.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if !(w_max > 0.0) {
+    // (`fold` with `max` skips NaN; a run that never turns has nothing to split.)
+    if w_max <= 0.0 || !w_max.is_finite() {
         return None;
     }
     // The scored samples no more than 45 deg off: (error rad, speed rad/s).
@@ -160,7 +161,7 @@ pub fn speed_bands(
     // tells the two shapes from the constant (and from errors that keep their sign).
     let forward = kept.iter().filter(|(_, w)| *w > 0.0).count() as f64;
     let share = forward / kept.len() as f64;
-    let both = share >= MIN_DIRECTION_SHARE && share <= 1.0 - MIN_DIRECTION_SHARE;
+    let both = (MIN_DIRECTION_SHARE..=1.0 - MIN_DIRECTION_SHARE).contains(&share);
     let fit = (both && scale > 0.0 && det > MIN_CONDITIONING * scale)
         .then(|| ata.cholesky())
         .flatten()
