@@ -60,6 +60,11 @@
 //! baseline has no confidence measure: its status is UNCERTAIN on every accepted sample (it
 //! never claims TRACKING).
 //!
+//! Two diagnostics of the default EKF's error say where it comes from: the part that repeats
+//! with the reference's mechanical angle (module `reference`: the encoder's own error), and
+//! its split by speed band and direction with a fit to a d-axis voltage the model lacks and a
+//! timing (module `speed_bands`).
+//!
 //! # Two passes: the record's calibration
 //!
 //! The drive observer's estimates of the voltage lead, the resistance and the dead-time
