@@ -51,6 +51,7 @@ fn pyfoc(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(engine::clear_buffer_pool, m)?)?;
     m.add_function(wrap_pyfunction!(replay::read_log, m)?)?;
     m.add_function(wrap_pyfunction!(replay::flux_check, m)?)?;
+    m.add_function(wrap_pyfunction!(replay::speed_bands, m)?)?;
     m.add_class::<replay::FluxObserver>()?;
     m.add_class::<drive::DriveObserver>()?;
     m.add("LogError", py.get_type::<replay::LogError>())?;

@@ -445,3 +445,99 @@ pub(crate) fn flux_check<'py>(
     d.set_item("off", f.off())?;
     Ok(Some(d))
 }
+
+/// A run's angle error by speed band and direction, fitted to a d-axis voltage the model
+/// lacks and a timing (`pmsm_sim::replay::speed_bands`, whose module docs give the method):
+/// `theta`, `theta_ref` (N,) electrical angles (rad), `omega_ref` (N,) the reference speed
+/// (rad/s el.), `psi_f` the flux linkage the observer was told (Wb), `dt` (N,) the period
+/// that ended at each row (default `ts`). Scored as `pmsm-sim replay` scores: rows with
+/// `|omega_ref|` at least 10 % of its largest, 20 ms after each period longer than 1.35 `ts`
+/// left out, the error's circular mean removed, rows more than 45 deg off left out. Returns a
+/// dict (`offset_deg`, `bands`: a list of dicts, `fit`: a dict or `None`), or `None` with
+/// fewer than 16 rows to use. ValueError naming the argument for a wrong shape or value.
+#[pyfunction]
+#[pyo3(signature = (ts, theta, theta_ref, omega_ref, psi_f, *, dt = None))]
+pub(crate) fn speed_bands<'py>(
+    py: Python<'py>,
+    ts: f64,
+    theta: &Bound<'py, PyAny>,
+    theta_ref: &Bound<'py, PyAny>,
+    omega_ref: &Bound<'py, PyAny>,
+    psi_f: f64,
+    dt: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    use pmsm_sim::replay::{DriveLog, ReplayStatus};
+    if !(ts.is_finite() && ts > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "ts = {ts}: must be finite and > 0 s"
+        )));
+    }
+    if !(psi_f.is_finite() && psi_f > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "psi_f = {psi_f}: must be finite and > 0 Wb"
+        )));
+    }
+    let theta = to_vec(&vector(theta, "theta", None)?, "theta")?;
+    let n = theta.len();
+    // The copies below: theta_ref, omega_ref, dt, t, the (unused) voltages and currents, the
+    // statuses, the mask, the errors and the samples kept.
+    crate::convert::ensure_memory(n as u128 * 120, "speed_bands")?;
+    let theta_ref = to_vec(&vector(theta_ref, "theta_ref", Some(n))?, "theta_ref")?;
+    let omega_ref = to_vec(&vector(omega_ref, "omega_ref", Some(n))?, "omega_ref")?;
+    let dt_s = match dt {
+        Some(d) => periods(d, n)?,
+        None => vec![ts; n],
+    };
+    let log = DriveLog {
+        t_s: dt_s
+            .iter()
+            .scan(0.0, |t, d| {
+                let now = *t;
+                *t += d;
+                Some(now)
+            })
+            .collect(),
+        u_ab: vec![[0.0; 2]; n],
+        i_ab: vec![[0.0; 2]; n],
+        dt_s,
+        u_prev: [0.0; 2],
+        theta_ref: Some(theta_ref),
+        omega_ref: Some(omega_ref),
+    };
+    let result = py.detach(|| {
+        let status = vec![ReplayStatus::Tracking; n];
+        let score = pmsm_sim::replay::score(&log, ts, &theta, &status)?;
+        let offset = score.offset_deg.to_radians();
+        pmsm_sim::replay::speed_bands(&log, ts, &theta, offset, psi_f).map(|b| (score, b))
+    });
+    let Some((score, b)) = result else {
+        return Ok(None);
+    };
+    let d = PyDict::new(py);
+    d.set_item("offset_deg", score.offset_deg)?;
+    let bands = pyo3::types::PyList::empty(py);
+    for x in &b.bands {
+        let e = PyDict::new(py);
+        e.set_item("from_share", x.from_share)?;
+        e.set_item("to_share", x.to_share)?;
+        e.set_item("forward", x.forward)?;
+        e.set_item("samples", x.samples)?;
+        e.set_item("speed_rad_s", x.speed_rad_s)?;
+        e.set_item("mean_deg", x.mean_deg)?;
+        e.set_item("rms_deg", x.rms_deg)?;
+        bands.append(e)?;
+    }
+    d.set_item("bands", bands)?;
+    match b.fit {
+        Some(f) => {
+            let e = PyDict::new(py);
+            e.set_item("constant_deg", f.constant_deg)?;
+            e.set_item("d_voltage_v", f.d_voltage_v)?;
+            e.set_item("delay_s", f.delay_s)?;
+            e.set_item("residual_rms_deg", f.residual_rms_deg)?;
+            d.set_item("fit", e)?;
+        }
+        None => d.set_item("fit", py.None())?,
+    }
+    Ok(Some(d))
+}

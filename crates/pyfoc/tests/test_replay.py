@@ -359,3 +359,43 @@ def test_flux_check_reads_the_records_flux_and_flags_a_wrong_scaling(sim, tmp_pa
         pyfoc.flux_check(motor, TS, log["u_ab"], log["i_ab"], out["theta"], np.full(len(out["theta"]), 7))
     with pytest.raises(ValueError, match="ts"):
         pyfoc.flux_check(motor, float("nan"), log["u_ab"], log["i_ab"], out["theta"], out["status"])
+
+
+def test_speed_bands_find_a_d_voltage_and_a_timing():
+    """A synthetic run forward and backward at 150-1000 rad/s whose estimate carries a d-axis
+    voltage's error dU / (w psi) (0.05 V, 0.01 Wb), a timing error 30 us * w and an offset of
+    2 deg: pyfoc.speed_bands finds the offset, the voltage and the timing, and the slowest
+    bands' means flip with the direction; at one speed it gives bands and no fit; wrong shapes
+    and values are refused by name."""
+    ts, n, psi = 1e-4, 60_000, 0.01
+    t = np.arange(n) * ts
+    p = np.mod(t / 3.0, 1.0)
+    w = 1000.0 * np.clip(1.0 - 4.0 * np.abs(p - 0.5), -1.0, 1.0)
+    w = np.where(np.abs(w) < 150.0, np.copysign(150.0, w), w)
+    th = np.concatenate([[0.0], np.cumsum(w[:-1] * ts)])
+    est = wrap(th + 0.05 / (w * psi) + 30e-6 * w + np.radians(2.0))
+    out = pyfoc.speed_bands(ts, est, wrap(th), w, psi)
+    print(out["fit"], out["offset_deg"])
+    assert out is not None and out["fit"] is not None
+    assert abs(out["fit"]["d_voltage_v"] - 0.05) < 1e-3 * 0.05
+    assert abs(out["fit"]["delay_s"] - 30e-6) < 1e-3 * 30e-6
+    assert len(out["bands"]) == 8
+    slow = [b for b in out["bands"] if b["from_share"] == 0.1]
+    assert slow[0]["forward"] and slow[0]["mean_deg"] > 1.0
+    assert not slow[1]["forward"] and slow[1]["mean_deg"] < -1.0
+    # One speed: bands, no fit; the 1 deg offset is read as the offset.
+    w1 = np.full(n, 800.0)
+    th1 = np.arange(n) * ts * 800.0
+    one = pyfoc.speed_bands(ts, wrap(th1 + np.radians(1.0)), wrap(th1), w1, psi, dt=np.full(n, ts))
+    assert one["fit"] is None and len(one["bands"]) == 1
+    assert abs(one["offset_deg"] - 1.0) < 1e-9 and one["bands"][0]["rms_deg"] < 1e-9
+    # Too few rows: None. Wrong shapes and values: ValueError naming the argument.
+    assert pyfoc.speed_bands(ts, est[:10], wrap(th[:10]), w[:10], psi) is None
+    with pytest.raises(ValueError, match="theta_ref"):
+        pyfoc.speed_bands(ts, est, th[:-1], w, psi)
+    with pytest.raises(ValueError, match="omega_ref"):
+        pyfoc.speed_bands(ts, est, th, w[:, None], psi)
+    with pytest.raises(ValueError, match="psi_f"):
+        pyfoc.speed_bands(ts, est, th, w, 0.0)
+    with pytest.raises(ValueError, match="dt"):
+        pyfoc.speed_bands(ts, est, th, w, psi, dt=np.zeros(n))

@@ -25,6 +25,7 @@ __all__ = [
     "clear_buffer_pool",
     "read_log",
     "flux_check",
+    "speed_bands",
     "replay_many",
     "to_frame",
     "FluxObserver",

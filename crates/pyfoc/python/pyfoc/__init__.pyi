@@ -28,6 +28,7 @@ __all__ = [
     "clear_buffer_pool",
     "read_log",
     "flux_check",
+    "speed_bands",
     "replay_many",
     "to_frame",
     "FluxObserver",
@@ -443,6 +444,25 @@ def flux_check(
     at each row, default ts): light-load, steady blocks where the status is TRACKING. A dict
     (blocks, flux_wb, told_wb, ratio, off: more than 10 % from the told flux) or None when no
     block qualifies."""
+
+def speed_bands(
+    ts: float,
+    theta: npt.ArrayLike,
+    theta_ref: npt.ArrayLike,
+    omega_ref: npt.ArrayLike,
+    psi_f: float,
+    *,
+    dt: npt.ArrayLike | None = None,
+) -> dict[str, Any] | None:
+    """A run's angle error by speed band (10-20, 20-40, 40-70, 70-100 % of the largest
+    |omega_ref|) and direction, scored as pmsm-sim replay scores (|omega_ref| >= 10 % of its
+    largest, 20 ms after each period longer than 1.35 ts left out, the circular mean removed,
+    rows more than 45 deg off left out), and fitted as c + a / w + b w: a d-axis voltage the
+    model lacks (d_voltage_v = a psi_f) and a timing (delay_s = b: the reference's delay or the
+    voltage's lead). A dict (offset_deg; bands: dicts with from_share, to_share, forward,
+    samples, speed_rad_s, mean_deg, rms_deg; fit: a dict with constant_deg, d_voltage_v,
+    delay_s, residual_rms_deg, or None when the run turns one way only or its speeds are too
+    alike), or None with fewer than 16 rows to use."""
 
 def simulate(
     scenario: str | os.PathLike[str] | dict[str, Any] | None = None,
