@@ -106,6 +106,28 @@ pub(crate) fn periods(obj: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<f64>> {
     Ok(v)
 }
 
+/// The `dt=` argument of a function on a record's arrays ([`periods`]; `ts` on every row when
+/// absent) and the time stamps it gives, from 0: `(dt_s, t_s)`.
+fn periods_and_times(
+    dt: Option<&Bound<'_, PyAny>>,
+    n: usize,
+    ts: f64,
+) -> PyResult<(Vec<f64>, Vec<f64>)> {
+    let dt_s = match dt {
+        Some(d) => periods(d, n)?,
+        None => vec![ts; n],
+    };
+    let t_s = dt_s
+        .iter()
+        .scan(0.0, |t, d| {
+            let now = *t;
+            *t += d;
+            Some(now)
+        })
+        .collect();
+    Ok((dt_s, t_s))
+}
+
 /// One step with the period that ended at this row.
 #[inline]
 fn step_row_dt<T: Float + Into<f64>, O: Steps<T>>(
@@ -403,19 +425,9 @@ pub(crate) fn flux_check<'py>(
             ))),
         })
         .collect::<PyResult<Vec<_>>>()?;
-    let dt_s = match dt {
-        Some(d) => periods(d, n)?,
-        None => vec![ts; n],
-    };
+    let (dt_s, t_s) = periods_and_times(dt, n, ts)?;
     let log = DriveLog {
-        t_s: dt_s
-            .iter()
-            .scan(0.0, |t, d| {
-                let now = *t;
-                *t += d;
-                Some(now)
-            })
-            .collect(),
+        t_s,
         dt_s,
         u_ab,
         i_ab,
@@ -484,19 +496,9 @@ pub(crate) fn speed_bands<'py>(
     crate::convert::ensure_memory(n as u128 * 120, "speed_bands")?;
     let theta_ref = to_vec(&vector(theta_ref, "theta_ref", Some(n))?, "theta_ref")?;
     let omega_ref = to_vec(&vector(omega_ref, "omega_ref", Some(n))?, "omega_ref")?;
-    let dt_s = match dt {
-        Some(d) => periods(d, n)?,
-        None => vec![ts; n],
-    };
+    let (dt_s, t_s) = periods_and_times(dt, n, ts)?;
     let log = DriveLog {
-        t_s: dt_s
-            .iter()
-            .scan(0.0, |t, d| {
-                let now = *t;
-                *t += d;
-                Some(now)
-            })
-            .collect(),
+        t_s,
         u_ab: vec![[0.0; 2]; n],
         i_ab: vec![[0.0; 2]; n],
         dt_s,

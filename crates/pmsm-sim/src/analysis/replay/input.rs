@@ -51,6 +51,24 @@ pub struct DriveLog {
     pub omega_ref: Option<Vec<f64>>,
 }
 
+#[cfg(test)]
+impl DriveLog {
+    /// A log of `theta_ref.len()` rows at the period `ts` with the reference angle and speed
+    /// given and no voltage or current (for the tests of the scoring's diagnostics).
+    pub(crate) fn reference_only(ts: f64, theta_ref: Vec<f64>, omega_ref: Vec<f64>) -> Self {
+        let n = theta_ref.len();
+        Self {
+            t_s: (0..n).map(|k| k as f64 * ts).collect(),
+            dt_s: vec![ts; n],
+            u_ab: vec![[0.0; 2]; n],
+            i_ab: vec![[0.0; 2]; n],
+            u_prev: [0.0; 2],
+            theta_ref: Some(theta_ref),
+            omega_ref: Some(omega_ref),
+        }
+    }
+}
+
 impl DriveLog {
     /// Rows.
     pub fn len(&self) -> usize {

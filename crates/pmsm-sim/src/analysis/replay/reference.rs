@@ -136,15 +136,7 @@ mod tests {
             est.push(wrap_angle(th - w * 1e-5));
             th += w * ts;
         }
-        let log = DriveLog {
-            t_s: (0..n).map(|k| k as f64 * ts).collect(),
-            dt_s: vec![ts; n],
-            u_ab: vec![[0.0; 2]; n],
-            i_ab: vec![[0.0; 2]; n],
-            u_prev: [0.0; 2],
-            theta_ref: Some(theta_ref),
-            omega_ref: Some(omega_ref),
-        };
+        let log = DriveLog::reference_only(ts, theta_ref, omega_ref);
         let m = mechanical_component(&log, ts, &est, 0.0, pp).unwrap();
         assert!((m.first_deg - 2.0).abs() < 0.1, "{m:?}");
         assert!((m.second_deg - 6.0).abs() < 0.1, "{m:?}");

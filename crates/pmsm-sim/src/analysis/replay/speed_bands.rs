@@ -219,15 +219,7 @@ mod tests {
             ));
             th += w * ts;
         }
-        let log = DriveLog {
-            t_s: (0..n).map(|k| k as f64 * ts).collect(),
-            dt_s: vec![ts; n],
-            u_ab: vec![[0.0; 2]; n],
-            i_ab: vec![[0.0; 2]; n],
-            u_prev: [0.0; 2],
-            theta_ref: Some(theta_ref),
-            omega_ref: Some(omega_ref),
-        };
+        let log = DriveLog::reference_only(ts, theta_ref, omega_ref);
         let b = speed_bands(&log, ts, &est, 2f64.to_radians(), psi).unwrap();
         let f = b.fit.expect("speeds from 15 to 100 % of the largest");
         assert!((f.d_voltage_v - du).abs() < 1e-3 * du, "{f:?}");
@@ -243,11 +235,11 @@ mod tests {
         assert!(!slow[1].forward && slow[1].mean_deg < -1.0, "{slow:?}");
         assert_eq!(b.bands.len(), 8);
         // At one speed the three shapes cannot be told apart: bands, no fit.
-        let steady = DriveLog {
-            omega_ref: Some(vec![800.0; n]),
-            theta_ref: Some((0..n).map(|k| wrap_angle(800.0 * ts * k as f64)).collect()),
-            ..log.clone()
-        };
+        let steady = DriveLog::reference_only(
+            ts,
+            (0..n).map(|k| wrap_angle(800.0 * ts * k as f64)).collect(),
+            vec![800.0; n],
+        );
         let b = speed_bands(&steady, ts, &est_at(&steady), 0.0, psi).unwrap();
         assert!(b.fit.is_none() && b.bands.len() == 1, "{b:?}");
         // No reference speed: nothing.
