@@ -973,25 +973,15 @@ impl<T: Float> Tracker<T> {
             self.s.contiguous = true;
             if let Some(s) = &mut slow.split {
                 // A window of the active tracking, or (host builds) one that ends with the
-                // EKF's tracking frozen and either its innovations out of line or its speed
-                // state apart from its angle's advance, which corrects `Rs` where it measures
-                // `Rs` (module docs, "Resistance while the filter is in trouble"). A result
-                // that is not finite leaves the filter as it was.
-                let troubled = TRANSIENT
-                    && k.transient
-                    && s.tracked
-                    && s.anchored
-                    && !self.s.active
-                    && (troubled || s.speed_conflict(&sums, x, k));
-                // (Host builds) a window of a consistent filter frozen through a speed change,
-                // which corrects `Rs` on a braking ramp (module docs, "Resistance on a braking
-                // ramp").
-                let frozen = TRANSIENT
-                    && k.transient
-                    && s.tracked
-                    && s.anchored
-                    && !self.s.active
-                    && !troubled;
+                // EKF's tracking frozen after the filter has tracked and anchored: of a filter
+                // in trouble (its innovations out of line or its speed state apart from its
+                // angle's advance; module docs, "Resistance while the filter is in trouble"),
+                // or of a consistent filter frozen through a speed change (a braking ramp's;
+                // module docs, "Resistance on a braking ramp"). Either corrects `Rs` where it
+                // measures `Rs`. A result that is not finite leaves the filter as it was.
+                let waiting = TRANSIENT && k.transient && s.tracked && s.anchored && !self.s.active;
+                let troubled = waiting && (troubled || s.speed_conflict(&sums, x, k));
+                let frozen = waiting && !troubled;
                 #[cfg(feature = "std")]
                 if !frozen {
                     s.brake_w = T::zero();
